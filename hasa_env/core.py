@@ -1,0 +1,254 @@
+"""What the single and the vector env share: set-up from a config, episode
+draws, noise blocks, spaces, and the info/observation layout.
+
+Both envs draw their randomness through these functions from one
+``numpy.random.Generator`` per car, in the same order, so the vector env
+reproduces N single envs exactly (DESIGN.md section 2).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from hasa_env.config import make_config
+from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState
+from hasa_env.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
+
+__all__ = ["EnvSetup", "INFO_KEYS", "STATE_NAMES", "RESET_OPTIONS", "build_setup", "draw_episode"]
+
+STATE_NAMES = ("lateral_offset", "heading", "speed", "steering", "road_curvature")
+"""True-state observation channels (units: m, rad, m/s, rad, 1/m)."""
+
+INFO_KEYS = (
+    "time",
+    "station",
+    "lateral_offset",
+    "heading",
+    "speed",
+    "steering",
+    "acceleration",
+    "road_curvature",
+    "longitudinal_velocity",
+    "lateral_velocity",
+    "bias",
+    "bias_index",
+    *(f"sensor_{name}" for name in SENSOR_NAMES),
+)
+"""Keys of ``info``, identical at ``reset`` and every ``step`` (all floats, bias_index an int)."""
+
+RESET_OPTIONS = ("bias", "bias_index", "lateral_offset", "heading", "speed", "steering")
+"""Keys accepted in ``reset(options=...)``."""
+
+
+@dataclass(frozen=True, eq=False)
+class EnvSetup:
+    """Everything derived once from a validated config."""
+
+    config: dict[str, Any]
+    road: Road
+    params: VehicleParams
+    hypotheses: tuple[float, ...]
+    cumulative_probabilities: tuple[float, ...]
+    noise_std: tuple[float, ...]
+    noise_block: int
+    lower_edge: float
+    upper_edge: float
+    steering_limit: float
+    acceleration_limits: tuple[float, float]
+    normalized_actions: bool
+    action_repeat: int
+    max_sim_steps: int
+    observation_type: str
+
+    @property
+    def dt(self) -> float:
+        return self.params.dt
+
+    def curvature_scalar(self):  # noqa: ANN201
+        """kappa(s) for one car (Python float in, float out)."""
+        return partial(curvature_lookup_scalar, self.road.curvature_list, 1.0 / self.road.spacing)
+
+    def curvature_array(self):  # noqa: ANN201
+        """kappa(s) for N cars (array in, array out)."""
+        return partial(curvature_lookup_array, self.road.curvature, 1.0 / self.road.spacing)
+
+    # ----- spaces -------------------------------------------------------------
+    def action_space(self) -> spaces.Box:
+        if self.normalized_actions:
+            return spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        lo = np.array([-self.steering_limit, self.acceleration_limits[0]], dtype=np.float32)
+        hi = np.array([self.steering_limit, self.acceleration_limits[1]], dtype=np.float32)
+        return spaces.Box(lo, hi, dtype=np.float32)
+
+    def sensor_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        vmax = self.params.max_speed
+        lo = [-10.0, -50.0, -math.pi, -200.0, -200.0, -(self.steering_limit + 1.0)]
+        hi = [vmax + 10.0, 50.0, math.pi, 200.0, 200.0, self.steering_limit + 1.0]
+        return np.array(lo, dtype=np.float32), np.array(hi, dtype=np.float32)
+
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo = [-50.0, -math.pi, 0.0, -self.steering_limit, -1.0]
+        hi = [50.0, math.pi, self.params.max_speed, self.steering_limit, 1.0]
+        return np.array(lo, dtype=np.float32), np.array(hi, dtype=np.float32)
+
+    def observation_space(self) -> spaces.Space:
+        sensors = spaces.Box(*self.sensor_bounds(), dtype=np.float32)
+        state = spaces.Box(*self.state_bounds(), dtype=np.float32)
+        if self.observation_type == "sensors":
+            return sensors
+        if self.observation_type == "state":
+            return state
+        return spaces.Dict({"sensors": sensors, "state": state})
+
+
+def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> EnvSetup:
+    """Validate ``config`` (deep-merged onto the defaults) and derive the set-up.
+
+    ``track`` sets the default track of a registered id; an explicit
+    ``config["track"]`` wins.
+    """
+    user = dict(config or {})
+    if track is not None and "track" not in user:
+        user["track"] = track
+    cfg = make_config(user)
+    road_cfg = cfg["road"]
+    width = road_cfg["lane_width"]
+    road = make_road(cfg["track"], lane_width=width)
+    dt = 1.0 / cfg["sim_frequency"]
+    params = VehicleParams(cfg["vehicle"]["wheelbase"], cfg["vehicle"]["max_speed"], dt)
+    hyps = tuple(cfg["markings"]["hypotheses"])
+    probs = cfg["markings"]["probabilities"] or [1.0 / len(hyps)] * len(hyps)
+    cum = tuple(float(c) for c in np.cumsum(probs))
+    noise = cfg["noise"]
+    noise_std = tuple(
+        float(noise[k]) for k in ("speed", "camera", "camera_heading", "imu", "imu", "steering")
+    )
+    margin = road_cfg["offroad_margin"]
+    lower = -width / 2 - road_cfg["lanes_right"] * width - margin
+    upper = width / 2 + road_cfg["lanes_left"] * width + margin
+    act = cfg["action"]
+    return EnvSetup(
+        config=cfg,
+        road=road,
+        params=params,
+        hypotheses=hyps,
+        cumulative_probabilities=cum,
+        noise_std=noise_std,
+        noise_block=int(noise["block_size"]),
+        lower_edge=lower,
+        upper_edge=upper,
+        steering_limit=act["max_steering"],
+        acceleration_limits=(act["min_acceleration"], act["max_acceleration"]),
+        normalized_actions=act["type"] == "normalized",
+        action_repeat=int(cfg["action_repeat"]),
+        max_sim_steps=max(1, round(cfg["time_limit"] * cfg["sim_frequency"])),
+        observation_type=cfg["observation"]["type"],
+    )
+
+
+def _finite_option(options: Mapping[str, Any], key: str, low: float, high: float) -> float:
+    value = options[key]
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"reset option '{key}' must be a number, got {value!r}") from None
+    if not (low <= value <= high):
+        raise ValueError(f"reset option '{key}' = {value!r} is out of range: allowed [{low:g}, {high:g}]")
+    return value
+
+
+def draw_episode(
+    rng: np.random.Generator, setup: EnvSetup, options: Mapping[str, Any] | None
+) -> tuple[VehicleState, int, float, np.ndarray]:
+    """Draw one episode's start: state, true-hypothesis index, bias (m), noise block.
+
+    Draw order (fixed, whatever the options): one uniform for the bias, three
+    normals for the initial-state randomisation, then the first noise block.
+    """
+    options = dict(options or {})
+    unknown = [k for k in options if k not in RESET_OPTIONS]
+    if unknown:
+        raise ValueError(f"unknown reset option {unknown[0]!r}; allowed: {', '.join(RESET_OPTIONS)}")
+    u = float(rng.random())
+    jitter = rng.standard_normal(3)
+    block = draw_noise_block(rng, setup)
+    cum = setup.cumulative_probabilities
+    index = next((i for i, c in enumerate(cum) if u < c), len(cum) - 1)
+    bias = setup.hypotheses[index]
+    if "bias_index" in options:
+        idx = options["bias_index"]
+        if isinstance(idx, bool) or not isinstance(idx, int | np.integer) or not 0 <= idx < len(setup.hypotheses):
+            raise ValueError(
+                f"reset option 'bias_index' = {idx!r} is out of range: allowed integers "
+                f"0..{len(setup.hypotheses) - 1} (one per markings.hypotheses)"
+            )
+        index, bias = int(idx), setup.hypotheses[int(idx)]
+    if "bias" in options:
+        bias = _finite_option(options, "bias", -20.0, 20.0)
+        matches = [i for i, h in enumerate(setup.hypotheses) if h == bias]
+        index = matches[0] if matches else -1
+    init = setup.config["initial_state"]
+    y = init["lateral_offset"] + init["lateral_offset_std"] * float(jitter[0])
+    th = init["heading"] + init["heading_std"] * float(jitter[1])
+    v = init["speed"] + init["speed_std"] * float(jitter[2])
+    v = min(max(v, 0.0), setup.params.max_speed)
+    delta = init["steering"]
+    if "lateral_offset" in options:
+        y = _finite_option(options, "lateral_offset", -10.0, 10.0)
+    if "heading" in options:
+        th = _finite_option(options, "heading", -1.0, 1.0)
+    if "speed" in options:
+        v = _finite_option(options, "speed", 0.0, setup.params.max_speed)
+    if "steering" in options:
+        delta = _finite_option(options, "steering", -setup.steering_limit, setup.steering_limit)
+    return VehicleState(0.0, y, th, v, delta), index, bias, block
+
+
+def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:
+    """The next block of standard-normal sensor noise, shape (block_size, 6)."""
+    return rng.standard_normal((setup.noise_block, len(setup.noise_std)))
+
+
+def physical_action(setup: EnvSetup, action: Any) -> tuple[float, float]:
+    """Validate an action and map it to (steering rad, acceleration m/s^2), clipped to the limits."""
+    arr = np.asarray(action, dtype=np.float64)
+    if arr.shape != (2,):
+        raise ValueError(
+            f"action must have shape (2,) = [steering, acceleration], got shape {arr.shape}"
+        )
+    steer, acc = arr.tolist()
+    if not (math.isfinite(steer) and math.isfinite(acc)):
+        raise ValueError(f"action must be finite, got [steering={steer!r}, acceleration={acc!r}]")
+    lo, hi = setup.acceleration_limits
+    limit = setup.steering_limit
+    if setup.normalized_actions:
+        steer = min(max(steer, -1.0), 1.0) * limit
+        acc = min(max(acc, -1.0), 1.0)
+        acc = lo + (acc + 1.0) * 0.5 * (hi - lo)
+        return steer, acc
+    return min(max(steer, -limit), limit), min(max(acc, lo), hi)
+
+
+def physical_actions(setup: EnvSetup, actions: Any, num_envs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorized :func:`physical_action` for an (N, 2) batch (same arithmetic)."""
+    arr = np.asarray(actions, dtype=np.float64)
+    if arr.shape != (num_envs, 2):
+        raise ValueError(f"actions must have shape ({num_envs}, 2), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.argwhere(~np.isfinite(arr))[0][0])
+        raise ValueError(f"actions must be finite; env {bad} got {arr[bad].tolist()}")
+    lo, hi = setup.acceleration_limits
+    limit = setup.steering_limit
+    steer, acc = arr[:, 0], arr[:, 1]
+    if setup.normalized_actions:
+        steer = np.minimum(np.maximum(steer, -1.0), 1.0) * limit
+        acc = np.minimum(np.maximum(acc, -1.0), 1.0)
+        return steer, lo + (acc + 1.0) * 0.5 * (hi - lo)
+    return np.minimum(np.maximum(steer, -limit), limit), np.minimum(np.maximum(acc, lo), hi)

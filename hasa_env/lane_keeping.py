@@ -1,0 +1,260 @@
+"""Lane keeping with ambiguous lane markings: the single-car Gymnasium env."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from hasa_env.core import (
+    INFO_KEYS,
+    build_setup,
+    draw_episode,
+    draw_noise_block,
+    physical_action,
+)
+from hasa_env.dynamics import (
+    SCALAR_OPS,
+    VehicleState,
+    lane_keeping_reward,
+    left_road,
+    road_frame_acceleration,
+    road_frame_velocity,
+    sensor_readings,
+    step_vehicle,
+)
+
+__all__ = ["LaneKeepingEnv"]
+
+
+class LaneKeepingEnv(gym.Env):
+    """A kinematic bicycle keeping its lane while the camera sees a biased lane.
+
+    ## Description
+    The car (paper eq. 1, DESIGN.md section 2) starts off-centre in its lane
+    (y = -0.5 m, v = 15 m/s by default) on a straight or curved road. Lane
+    markings are ambiguous: the camera reports the lateral offset relative to
+    one of several lane-centre hypotheses, ``y + b``, where the true bias ``b``
+    is drawn per episode from ``config["markings"]["hypotheses"]``
+    (default {0, -1.8} m) or fixed with ``reset(options={"bias_index": i})``.
+    Simulation runs at ``sim_frequency`` (100 Hz); the policy acts every
+    ``action_repeat`` samples. The observation is taken *after* the step.
+
+    ## Action space
+    ``Box(-1, 1, (2,), float32)`` by default (``action.type = "normalized"``),
+    mapped linearly onto the physical limits; with ``"physical"`` the Box is in
+    physical units. Out-of-range actions are clipped; NaN or inf raises
+    ``ValueError``.
+
+    | index | action                   | unit   | normalized -1 .. 1 maps to            |
+    |-------|--------------------------|--------|---------------------------------------|
+    | 0     | road-wheel angle delta   | rad    | -max_steering .. max_steering (0.5)   |
+    | 1     | acceleration a           | m/s^2  | min_acceleration .. max_acceleration  |
+
+    ## Observation space
+    ``observation.type = "sensors"`` (default, what an autonomous car sees),
+    ``Box(6,)`` float32; readings saturate at the bounds:
+
+    | index | sensor            | unit   | measures                       | bounds             |
+    |-------|-------------------|--------|--------------------------------|--------------------|
+    | 0     | speed             | m/s    | v + noise                      | [-10, v_max + 10]  |
+    | 1     | camera_lateral    | m      | y + b + noise (biased!)        | [-50, 50]          |
+    | 2     | camera_heading    | rad    | theta + noise                  | [-pi, pi]          |
+    | 3     | imu_longitudinal  | m/s^2  | mean d(v cos theta)/dt + noise | [-200, 200]        |
+    | 4     | imu_lateral       | m/s^2  | mean d(v sin theta)/dt + noise | [-200, 200]        |
+    | 5     | steering          | rad    | delta + noise                  | [-(d_max+1), ...]  |
+
+    The IMU reports the road-frame acceleration averaged over the last sample
+    (the input of the paper's eq. 4). ``"state"`` (oracle), ``Box(5,)``:
+
+    | index | state            | unit | bounds             |
+    |-------|------------------|------|--------------------|
+    | 0     | lateral_offset y | m    | [-50, 50]          |
+    | 1     | heading theta    | rad  | [-pi, pi]          |
+    | 2     | speed v          | m/s  | [0, v_max]         |
+    | 3     | steering delta   | rad  | [-d_max, d_max]    |
+    | 4     | road_curvature   | 1/m  | [-1, 1]            |
+
+    ``"both"``: ``Dict(sensors=..., state=...)``.
+
+    ## Reward
+    Per env step: ``1 - w_y (y / 1.8)^2 - w_d (d_delta / d_max)^2``, minus
+    ``offroad_penalty`` (10) on the step that leaves the road.
+
+    ## Episode end
+    | flag       | when                                                               |
+    |------------|--------------------------------------------------------------------|
+    | terminated | the car is past a road edge by more than offroad_margin, or faces backwards |
+    | truncated  | simulated time reaches ``time_limit`` (30 s, the paper's run length) |
+
+    ## Info
+    The same keys at ``reset`` and every ``step`` (:data:`hasa_env.core.INFO_KEYS`):
+    time (s), station (m), the true state, the applied acceleration,
+    road_curvature, road-frame velocities, the true ``bias`` and ``bias_index``,
+    and every raw (unclipped) sensor reading as ``sensor_<name>``.
+
+    ## Arguments
+    ``gym.make("hasa_env/LaneKeeping-v0", config={...}, render_mode=None)``;
+    ``config`` is deep-merged onto :func:`hasa_env.default_config` and validated.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
+
+    def __init__(
+        self,
+        config: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+        track: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported; allowed: None, "
+                + ", ".join(repr(m) for m in self.metadata["render_modes"])
+            )
+        self.setup = build_setup(config, track)
+        self.config = self.setup.config
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.config["render"]["fps"]}
+        self.action_space = self.setup.action_space()
+        self.observation_space = self.setup.observation_space()
+        self._curvature = self.setup.curvature_scalar()
+        self._bounds = {
+            "sensors": [b.astype(np.float64).tolist() for b in self.setup.sensor_bounds()],
+            "state": [b.astype(np.float64).tolist() for b in self.setup.state_bounds()],
+        }
+        self._renderer = None
+        self._state: VehicleState | None = None
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        state, index, bias, block = draw_episode(self.np_random, self.setup, options)
+        self._state = state
+        self._bias, self._bias_index = bias, index
+        self._noise, self._noise_pos = block.tolist(), 0
+        self._sim_step = 0
+        self._acceleration = 0.0
+        kappa = self._curvature(state.station)
+        imu = road_frame_acceleration(state, 0.0, kappa, self.setup.params, SCALAR_OPS)
+        self._finish_sample(imu, kappa)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), self._info()
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        setup = self.setup
+        steer, acc = physical_action(setup, action)
+        previous_steering = self._state.steering
+        state = self._state
+        params = setup.params
+        for _ in range(setup.action_repeat):
+            before = state
+            state = step_vehicle(state, steer, acc, params, self._curvature, SCALAR_OPS)
+        self._sim_step += setup.action_repeat
+        vx0, vy0 = road_frame_velocity(before, SCALAR_OPS)
+        vx1, vy1 = road_frame_velocity(state, SCALAR_OPS)
+        imu = ((vx1 - vx0) / params.dt, (vy1 - vy0) / params.dt)
+        self._state = state
+        self._acceleration = acc
+        self._finish_sample(imu, self._curvature(state.station))
+        terminated = bool(left_road(state, setup.lower_edge, setup.upper_edge, SCALAR_OPS))
+        truncated = self._sim_step >= setup.max_sim_steps
+        rc = self.config["reward"]
+        reward = lane_keeping_reward(
+            state.lateral_offset,
+            steer - previous_steering,
+            terminated,
+            0.5 * setup.road.lane_width,
+            setup.steering_limit,
+            rc["lateral_weight"],
+            rc["steering_rate_weight"],
+            rc["offroad_penalty"],
+        )
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), float(reward), terminated, truncated, self._info()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
+                "to gym.make"
+            )
+            return None
+        if self._state is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from hasa_env.rendering import TopDownRenderer
+
+            self._renderer = TopDownRenderer(self.setup, self.render_mode)
+        return self._renderer.render(self._info())
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # ------------------------------------------------------------- helpers
+    def _finish_sample(self, imu: tuple[float, float], kappa: float) -> None:
+        if self._noise_pos >= len(self._noise):
+            self._noise, self._noise_pos = draw_noise_block(self.np_random, self.setup).tolist(), 0
+        noise = self._noise[self._noise_pos]
+        self._noise_pos += 1
+        self._kappa = kappa
+        self._sensors = sensor_readings(self._state, imu, self._bias, noise, self.setup.noise_std)
+
+    def _observation(self) -> Any:
+        setup = self.setup
+        kind = setup.observation_type
+        if kind == "sensors":
+            return self._sensor_obs()
+        if kind == "state":
+            return self._state_obs()
+        return {"sensors": self._sensor_obs(), "state": self._state_obs()}
+
+    def _sensor_obs(self) -> np.ndarray:
+        lo, hi = self._bounds["sensors"]
+        return np.array([min(max(v, a), b) for v, a, b in zip(self._sensors, lo, hi)], dtype=np.float32)
+
+    def _state_obs(self) -> np.ndarray:
+        s = self._state
+        lo, hi = self._bounds["state"]
+        values = (s.lateral_offset, s.heading, s.speed, s.steering, self._kappa)
+        return np.array([min(max(v, a), b) for v, a, b in zip(values, lo, hi)], dtype=np.float32)
+
+    def _info(self) -> dict[str, Any]:
+        s = self._state
+        vx, vy = road_frame_velocity(s, SCALAR_OPS)
+        sensors = self._sensors
+        return dict(
+            zip(
+                INFO_KEYS,
+                (
+                    self._sim_step * self.setup.dt,
+                    s.station,
+                    s.lateral_offset,
+                    s.heading,
+                    s.speed,
+                    s.steering,
+                    self._acceleration,
+                    self._kappa,
+                    vx,
+                    vy,
+                    self._bias,
+                    self._bias_index,
+                    *sensors,
+                ),
+                strict=True,
+            )
+        )
+
+    @property
+    def state(self) -> VehicleState | None:
+        """The true Frenet state (None before the first reset)."""
+        return self._state

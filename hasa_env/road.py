@@ -1,0 +1,198 @@
+"""Roads: a lane centre line given by its curvature along the arc length s.
+
+A :class:`Road` stores the curvature kappa(s) (1/m, positive turning left) on a
+uniform grid, piecewise linear in s, so straights, circular arcs and clothoid
+transitions are represented exactly. The centre line's global pose
+(X, Y, psi) is integrated from it once. Beyond the end of the table the road
+continues with the last curvature.
+
+Frenet coordinates of a car: station s (m along the centre line), lateral
+offset y (m, left positive, ISO 8855) and heading theta (rad, relative to the
+road tangent). :meth:`Road.to_global` maps them to the global frame;
+:func:`lane_centre_bearing` gives the bearing of a lane-centre point ahead,
+the visual angle of the two-point steering model on any road.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Road", "straight_road", "curved_road", "make_road", "TRACKS", "lane_centre_bearing"]
+
+
+@dataclass(frozen=True, eq=False)
+class Road:
+    """A centre line sampled on a uniform grid of arc length.
+
+    Attributes:
+        name: track name.
+        spacing: grid spacing ds (m).
+        curvature: kappa at the grid nodes (1/m), float64 array, linear in between.
+        lane_width: m.
+    """
+
+    name: str
+    spacing: float
+    curvature: np.ndarray
+    lane_width: float = 3.6
+    x: np.ndarray = field(init=False, repr=False)
+    y: np.ndarray = field(init=False, repr=False)
+    psi: np.ndarray = field(init=False, repr=False)
+    curvature_list: list[float] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        kappa = np.asarray(self.curvature, dtype=np.float64)
+        if kappa.ndim != 1 or kappa.size < 2:
+            raise ValueError("Road.curvature must be a 1-D array of at least 2 nodes")
+        if not np.all(np.isfinite(kappa)):
+            raise ValueError("Road.curvature must be finite")
+        ds = float(self.spacing)
+        # Heading: exact integral of a piecewise-linear curvature.
+        psi = np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)])
+        # Position: Simpson's rule on each interval with the mid-point heading
+        # (exact for the quadratic psi of a clothoid up to O(ds^4)).
+        psi_mid = 0.5 * (psi[1:] + psi[:-1]) + (kappa[:-1] - kappa[1:]) * ds / 8.0
+        dx = ds / 6.0 * (np.cos(psi[:-1]) + 4.0 * np.cos(psi_mid) + np.cos(psi[1:]))
+        dy = ds / 6.0 * (np.sin(psi[:-1]) + 4.0 * np.sin(psi_mid) + np.sin(psi[1:]))
+        object.__setattr__(self, "curvature", kappa)
+        object.__setattr__(self, "psi", psi)
+        object.__setattr__(self, "x", np.concatenate([[0.0], np.cumsum(dx)]))
+        object.__setattr__(self, "y", np.concatenate([[0.0], np.cumsum(dy)]))
+        object.__setattr__(self, "curvature_list", kappa.tolist())
+        for arr in (self.curvature, self.psi, self.x, self.y):
+            arr.setflags(write=False)
+
+    @property
+    def length(self) -> float:
+        """Length (m) of the tabulated part; the road continues beyond it."""
+        return self.spacing * (self.curvature.size - 1)
+
+    @property
+    def is_straight(self) -> bool:
+        return not np.any(self.curvature)
+
+    def curvature_at(self, s: np.ndarray | float) -> np.ndarray:
+        """kappa(s) (1/m), vectorized; constant beyond the table."""
+        grid = np.arange(self.curvature.size) * self.spacing
+        return np.interp(s, grid, self.curvature)
+
+    def pose_at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Global (X, Y, psi) of the centre line at station s (m), vectorized.
+
+        Inside the table the pose is interpolated (error O(ds^2 kappa)); beyond
+        either end the road is extended with its end curvature (exact arcs).
+        """
+        s = np.asarray(s, dtype=np.float64)
+        grid_s = np.arange(self.curvature.size) * self.spacing
+        s_in = np.clip(s, 0.0, self.length)
+        X = np.interp(s_in, grid_s, self.x)
+        Y = np.interp(s_in, grid_s, self.y)
+        psi = np.interp(s_in, grid_s, self.psi)
+        extra = s - s_in
+        if np.any(extra != 0.0):
+            kappa_end = np.where(extra > 0, self.curvature[-1], self.curvature[0])
+            dpsi = kappa_end * extra
+            small = np.abs(dpsi) < 1e-9
+            safe_k = np.where(small, 1.0, kappa_end)
+            fx = np.where(small, extra * np.cos(psi), (np.sin(psi + dpsi) - np.sin(psi)) / safe_k)
+            fy = np.where(small, extra * np.sin(psi), (np.cos(psi) - np.cos(psi + dpsi)) / safe_k)
+            X, Y, psi = X + fx, Y + fy, psi + dpsi
+        return X, Y, psi
+
+    def to_global(
+        self, station: np.ndarray | float, lateral_offset: np.ndarray | float, heading: np.ndarray | float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Global (X, Y, yaw) of a point at Frenet (s, y) with relative heading theta."""
+        X, Y, psi = self.pose_at(station)
+        return X - np.sin(psi) * lateral_offset, Y + np.cos(psi) * lateral_offset, psi + heading
+
+
+def lane_centre_bearing(
+    road: Road,
+    station: np.ndarray | float,
+    lateral_offset: np.ndarray | float,
+    heading: np.ndarray | float,
+    distance: float,
+    lane_offset: np.ndarray | float = 0.0,
+) -> np.ndarray:
+    """Bearing (rad, positive = to the left) of the lane-centre point ``distance`` m ahead.
+
+    The point is the centre of the lane whose centre lies ``lane_offset`` m left
+    of the road's reference line, at arc length ``station + distance``; the
+    bearing is measured from the car's heading. On a straight road it equals the
+    paper's approximation ``-(theta + atan((y - lane_offset) / distance))``
+    exactly.
+    """
+    car_x, car_y, car_yaw = road.to_global(station, lateral_offset, heading)
+    px, py, ppsi = road.pose_at(np.asarray(station, dtype=np.float64) + distance)
+    px = px - np.sin(ppsi) * lane_offset
+    py = py + np.cos(ppsi) * lane_offset
+    bearing = np.arctan2(py - car_y, px - car_x) - car_yaw
+    return (bearing + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _profile(segments: list[tuple[float, float, float]], spacing: float) -> np.ndarray:
+    """Curvature nodes from (length m, kappa_start, kappa_end) segments, linear inside each."""
+    nodes = [segments[0][1]]
+    for length, k0, k1 in segments:
+        n = round(length / spacing)
+        if abs(n * spacing - length) > 1e-9:
+            raise ValueError(f"segment length {length} is not a multiple of the spacing {spacing}")
+        nodes.extend((k0 + (k1 - k0) * np.arange(1, n + 1) / n).tolist())
+    return np.asarray(nodes)
+
+
+def straight_road(lane_width: float = 3.6, length: float = 5000.0, spacing: float = 1.0) -> Road:
+    """An endless straight road (zero curvature)."""
+    return Road("straight", spacing, np.zeros(int(round(length / spacing)) + 1), lane_width)
+
+
+def curved_road(lane_width: float = 3.6, spacing: float = 0.5) -> Road:
+    """The shipped curved track: left and right bends joined by clothoids.
+
+    A 3,000 m course (then straight): 150 m straight, then a sequence of bends
+    with radii 250 m (left), 150 m (right), 120 m (left), 300 m (right),
+    200 m (left), each entered and left through 50 m clothoids with straights
+    in between, so curvature is continuous (a car needs no steering jumps).
+    It plays the part of the paper's "strongly curved" track; at 15-20 m/s the
+    tightest bend needs about 2-3.3 m/s^2 of lateral acceleration.
+    """
+    segments: list[tuple[float, float, float]] = [(150.0, 0.0, 0.0)]
+    for radius, arc in ((250.0, 200.0), (-150.0, 150.0), (120.0, 120.0), (-300.0, 250.0), (200.0, 180.0)):
+        k = 1.0 / radius
+        segments += [(50.0, 0.0, k), (arc, k, k), (50.0, k, 0.0), (120.0, 0.0, 0.0)]
+    used = sum(seg[0] for seg in segments)
+    segments.append((3000.0 - used, 0.0, 0.0))
+    return Road("curved", spacing, _profile(segments, spacing), lane_width)
+
+
+TRACKS = {"straight": straight_road, "curved": curved_road}
+
+
+def make_road(track: str, lane_width: float = 3.6) -> Road:
+    """Build a named track ('straight' or 'curved')."""
+    try:
+        factory = TRACKS[track]
+    except KeyError:
+        raise ValueError(f"unknown track {track!r}; allowed: {', '.join(TRACKS)}") from None
+    return factory(lane_width=lane_width)
+
+
+def curvature_lookup_scalar(curvature: list[float], inv_spacing: float, station: float) -> float:
+    """kappa(s) from the node list (pure Python, for the single env's hot path)."""
+    top = len(curvature) - 1
+    pos = min(max(station * inv_spacing, 0.0), float(top))
+    i = min(int(pos), top - 1)
+    k0 = curvature[i]
+    return k0 + (pos - i) * (curvature[i + 1] - k0)
+
+
+def curvature_lookup_array(curvature: np.ndarray, inv_spacing: float, station: np.ndarray) -> np.ndarray:
+    """kappa(s) from the node array (numpy, for the vector env); same arithmetic as the scalar one."""
+    top = curvature.size - 1
+    pos = np.minimum(np.maximum(station * inv_spacing, 0.0), float(top))
+    i = np.minimum(pos.astype(np.int64), top - 1)
+    k0 = curvature[i]
+    return k0 + (pos - i) * (curvature[i + 1] - k0)

@@ -1,0 +1,249 @@
+"""The native vectorized lane-keeping env: N cars as numpy arrays.
+
+It calls the same dynamics, sensor and reward functions as
+:class:`hasa_env.LaneKeepingEnv` (with the array backend) and draws every
+car's randomness from its own generator in the same order, so car ``i`` of
+``LaneKeepingVectorEnv(num_envs=N)`` reset with ``seed`` reproduces
+``LaneKeepingEnv`` reset with ``seed + i`` step for step, as
+``gymnasium.vector.SyncVectorEnv`` would (autoreset mode ``NEXT_STEP``).
+
+``gym.make_vec("hasa_env/LaneKeeping-v0", num_envs=N,
+vectorization_mode="vector_entry_point", config={...})``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from hasa_env.core import (
+    INFO_KEYS,
+    build_setup,
+    draw_episode,
+    draw_noise_block,
+    physical_actions,
+)
+from hasa_env.dynamics import (
+    ARRAY_OPS,
+    VehicleState,
+    lane_keeping_reward,
+    left_road,
+    road_frame_acceleration,
+    road_frame_velocity,
+    sensor_readings,
+    step_vehicle,
+)
+
+__all__ = ["LaneKeepingVectorEnv"]
+
+
+class LaneKeepingVectorEnv(VectorEnv):
+    """N independent lane-keeping cars stepped together (see :class:`hasa_env.LaneKeepingEnv`).
+
+    Spaces are the single env's, batched. ``infos`` is a dict of arrays (one
+    entry per car, with the ``"_key"`` masks of gymnasium's vector API) holding
+    the single env's info keys. A car whose episode ended is reset on the next
+    ``step`` (its action is ignored, reward 0, flags False).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP, "render_fps": 30}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        config: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+        track: str | None = None,
+        max_episode_steps: int | None = None,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r} is not supported by the vector env; allowed: None, 'rgb_array'")
+        if max_episode_steps is not None:
+            raise ValueError("max_episode_steps is not supported; set config['time_limit'] (s) instead")
+        self.setup = build_setup(config, track)
+        self.config = self.setup.config
+        self.num_envs = int(num_envs)
+        self.render_mode = render_mode
+        self.single_action_space = self.setup.action_space()
+        self.single_observation_space = self.setup.observation_space()
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._curvature = self.setup.curvature_array()
+        n = self.num_envs
+        self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n)]
+        self._noise = np.zeros((n, self.setup.noise_block, len(self.setup.noise_std)))
+        self._noise_pos = np.zeros(n, dtype=np.int64)
+        self._sim_step = np.zeros(n, dtype=np.int64)
+        self._acceleration = np.zeros(n)
+        self._bias = np.zeros(n)
+        self._bias_index = np.zeros(n, dtype=np.int64)
+        self._autoreset = np.zeros(n, dtype=bool)
+        self._kappa = np.zeros(n)
+        self._sensors = np.zeros((n, len(self.setup.noise_std)))
+        self._state: VehicleState | None = None
+        self._arange = np.arange(n)
+        self._renderers: list[Any] | None = None
+        self._sensor_lo, self._sensor_hi = (b.astype(np.float64) for b in self.setup.sensor_bounds())
+        self._state_lo, self._state_hi = (b.astype(np.float64) for b in self.setup.state_bounds())
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        n = self.num_envs
+        if seed is None:
+            seeds: list[int | None] = [None] * n
+        elif isinstance(seed, int | np.integer):
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
+        for i, s in enumerate(seeds):
+            if s is not None:
+                self._rngs[i] = np.random.default_rng(s)
+        fields = [np.zeros(n) for _ in range(5)]
+        self._state = VehicleState(*fields)
+        self._reset_envs(self._arange, options)
+        self._autoreset[:] = False
+        return self._observation(), self._info()
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        setup = self.setup
+        steer, acc = physical_actions(setup, actions, self.num_envs)
+        resetting = self._autoreset.copy()
+        state = self._state
+        previous_steering = state.steering
+        for _ in range(setup.action_repeat):
+            before = state
+            state = step_vehicle(state, steer, acc, setup.params, self._curvature, ARRAY_OPS)
+        vx0, vy0 = road_frame_velocity(before, ARRAY_OPS)
+        vx1, vy1 = road_frame_velocity(state, ARRAY_OPS)
+        dt = setup.params.dt
+        imu = ((vx1 - vx0) / dt, (vy1 - vy0) / dt)
+        self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in state))
+        self._sim_step += setup.action_repeat
+        self._acceleration = acc
+        active = self._arange[~resetting] if resetting.any() else self._arange
+        self._sample(imu, self._curvature(self._state.station), active)
+        terminated = left_road(self._state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
+        truncated = self._sim_step >= setup.max_sim_steps
+        rc = self.config["reward"]
+        rewards = lane_keeping_reward(
+            self._state.lateral_offset,
+            steer - previous_steering,
+            terminated,
+            0.5 * setup.road.lane_width,
+            setup.steering_limit,
+            rc["lateral_weight"],
+            rc["steering_rate_weight"],
+            rc["offroad_penalty"],
+        )
+        if resetting.any():
+            idx = np.flatnonzero(resetting)
+            self._reset_envs(idx, None)
+            rewards[idx] = 0.0
+            terminated[idx] = False
+            truncated[idx] = False
+        self._autoreset = terminated | truncated
+        return self._observation(), rewards, terminated, truncated, self._info()
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode='rgb_array'")
+            return None
+        if self._renderers is None:
+            from hasa_env.rendering import TopDownRenderer
+
+            self._renderers = [TopDownRenderer(self.setup, "rgb_array") for _ in range(self.num_envs)]
+        info = self._info()
+        frames = []
+        for i, renderer in enumerate(self._renderers):
+            frames.append(renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")}))
+        return tuple(frames)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._renderers = None
+
+    # ------------------------------------------------------------- helpers
+    def _reset_envs(self, idx: np.ndarray, options: dict[str, Any] | None) -> None:
+        fields = [f.copy() for f in self._state]
+        for i in idx.tolist():
+            start, index, bias, block = draw_episode(self._rngs[i], self.setup, options)
+            for f, value in zip(fields, start, strict=True):
+                f[i] = value
+            self._bias[i], self._bias_index[i] = bias, index
+            self._noise[i] = block
+            self._noise_pos[i] = 0
+            self._sim_step[i] = 0
+            self._acceleration[i] = 0.0
+        self._state = VehicleState(*fields)
+        # the reset cars' first sample: instantaneous IMU at zero acceleration
+        kappa = self._curvature(self._state.station)
+        imu = road_frame_acceleration(self._state, 0.0, kappa, self.setup.params, ARRAY_OPS)
+        self._sample(imu, kappa, idx)
+
+    def _sample(self, imu: tuple, kappa: np.ndarray, rows: np.ndarray) -> None:
+        """Draw the next noise row of the cars ``rows`` and compute their sensors and curvature."""
+        exhausted = rows[self._noise_pos[rows] >= self.setup.noise_block]
+        for i in exhausted.tolist():
+            self._noise[i] = draw_noise_block(self._rngs[i], self.setup)
+            self._noise_pos[i] = 0
+        noise = self._noise[rows, self._noise_pos[rows]]
+        self._noise_pos[rows] += 1
+        state = VehicleState(*(f[rows] for f in self._state))
+        readings = sensor_readings(
+            state, (imu[0][rows], imu[1][rows]), self._bias[rows], noise.T, self.setup.noise_std
+        )
+        self._kappa[rows] = kappa[rows]
+        self._sensors[rows] = np.stack(readings, axis=1)
+
+    def _observation(self) -> Any:
+        kind = self.setup.observation_type
+        if kind == "sensors":
+            return self._sensor_obs()
+        if kind == "state":
+            return self._state_obs()
+        return {"sensors": self._sensor_obs(), "state": self._state_obs()}
+
+    def _sensor_obs(self) -> np.ndarray:
+        return np.clip(self._sensors, self._sensor_lo, self._sensor_hi).astype(np.float32)
+
+    def _state_obs(self) -> np.ndarray:
+        s = self._state
+        values = np.stack([s.lateral_offset, s.heading, s.speed, s.steering, self._kappa], axis=1)
+        return np.clip(values, self._state_lo, self._state_hi).astype(np.float32)
+
+    def _info(self) -> dict[str, Any]:
+        s = self._state
+        vx, vy = road_frame_velocity(s, ARRAY_OPS)
+        values = (
+            self._sim_step * self.setup.dt,
+            s.station,
+            s.lateral_offset,
+            s.heading,
+            s.speed,
+            s.steering,
+            self._acceleration,
+            self._kappa,
+            vx,
+            vy,
+            self._bias,
+            self._bias_index,
+            *self._sensors.T,
+        )
+        info: dict[str, Any] = {}
+        mask = np.ones(self.num_envs, dtype=bool)
+        for key, value in zip(INFO_KEYS, values, strict=True):
+            info[key] = np.array(value, copy=True)
+            info["_" + key] = mask
+        return info
