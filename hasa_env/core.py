@@ -21,7 +21,7 @@ from hasa_env.config import make_config
 from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState
 from hasa_env.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
 
-__all__ = ["EnvSetup", "INFO_KEYS", "STATE_NAMES", "RESET_OPTIONS", "build_setup", "draw_episode"]
+__all__ = ["EnvSetup", "INFO_KEYS", "RECORDING_COLUMNS", "recording_row", "STATE_NAMES", "RESET_OPTIONS", "build_setup", "draw_episode"]
 
 STATE_NAMES = ("lateral_offset", "heading", "speed", "steering", "road_curvature")
 """True-state observation channels (units: m, rad, m/s, rad, 1/m)."""
@@ -42,6 +42,22 @@ INFO_KEYS = (
     *(f"sensor_{name}" for name in SENSOR_NAMES),
 )
 """Keys of ``info``, identical at ``reset`` and every ``step`` (all floats, bias_index an int)."""
+
+RECORDING_COLUMNS = ("step", *INFO_KEYS, "reward", "terminated", "truncated")
+"""Columns of a recording CSV (one row per env step; row 0 is the reset state).
+
+``steering`` and ``acceleration`` of row k are the physical action applied over
+the step that ended at row k (row 0: the initial steering and 0), so replaying
+rows 1..n's (steering, acceleration) with ``action.type = "physical"``
+reproduces the run.
+"""
+
+
+
+def recording_row(step: int, info: Mapping[str, Any], reward: float, terminated: bool, truncated: bool) -> list:
+    """One recording row (values in :data:`RECORDING_COLUMNS` order) from an env's ``info``."""
+    return [int(step), *(info[k] for k in INFO_KEYS), float(reward), bool(terminated), bool(truncated)]
+
 
 RESET_OPTIONS = ("bias", "bias_index", "lateral_offset", "heading", "speed", "steering")
 """Keys accepted in ``reset(options=...)``."""

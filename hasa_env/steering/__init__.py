@@ -1,0 +1,5 @@
+"""Human steering models: features, the ARX description, models, fitting."""
+
+from hasa_env.steering.arx import ARXForm
+
+__all__ = ["ARXForm"]
