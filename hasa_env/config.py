@@ -143,7 +143,7 @@ _SCHEMA: dict[str, Any] = {
     "render": {
         "width": _Spec(640, "Frame width (pixels).", kind="int", low=64, high=4096),
         "height": _Spec(480, "Frame height (pixels).", kind="int", low=64, high=4096),
-        "pixels_per_metre": _Spec(8.0, "Top-down zoom.", low=0.5, high=200.0),
+        "pixels_per_metre": _Spec(12.0, "Top-down zoom.", low=0.5, high=200.0),
         "fps": _Spec(30, "Frame rate of render_mode='human'.", kind="int", low=1, high=240),
     },
 }
