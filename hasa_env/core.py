@@ -63,6 +63,11 @@ RESET_OPTIONS = ("bias", "bias_index", "lateral_offset", "heading", "speed", "st
 """Keys accepted in ``reset(options=...)``."""
 
 
+def _zero_curvature(station: Any) -> float:
+    """kappa(s) of a straight road: 0.0 (broadcasts against arrays, same arithmetic for both backends)."""
+    return 0.0
+
+
 @dataclass(frozen=True, eq=False)
 class EnvSetup:
     """Everything derived once from a validated config."""
@@ -88,11 +93,15 @@ class EnvSetup:
         return self.params.dt
 
     def curvature_scalar(self):  # noqa: ANN201
-        """kappa(s) for one car (Python float in, float out)."""
+        """kappa(s) for one car (Python float in, float out); a constant 0.0 on a straight road."""
+        if self.road.is_straight:
+            return _zero_curvature
         return partial(curvature_lookup_scalar, self.road.curvature_list, 1.0 / self.road.spacing)
 
     def curvature_array(self):  # noqa: ANN201
-        """kappa(s) for N cars (array in, array out)."""
+        """kappa(s) for N cars (array in, array out); a constant 0.0 on a straight road."""
+        if self.road.is_straight:
+            return _zero_curvature
         return partial(curvature_lookup_array, self.road.curvature, 1.0 / self.road.spacing)
 
     # ----- spaces -------------------------------------------------------------

@@ -219,14 +219,12 @@ class LaneKeepingEnv(gym.Env):
         return {"sensors": self._sensor_obs(), "state": self._state_obs()}
 
     def _sensor_obs(self) -> np.ndarray:
-        lo, hi = self._bounds["sensors"]
-        return np.array([min(max(v, a), b) for v, a, b in zip(self._sensors, lo, hi)], dtype=np.float32)
+        return _clipped(self._sensors, *self._bounds["sensors"])
 
     def _state_obs(self) -> np.ndarray:
         s = self._state
-        lo, hi = self._bounds["state"]
         values = (s.lateral_offset, s.heading, s.speed, s.steering, self._kappa)
-        return np.array([min(max(v, a), b) for v, a, b in zip(values, lo, hi)], dtype=np.float32)
+        return _clipped(values, *self._bounds["state"])
 
     def _info(self) -> dict[str, Any]:
         s = self._state
@@ -258,3 +256,11 @@ class LaneKeepingEnv(gym.Env):
     def state(self) -> VehicleState | None:
         """The true Frenet state (None before the first reset)."""
         return self._state
+
+
+def _clipped(values: tuple, low: list[float], high: list[float]) -> np.ndarray:
+    """float32 observation of ``values`` saturated at the bounds."""
+    return np.array(
+        [lo if v < lo else (hi if v > hi else v) for v, lo, hi in zip(values, low, high)],
+        dtype=np.float32,
+    )

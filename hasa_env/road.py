@@ -183,8 +183,10 @@ def make_road(track: str, lane_width: float = 3.6) -> Road:
 def curvature_lookup_scalar(curvature: list[float], inv_spacing: float, station: float) -> float:
     """kappa(s) from the node list (pure Python, for the single env's hot path)."""
     top = len(curvature) - 1
-    pos = min(max(station * inv_spacing, 0.0), float(top))
-    i = min(int(pos), top - 1)
+    pos = station * inv_spacing
+    pos = 0.0 if pos < 0.0 else (top if pos > top else pos)
+    i = int(pos)
+    i = top - 1 if i >= top else i
     k0 = curvature[i]
     return k0 + (pos - i) * (curvature[i + 1] - k0)
 
@@ -192,7 +194,7 @@ def curvature_lookup_scalar(curvature: list[float], inv_spacing: float, station:
 def curvature_lookup_array(curvature: np.ndarray, inv_spacing: float, station: np.ndarray) -> np.ndarray:
     """kappa(s) from the node array (numpy, for the vector env); same arithmetic as the scalar one."""
     top = curvature.size - 1
-    pos = np.minimum(np.maximum(station * inv_spacing, 0.0), float(top))
+    pos = np.minimum(np.maximum(station * inv_spacing, 0.0), top)
     i = np.minimum(pos.astype(np.int64), top - 1)
     k0 = curvature[i]
     return k0 + (pos - i) * (curvature[i + 1] - k0)

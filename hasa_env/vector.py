@@ -134,7 +134,7 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._sim_step += setup.action_repeat
         self._acceleration = acc
         active = self._arange[~resetting] if resetting.any() else self._arange
-        self._sample(imu, self._curvature(self._state.station), active)
+        self._sample(imu, self._curvature_now(), active)
         terminated = left_road(self._state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
         truncated = self._sim_step >= setup.max_sim_steps
         rc = self.config["reward"]
@@ -188,9 +188,14 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._acceleration[i] = 0.0
         self._state = VehicleState(*fields)
         # the reset cars' first sample: instantaneous IMU at zero acceleration
-        kappa = self._curvature(self._state.station)
+        kappa = self._curvature_now()
         imu = road_frame_acceleration(self._state, 0.0, kappa, self.setup.params, ARRAY_OPS)
         self._sample(imu, kappa, idx)
+
+    def _curvature_now(self) -> np.ndarray:
+        """Road curvature (1/m) at every car's station, shape (N,)."""
+        kappa = self._curvature(self._state.station)
+        return np.broadcast_to(np.asarray(kappa, dtype=np.float64), (self.num_envs,))
 
     def _sample(self, imu: tuple, kappa: np.ndarray, rows: np.ndarray) -> None:
         """Draw the next noise row of the cars ``rows`` and compute their sensors and curvature."""
