@@ -145,6 +145,18 @@ _SCHEMA: dict[str, Any] = {
         "height": _Spec(480, "Frame height (pixels).", kind="int", low=64, high=4096),
         "pixels_per_metre": _Spec(12.0, "Top-down zoom.", low=0.5, high=200.0),
         "fps": _Spec(30, "Frame rate of render_mode='human'.", kind="int", low=1, high=240),
+        "view": _Spec(
+            "top_down",
+            "'top_down' (map view following the car) or 'driver' (first-person perspective).",
+            kind="choice", choices=("top_down", "driver"),
+        ),
+        "show_points": _Spec(
+            False, "Driver view: draw the near (6.2 m) and far (20 m) lane-centre points.", kind="bool"
+        ),
+        "horizontal_field_of_view": _Spec(
+            1.2, "Driver view: horizontal field of view (rad).", low=0.2, high=2.8
+        ),
+        "eye_height": _Spec(1.2, "Driver view: eye height above the road (m).", low=0.3, high=5.0),
     },
 }
 
@@ -179,7 +191,9 @@ def default_config() -> dict[str, Any]:
     observation.type            'sensors' | 'state' | 'both'
     reward.*                    lateral_weight, steering_rate_weight,
                                 offroad_penalty
-    render.*                    width, height, pixels_per_metre, fps
+    render.*                    width, height, pixels_per_metre, fps, view
+                                ('top_down' | 'driver'), show_points,
+                                horizontal_field_of_view (rad), eye_height (m)
     ==========================  =================================================
 
     :func:`describe_config` prints every key with its documentation and range.
