@@ -1,36 +1,323 @@
-"""Top-down rendering with pygame.
+"""Rendering with pygame: the top-down view, the shared HUD and window handling.
 
 Frames are drawn on an off-screen ``pygame.Surface`` (works headless, with
 ``SDL_VIDEODRIVER=dummy`` and no display) and returned as ``(H, W, 3)``
 uint8 arrays for ``render_mode="rgb_array"``; ``"human"`` blits the same
 surface to a window.
 
-The view follows the car with the road tangent pointing up: grey road, white
-lane markings (true), faded yellow "ghost" markings where a wrong lane-centre
-hypothesis would put the lane, the car, and a HUD with time, speed and
-steering.
+Two views exist, chosen with ``config["render"]["view"]`` (see
+:func:`make_renderer`):
+
+- ``"top_down"`` (:class:`TopDownRenderer`): the view follows the car with the
+  road tangent pointing up: grey road, white lane markings (true), faded
+  yellow "ghost" markings where a wrong lane-centre hypothesis would put the
+  lane, the car;
+- ``"driver"`` (:class:`hasa_env.views.DriverViewRenderer`): the first-person
+  perspective of the road ahead.
+
+Both draw the same HUD (:class:`Hud`): time, speed, steering angle, and, when
+an estimator runs alongside, the live weight of every lane hypothesis.
+
+In ``"human"`` mode the window is paced by the *simulation* clock
+(:class:`HumanWindow`): each call sleeps until the wall clock has caught up
+with ``info["time"]`` (so 100 Hz simulation runs in real time) and a frame
+is only drawn when one is due at the configured ``render.fps``; the frame
+rate never changes the physics.
 """
 
 from __future__ import annotations
 
+import math
 import os
+import time
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["TopDownRenderer", "ROAD_COLOUR", "MARKING_COLOUR", "GHOST_COLOUR", "GRASS_COLOUR"]
+__all__ = [
+    "TopDownRenderer",
+    "Hud",
+    "HumanWindow",
+    "make_renderer",
+    "surface_to_array",
+    "resolve_weights",
+    "WeightSource",
+    "ROAD_COLOUR",
+    "MARKING_COLOUR",
+    "GHOST_COLOUR",
+    "GRASS_COLOUR",
+    "HYPOTHESIS_COLOURS",
+]
 
 GRASS_COLOUR = (46, 120, 52)
 ROAD_COLOUR = (90, 90, 96)
 MARKING_COLOUR = (245, 245, 245)
 GHOST_COLOUR = (200, 185, 90)
 CAR_COLOUR = (200, 40, 40)
+HUD_TEXT_COLOUR = (255, 255, 255)
+HYPOTHESIS_COLOURS = (
+    (235, 235, 235),
+    GHOST_COLOUR,
+    (90, 190, 220),
+    (220, 120, 200),
+    (150, 220, 110),
+    (240, 150, 80),
+)
+"""Colour of hypothesis i (cycled): HUD weight bars; index 0 is usually the true-lane one."""
+
+WeightSource = Mapping[float, float] | Sequence[float] | Callable[[Mapping[str, Any]], Any] | None
+"""Where the HUD takes hypothesis weights from: a dict bias (m) -> weight, a
+sequence with one weight per ``markings.hypotheses`` entry, a callable
+``info -> either of those``, or None (look in ``info``, see :func:`resolve_weights`)."""
+
+INFO_WEIGHT_KEYS = ("estimator_weights", "hypothesis_weights", "weights")
+"""``info`` keys searched, in order, for hypothesis weights when none are passed explicitly."""
+
+
+def surface_to_array(surface: Any) -> np.ndarray:
+    """An ``(H, W, 3)`` uint8 RGB copy of a pygame surface (fast path via ``image.tobytes``)."""
+    import pygame
+
+    width, height = surface.get_size()
+    tobytes = getattr(pygame.image, "tobytes", None) or pygame.image.tostring
+    data = tobytes(surface, "RGB")
+    return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3).copy()
+
+
+def resolve_weights(
+    source: WeightSource, info: Mapping[str, Any], hypotheses: Sequence[float]
+) -> list[tuple[float, float]] | None:
+    """Hypothesis weights to show as ``[(bias m, weight), ...]``, or None if there are none.
+
+    ``source`` may be a dict ``{bias: weight}``, a sequence of weights (one per
+    entry of ``hypotheses``, same order), a callable ``info -> dict or
+    sequence``, or None; with None the first present key of
+    :data:`INFO_WEIGHT_KEYS` in ``info`` is used (a sequence, aligned with
+    ``info["estimator_hypotheses"]`` when present, else with ``hypotheses``).
+    Weights are shown as given (no renormalisation).
+
+    Raises:
+        ValueError: a sequence whose length matches neither the hypotheses nor
+            the biases given with it.
+    """
+    biases: Sequence[float] = hypotheses
+    if source is None:
+        for key in INFO_WEIGHT_KEYS:
+            if key in info and info[key] is not None:
+                source = info[key]
+                if "estimator_hypotheses" in info:
+                    biases = [float(b) for b in np.ravel(info["estimator_hypotheses"])]
+                break
+        else:
+            return None
+    elif callable(source):
+        source = source(info)
+        if source is None:
+            return None
+    if isinstance(source, Mapping):
+        return [(float(b), float(w)) for b, w in source.items()]
+    values = [float(w) for w in np.ravel(np.asarray(source, dtype=np.float64))]
+    if len(values) != len(biases):
+        raise ValueError(
+            f"got {len(values)} hypothesis weights for {len(biases)} hypotheses {list(biases)}; "
+            "pass one weight per hypothesis or a dict {bias_m: weight}"
+        )
+    return list(zip((float(b) for b in biases), values, strict=True))
+
+
+class Hud:
+    """Heads-up display: time, speed, steering angle, hypothesis weights, a message.
+
+    Args:
+        pygame_module: the imported ``pygame``.
+        height: frame height (px); the font scales with it.
+        time_limit: episode length (s) shown after the time, or None.
+        steering_ratio: steering-wheel angle / road-wheel angle; when given, the
+            steering line also shows the steering-wheel angle.
+    """
+
+    def __init__(
+        self,
+        pygame_module: Any,
+        height: int,
+        time_limit: float | None = None,
+        steering_ratio: float | None = None,
+    ) -> None:
+        self._pg = pygame_module
+        self._pg.font.init()
+        self.font = self._pg.font.Font(None, max(16, height // 26))
+        self.big_font = self._pg.font.Font(None, max(32, height // 6))
+        self.time_limit = time_limit
+        self.steering_ratio = steering_ratio
+        self._panel_cache: dict[tuple[int, int], Any] = {}
+
+    def lines(self, info: Mapping[str, Any]) -> list[str]:
+        """The text lines of the HUD (without weights)."""
+        t = float(info["time"])
+        limit = f" / {self.time_limit:.0f}" if self.time_limit else ""
+        v = float(info["speed"])
+        delta_deg = math.degrees(float(info["steering"]))
+        steer = f"steering {delta_deg:+6.2f} deg (road wheel)"
+        if self.steering_ratio:
+            steer += f"  {delta_deg * self.steering_ratio:+6.1f} deg (wheel)"
+        return [
+            f"time {t:6.2f}{limit} s",
+            f"speed {v:5.2f} m/s  ({v * 3.6:5.1f} km/h)",
+            steer,
+        ]
+
+    def _panel(self, width: int, height: int) -> Any:
+        key = (width, height)
+        panel = self._panel_cache.get(key)
+        if panel is None:
+            panel = self._pg.Surface(key, self._pg.SRCALPHA)
+            panel.fill((0, 0, 0, 150))
+            self._panel_cache[key] = panel
+        return panel
+
+    def draw(
+        self,
+        surface: Any,
+        info: Mapping[str, Any],
+        weights: list[tuple[float, float]] | None = None,
+        message: str | None = None,
+        hypotheses: Sequence[float] = (),
+    ) -> None:
+        """Draw the HUD onto ``surface`` (top-left panel; message centred)."""
+        pg = self._pg
+        texts = [self.font.render(s, True, HUD_TEXT_COLOUR) for s in self.lines(info)]
+        line_h = self.font.get_linesize()
+        bar_w = max(80, surface.get_width() // 8)
+        label_w = 0
+        labels = []
+        if weights:
+            for b, w in weights:
+                img = self.font.render(f"b {b:+5.2f} m {w:5.3f}", True, HUD_TEXT_COLOUR)
+                labels.append(img)
+                label_w = max(label_w, img.get_width())
+        n_lines = len(texts) + (1 + len(weights) if weights else 0)
+        width = max([t.get_width() for t in texts] + [label_w + bar_w + 18]) + 16
+        height = n_lines * line_h + 12
+        surface.blit(self._panel(width, height), (6, 6))
+        y = 12
+        for img in texts:
+            surface.blit(img, (14, y))
+            y += line_h
+        if weights:
+            surface.blit(
+                self.font.render("lane hypotheses (estimator)", True, HUD_TEXT_COLOUR), (14, y)
+            )
+            y += line_h
+            for (b, w), img in zip(weights, labels, strict=True):
+                index = _hypothesis_index(b, hypotheses)
+                colour = HYPOTHESIS_COLOURS[index % len(HYPOTHESIS_COLOURS)]
+                surface.blit(img, (14, y))
+                x0 = 14 + label_w + 8
+                bar_h = max(4, line_h - 6)
+                pg.draw.rect(surface, (60, 60, 60), (x0, y + 2, bar_w, bar_h))
+                fill = int(round(bar_w * min(max(w, 0.0), 1.0)))
+                if fill > 0:
+                    pg.draw.rect(surface, colour, (x0, y + 2, fill, bar_h))
+                y += line_h
+        if message:
+            self.draw_message(surface, message)
+
+    def draw_message(self, surface: Any, message: str) -> None:
+        """Centre ``message`` (lines split on newlines; a short first line is drawn large)."""
+        lines = message.split("\n")
+        big = len(lines[0]) <= 12
+        images = [
+            (self.big_font if (i == 0 and big) else self.font).render(s, True, HUD_TEXT_COLOUR)
+            for i, s in enumerate(lines)
+        ]
+        total_h = sum(img.get_height() + 6 for img in images)
+        width = max(img.get_width() for img in images) + 40
+        sw, sh = surface.get_size()
+        top = (sh - total_h) // 2
+        surface.blit(self._panel(width, total_h + 20), ((sw - width) // 2, top - 10))
+        y = top
+        for img in images:
+            surface.blit(img, ((sw - img.get_width()) // 2, y))
+            y += img.get_height() + 6
+
+
+def _hypothesis_index(bias: float, hypotheses: Sequence[float]) -> int:
+    for i, h in enumerate(hypotheses):
+        if abs(h - bias) < 1e-9:
+            return i
+    return len(hypotheses)
+
+
+class HumanWindow:
+    """A window shown in ``render_mode="human"``, paced by the simulation clock.
+
+    :meth:`show` sleeps until the wall-clock time since the episode started
+    (``info["time"] == 0``) reaches ``info["time"]`` (real-time simulation,
+    the physics step size never depends on the frame rate) and blits a new
+    frame only when ``1 / fps`` s have passed since the last one. If the
+    simulation falls behind the wall clock it runs as fast as it can.
+    """
+
+    def __init__(self, pygame_module: Any, size: tuple[int, int], fps: int, caption: str) -> None:
+        self._pg = pygame_module
+        self.size = size
+        self.frame_interval = 1.0 / float(fps)
+        self.caption = caption
+        self.window = None
+        self._anchor: float | None = None
+        self._last_frame = -math.inf
+
+    def frame_due(self, sim_time: float) -> bool:
+        """Pace to ``sim_time`` (s) and say whether a frame should be drawn now."""
+        now = time.perf_counter()
+        if self._anchor is None or sim_time == 0.0:
+            self._anchor = now - sim_time
+            self._last_frame = -math.inf
+        wait = self._anchor + sim_time - now
+        if wait > 0.0:
+            time.sleep(wait)
+            now = time.perf_counter()
+        elif wait < -0.25:  # far behind (e.g. paused in a debugger): re-anchor, do not sprint
+            self._anchor = now - sim_time
+        return now - self._last_frame >= self.frame_interval or sim_time == 0.0
+
+    def show(self, surface: Any) -> None:
+        """Blit ``surface`` to the window (opened on first use) and flip."""
+        pg = self._pg
+        if self.window is None:
+            pg.display.init()
+            self.window = pg.display.set_mode(self.size)
+            pg.display.set_caption(self.caption)
+        self.window.blit(surface, (0, 0))
+        pg.event.pump()
+        pg.display.flip()
+        self._last_frame = time.perf_counter()
+
+    def close(self) -> None:
+        if self.window is not None:
+            self._pg.display.quit()
+            self.window = None
 
 
 class TopDownRenderer:
-    """Draws an env's info dict; one instance per env."""
+    """Draws an env's info dict from above; one instance per env.
 
-    def __init__(self, setup: Any, render_mode: str) -> None:
+    Args:
+        setup: the env's :class:`hasa_env.core.EnvSetup`.
+        render_mode: ``"rgb_array"`` or ``"human"``.
+        weights: where the HUD takes hypothesis weights from (see :data:`WeightSource`).
+        steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
+    """
+
+    def __init__(
+        self,
+        setup: Any,
+        render_mode: str,
+        *,
+        weights: WeightSource = None,
+        steering_ratio: float | None = None,
+    ) -> None:
         os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
         import pygame
 
@@ -41,14 +328,18 @@ class TopDownRenderer:
         self.width, self.height = int(rc["width"]), int(rc["height"])
         self.ppm = float(rc["pixels_per_metre"])
         self.fps = int(rc["fps"])
+        self.weights = weights
         pygame.font.init()
         self.surface = pygame.Surface((self.width, self.height))
-        self.font = pygame.font.Font(None, max(14, self.height // 24))
-        self.window = None
-        self.clock = None
+        self.hud = Hud(pygame, self.height, setup.config["time_limit"], steering_ratio)
+        self._window = HumanWindow(
+            pygame, (self.width, self.height), self.fps, "hasa-env lane keeping"
+        )
 
     # -------------------------------------------------------------- drawing
-    def _to_screen(self, gx: np.ndarray, gy: np.ndarray, origin: tuple[float, float, float]) -> np.ndarray:
+    def _to_screen(
+        self, gx: np.ndarray, gy: np.ndarray, origin: tuple[float, float, float]
+    ) -> np.ndarray:
         ox, oy, psi = origin
         dx, dy = gx - ox, gy - oy
         forward = dx * np.cos(psi) + dy * np.sin(psi)
@@ -57,20 +348,39 @@ class TopDownRenderer:
         sy = self.height * 0.7 - forward * self.ppm
         return np.stack([sx, sy], axis=-1)
 
-    def _line_points(self, stations: np.ndarray, offset: float, origin: tuple) -> list[tuple[float, float]]:
+    def _line_points(
+        self, stations: np.ndarray, offset: float, origin: tuple
+    ) -> list[tuple[float, float]]:
         road = self.setup.road
         X, Y, psi = road.pose_at(stations)
         gx = X - np.sin(psi) * offset
         gy = Y + np.cos(psi) * offset
         return [tuple(p) for p in self._to_screen(gx, gy, origin).tolist()]
 
-    def draw(self, info: dict[str, Any]) -> Any:
-        """Draw the scene described by an env ``info`` dict onto the off-screen surface."""
+    def draw(
+        self,
+        info: Mapping[str, Any],
+        weights: WeightSource = None,
+        message: str | None = None,
+        target: Any = None,
+    ) -> Any:
+        """Draw the scene described by an env ``info`` dict.
+
+        Args:
+            info: the env's info (keys of :data:`hasa_env.core.INFO_KEYS`).
+            weights: hypothesis weights for the HUD (default: the constructor's).
+            message: text centred over the scene (e.g. a countdown), or None.
+            target: surface to draw on (same size); default the off-screen surface.
+
+        Returns:
+            The surface drawn on.
+        """
         pg = self._pg
         setup = self.setup
         road = setup.road
         width = road.lane_width
-        surf = self.surface
+        surf = self.surface if target is None else target
+        self._target = surf
         surf.fill(GRASS_COLOUR)
         s0 = float(info["station"])
         behind = self.height * 0.3 / self.ppm + 5.0
@@ -102,56 +412,75 @@ class TopDownRenderer:
                 pts = self._line_points(stations, -b + side * width, origin)
                 self._dashed(pts, stations, GHOST_COLOUR, max(1, line_w // 2), period=6.0)
         self._draw_car(info, origin)
-        self._draw_hud(info)
+        shown = resolve_weights(
+            self.weights if weights is None else weights, info, setup.hypotheses
+        )
+        self.hud.draw(surf, info, shown, message, setup.hypotheses)
         return surf
 
-    def _dashed(self, pts: list, stations: np.ndarray, colour: tuple, line_w: int, period: float = 12.0) -> None:
+    def _dashed(
+        self, pts: list, stations: np.ndarray, colour: tuple, line_w: int, period: float = 12.0
+    ) -> None:
         pg = self._pg
         on = (np.floor(stations / (period / 2.0)) % 2) == 0
         for i in range(len(pts) - 1):
             if on[i]:
-                pg.draw.line(self.surface, colour, pts[i], pts[i + 1], line_w)
+                pg.draw.line(self._target, colour, pts[i], pts[i + 1], line_w)
 
-    def _draw_car(self, info: dict[str, Any], origin: tuple) -> None:
+    def _draw_car(self, info: Mapping[str, Any], origin: tuple) -> None:
         road = self.setup.road
-        gx, gy, yaw = road.to_global(float(info["station"]), float(info["lateral_offset"]), float(info["heading"]))
+        gx, gy, yaw = road.to_global(
+            float(info["station"]), float(info["lateral_offset"]), float(info["heading"])
+        )
         rear_overhang, length, half_w = 1.0, 4.6, 0.9
         corners = np.array(
-            [[-rear_overhang, -half_w], [length - rear_overhang, -half_w],
-             [length - rear_overhang, half_w], [-rear_overhang, half_w]]
+            [
+                [-rear_overhang, -half_w],
+                [length - rear_overhang, -half_w],
+                [length - rear_overhang, half_w],
+                [-rear_overhang, half_w],
+            ]
         )
         c, s = np.cos(yaw), np.sin(yaw)
         px = gx + corners[:, 0] * c - corners[:, 1] * s
         py = gy + corners[:, 0] * s + corners[:, 1] * c
         pts = [tuple(p) for p in self._to_screen(px, py, origin).tolist()]
-        self._pg.draw.polygon(self.surface, CAR_COLOUR, pts)
-
-    def _draw_hud(self, info: dict[str, Any]) -> None:
-        text = (
-            f"t {info['time']:5.2f} s   v {info['speed']:5.1f} m/s   "
-            f"delta {np.degrees(info['steering']):+6.2f} deg   y {info['lateral_offset']:+5.2f} m"
-        )
-        img = self.font.render(text, True, (255, 255, 255), (0, 0, 0))
-        self.surface.blit(img, (8, 8))
+        self._pg.draw.polygon(self._target, CAR_COLOUR, pts)
 
     # ----------------------------------------------------------- output
-    def render(self, info: dict[str, Any]) -> np.ndarray | None:
-        surf = self.draw(info)
+    def render(self, info: Mapping[str, Any], weights: WeightSource = None) -> np.ndarray | None:
+        """``rgb_array``: the (H, W, 3) uint8 frame; ``human``: show it, paced by sim time."""
         if self.render_mode == "rgb_array":
-            return np.transpose(self._pg.surfarray.array3d(surf), (1, 0, 2)).copy()
-        pg = self._pg
-        if self.window is None:
-            pg.display.init()
-            self.window = pg.display.set_mode((self.width, self.height))
-            pg.display.set_caption("hasa-env lane keeping")
-            self.clock = pg.time.Clock()
-        self.window.blit(surf, (0, 0))
-        pg.event.pump()
-        pg.display.flip()
-        self.clock.tick(self.fps)
+            return surface_to_array(self.draw(info, weights))
+        if self._window.frame_due(float(info["time"])):
+            self._window.show(self.draw(info, weights))
         return None
 
     def close(self) -> None:
-        if self.window is not None:
-            self._pg.display.quit()
-            self.window = None
+        self._window.close()
+
+
+def make_renderer(
+    setup: Any,
+    render_mode: str,
+    *,
+    view: str | None = None,
+    weights: WeightSource = None,
+    steering_ratio: float | None = None,
+) -> Any:
+    """The renderer of ``view`` (default ``setup.config["render"]["view"]``) for an env set-up.
+
+    Returns a :class:`TopDownRenderer` or a :class:`hasa_env.views.DriverViewRenderer`;
+    both have ``draw(info, weights, message, target)``, ``render(info, weights)``
+    and ``close()``.
+    """
+    view = setup.config["render"]["view"] if view is None else view
+    if view == "top_down":
+        return TopDownRenderer(setup, render_mode, weights=weights, steering_ratio=steering_ratio)
+    if view == "driver":
+        from hasa_env.views import DriverViewRenderer
+
+        return DriverViewRenderer(
+            setup, render_mode, weights=weights, steering_ratio=steering_ratio
+        )
+    raise ValueError(f"unknown view {view!r}; allowed: 'top_down', 'driver'")

@@ -1,0 +1,368 @@
+"""The driver's-eye view: a first-person perspective of the road ahead.
+
+What a participant sees in ``hasa-drive`` (and what ``render.view = "driver"``
+renders): sky, grass, the grey road, the true lane markings in white (solid
+road edges, dashed lane dividers), roadside posts every 50 m for a sense of
+speed, the *ghost* markings of every wrong lane hypothesis (b != 0: the
+camera reads y + b, so that hypothesis puts the lane centre at y = -b and its
+markings at y = -b +- lane_width / 2), drawn dashed and faded, and
+optionally the near (6.2 m) and far (20 m) lane-centre points of the
+two-point steering model (filled for the true lane, rings for the ghost
+lanes). The HUD (:class:`hasa_env.rendering.Hud`) shows time, speed,
+steering angle and, when an estimator runs alongside, the hypothesis weights.
+
+Camera model: a pinhole camera at the driver's eye, ``EYE_FORWARD`` m ahead
+of the rear axle on the car's centre line, ``render.eye_height`` m above the
+road, looking along the car's heading with a horizontal field of view
+``render.horizontal_field_of_view`` (rad). The horizon sits at
+``HORIZON_FRACTION`` of the frame height (a shifted principal point rather
+than a pitched camera, so straight road lines stay straight). A ground
+point at forward distance X_c and leftward offset Y_c (m, camera frame)
+appears at ``(W/2 - f Y_c / X_c, horizon + f h / X_c)`` with the focal length
+``f = (W/2) / tan(fov/2)`` in pixels.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from hasa_env.rendering import (
+    GHOST_COLOUR,
+    GRASS_COLOUR,
+    MARKING_COLOUR,
+    ROAD_COLOUR,
+    Hud,
+    HumanWindow,
+    WeightSource,
+    resolve_weights,
+    surface_to_array,
+)
+
+__all__ = [
+    "DriverViewRenderer",
+    "SKY_COLOUR",
+    "GHOST_FADED_COLOUR",
+    "NEAR_POINT_COLOUR",
+    "FAR_POINT_COLOUR",
+    "NEAR_POINT_DISTANCE",
+    "FAR_POINT_DISTANCE",
+    "EYE_FORWARD",
+]
+
+SKY_COLOUR = (150, 190, 230)
+FAR_GRASS_COLOUR = (70, 135, 70)
+POST_COLOUR = (235, 235, 235)
+POST_TOP_COLOUR = (30, 30, 30)
+GHOST_FADED_COLOUR = tuple(
+    int(round(0.55 * g + 0.45 * r)) for g, r in zip(GHOST_COLOUR, ROAD_COLOUR, strict=True)
+)
+"""Ghost markings, faded: 55 % ghost yellow over the road grey, (150, 142, 93)."""
+NEAR_POINT_COLOUR = (0, 210, 255)
+FAR_POINT_COLOUR = (255, 70, 200)
+
+NEAR_POINT_DISTANCE = 6.2
+"""Near point distance ahead (m), Salvucci & Gray (DESIGN.md section 3)."""
+FAR_POINT_DISTANCE = 20.0
+"""Far point distance ahead (m)."""
+EYE_FORWARD = 1.2
+"""Driver's eye ahead of the rear axle (m)."""
+HORIZON_FRACTION = 0.4
+"""Horizon height as a fraction of the frame height from the top."""
+VIEW_DISTANCE = 250.0
+"""Road drawn up to this distance ahead (m)."""
+NEAR_CLIP = 0.8
+"""Points closer than this (m, forward in the camera frame) are not drawn."""
+MARKING_WIDTH = 0.15
+"""Width of a lane marking (m)."""
+DASH_PERIOD = 12.0
+"""True lane dividers: 6 m dash, 6 m gap (as in the top-down view)."""
+GHOST_DASH_PERIOD = 6.0
+"""Ghost markings: 3 m dash, 3 m gap."""
+POST_SPACING = 50.0
+"""Roadside posts every this many metres (m)."""
+POINT_RADIUS = 0.12
+"""Radius (m) of the near / far point discs."""
+
+
+class DriverViewRenderer:
+    """First-person perspective renderer of an env's ``info`` dict; one instance per env.
+
+    Args:
+        setup: the env's :class:`hasa_env.core.EnvSetup` (road, hypotheses, config).
+        render_mode: ``"rgb_array"`` (frames as arrays) or ``"human"`` (a window).
+        weights: where the HUD takes hypothesis weights from
+            (:data:`hasa_env.rendering.WeightSource`); default: look in ``info``.
+        steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
+        size: frame (width, height) in pixels; default ``render.width``/``height``.
+        show_points: draw the near and far points; default ``render.show_points``.
+    """
+
+    def __init__(
+        self,
+        setup: Any,
+        render_mode: str = "rgb_array",
+        *,
+        weights: WeightSource = None,
+        steering_ratio: float | None = None,
+        size: tuple[int, int] | None = None,
+        show_points: bool | None = None,
+    ) -> None:
+        if render_mode not in ("rgb_array", "human"):
+            raise ValueError(f"render_mode must be 'rgb_array' or 'human', got {render_mode!r}")
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+        import pygame
+
+        self._pg = pygame
+        self.setup = setup
+        self.render_mode = render_mode
+        rc = setup.config["render"]
+        self.width, self.height = (
+            size if size is not None else (int(rc["width"]), int(rc["height"]))
+        )
+        self.fps = int(rc["fps"])
+        self.eye_height = float(rc["eye_height"])
+        self.field_of_view = float(rc["horizontal_field_of_view"])
+        self.show_points = bool(rc["show_points"]) if show_points is None else bool(show_points)
+        self.focal = 0.5 * self.width / math.tan(0.5 * self.field_of_view)
+        self.horizon = HORIZON_FRACTION * self.height
+        self.weights = weights
+        self.surface = pygame.Surface((self.width, self.height))
+        self.hud = Hud(pygame, self.height, setup.config["time_limit"], steering_ratio)
+        self._window = HumanWindow(
+            pygame, (self.width, self.height), self.fps, "hasa-env: driver's view"
+        )
+        road_cfg = setup.config["road"]
+        lane = setup.road.lane_width
+        self.right_edge = -lane / 2 - road_cfg["lanes_right"] * lane
+        self.left_edge = lane / 2 + road_cfg["lanes_left"] * lane
+        n_lanes = road_cfg["lanes_left"] + road_cfg["lanes_right"] + 1
+        self.dividers = [self.right_edge + i * lane for i in range(1, n_lanes)]
+        self.ghost_lines = [
+            -b + side * lane for b in setup.hypotheses if b != 0.0 for side in (-0.5, 0.5)
+        ]
+        self.ghost_centres = [-b for b in setup.hypotheses if b != 0.0]
+        # distances ahead of the car's station at which the continuous lines are sampled:
+        # dense near the car, where perspective magnifies
+        self._distances = np.geomspace(1.0, VIEW_DISTANCE, 64)
+
+    # ---------------------------------------------------------- geometry
+    def _camera(self, info: Mapping[str, Any]) -> tuple[float, float, float, float]:
+        """Camera (x, y, cos yaw, sin yaw) in the global frame."""
+        gx, gy, yaw = self.setup.road.to_global(
+            float(info["station"]), float(info["lateral_offset"]), float(info["heading"])
+        )
+        c, s = math.cos(float(yaw)), math.sin(float(yaw))
+        return float(gx) + EYE_FORWARD * c, float(gy) + EYE_FORWARD * s, c, s
+
+    def _to_camera(
+        self, gx: np.ndarray, gy: np.ndarray, camera: tuple[float, float, float, float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        ex, ey, c, s = camera
+        dx, dy = gx - ex, gy - ey
+        return dx * c + dy * s, -dx * s + dy * c
+
+    def project(
+        self,
+        gx: np.ndarray,
+        gy: np.ndarray,
+        camera: tuple[float, float, float, float],
+        height: float = 0.0,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pixel x, y of global points ``height`` m above the road and their distance ahead (m)."""
+        forward, left = self._to_camera(gx, gy, camera)
+        safe = np.maximum(forward, NEAR_CLIP)
+        sx = 0.5 * self.width - self.focal * left / safe
+        sy = self.horizon + self.focal * (self.eye_height - height) / safe
+        return sx, sy, forward
+
+    def _offset_points(
+        self, X: np.ndarray, Y: np.ndarray, psi_sin: np.ndarray, psi_cos: np.ndarray, offset: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return X - psi_sin * offset, Y + psi_cos * offset
+
+    def _strip(
+        self,
+        poses: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        right: float,
+        left: float,
+        camera: tuple[float, float, float, float],
+    ) -> list[tuple[float, float]] | None:
+        """Polygon of the band between lateral offsets ``right`` < ``left`` (m); None if behind."""
+        X, Y, sn, cs = poses
+        rx, ry = self._offset_points(X, Y, sn, cs, right)
+        lx, ly = self._offset_points(X, Y, sn, cs, left)
+        rsx, rsy, rf = self.project(rx, ry, camera)
+        lsx, lsy, lf = self.project(lx, ly, camera)
+        visible = (rf > NEAR_CLIP) & (lf > NEAR_CLIP)
+        idx = np.flatnonzero(visible)
+        if idx.size < 2:
+            return None
+        # the first contiguous visible run (a very tight bend could bring points behind again)
+        breaks = np.flatnonzero(np.diff(idx) != 1)
+        if breaks.size:
+            idx = idx[: breaks[0] + 1]
+            if idx.size < 2:
+                return None
+        right_pts = np.stack([rsx[idx], rsy[idx]], axis=1)
+        left_pts = np.stack([lsx[idx], lsy[idx]], axis=1)[::-1]
+        return [tuple(p) for p in np.concatenate([right_pts, left_pts]).tolist()]
+
+    def _poses(self, stations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        X, Y, psi = self.setup.road.pose_at(stations)
+        return X, Y, np.sin(psi), np.cos(psi)
+
+    def _dashes(
+        self,
+        station: float,
+        period: float,
+        offsets: list[float],
+        colour: tuple[int, int, int],
+        width: float,
+        camera: tuple[float, float, float, float],
+    ) -> None:
+        """Dashes ``[k P, k P + P/2]`` (m of station) of the lines at lateral ``offsets`` (m)."""
+        if not offsets:
+            return
+        pg = self._pg
+        start, end = station + 1.0, station + min(VIEW_DISTANCE, 160.0)
+        first = math.floor(start / period)
+        ks = np.arange(first, math.ceil(end / period))
+        a = np.maximum(ks * period, start)
+        b = np.minimum(ks * period + 0.5 * period, end)
+        keep = b > a
+        a, b = a[keep], b[keep]
+        if a.size == 0:
+            return
+        # three samples per dash keep dashes on a bend curved
+        samples = np.stack([a, 0.5 * (a + b), b], axis=1)
+        X, Y, sn, cs = self._poses(samples.ravel())
+        n = a.size
+        for offset in offsets:
+            rx, ry = self._offset_points(X, Y, sn, cs, offset - 0.5 * width)
+            lx, ly = self._offset_points(X, Y, sn, cs, offset + 0.5 * width)
+            rsx, rsy, rf = self.project(rx, ry, camera)
+            lsx, lsy, lf = self.project(lx, ly, camera)
+            rsx, rsy, lsx, lsy = (v.reshape(n, 3) for v in (rsx, rsy, lsx, lsy))
+            ok = ((rf > NEAR_CLIP) & (lf > NEAR_CLIP)).reshape(n, 3).all(axis=1)
+            for i in np.flatnonzero(ok):
+                pts = [
+                    (rsx[i, 0], rsy[i, 0]),
+                    (rsx[i, 1], rsy[i, 1]),
+                    (rsx[i, 2], rsy[i, 2]),
+                    (lsx[i, 2], lsy[i, 2]),
+                    (lsx[i, 1], lsy[i, 1]),
+                    (lsx[i, 0], lsy[i, 0]),
+                ]
+                pg.draw.polygon(self._target, colour, pts)
+
+    # ----------------------------------------------------------- drawing
+    def draw(
+        self,
+        info: Mapping[str, Any],
+        weights: WeightSource = None,
+        message: str | None = None,
+        target: Any = None,
+    ) -> Any:
+        """Draw the driver's view of the scene described by an env ``info`` dict.
+
+        Args:
+            info: the env's info (keys of :data:`hasa_env.core.INFO_KEYS`).
+            weights: hypothesis weights for the HUD (default: the constructor's).
+            message: text centred over the scene (e.g. a countdown), or None.
+            target: surface to draw on (same size); default the off-screen surface.
+
+        Returns:
+            The surface drawn on.
+        """
+        pg = self._pg
+        surf = self.surface if target is None else target
+        self._target = surf
+        w, h = self.width, self.height
+        horizon = int(round(self.horizon))
+        surf.fill(SKY_COLOUR, (0, 0, w, horizon))
+        surf.fill(GRASS_COLOUR, (0, horizon, w, h - horizon))
+        surf.fill(FAR_GRASS_COLOUR, (0, horizon, w, max(1, h // 60)))
+        camera = self._camera(info)
+        station = float(info["station"])
+        poses = self._poses(station + self._distances)
+        road = self._strip(poses, self.right_edge, self.left_edge, camera)
+        if road is not None:
+            pg.draw.polygon(surf, ROAD_COLOUR, road)
+        ghost_w = 0.7 * MARKING_WIDTH
+        self._dashes(
+            station, GHOST_DASH_PERIOD, self.ghost_lines, GHOST_FADED_COLOUR, ghost_w, camera
+        )
+        for edge in (self.right_edge, self.left_edge):
+            band = self._strip(
+                poses, edge - 0.5 * MARKING_WIDTH, edge + 0.5 * MARKING_WIDTH, camera
+            )
+            if band is not None:
+                pg.draw.polygon(surf, MARKING_COLOUR, band)
+        self._dashes(station, DASH_PERIOD, self.dividers, MARKING_COLOUR, MARKING_WIDTH, camera)
+        self._draw_posts(station, camera)
+        if self.show_points:
+            self._draw_points(station, camera)
+        shown = resolve_weights(
+            self.weights if weights is None else weights, info, self.setup.hypotheses
+        )
+        self.hud.draw(surf, info, shown, message, self.setup.hypotheses)
+        return surf
+
+    def _draw_posts(self, station: float, camera: tuple[float, float, float, float]) -> None:
+        ks = np.arange(
+            math.ceil((station + 2.0) / POST_SPACING),
+            math.floor((station + 200.0) / POST_SPACING) + 1,
+        )
+        if ks.size == 0:
+            return
+        X, Y, sn, cs = self._poses(ks * POST_SPACING)
+        pg = self._pg
+        for offset in (self.right_edge - 1.5, self.left_edge + 1.5):
+            px, py = self._offset_points(X, Y, sn, cs, offset)
+            sx, base, forward = self.project(px, py, camera)
+            _, top, _ = self.project(px, py, camera, height=1.0)
+            for x, y0, y1, f in zip(sx, base, top, forward, strict=True):
+                if f <= 2.0:
+                    continue
+                half = max(1.0, 0.06 * self.focal / f)
+                rect = pg.Rect(int(x - half), int(y1), max(1, int(2 * half)), max(1, int(y0 - y1)))
+                pg.draw.rect(self._target, POST_COLOUR, rect)
+                pg.draw.rect(
+                    self._target, POST_TOP_COLOUR, (rect.x, rect.y, rect.w, max(1, rect.h // 5))
+                )
+
+    def _draw_points(self, station: float, camera: tuple[float, float, float, float]) -> None:
+        distances = np.array([NEAR_POINT_DISTANCE, FAR_POINT_DISTANCE])
+        X, Y, sn, cs = self._poses(station + distances)
+        pg = self._pg
+        colours = (NEAR_POINT_COLOUR, FAR_POINT_COLOUR)
+        for centre, ring in [(0.0, False)] + [(c, True) for c in self.ghost_centres]:
+            px, py = self._offset_points(X, Y, sn, cs, centre)
+            sx, sy, forward = self.project(px, py, camera)
+            for x, y, f, colour in zip(sx, sy, forward, colours, strict=True):
+                if f <= NEAR_CLIP:
+                    continue
+                radius = max(3, int(round(self.focal * POINT_RADIUS / f)))
+                if ring:
+                    pg.draw.circle(
+                        self._target, colour, (int(x), int(y)), radius, max(1, radius // 3)
+                    )
+                else:
+                    pg.draw.circle(self._target, colour, (int(x), int(y)), radius)
+
+    # ------------------------------------------------------------ output
+    def render(self, info: Mapping[str, Any], weights: WeightSource = None) -> np.ndarray | None:
+        """``rgb_array``: the (H, W, 3) uint8 frame; ``human``: show it, paced by sim time."""
+        if self.render_mode == "rgb_array":
+            return surface_to_array(self.draw(info, weights))
+        if self._window.frame_due(float(info["time"])):
+            self._window.show(self.draw(info, weights))
+        return None
+
+    def close(self) -> None:
+        self._window.close()
