@@ -17,6 +17,17 @@ import gymnasium as gym
 
 from hasa_env.config import ConfigError, default_config, describe_config, make_config
 from hasa_env.lane_keeping import LaneKeepingEnv
+from hasa_env.recording import (
+    Recording,
+    RecordingError,
+    RecordingWrapper,
+    compare_recordings,
+    load_recording,
+    load_recordings,
+    replay,
+    replay_actions,
+    save_recording,
+)
 from hasa_env.vector import LaneKeepingVectorEnv
 
 try:
@@ -28,6 +39,15 @@ __all__ = [
     "ConfigError",
     "LaneKeepingEnv",
     "LaneKeepingVectorEnv",
+    "Recording",
+    "RecordingError",
+    "RecordingWrapper",
+    "compare_recordings",
+    "load_recording",
+    "load_recordings",
+    "replay",
+    "replay_actions",
+    "save_recording",
     "default_config",
     "describe_config",
     "make_config",

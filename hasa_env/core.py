@@ -226,9 +226,9 @@ def draw_episode(
     v = min(max(v, 0.0), setup.params.max_speed)
     delta = init["steering"]
     if "lateral_offset" in options:
-        y = _finite_option(options, "lateral_offset", -10.0, 10.0)
+        y = _finite_option(options, "lateral_offset", -30.0, 30.0)
     if "heading" in options:
-        th = _finite_option(options, "heading", -1.0, 1.0)
+        th = _finite_option(options, "heading", -0.5 * math.pi, 0.5 * math.pi)
     if "speed" in options:
         v = _finite_option(options, "speed", 0.0, setup.params.max_speed)
     if "steering" in options:

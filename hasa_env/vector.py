@@ -133,8 +133,12 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in state))
         self._sim_step += setup.action_repeat
         self._acceleration = acc
-        active = self._arange[~resetting] if resetting.any() else self._arange
-        self._sample(imu, self._curvature_now(), active)
+        if resetting.any():
+            active = self._arange[~resetting]
+            imu = (imu[0][active], imu[1][active])
+        else:
+            active = self._arange
+        self._sample(active, imu, self._curvature_of(self._state.station[active]))
         terminated = left_road(self._state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
         truncated = self._sim_step >= setup.max_sim_steps
         rc = self.config["reward"]
@@ -188,17 +192,21 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._acceleration[i] = 0.0
         self._state = VehicleState(*fields)
         # the reset cars' first sample: instantaneous IMU at zero acceleration
-        kappa = self._curvature_now()
-        imu = road_frame_acceleration(self._state, 0.0, kappa, self.setup.params, ARRAY_OPS)
-        self._sample(imu, kappa, idx)
+        start_state = VehicleState(*(f[idx] for f in fields))
+        kappa = self._curvature_of(start_state.station)
+        imu = road_frame_acceleration(start_state, 0.0, kappa, self.setup.params, ARRAY_OPS)
+        self._sample(idx, imu, kappa)
 
-    def _curvature_now(self) -> np.ndarray:
-        """Road curvature (1/m) at every car's station, shape (N,)."""
-        kappa = self._curvature(self._state.station)
-        return np.broadcast_to(np.asarray(kappa, dtype=np.float64), (self.num_envs,))
+    def _curvature_of(self, station: np.ndarray) -> np.ndarray:
+        """Road curvature (1/m) at the given stations, same shape."""
+        kappa = self._curvature(station)
+        return np.broadcast_to(np.asarray(kappa, dtype=np.float64), station.shape)
 
-    def _sample(self, imu: tuple, kappa: np.ndarray, rows: np.ndarray) -> None:
-        """Draw the next noise row of the cars ``rows`` and compute their sensors and curvature."""
+    def _sample(self, rows: np.ndarray, imu: tuple, kappa: np.ndarray) -> None:
+        """Draw the next noise row of the cars ``rows``; store their sensors and curvature.
+
+        ``imu`` (x'', y'') and ``kappa`` are given for those rows only.
+        """
         exhausted = rows[self._noise_pos[rows] >= self.setup.noise_block]
         for i in exhausted.tolist():
             self._noise[i] = draw_noise_block(self._rngs[i], self.setup)
@@ -206,10 +214,8 @@ class LaneKeepingVectorEnv(VectorEnv):
         noise = self._noise[rows, self._noise_pos[rows]]
         self._noise_pos[rows] += 1
         state = VehicleState(*(f[rows] for f in self._state))
-        readings = sensor_readings(
-            state, (imu[0][rows], imu[1][rows]), self._bias[rows], noise.T, self.setup.noise_std
-        )
-        self._kappa[rows] = kappa[rows]
+        readings = sensor_readings(state, imu, self._bias[rows], noise.T, self.setup.noise_std)
+        self._kappa[rows] = kappa
         self._sensors[rows] = np.stack(readings, axis=1)
 
     def _observation(self) -> Any:
