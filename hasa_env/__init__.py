@@ -17,17 +17,6 @@ import gymnasium as gym
 
 from hasa_env.config import ConfigError, default_config, describe_config, make_config
 from hasa_env.lane_keeping import LaneKeepingEnv
-from hasa_env.recording import (
-    Recording,
-    RecordingError,
-    RecordingWrapper,
-    compare_recordings,
-    load_recording,
-    load_recordings,
-    replay,
-    replay_actions,
-    save_recording,
-)
 from hasa_env.vector import LaneKeepingVectorEnv
 
 try:
@@ -57,6 +46,32 @@ __all__ = [
 ]
 
 ENV_IDS = ("hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0")
+
+
+_LAZY = {
+    # hasa_env.recording imports pandas; load it on first use to keep `import hasa_env` light.
+    name: "hasa_env.recording"
+    for name in (
+        "Recording",
+        "RecordingError",
+        "RecordingWrapper",
+        "compare_recordings",
+        "load_recording",
+        "load_recordings",
+        "replay",
+        "replay_actions",
+        "save_recording",
+    )
+}
+
+
+def __getattr__(name: str):  # noqa: ANN202 - PEP 562 lazy attributes
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'hasa_env' has no attribute {name!r}")
+    from importlib import import_module
+
+    return getattr(import_module(module), name)
 
 
 def register_envs() -> None:
