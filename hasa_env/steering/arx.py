@@ -12,6 +12,12 @@ with phi, Omega the near/far-point bearings (rad, positive: lane centre to
 the left) at ``near_distance`` / ``far_distance`` m and v_y the lateral
 velocity (m/s). Note the index convention: ``a[0]`` multiplies delta(k-1)
 (the paper's "a_0 = 1.47"), ``b[0]`` multiplies phi(k).
+
+Sample alignment (see :mod:`hasa_env.steering.features`): delta(k) is the
+steering *decided* at sample k, which a recording holds in row k+1 (the
+action applied over the step ending there) and the env's steering sensor
+reports one step later; phi(k), Omega(k), v_y(k) are what the driver saw at
+sample k. :func:`hasa_env.steering.features.steering_features` pairs them so.
 """
 
 from __future__ import annotations
@@ -61,7 +67,7 @@ class ARXForm:
 
     @property
     def static_lane_gain(self) -> float:
-        """sum(b)/near + sum(c)/far: steady-state steering per metre of lateral offset, times (1 - sum(a)).
+        """sum(b)/near + sum(c)/far: steady-state steering per metre of offset, times (1 - sum(a)).
 
         With phi ~ -y/near and Omega ~ -y/far at small angles, a steady offset y
         gives (1 - sum a) delta = -(sum(b)/near + sum(c)/far) y. The estimator can

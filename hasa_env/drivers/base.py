@@ -1,0 +1,253 @@
+"""The driver protocol, speed profiles, and batches of drivers acting on arrays.
+
+A :class:`Driver` is what sits behind the steering wheel: given the env's
+*true* ``info`` (never the biased camera) and the road geometry, it returns a
+physical action (road-wheel angle in rad, acceleration in m/s^2). Drivers are
+seeded (``reset(seed)``) and reproducible.
+
+To drive many cars at once in the native vector env, drivers act on arrays
+through a :class:`BatchDriver`: :func:`make_batch` groups drivers of a class
+that provides ``make_batch`` (the synthetic and model drivers do) into one
+vectorized batch, and runs any other driver car by car.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from hasa_env.road import Road
+
+__all__ = [
+    "Driver",
+    "BatchDriver",
+    "SpeedProfile",
+    "LoopBatch",
+    "CompositeBatch",
+    "make_batch",
+    "speed_command",
+    "info_arrays",
+]
+
+
+@runtime_checkable
+class Driver(Protocol):
+    """A seeded driver acting on the env's true state.
+
+    ``reset(seed, dt=...)`` starts a new run (``dt`` is the env step, s);
+    ``act(info, road)`` gets the env's ``info`` at time k (the dict of
+    :data:`hasa_env.core.INFO_KEYS`, true state) and the road, and returns
+    ``(steering, acceleration)``: the road-wheel angle (rad) and acceleration
+    (m/s^2) to apply over the next step.
+    """
+
+    def reset(self, seed: int | None = None, *, dt: float = 0.01) -> None: ...
+
+    def act(self, info: Mapping[str, Any], road: Road) -> tuple[float, float]: ...
+
+
+@runtime_checkable
+class BatchDriver(Protocol):
+    """N drivers acting on N cars' info arrays at once (see :func:`make_batch`)."""
+
+    num_cars: int
+
+    def reset(self, seeds: Sequence[int | None], dt: float) -> None: ...
+
+    def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+# ---------------------------------------------------------------- speed
+@dataclass(frozen=True)
+class SpeedProfile:
+    """How a driver chooses its speed.
+
+    The reference speed is the speed at reset, v0, until ``start_time``; then
+    it ramps at ``ramp_rate`` towards ``target_speed`` (None: hold v0). A
+    proportional controller with feed-forward of the ramp tracks it. On a
+    curved road the driver also slows for bends ahead: the speed at any point
+    up to its braking distance ahead is kept below
+    ``sqrt(max_lateral_acceleration / |curvature|)``, braking at
+    ``comfortable_deceleration``.
+
+    Attributes:
+        target_speed: m/s, or None to hold the initial speed.
+        start_time: s when the ramp starts.
+        ramp_rate: m/s^2 of the ramp (> 0).
+        gain: 1/s of the speed controller.
+        max_lateral_acceleration: m/s^2 the driver accepts in bends (inf: ignores bends).
+        comfortable_deceleration: m/s^2 used to slow down before a bend.
+        max_acceleration: m/s^2, limit of the speed controller (both ways).
+    """
+
+    target_speed: float | None = None
+    start_time: float = 0.0
+    ramp_rate: float = 1.5
+    gain: float = 1.0
+    max_lateral_acceleration: float = math.inf
+    comfortable_deceleration: float = 2.5
+    max_acceleration: float = 4.0
+
+    def __post_init__(self) -> None:
+        if self.target_speed is not None and not (0.0 <= self.target_speed <= 150.0):
+            raise ValueError(
+                "SpeedProfile.target_speed must be in [0, 150] m/s or None, "
+                f"got {self.target_speed}"
+            )
+        for name in ("ramp_rate", "gain", "max_lateral_acceleration", "comfortable_deceleration",
+                     "max_acceleration"):  # fmt: skip
+            value = getattr(self, name)
+            if not value > 0:
+                raise ValueError(f"SpeedProfile.{name} must be > 0, got {value}")
+        if not math.isfinite(self.start_time) or self.start_time < 0:
+            raise ValueError(f"SpeedProfile.start_time must be >= 0 s, got {self.start_time}")
+
+    @classmethod
+    def hold(cls, max_lateral_acceleration: float = math.inf) -> SpeedProfile:
+        """Keep the speed the run starts with."""
+        return cls(max_lateral_acceleration=max_lateral_acceleration)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _profile_arrays(profiles: Sequence[SpeedProfile]) -> dict[str, np.ndarray]:
+    return {
+        "target": np.array(
+            [np.nan if p.target_speed is None else p.target_speed for p in profiles]
+        ),
+        "start": np.array([p.start_time for p in profiles]),
+        "rate": np.array([p.ramp_rate for p in profiles]),
+        "gain": np.array([p.gain for p in profiles]),
+        "lateral": np.array([p.max_lateral_acceleration for p in profiles]),
+        "braking": np.array([p.comfortable_deceleration for p in profiles]),
+        "limit": np.array([p.max_acceleration for p in profiles]),
+    }
+
+
+_PREVIEW = np.linspace(0.0, 1.0, 33)
+
+
+def speed_command(
+    profile: Mapping[str, np.ndarray],
+    initial_speed: np.ndarray,
+    info: Mapping[str, np.ndarray],
+    road: Road,
+) -> np.ndarray:
+    """Acceleration (m/s^2) of N cars following their speed profiles (see :class:`SpeedProfile`)."""
+    t = info["time"]
+    v = info["speed"]
+    target = profile["target"]
+    ramping = np.isfinite(target)
+    goal = np.where(ramping, target, initial_speed)
+    elapsed = np.maximum(t - profile["start"], 0.0)
+    direction = np.sign(goal - initial_speed)
+    reference = initial_speed + direction * np.minimum(
+        profile["rate"] * elapsed, np.abs(goal - initial_speed)
+    )
+    still_ramping = (
+        ramping
+        & (profile["rate"] * elapsed < np.abs(goal - initial_speed))
+        & (t >= profile["start"])
+    )
+    feed_forward = np.where(still_ramping, direction * profile["rate"], 0.0)
+    lateral = profile["lateral"]
+    if not road.is_straight and np.any(np.isfinite(lateral)):
+        braking = profile["braking"]
+        reach = v * v / (2.0 * braking) + 2.0 * v + 20.0
+        ahead = reach[:, None] * _PREVIEW[None, :]
+        kappa = np.abs(road.curvature_at(info["station"][:, None] + ahead))
+        with np.errstate(divide="ignore"):
+            bend_speed2 = np.where(kappa > 0, lateral[:, None] / kappa, np.inf)
+        allowed = np.sqrt(np.min(bend_speed2 + 2.0 * braking[:, None] * ahead, axis=1))
+        slowing = allowed < reference
+        reference = np.minimum(reference, allowed)
+        feed_forward = np.where(slowing, 0.0, feed_forward)
+    accel = profile["gain"] * (reference - v) + feed_forward
+    return np.clip(accel, -profile["limit"], profile["limit"])
+
+
+# ---------------------------------------------------------------- batches
+def info_arrays(
+    info: Mapping[str, Any], keys: Sequence[str] | None = None
+) -> dict[str, np.ndarray]:
+    """One car's ``info`` (scalars) as 1-element float64 arrays (for a batch of one)."""
+    names = keys if keys is not None else [k for k in info if not k.startswith("_")]
+    return {k: np.array([info[k]], dtype=np.float64) for k in names}
+
+
+class LoopBatch:
+    """Any drivers, acting one car at a time (the fallback of :func:`make_batch`).
+
+    Each car gets its own deep copy of its driver, so one driver object can
+    drive many cars independently.
+    """
+
+    def __init__(self, drivers: Sequence[Driver]) -> None:
+        self.drivers = [copy.deepcopy(d) for d in drivers]
+        self.num_cars = len(self.drivers)
+
+    def reset(self, seeds: Sequence[int | None], dt: float) -> None:
+        for driver, seed in zip(self.drivers, seeds, strict=True):
+            driver.reset(seed, dt=dt)
+
+    def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
+        keys = [k for k in info if not k.startswith("_")]
+        steering = np.zeros(self.num_cars)
+        acceleration = np.zeros(self.num_cars)
+        for i, driver in enumerate(self.drivers):
+            one = {k: info[k][i].item() for k in keys}
+            steering[i], acceleration[i] = driver.act(one, road)
+        return steering, acceleration
+
+
+class CompositeBatch:
+    """Several batches, each driving its own subset of the cars."""
+
+    def __init__(self, parts: Sequence[tuple[np.ndarray, BatchDriver]], num_cars: int) -> None:
+        self.parts = [(np.asarray(idx, dtype=np.int64), batch) for idx, batch in parts]
+        self.num_cars = num_cars
+
+    def reset(self, seeds: Sequence[int | None], dt: float) -> None:
+        for idx, batch in self.parts:
+            batch.reset([seeds[i] for i in idx.tolist()], dt)
+
+    def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
+        steering = np.zeros(self.num_cars)
+        acceleration = np.zeros(self.num_cars)
+        keys = [k for k in info if not k.startswith("_")]
+        for idx, batch in self.parts:
+            sub = {k: np.asarray(info[k])[idx] for k in keys}
+            s, a = batch.act(sub, road)
+            steering[idx] = s
+            acceleration[idx] = a
+        return steering, acceleration
+
+
+def make_batch(drivers: Sequence[Driver]) -> BatchDriver:
+    """One :class:`BatchDriver` for N cars, car i driven by ``drivers[i]``.
+
+    Drivers whose class has a ``make_batch(drivers)`` classmethod are
+    vectorized together (one batch per class); the rest run car by car in a
+    :class:`LoopBatch`.
+    """
+    drivers = list(drivers)
+    if not drivers:
+        raise ValueError("make_batch needs at least one driver")
+    groups: dict[Any, list[int]] = {}
+    for i, driver in enumerate(drivers):
+        key = type(driver) if hasattr(type(driver), "make_batch") else None
+        groups.setdefault(key, []).append(i)
+    parts: list[tuple[np.ndarray, BatchDriver]] = []
+    for key, idx in groups.items():
+        members = [drivers[i] for i in idx]
+        batch = LoopBatch(members) if key is None else key.make_batch(members)
+        parts.append((np.array(idx), batch))
+    if len(parts) == 1:
+        return parts[0][1]
+    return CompositeBatch(parts, len(drivers))

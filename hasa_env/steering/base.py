@@ -1,0 +1,717 @@
+"""The one interface every steering model implements: :class:`SteeringModel`.
+
+A steering model predicts the driver's road-wheel angle delta(k) (rad) from
+what the driver saw: the near- and far-point bearings phi, omega (rad), the
+lateral velocity v_y (m/s) and the past steering (see
+:mod:`hasa_env.steering.features` for the sample alignment). Every model has
+
+- ``name`` and ``model_type`` (the ``"type"`` of its JSON file);
+- ``parameter_names`` and ``parameters`` (``None`` until fitted or given);
+- ``regressors``: which features it uses at which lags
+  (:class:`Regressor`, e.g. ``phi(k-1)``);
+- ``predict(run)``: one-step-ahead prediction with the *measured* past
+  steering (NaN where the history is too short);
+- ``fit(runs)``: least squares on one or many runs, with standard errors
+  (:mod:`hasa_env.steering.fitting`); returns a new, fitted model;
+- ``arx()``: its :class:`~hasa_env.steering.arx.ARXForm` where it is an ARX
+  model (the estimator builds on that), else ``None``;
+- ``simulate(run)``: free run driven by the measured bearings, feeding back
+  its own steering;
+- ``to_json()`` / ``from_json()`` and ``save(path)`` / ``load(path)``, with
+  validation that names the file, the field and the allowed values.
+
+Writing your own model
+----------------------
+A model that is *linear in its parameters* (most are) implements four things
+and inherits everything else (fitting, standard errors, scoring, JSON, free
+run, driving the car through :class:`hasa_env.drivers.ModelDriver`)::
+
+    from hasa_env.steering.base import Design, Regressor, SteeringModel, lagged
+
+    class NearPointPD(SteeringModel):
+        model_type = "near_point_pd"          # the "type" in its JSON file
+
+        @property
+        def parameter_names(self):
+            return ("memory", "proportional", "derivative")
+
+        @property
+        def regressors(self):
+            return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 1))
+
+        def design(self, features):
+            # delta(k) = offset(k) + sum_j parameter_j * column_j(k)
+            delta, phi = features["delta"].to_numpy(), features["phi"].to_numpy()
+            columns = np.column_stack([lagged(delta, 1), phi, phi - lagged(phi, 1)])
+            return Design(target=delta, offset=np.zeros_like(delta), matrix=columns)
+
+        def arx(self):  # optional: only if the model is an ARX model
+            m, p, d = (self.parameters[n] for n in self.parameter_names)
+            return ARXForm(a=(m,), b=(p + d, -d), near_distance=self.near_distance,
+                           far_distance=self.far_distance, dt=self.dt)
+
+A model with structure (orders, options) also overrides :meth:`structure`
+(a JSON-able dict of its constructor's keyword arguments). A model that is
+*not* linear in its parameters overrides :meth:`predict_features` and
+:meth:`fit` instead of :meth:`design`. Defining the subclass registers its
+``model_type`` so :meth:`SteeringModel.load` can read its files.
+``examples/custom_steering_model.py`` is a complete, runnable example.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import os
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Self
+
+import numpy as np
+import pandas as pd
+
+from hasa_env.road import Road
+from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.features import is_feature_frame, steering_features
+
+if TYPE_CHECKING:
+    from hasa_env.steering.fitting import FitResult
+
+__all__ = [
+    "FEATURE_NAMES",
+    "MODEL_FILE_FORMAT",
+    "MODEL_TYPES",
+    "Design",
+    "ModelFileError",
+    "Regressor",
+    "SteeringModel",
+    "lagged",
+]
+
+FEATURE_NAMES = ("delta", "phi", "omega", "lateral_velocity", "speed")
+"""Features a regressor may refer to (the columns of
+:func:`~hasa_env.steering.features.steering_features`)."""
+
+MODEL_FILE_FORMAT = "hasa_env.steering_model"
+"""Value of the ``"format"`` field of a model file."""
+
+MODEL_FILE_VERSION = 1
+
+MODEL_TYPES: dict[str, type[SteeringModel]] = {}
+"""Registered model types: JSON ``"type"`` -> class (filled when a subclass is defined)."""
+
+
+class ModelFileError(ValueError):
+    """A steering-model file or JSON document that cannot be read; the message names the field."""
+
+
+@dataclass(frozen=True)
+class Regressor:
+    """A feature at a lag: ``Regressor("phi", 1)`` is phi(k-1).
+
+    Attributes:
+        feature: one of :data:`FEATURE_NAMES` (or a column a custom model adds).
+        lag: samples back (0 = the current sample k).
+    """
+
+    feature: str
+    lag: int
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.feature, str) or not self.feature:
+            raise ValueError(f"Regressor.feature must be a non-empty string, got {self.feature!r}")
+        if isinstance(self.lag, bool) or not isinstance(self.lag, int | np.integer) or self.lag < 0:
+            raise ValueError(f"Regressor.lag must be a non-negative integer, got {self.lag!r}")
+
+    def __str__(self) -> str:
+        return f"{self.feature}(k)" if self.lag == 0 else f"{self.feature}(k-{self.lag})"
+
+
+@dataclass(frozen=True)
+class Design:
+    """A model's equation over one run, linear in its parameters.
+
+    ``target(k) = offset(k) + matrix(k, :) @ parameters + error(k)`` for every
+    sample k where all entries are finite (rows with NaN are left out).
+
+    Attributes:
+        target: delta(k), the recorded steering (rad), shape (n,).
+        offset: the part of delta(k) that is not fitted (e.g. delta(k-1) of the
+            two-point model; zeros for a plain ARX model), shape (n,).
+        matrix: one column per parameter, in ``parameter_names`` order, shape (n, p).
+    """
+
+    target: np.ndarray
+    offset: np.ndarray
+    matrix: np.ndarray
+
+    def __post_init__(self) -> None:
+        target = np.asarray(self.target, dtype=np.float64)
+        offset = np.asarray(self.offset, dtype=np.float64)
+        matrix = np.asarray(self.matrix, dtype=np.float64)
+        if matrix.ndim == 1:
+            matrix = matrix[:, None]
+        if target.ndim != 1 or offset.shape != target.shape or matrix.ndim != 2:
+            raise ValueError(
+                "Design needs target (n,), offset (n,) and matrix (n, p); got shapes "
+                f"{target.shape}, {offset.shape}, {matrix.shape}"
+            )
+        if matrix.shape[0] != target.size:
+            raise ValueError(f"Design.matrix has {matrix.shape[0]} rows, target has {target.size}")
+        object.__setattr__(self, "target", target)
+        object.__setattr__(self, "offset", offset)
+        object.__setattr__(self, "matrix", matrix)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Rows where target, offset and every column are finite."""
+        return (
+            np.isfinite(self.target)
+            & np.isfinite(self.offset)
+            & np.all(np.isfinite(self.matrix), axis=1)
+        )
+
+
+def lagged(values: np.ndarray, lag: int) -> np.ndarray:
+    """``values(k - lag)`` aligned with ``values`` (NaN for k < lag)."""
+    values = np.asarray(values, dtype=np.float64)
+    if lag == 0:
+        return values.copy()
+    out = np.full(values.shape, np.nan)
+    if lag < values.shape[0]:
+        out[lag:] = values[:-lag]
+    return out
+
+
+def _finite_positive(value: Any, field: str, source: str) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not math.isfinite(value)
+        or value <= 0
+    ):
+        raise ModelFileError(
+            f"{source}: field '{field}' must be a finite positive number, got {value!r}"
+        )
+    return float(value)
+
+
+class SteeringModel(ABC):
+    """Base class of all steering models (see the module docstring).
+
+    Args:
+        parameters: the parameter values, a mapping name -> value or a sequence
+            in ``parameter_names`` order; ``None``: not fitted yet.
+        near_distance: near-point distance (m) of the bearings phi.
+        far_distance: far-point distance (m) of the bearings omega.
+        dt: sample time Ts (s) the parameters belong to.
+        decision_lag: samples between the bearings seen and the steering
+            recorded (see :mod:`hasa_env.steering.features`).
+        name: a label (default: ``model_type``).
+        standard_errors: standard errors of the parameters (same form), if known.
+    """
+
+    model_type: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if inspect.isabstract(cls):
+            return
+        if not cls.model_type or not isinstance(cls.model_type, str):
+            raise TypeError(
+                f"{cls.__name__} must set the class attribute model_type (its JSON 'type')"
+            )
+        previous = MODEL_TYPES.get(cls.model_type)
+        if previous is not None and previous.__qualname__ != cls.__qualname__:
+            raise TypeError(
+                f"model_type {cls.model_type!r} of {cls.__qualname__} is already used by "
+                f"{previous.__module__}.{previous.__qualname__}"
+            )
+        MODEL_TYPES[cls.model_type] = cls
+
+    def __init__(
+        self,
+        parameters: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
+        *,
+        near_distance: float = 6.2,
+        far_distance: float = 20.0,
+        dt: float = 0.01,
+        decision_lag: int = 1,
+        name: str | None = None,
+        standard_errors: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
+    ) -> None:
+        for label, value in (
+            ("near_distance", near_distance),
+            ("far_distance", far_distance),
+            ("dt", dt),
+        ):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{label} must be a finite positive number, got {value!r}")
+        if (
+            isinstance(decision_lag, bool)
+            or not isinstance(decision_lag, int | np.integer)
+            or decision_lag < 0
+        ):
+            raise ValueError(f"decision_lag must be a non-negative integer, got {decision_lag!r}")
+        self.near_distance = float(near_distance)
+        self.far_distance = float(far_distance)
+        self.dt = float(dt)
+        self.decision_lag = int(decision_lag)
+        self.name = str(name) if name is not None else self.model_type
+        self._parameters = self._as_vector(parameters, "parameters")
+        self._standard_errors = self._as_vector(standard_errors, "standard_errors")
+        self.fit_result: FitResult | None = None
+
+    # ------------------------------------------------------------ to implement
+    @property
+    @abstractmethod
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of the parameters, in the order of the design matrix's columns."""
+
+    @property
+    @abstractmethod
+    def regressors(self) -> tuple[Regressor, ...]:
+        """The features the model uses, at which lags."""
+
+    @abstractmethod
+    def design(self, features: pd.DataFrame) -> Design:
+        """The model's equation over one run of features (see :class:`Design`)."""
+
+    def structure(self) -> dict[str, Any]:
+        """Keyword arguments (JSON-able) that fix the model's structure, e.g. its orders."""
+        return {}
+
+    def arx(self) -> ARXForm | None:
+        """The model as an ARX model (:class:`ARXForm`), or None if it is not one."""
+        return None
+
+    # ---------------------------------------------------------------- values
+    def _as_vector(self, values: Any, label: str) -> np.ndarray | None:
+        if values is None:
+            return None
+        names = self.parameter_names
+        if isinstance(values, Mapping):
+            missing = [n for n in names if n not in values]
+            extra = [k for k in values if k not in names]
+            if missing or extra:
+                raise ValueError(
+                    f"{type(self).__name__} {label}: missing {missing}, unexpected {extra}; "
+                    f"expected exactly {list(names)}"
+                )
+            vector = np.array([float(values[n]) for n in names], dtype=np.float64)
+        else:
+            vector = np.asarray(values, dtype=np.float64).reshape(-1)
+            if vector.size != len(names):
+                raise ValueError(
+                    f"{type(self).__name__} {label}: got {vector.size} values for the "
+                    f"{len(names)} parameters {list(names)}"
+                )
+        if not np.all(np.isfinite(vector)):
+            raise ValueError(f"{type(self).__name__} {label} must be finite, got {vector.tolist()}")
+        vector.setflags(write=False)
+        return vector
+
+    @property
+    def is_fitted(self) -> bool:
+        """True once the model has parameter values."""
+        return self._parameters is not None
+
+    @property
+    def parameters(self) -> dict[str, float] | None:
+        """Parameter values by name, or None if the model has none yet."""
+        if self._parameters is None:
+            return None
+        return dict(zip(self.parameter_names, self._parameters.tolist(), strict=True))
+
+    @property
+    def parameter_vector(self) -> np.ndarray:
+        """Parameter values in ``parameter_names`` order (raises if not fitted)."""
+        if self._parameters is None:
+            raise RuntimeError(f"{self.name}: the model has no parameters yet; fit it or give them")
+        return self._parameters
+
+    @property
+    def standard_errors(self) -> dict[str, float] | None:
+        """Standard errors of the parameters by name (from a fit), or None."""
+        if self._standard_errors is None:
+            return None
+        return dict(zip(self.parameter_names, self._standard_errors.tolist(), strict=True))
+
+    @property
+    def max_lag(self) -> int:
+        """Largest lag of any regressor (samples)."""
+        return max((r.lag for r in self.regressors), default=0)
+
+    def common_kwargs(self) -> dict[str, Any]:
+        """Constructor keywords shared by every model (distances, dt, lag, name)."""
+        return {
+            "near_distance": self.near_distance,
+            "far_distance": self.far_distance,
+            "dt": self.dt,
+            "decision_lag": self.decision_lag,
+            "name": self.name,
+        }
+
+    def with_parameters(
+        self,
+        parameters: Mapping[str, float] | Sequence[float] | np.ndarray,
+        standard_errors: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
+        fit_result: FitResult | None = None,
+    ) -> Self:
+        """A copy of this model (same structure and features) with new parameter values."""
+        model = type(self)(
+            **self.structure(),
+            parameters=parameters,
+            standard_errors=standard_errors,
+            **self.common_kwargs(),
+        )
+        model.fit_result = fit_result
+        return model
+
+    # ------------------------------------------------------------ prediction
+    def features(self, data: pd.DataFrame, road: Road | None = None) -> pd.DataFrame:
+        """Features of one run for this model: ``data`` itself if it already holds
+        features (checked against the model's distances), else
+        :func:`~hasa_env.steering.features.steering_features` of the recording."""
+        if not isinstance(data, pd.DataFrame):
+            raise TypeError(f"expected a pandas DataFrame (one run), got {type(data).__name__}")
+        if is_feature_frame(data):
+            for key, mine in (
+                ("near_distance", self.near_distance),
+                ("far_distance", self.far_distance),
+                ("decision_lag", self.decision_lag),
+            ):
+                theirs = data.attrs.get(key)
+                if theirs is not None and float(theirs) != float(mine):
+                    raise ValueError(
+                        f"{self.name}: the features were computed with {key}={theirs}, "
+                        f"the model uses {mine}; recompute them with steering_features"
+                    )
+            features = data
+        else:
+            features = steering_features(
+                data, road, self.near_distance, self.far_distance, decision_lag=self.decision_lag
+            )
+        data_dt = features.attrs.get("dt")
+        if data_dt is not None and abs(float(data_dt) - self.dt) > 1e-9 * max(1.0, self.dt):
+            raise ValueError(
+                f"{self.name}: the run is sampled every {data_dt:g} s but the model's "
+                f"coefficients belong to Ts = {self.dt:g} s"
+            )
+        return features
+
+    def predict_features(self, features: pd.DataFrame) -> np.ndarray:
+        """One-step-ahead predictions from a features frame (NaN where history is short)."""
+        design = self.design(features)
+        theta = self.parameter_vector
+        if design.matrix.shape[1] != theta.size:
+            raise ValueError(
+                f"{self.name}: design has {design.matrix.shape[1]} columns for "
+                f"{theta.size} parameters {list(self.parameter_names)}"
+            )
+        out = np.full(design.target.size, np.nan)
+        valid = np.isfinite(design.offset) & np.all(np.isfinite(design.matrix), axis=1)
+        out[valid] = design.offset[valid] + design.matrix[valid] @ theta
+        return out
+
+    def predict(self, data: pd.DataFrame, road: Road | None = None) -> np.ndarray:
+        """One-step-ahead predictions delta_hat(k) (rad) for one run.
+
+        Uses the *measured* past steering (and the bearings seen). ``data`` is a
+        recording (the features are computed with the model's distances;
+        ``road`` as in :func:`~hasa_env.steering.features.steering_features`)
+        or a features frame. Returns an array aligned with the run's rows, NaN
+        where the history is too short.
+        """
+        return self.predict_features(self.features(data, road))
+
+    def simulate(self, data: pd.DataFrame, road: Road | None = None) -> np.ndarray:
+        """Free-run simulation over one run: delta(k) from the model's own past outputs.
+
+        The bearings and lateral velocity are the measured ones (open loop); the
+        measured steering is used only until the first sample the model can
+        predict. Returns an array aligned with the run's rows (NaN before that
+        sample). ARX models use their :meth:`arx` form; other models are run
+        sample by sample through :meth:`predict_features`.
+        """
+        features = self.features(data, road)
+        one_step = self.predict_features(features)
+        finite = np.flatnonzero(np.isfinite(one_step))
+        out = np.full(len(features), np.nan)
+        if finite.size == 0:
+            return out
+        start = int(finite[0])
+        arx = self.arx()
+        if arx is not None:
+            from hasa_env.steering.fitting import simulate_arx
+
+            return simulate_arx(arx, features, start)
+        delta = features["delta"].to_numpy(dtype=np.float64).copy()
+        window = self.max_lag + 1
+        work = features.copy()
+        values = work["delta"].to_numpy(dtype=np.float64).copy()
+        for k in range(start, len(features)):
+            lo = max(0, k - window + 1)
+            part = work.iloc[lo : k + 1].copy()
+            part["delta"] = values[lo : k + 1]
+            prediction = self.predict_features(part)[-1]
+            values[k] = prediction if np.isfinite(prediction) else delta[k]
+            out[k] = prediction
+        return out
+
+    # --------------------------------------------------------------- fitting
+    def fit(self, runs: pd.DataFrame | Sequence[pd.DataFrame], road: Road | None = None) -> Self:
+        """Least-squares fit on one or many runs; returns a new, fitted model.
+
+        Each run is a recording (or a features frame); lags never cross from
+        one run into the next. Standard errors come with the fit
+        (``standard_errors``, ``fit_result``); a fit that loses the
+        identifiability of the lane offset warns (DESIGN.md section 3). See
+        :func:`hasa_env.steering.fitting.fit_model`.
+        """
+        from hasa_env.steering.fitting import fit_model
+
+        return fit_model(self, runs, road=road)
+
+    # ------------------------------------------------------------------ JSON
+    def to_dict(self) -> dict[str, Any]:
+        """The model as a JSON-able dict (see :meth:`from_dict` for the fields)."""
+        return {
+            "format": MODEL_FILE_FORMAT,
+            "format_version": MODEL_FILE_VERSION,
+            "type": self.model_type,
+            "name": self.name,
+            "dt": self.dt,
+            "features": {
+                "near_distance": self.near_distance,
+                "far_distance": self.far_distance,
+                "decision_lag": self.decision_lag,
+                "regressors": [str(r) for r in self.regressors],
+            },
+            "structure": self.structure(),
+            "parameters": self.parameters,
+            "standard_errors": self.standard_errors,
+        }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The model as JSON text (floats written exactly)."""
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+
+    @classmethod
+    def from_dict(cls, document: Mapping[str, Any], source: str = "<model>") -> SteeringModel:
+        """Build a model from :meth:`to_dict`'s form, validating every field.
+
+        Fields: ``format`` (= "hasa_env.steering_model"), ``format_version``
+        (1), ``type`` (a registered model type), ``name``, ``dt`` (s, > 0),
+        ``features`` {``near_distance``, ``far_distance`` (m, > 0),
+        ``decision_lag`` (int >= 0), ``regressors`` (optional; checked)},
+        ``structure`` (the model's keyword arguments), ``parameters`` (name ->
+        number, or null) and ``standard_errors`` (same, or null).
+
+        Raises:
+            ModelFileError: naming ``source``, the field and the allowed values.
+        """
+        if not isinstance(document, Mapping):
+            raise ModelFileError(f"{source}: expected a JSON object, got {type(document).__name__}")
+        known = {
+            "format", "format_version", "type", "name", "dt", "features", "structure",
+            "parameters", "standard_errors",
+        }  # fmt: skip
+        unknown = sorted(set(document) - known)
+        if unknown:
+            raise ModelFileError(
+                f"{source}: unknown field '{unknown[0]}'; "
+                f"allowed fields: {', '.join(sorted(known))}"
+            )
+        for field in ("format", "type", "dt", "features", "parameters"):
+            if field not in document:
+                raise ModelFileError(f"{source}: missing field '{field}'")
+        if document["format"] != MODEL_FILE_FORMAT:
+            raise ModelFileError(
+                f"{source}: field 'format' is {document['format']!r}; "
+                f"allowed: {MODEL_FILE_FORMAT!r}"
+            )
+        version = document.get("format_version", MODEL_FILE_VERSION)
+        if version != MODEL_FILE_VERSION:
+            raise ModelFileError(
+                f"{source}: field 'format_version' is {version!r}; allowed: {MODEL_FILE_VERSION}"
+            )
+        model_type = document["type"]
+        if model_type not in MODEL_TYPES:
+            raise ModelFileError(
+                f"{source}: field 'type' is {model_type!r}; "
+                f"allowed: {', '.join(sorted(MODEL_TYPES))} "
+                "(a custom model's class must be defined (imported) before loading its file)"
+            )
+        target = MODEL_TYPES[model_type]
+        if cls is not SteeringModel and not issubclass(target, cls):
+            raise ModelFileError(
+                f"{source}: field 'type' is {model_type!r} but {cls.__name__}.from_json expects "
+                f"{cls.model_type!r}; use SteeringModel.load to read any model"
+            )
+        dt = _finite_positive(document["dt"], "dt", source)
+        features = document["features"]
+        if not isinstance(features, Mapping):
+            raise ModelFileError(f"{source}: field 'features' must be an object, got {features!r}")
+        allowed_features = {"near_distance", "far_distance", "decision_lag", "regressors"}
+        bad = sorted(set(features) - allowed_features)
+        if bad:
+            raise ModelFileError(
+                f"{source}: unknown field 'features.{bad[0]}'; "
+                f"allowed: {', '.join(sorted(allowed_features))}"
+            )
+        near = _finite_positive(
+            features.get("near_distance", 6.2), "features.near_distance", source
+        )
+        far = _finite_positive(features.get("far_distance", 20.0), "features.far_distance", source)
+        lag = features.get("decision_lag", 1)
+        if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
+            raise ModelFileError(
+                f"{source}: field 'features.decision_lag' must be a non-negative integer, "
+                f"got {lag!r}"
+            )
+        name = document.get("name", model_type)
+        if not isinstance(name, str):
+            raise ModelFileError(f"{source}: field 'name' must be a string, got {name!r}")
+        structure = document.get("structure", {})
+        if not isinstance(structure, Mapping):
+            raise ModelFileError(
+                f"{source}: field 'structure' must be an object, got {structure!r}"
+            )
+        try:
+            skeleton = target(
+                **structure,
+                near_distance=near,
+                far_distance=far,
+                dt=dt,
+                decision_lag=lag,
+                name=name,
+            )
+        except (TypeError, ValueError) as exc:
+            raise ModelFileError(
+                f"{source}: field 'structure' is not valid for {model_type!r}: {exc}"
+            ) from None
+        names = skeleton.parameter_names
+        values = {}
+        for field in ("parameters", "standard_errors"):
+            raw = document.get(field)
+            if raw is None:
+                values[field] = None
+                continue
+            if not isinstance(raw, Mapping):
+                raise ModelFileError(
+                    f"{source}: field '{field}' must be an object name -> number or null, "
+                    f"got {raw!r}"
+                )
+            missing = [n for n in names if n not in raw]
+            extra = [k for k in raw if k not in names]
+            if missing or extra:
+                raise ModelFileError(
+                    f"{source}: field '{field}' has "
+                    f"{'missing ' + str(missing) if missing else ''}"
+                    f"{' and ' if missing and extra else ''}"
+                    f"{'unexpected ' + str(extra) if extra else ''}; "
+                    f"allowed names for this structure: {list(names)}"
+                )
+            for key in names:
+                item = raw[key]
+                if (
+                    isinstance(item, bool)
+                    or not isinstance(item, int | float)
+                    or not math.isfinite(item)
+                ):
+                    raise ModelFileError(
+                        f"{source}: field '{field}.{key}' must be a finite number, got {item!r}"
+                    )
+                if field == "standard_errors" and item < 0:
+                    raise ModelFileError(
+                        f"{source}: field '{field}.{key}' must be >= 0, got {item!r}"
+                    )
+            values[field] = {n: float(raw[n]) for n in names}
+        if values["parameters"] is None and values["standard_errors"] is not None:
+            raise ModelFileError(f"{source}: field 'standard_errors' given without 'parameters'")
+        listed = features.get("regressors")
+        if listed is not None:
+            expected = [str(r) for r in skeleton.regressors]
+            if not isinstance(listed, list) or listed != expected:
+                raise ModelFileError(
+                    f"{source}: field 'features.regressors' is {listed!r} but this structure uses "
+                    f"{expected}"
+                )
+        return target(
+            **structure,
+            parameters=values["parameters"],
+            standard_errors=values["standard_errors"],
+            near_distance=near,
+            far_distance=far,
+            dt=dt,
+            decision_lag=lag,
+            name=name,
+        )
+
+    @classmethod
+    def from_json(
+        cls, text: str | bytes | Mapping[str, Any], source: str = "<json>"
+    ) -> SteeringModel:
+        """Build a model from JSON text (or an already parsed dict); see :meth:`from_dict`."""
+        if isinstance(text, Mapping):
+            return cls.from_dict(text, source)
+        try:
+            document = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ModelFileError(
+                f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+            ) from None
+        return cls.from_dict(document, source)
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the model to a JSON file."""
+        with open(path, "w", encoding="utf-8") as handle:
+            handle.write(self.to_json())
+            handle.write("\n")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> SteeringModel:
+        """Read a model file written by :meth:`save` (``SteeringModel.load`` reads any type)."""
+        source = os.fspath(path)
+        try:
+            with open(path, encoding="utf-8") as handle:
+                text = handle.read()
+        except FileNotFoundError:
+            raise ModelFileError(f"{source}: no such model file") from None
+        except UnicodeDecodeError as exc:
+            raise ModelFileError(f"{source}: not a UTF-8 text file ({exc.reason})") from None
+        return cls.from_json(text, source)
+
+    # ------------------------------------------------------------------ misc
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        assert isinstance(other, SteeringModel)
+
+        def same(x: np.ndarray | None, y: np.ndarray | None) -> bool:
+            if x is None or y is None:
+                return x is None and y is None
+            return bool(np.array_equal(x, y))
+
+        return (
+            self.structure() == other.structure()
+            and self.common_kwargs() == other.common_kwargs()
+            and same(self._parameters, other._parameters)
+            and same(self._standard_errors, other._standard_errors)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        params = self.parameters
+        shown = (
+            "not fitted" if params is None else ", ".join(f"{k}={v:.6g}" for k, v in params.items())
+        )
+        structure = ", ".join(f"{k}={v!r}" for k, v in self.structure().items())
+        head = f"{type(self).__name__}({structure + '; ' if structure else ''}{shown}"
+        return (
+            f"{head}; near={self.near_distance:g} m, far={self.far_distance:g} m, Ts={self.dt:g} s)"
+        )

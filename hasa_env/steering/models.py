@@ -1,0 +1,241 @@
+"""The paper's steering models: the two-point model and the generalized ARX model.
+
+Both are linear in their parameters and ARX models (paper eq. 11), so they
+fit by least squares, score, save, and serve the estimator through
+:meth:`~hasa_env.steering.base.SteeringModel.arx`. Sample alignment and sign
+conventions: :mod:`hasa_env.steering.features` and DESIGN.md section 3.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.base import Design, Regressor, SteeringModel, lagged
+
+__all__ = ["TwoPointModel", "GeneralizedModel", "PAPER_ORDERS"]
+
+PAPER_ORDERS = {"na": 2, "nb": 4, "nc": 1, "nd": 2}
+"""Orders of the paper's generalized model (eq. 13): 2 past steering values,
+phi(k..k-3), Omega(k), v_y(k..k-1)."""
+
+_MAX_ORDER = 50
+
+
+class TwoPointModel(SteeringModel):
+    """Salvucci & Gray's two-point model in corrected backward-Euler form (paper eq. 8/12).
+
+    ``delta(k) = delta(k-1) + k_n [phi(k) - phi(k-1)]
+    + k_f [Omega(k) - Omega(k-1)] + k_I Ts phi(k)``
+
+    (DESIGN.md section 3: the paper's sums without alternating signs are a
+    typo). Parameters: ``near_gain`` k_n (rad/rad), ``far_gain`` k_f (rad/rad),
+    ``integral_gain`` k_I (1/s). As an ARX model:
+    a = (1,), b = (k_n + k_I Ts, -k_n), c = (k_f, -k_f).
+
+    Args:
+        near_gain, far_gain, integral_gain: the gains (all three or none; or
+            give ``parameters``).
+        **kwargs: :class:`~hasa_env.steering.base.SteeringModel` options
+            (distances, dt, name, parameters, standard_errors).
+    """
+
+    model_type = "two_point"
+
+    def __init__(
+        self,
+        near_gain: float | None = None,
+        far_gain: float | None = None,
+        integral_gain: float | None = None,
+        **kwargs: Any,
+    ) -> None:
+        gains = (near_gain, far_gain, integral_gain)
+        if any(g is not None for g in gains):
+            if any(g is None for g in gains):
+                raise ValueError(
+                    "give all three gains near_gain, far_gain, integral_gain (or none)"
+                )
+            if kwargs.get("parameters") is not None:
+                raise ValueError("give the gains either as keywords or as parameters, not both")
+            kwargs["parameters"] = gains
+        kwargs.setdefault("name", "two-point")
+        super().__init__(**kwargs)
+
+    @classmethod
+    def paper(cls, dt: float = 0.01) -> TwoPointModel:
+        """The paper's fit on the illustrative driver (eq. 12): k_n=-0.2, k_f=0.7, k_I=0.087."""
+        return cls(-0.2, 0.7, 0.087, dt=dt, name="two-point (paper)")
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return ("near_gain", "far_gain", "integral_gain")
+
+    @property
+    def regressors(self) -> tuple[Regressor, ...]:
+        return (
+            Regressor("delta", 1),
+            Regressor("phi", 0),
+            Regressor("phi", 1),
+            Regressor("omega", 0),
+            Regressor("omega", 1),
+        )
+
+    def design(self, features: pd.DataFrame) -> Design:
+        delta = features["delta"].to_numpy(dtype=np.float64)
+        phi = features["phi"].to_numpy(dtype=np.float64)
+        omega = features["omega"].to_numpy(dtype=np.float64)
+        matrix = np.column_stack([phi - lagged(phi, 1), omega - lagged(omega, 1), self.dt * phi])
+        return Design(target=delta, offset=lagged(delta, 1), matrix=matrix)
+
+    def arx(self) -> ARXForm | None:
+        if not self.is_fitted:
+            return None
+        k_n, k_f, k_i = self.parameter_vector.tolist()
+        return ARXForm(
+            a=(1.0,),
+            b=(k_n + k_i * self.dt, -k_n),
+            c=(k_f, -k_f),
+            d=(),
+            near_distance=self.near_distance,
+            far_distance=self.far_distance,
+            dt=self.dt,
+        )
+
+
+class GeneralizedModel(SteeringModel):
+    """The generalized two-point model: an ARX model of any orders (paper eq. 11/13).
+
+    ``delta(k) = sum_{i=1}^{na} a_i delta(k-i) + sum_{i=0}^{nb-1} b_i phi(k-i)
+    + sum_{i=0}^{nc-1} c_i Omega(k-i) + sum_{i=0}^{nd-1} d_i v_y(k-i)``
+
+    Parameters are named by lag: ``a1`` .. ``a{na}`` (delta(k-1) ..; the
+    paper's "a_0" is our ``a1``), ``b0`` .. (phi(k) ..), ``c0`` .., ``d0`` ..
+    (v_y(k) ..). Default orders are the paper's (na=2, nb=4, nc=1, nd=2).
+
+    Args:
+        na, nb, nc, nd: the orders (0 .. 50 each).
+        **kwargs: :class:`~hasa_env.steering.base.SteeringModel` options.
+    """
+
+    model_type = "generalized"
+
+    def __init__(
+        self,
+        na: int = PAPER_ORDERS["na"],
+        nb: int = PAPER_ORDERS["nb"],
+        nc: int = PAPER_ORDERS["nc"],
+        nd: int = PAPER_ORDERS["nd"],
+        **kwargs: Any,
+    ) -> None:
+        orders = {"na": na, "nb": nb, "nc": nc, "nd": nd}
+        for key, value in orders.items():
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | np.integer)
+                or not 0 <= value <= _MAX_ORDER
+            ):
+                raise ValueError(
+                    f"order {key} must be an integer in [0, {_MAX_ORDER}], got {value!r}"
+                )
+        self.orders: dict[str, int] = {k: int(v) for k, v in orders.items()}
+        kwargs.setdefault("name", "generalized")
+        super().__init__(**kwargs)
+
+    @classmethod
+    def from_arx(cls, arx: ARXForm, **kwargs: Any) -> GeneralizedModel:
+        """The generalized model with an ARX form's coefficients, orders, distances and Ts."""
+        params = [*arx.a, *arx.b, *arx.c, *arx.d]
+        kwargs.setdefault("near_distance", arx.near_distance)
+        kwargs.setdefault("far_distance", arx.far_distance)
+        kwargs.setdefault("dt", arx.dt)
+        return cls(len(arx.a), len(arx.b), len(arx.c), len(arx.d), parameters=params, **kwargs)
+
+    @classmethod
+    def from_coefficients(
+        cls,
+        a: Sequence[float],
+        b: Sequence[float],
+        c: Sequence[float] = (),
+        d: Sequence[float] = (),
+        **kwargs: Any,
+    ) -> GeneralizedModel:
+        """The generalized model with the given coefficient tuples (see :class:`ARXForm`)."""
+        return cls(len(a), len(b), len(c), len(d), parameters=[*a, *b, *c, *d], **kwargs)
+
+    @classmethod
+    def paper(cls) -> GeneralizedModel:
+        """The paper's fit on the illustrative driver (eq. 13) in OUR convention (DESIGN.md 3).
+
+        a = (1.47, -0.51), b = (-5.73, 17.32, -17.65, 6.12), c0 = 0.11,
+        d = (-0.02, 0.02), Ts = 0.01 s: the paper prints "a_1 = 0.51" (unstable;
+        -0.51 is meant) and its d has the opposite sign (its delta and
+        bearings are not ISO 8855).
+        """
+        return cls.from_coefficients(
+            (1.47, -0.51),
+            (-5.73, 17.32, -17.65, 6.12),
+            (0.11,),
+            (-0.02, 0.02),
+            dt=0.01,
+            name="generalized (paper)",
+        )
+
+    def structure(self) -> dict[str, Any]:
+        return dict(self.orders)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        o = self.orders
+        return (
+            *(f"a{i}" for i in range(1, o["na"] + 1)),
+            *(f"b{i}" for i in range(o["nb"])),
+            *(f"c{i}" for i in range(o["nc"])),
+            *(f"d{i}" for i in range(o["nd"])),
+        )
+
+    @property
+    def regressors(self) -> tuple[Regressor, ...]:
+        o = self.orders
+        return (
+            *(Regressor("delta", i) for i in range(1, o["na"] + 1)),
+            *(Regressor("phi", i) for i in range(o["nb"])),
+            *(Regressor("omega", i) for i in range(o["nc"])),
+            *(Regressor("lateral_velocity", i) for i in range(o["nd"])),
+        )
+
+    def design(self, features: pd.DataFrame) -> Design:
+        columns = [
+            lagged(features[r.feature].to_numpy(dtype=np.float64), r.lag) for r in self.regressors
+        ]
+        delta = features["delta"].to_numpy(dtype=np.float64)
+        matrix = np.column_stack(columns) if columns else np.zeros((delta.size, 0))
+        return Design(target=delta, offset=np.zeros_like(delta), matrix=matrix)
+
+    def coefficients(self) -> Mapping[str, tuple[float, ...]]:
+        """The coefficient tuples ``{"a": ..., "b": ..., "c": ..., "d": ...}``."""
+        theta = self.parameter_vector.tolist()
+        out: dict[str, tuple[float, ...]] = {}
+        pos = 0
+        for key in ("a", "b", "c", "d"):
+            n = self.orders["n" + key]
+            out[key] = tuple(theta[pos : pos + n])
+            pos += n
+        return out
+
+    def arx(self) -> ARXForm | None:
+        if not self.is_fitted:
+            return None
+        coef = self.coefficients()
+        return ARXForm(
+            a=coef["a"],
+            b=coef["b"],
+            c=coef["c"],
+            d=coef["d"],
+            near_distance=self.near_distance,
+            far_distance=self.far_distance,
+            dt=self.dt,
+        )
