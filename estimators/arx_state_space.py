@@ -1,0 +1,326 @@
+"""The augmented state-space model: vehicle + bias + an ARX steering model's memory.
+
+Paper section 5.1 (eqs. 14-17), generalised to any ARX order and corrected
+as in DESIGN.md section 5.
+
+State (SI units), for an ARX steering model with ``n`` memory states::
+
+    x = [v_x, y, v_y, b, m_1, ..., m_n]
+
+``v_x`` longitudinal and ``v_y`` lateral road-frame velocity (m/s), ``y``
+lateral offset from the lane centre of this hypothesis (m), ``b`` camera bias
+(m), ``m_i`` the memory states (rad) of the steering model in observer
+canonical form. With no steering model (``arx=None``) the state is the first
+four entries (paper eq. 4).
+
+Visual features of a state (DESIGN.md section 3, straight-road formulas)::
+
+    theta = atan(v_y / v_x)
+    phi   = -(theta + atan(y / near))          near-point bearing (rad)
+    Omega = -(theta + atan(y / far))           far-point bearing (rad)
+    u     = [phi, Omega, v_y]
+
+Steering model (paper eq. 11/13; ``a_j`` multiplies delta(k-j), ``beta_j``
+the vector (b_j, c_j, d_j) multiplying u(k-j), zero beyond each order)::
+
+    delta(k) = sum_{j=1}^{n} a_j delta(k-j) + sum_{j=0}^{n} beta_j . u(k-j) + e(k)
+
+Observer canonical form (the corrected, non-circular paper eq. 14; for the
+paper's order it is DESIGN.md's g1, g2, g3 and h3)::
+
+    delta(k)   = m_n(k) + beta_0 . u(k) + e(k)                                 (h3)
+    m_i(k+1)   = a_{n-i+1} delta(k) + beta_{n-i+1} . u(k) + m_{i-1}(k),  m_0 = 0
+               = a_{n-i+1} m_n + (beta_{n-i+1} + a_{n-i+1} beta_0) . u + m_{i-1}
+                 + a_{n-i+1} e(k)                                              (g_i)
+
+Vehicle (paper eq. 4) with the IMU's road-frame accelerations as inputs::
+
+    v_x(k+1) = v_x + Ts a_x
+    y(k+1)   = y + Ts v_y + Ts^2 / 2 a_y
+    v_y(k+1) = v_y + Ts a_y
+    b(k+1)   = b
+
+Measurements (paper eq. 15, with DESIGN.md's erratum: the speedometer
+measures the speed, so h1 is the exact speed, not v_x)::
+
+    h1 = sqrt(v_x^2 + v_y^2)      speedometer (m/s)
+    h2 = y + b                    camera (m)
+    h3 = m_n + beta_0 . u         steering, in the model's units (rad)
+
+Jacobians (paper eqs. 16-17, exact: DESIGN.md notes the paper's A_h has
+a_2 c_0 / 6.2 where / 20 belongs, and its entries are small-angle ones)::
+
+    d theta / d v_x = -v_y / (v_x^2 + v_y^2),   d theta / d v_y = v_x / (v_x^2 + v_y^2)
+    d phi / d y     = -near / (near^2 + y^2),   d Omega / d y  = -far / (far^2 + y^2)
+    d phi / d v     = d Omega / d v = -d theta / d v        (v = v_x or v_y)
+
+All functions accept any leading batch shape (``x[..., n_states]``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from hasa_env.steering.arx import ARXForm
+
+__all__ = ["ARXStateSpace", "PHYSICAL_STATE_NAMES", "MEASUREMENT_NAMES"]
+
+PHYSICAL_STATE_NAMES = ("longitudinal_velocity", "lateral_offset", "lateral_velocity", "bias")
+"""Names of the first four states (m/s, m, m/s, m)."""
+
+MEASUREMENT_NAMES = ("speed", "camera_lateral", "steering")
+"""Rows of the measurement vector (m/s, m, rad)."""
+
+VX, Y, VY, BIAS = 0, 1, 2, 3
+N_PHYSICAL = 4
+_MIN_SPEED_SQ = 1e-12  # floor of v_x^2 + v_y^2 (m^2/s^2) against division by zero
+
+
+@dataclass(frozen=True, eq=False)
+class ARXStateSpace:
+    """The augmented model of a car and an ARX steering model, for any ARX orders.
+
+    Args:
+        arx: the steering model's ARX description, or None for the vehicle
+            and bias only (the no-steering baseline; then h3 = 0).
+        dt: sample time Ts (s); defaults to ``arx.dt`` (0.01 s without a model).
+        decision_lag: samples between the state the driver saw and the
+            steering measurement the model predicts. 0: the paper's eq. 13 as
+            written (delta(k) uses u(k)); 1: a recording's alignment, where
+            row k's steering was applied over the step ending at row k and so
+            decided from row k-1 (:mod:`hasa_env.steering.features`, default
+            ``decision_lag=1``). The lag shifts beta by that many samples
+            (beta'_{j+lag} = beta_j), adding ``decision_lag`` memory states.
+
+    Attributes:
+        lagged_arx: the ARX description with the decision lag applied (the
+            model the memory states realise).
+        n_memory: number of memory states n = ``lagged_arx.memory_order``
+            (0 without a model); the paper's order with lag 0 gives 3.
+        n_states: 4 + n_memory (paper order: 7).
+        feedback: (n_memory,) vector ``[a_n, ..., a_1]``: memory state m_i receives
+            a_{n-i+1} delta(k).
+        bearing_gain: (n_memory, 3) matrix; row i is ``beta_{n-i+1} + a_{n-i+1} beta_0``,
+            the gain from u(k) to m_i(k+1).
+        output_gain: (3,) vector ``beta_0 = (b_0, c_0, d_0)``.
+        memory_matrix: (n_memory, n_memory): d m(k+1) / d m(k) (shift + feedback on m_n).
+    """
+
+    arx: ARXForm | None
+    dt: float | None = None
+    decision_lag: int = 0
+    lagged_arx: ARXForm | None = field(init=False, repr=False)
+    n_memory: int = field(init=False)
+    feedback: np.ndarray = field(init=False, repr=False)
+    bearing_gain: np.ndarray = field(init=False, repr=False)
+    output_gain: np.ndarray = field(init=False, repr=False)
+    memory_matrix: np.ndarray = field(init=False, repr=False)
+    near_distance: float = field(init=False)
+    far_distance: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        arx = self.arx
+        dt = self.dt if self.dt is not None else (arx.dt if arx is not None else 0.01)
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        object.__setattr__(self, "dt", float(dt))
+        lag = self.decision_lag
+        if isinstance(lag, bool) or not isinstance(lag, int | np.integer) or lag < 0:
+            raise ValueError(f"decision_lag must be a non-negative integer, got {lag!r}")
+        if arx is not None and lag:
+            pad = (0.0,) * int(lag)
+            arx = replace(
+                arx, b=pad + arx.b, c=pad + arx.c if arx.c else (), d=pad + arx.d if arx.d else ()
+            )
+        if arx is None:
+            n = 0
+            near, far = 6.2, 20.0
+            a = np.zeros(0)
+            beta = np.zeros((1, 3))
+        else:
+            n = arx.memory_order
+            near, far = arx.near_distance, arx.far_distance
+            a = np.zeros(n + 1)  # a[j] multiplies delta(k-j); a[0] unused
+            a[1 : len(arx.a) + 1] = arx.a
+            beta = np.zeros((n + 1, 3))  # beta[j] multiplies u(k-j)
+            for column, coefficients in enumerate((arx.b, arx.c, arx.d)):
+                beta[: len(coefficients), column] = coefficients
+        # memory state i (1-based) is fed by lag j = n - i + 1
+        lags = np.arange(n, 0, -1)
+        feedback = a[lags] if n else np.zeros(0)
+        bearing_gain = (beta[lags] + feedback[:, None] * beta[0]) if n else np.zeros((0, 3))
+        memory_matrix = np.zeros((n, n))
+        if n:
+            memory_matrix[np.arange(1, n), np.arange(n - 1)] = 1.0
+            memory_matrix[:, n - 1] += feedback
+        for name, value in (
+            ("lagged_arx", arx),
+            ("n_memory", n),
+            ("feedback", feedback),
+            ("bearing_gain", bearing_gain),
+            ("output_gain", beta[0].copy()),
+            ("memory_matrix", memory_matrix),
+            ("near_distance", float(near)),
+            ("far_distance", float(far)),
+        ):
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    # ------------------------------------------------------------ structure
+    @property
+    def n_states(self) -> int:
+        """Length of the state vector, 4 + n_memory."""
+        return N_PHYSICAL + self.n_memory
+
+    @property
+    def has_steering(self) -> bool:
+        """True when the model predicts the steering measurement."""
+        return self.arx is not None
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """Names of the states: the four physical ones, then ``memory_1`` .. ``memory_n``."""
+        return PHYSICAL_STATE_NAMES + tuple(f"memory_{i}" for i in range(1, self.n_memory + 1))
+
+    def transition_matrix_template(self) -> np.ndarray:
+        """The state-independent part of dF/dx (paper eq. 16) as an (n, n) array."""
+        n = self.n_states
+        out = np.eye(n)
+        out[Y, VY] = self.dt
+        out[N_PHYSICAL:, N_PHYSICAL:] = self.memory_matrix
+        return out
+
+    def input_matrix(self) -> np.ndarray:
+        """B_D (paper eq. 4/14): (n, 2) map of (a_x, a_y) into the state."""
+        dt = self.dt
+        out = np.zeros((self.n_states, 2))
+        out[VX, 0] = dt
+        out[Y, 1] = 0.5 * dt * dt
+        out[VY, 1] = dt
+        return out
+
+    # ------------------------------------------------------------- features
+    def bearings(
+        self, x: np.ndarray, with_jacobian: bool = False
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Features u = [phi, Omega, v_y] of states ``x[..., n_states]`` (at least the first 3).
+
+        Returns u with shape (..., 3) and, with ``with_jacobian``, du/d(v_x, y, v_y)
+        with shape (..., 3, 3) (rows: phi, Omega, v_y; columns: v_x, y, v_y).
+        """
+        vx, y, vy = x[..., VX], x[..., Y], x[..., VY]
+        near, far = self.near_distance, self.far_distance
+        theta = np.arctan2(vy, vx)
+        u = np.empty(x.shape[:-1] + (3,))
+        u[..., 0] = -(theta + np.arctan(y / near))
+        u[..., 1] = -(theta + np.arctan(y / far))
+        u[..., 2] = vy
+        if not with_jacobian:
+            return u
+        speed_sq = np.maximum(vx * vx + vy * vy, _MIN_SPEED_SQ)
+        dtheta_dvx = -vy / speed_sq
+        dtheta_dvy = vx / speed_sq
+        du = np.zeros(x.shape[:-1] + (3, 3))
+        du[..., 0, 0] = du[..., 1, 0] = -dtheta_dvx
+        du[..., 0, 2] = du[..., 1, 2] = -dtheta_dvy
+        du[..., 0, 1] = -near / (near * near + y * y)
+        du[..., 1, 1] = -far / (far * far + y * y)
+        du[..., 2, 2] = 1.0
+        return u, du
+
+    # ------------------------------------------------------------ transition
+    def transition(self, x: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
+        """F(x) + B_D [a_x, a_y] (paper eq. 14 without noise): the state one sample later.
+
+        Args:
+            x: states, shape (..., n_states).
+            acceleration: road-frame accelerations (a_x, a_y) (m/s^2) over the
+                sample, shape broadcastable to (..., 2).
+        """
+        acceleration = np.asarray(acceleration, dtype=np.float64)
+        dt = self.dt
+        out = np.empty(np.broadcast_shapes(x.shape, acceleration.shape[:-1] + (1,)))
+        ax, ay = acceleration[..., 0], acceleration[..., 1]
+        vy = x[..., VY]
+        out[..., VX] = x[..., VX] + dt * ax
+        out[..., Y] = x[..., Y] + dt * vy + (0.5 * dt * dt) * ay
+        out[..., VY] = vy + dt * ay
+        out[..., BIAS] = x[..., BIAS]
+        if self.n_memory:
+            u = self.bearings(x)
+            memory = x[..., N_PHYSICAL:]
+            out[..., N_PHYSICAL:] = memory @ self.memory_matrix.T + u @ self.bearing_gain.T
+        return out
+
+    def transition_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """dF/dx at ``x[..., n_states]`` (paper eq. 16, exact), shape (..., n, n)."""
+        out = np.broadcast_to(
+            self.transition_matrix_template(), x.shape[:-1] + (self.n_states,) * 2
+        ).copy()
+        if self.n_memory:
+            _, du = self.bearings(x, with_jacobian=True)
+            out[..., N_PHYSICAL:, :3] = self.bearing_gain @ du
+        return out
+
+    # ----------------------------------------------------------- measurement
+    def measurement(self, x: np.ndarray) -> np.ndarray:
+        """h(x) = [speed, y + b, predicted steering] (paper eq. 15), shape (..., 3)."""
+        out = np.empty(x.shape[:-1] + (3,))
+        vx, vy = x[..., VX], x[..., VY]
+        out[..., 0] = np.sqrt(vx * vx + vy * vy)
+        out[..., 1] = x[..., Y] + x[..., BIAS]
+        out[..., 2] = self.predicted_steering(x)
+        return out
+
+    def predicted_steering(self, x: np.ndarray) -> np.ndarray:
+        """h3(x) = m_n + beta_0 . u(x) (rad, model units), shape (...)."""
+        if not self.has_steering:
+            return np.zeros(x.shape[:-1])
+        value = self.bearings(x) @ self.output_gain
+        if self.n_memory:
+            value = value + x[..., -1]
+        return value
+
+    def measurement_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """dh/dx at ``x[..., n_states]`` (paper eq. 17, exact), shape (..., 3, n)."""
+        out = np.zeros(x.shape[:-1] + (3, self.n_states))
+        vx, vy = x[..., VX], x[..., VY]
+        speed = np.sqrt(np.maximum(vx * vx + vy * vy, _MIN_SPEED_SQ))
+        out[..., 0, VX] = vx / speed
+        out[..., 0, VY] = vy / speed
+        out[..., 1, Y] = 1.0
+        out[..., 1, BIAS] = 1.0
+        if self.has_steering:
+            _, du = self.bearings(x, with_jacobian=True)
+            out[..., 2, :3] = self.output_gain @ du
+            if self.n_memory:
+                out[..., 2, -1] = 1.0
+        return out
+
+    # --------------------------------------------------------------- memory
+    def steady_memory(self, steering: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Memory states of a constant past: delta(k-j) = ``steering``, u(k-j) = u(x), j >= 1.
+
+        Unrolling g_i gives ``m_i = sum_{j=n-i+1}^{n} (a_j delta + beta_j . u)``.
+        Each hypothesis passes its *own* state ``x`` (its own y), so the
+        memory never encodes which lane is true (DESIGN.md section 5).
+
+        Args:
+            steering: measured steering delta (rad, model units), shape (...).
+            x: states whose first three entries give u, shape (..., >= 3).
+
+        Returns:
+            (..., n_memory) memory states.
+        """
+        n = self.n_memory
+        if not n:
+            return np.zeros(x.shape[:-1] + (0,))
+        u = self.bearings(x)
+        steering = np.asarray(steering, dtype=np.float64)
+        # contribution of lag j = n - i + 1 for memory i: a_j delta + beta_j . u
+        beta_lagged = self.bearing_gain - self.feedback[:, None] * self.output_gain
+        per_lag = self.feedback * steering[..., None] + u @ beta_lagged.T
+        return np.cumsum(per_lag, axis=-1)

@@ -1,0 +1,814 @@
+"""The Gaussian-mixture EKF with the human as advisor (paper section 5).
+
+Vectorized over lane hypotheses and over many runs at once: states are
+(runs, components, n), covariances (runs, components, n, n).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from estimators.arx_state_space import BIAS, N_PHYSICAL, VX, VY, ARXStateSpace, Y
+from estimators.base import Estimate
+from hasa_env.steering.arx import ARXForm
+
+__all__ = ["FilterSettings", "GaussianMixtureEKF", "FilterMatrices"]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """Noise levels, priors and pruning of the mixture filter (SI units; rad in model units).
+
+    Attributes:
+        speed_noise_std: speedometer noise (m/s), R_11 = std^2.
+        camera_noise_std: camera lateral-offset noise (m), R_22.
+        acceleration_noise_std: IMU noise (m/s^2) on each axis; process noise
+            Q = B_D diag(std^2) B_D^T on the vehicle states.
+        steering_residual_std: std of the steering model's equation error e(k)
+            (rad, model units): the model residual level, which dominates the
+            steering channel. R_33 = residual^2 + (ratio * sensor)^2.
+        steering_sensor_std: steering-sensor noise (rad, measured units).
+        steering_ratio: model units per measured unit: the filter compares
+            ``steering_ratio * delta_measured`` with the model (1: the model
+            predicts the road-wheel angle the sensor measures).
+        initial_speed_std: prior std of v_x around the first speed reading (m/s).
+        initial_lateral_std: prior std of y_i around ``camera - b_i`` (m);
+            None: camera_noise_std.
+        initial_lateral_velocity_std: prior std of v_y around 0 (m/s).
+        bias_std: prior std of each hypothesis' bias around b_i (m).
+        memory_std: prior std of each memory state around its constant-past
+            value (rad, model units).
+        bias_drift_std: random-walk std of b per sample (m); 0: constant bias.
+        memory_process_std: extra process noise on each memory state per
+            sample (rad), for model mismatch beyond the equation error.
+        missing_acceleration_std: process noise (m/s^2) used in place of the
+            IMU noise when an IMU reading is NaN (the input is then taken as 0).
+        prune_threshold: hypotheses whose weight falls below this are pruned
+            (weight 0, state frozen); the most likely one is never pruned.
+    """
+
+    speed_noise_std: float = 0.05
+    camera_noise_std: float = 0.05
+    acceleration_noise_std: float = 0.05
+    steering_residual_std: float = 2e-3
+    steering_sensor_std: float = 1e-4
+    steering_ratio: float = 1.0
+    initial_speed_std: float = 0.1
+    initial_lateral_std: float | None = None
+    initial_lateral_velocity_std: float = 0.3
+    bias_std: float = 1e-3
+    memory_std: float = 0.01
+    bias_drift_std: float = 0.0
+    memory_process_std: float = 0.0
+    missing_acceleration_std: float = 3.0
+    prune_threshold: float = 1e-10
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None and f.name == "initial_lateral_std":
+                continue
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ValueError(
+                    f"FilterSettings.{f.name} must be a finite number >= 0, got {value!r}"
+                )
+        positive = ("speed_noise_std", "camera_noise_std", "steering_ratio", "initial_speed_std")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"FilterSettings.{name} must be > 0, got {getattr(self, name)!r}")
+        if self.steering_residual_std == 0 and self.steering_sensor_std == 0:
+            raise ValueError("steering_residual_std and steering_sensor_std cannot both be 0")
+        if not self.prune_threshold < 1:
+            raise ValueError(f"prune_threshold must be < 1, got {self.prune_threshold!r}")
+
+    @classmethod
+    def from_env_config(cls, config: Mapping[str, Any], **overrides: Any) -> FilterSettings:
+        """Settings with the sensor noise levels of an env config (``env.unwrapped.config``)."""
+        noise = config["noise"]
+        values = {
+            "speed_noise_std": float(noise["speed"]),
+            "camera_noise_std": float(noise["camera"]),
+            "acceleration_noise_std": float(noise["imu"]),
+            "steering_sensor_std": float(noise["steering"]),
+        }
+        # a noise-free env would make R singular: keep a floor
+        values = {k: max(v, 1e-6) for k, v in values.items()}
+        values.update(overrides)
+        return cls(**values)
+
+
+class FilterMatrices:
+    """The model and noise matrices of the mixture filter, shared by the fast
+    filter and the filterpy reference.
+
+    The steering model's equation error e(k) drives both the steering
+    measurement (h3) and the memory states (through a_j delta(k), see
+    :mod:`estimators.arx_state_space`): process and measurement noise are
+    correlated, ``E[w(k) v_3(k)] = s = [0, 0, 0, 0, a_n, ..., a_1] sigma_e^2``.
+    The filter removes the correlation exactly (Simon, *Optimal State
+    Estimation*, 2006, sec. 7.1). When the steering was measured at k::
+
+        x(k+1) = F(x) + B_D a + J (z_3(k) - h_3(x)),      J = s / R_33
+        F'     = dF/dx - J H_3,      Q' = Q - s s^T / R_33
+
+    so the memory states follow the *measured* steering (the ARX model's
+    one-step-ahead predictor). When it was not (NaN)::
+
+        x(k+1) = F(x) + B_D a,       Q = Q_vehicle + a a^T sigma_e^2
+
+    with ``Q_vehicle = B_D diag(sigma_imu^2) B_D^T`` and
+    ``R = diag(sigma_speed^2, sigma_camera^2, sigma_e^2 + (ratio sigma_sensor)^2)``.
+
+    Attributes:
+        model: the :class:`ARXStateSpace`.
+        process_noise: Q, (n, n), steering not measured at k.
+        process_noise_decorrelated: Q', (n, n), steering measured at k.
+        process_noise_missing_acceleration: added to Q when an IMU reading is NaN.
+        steering_cross_covariance: s, (n,).
+        steering_gain: J = s / R_33, (n,).
+        measurement_var: diagonal of R, (3,).
+        initial_covariance: P_0 of every hypothesis, (n, n).
+        decorrelates: True when J != 0 (a steering model with memory).
+    """
+
+    def __init__(self, model: ARXStateSpace, settings: FilterSettings) -> None:
+        self.model = model
+        self.settings = settings
+        n = model.n_states
+        mem = slice(N_PHYSICAL, n)
+        s = settings
+        input_matrix = model.input_matrix()
+        input_outer = input_matrix @ input_matrix.T
+        accel_var = s.acceleration_noise_std**2
+        q_vehicle = accel_var * input_outer
+        q_vehicle[BIAS, BIAS] += s.bias_drift_std**2
+        self.process_noise_missing_acceleration = (
+            s.missing_acceleration_std**2 - accel_var
+        ) * input_outer
+        residual_var = s.steering_residual_std**2
+        sensor_var = (s.steering_ratio * s.steering_sensor_std) ** 2
+        steering_var = residual_var + sensor_var
+        cross = np.zeros(n)
+        cross[mem] = model.feedback * residual_var
+        self.steering_cross_covariance = cross
+        self.steering_gain = cross / steering_var
+        q_full = q_vehicle.copy()
+        q_full[mem, mem] += residual_var * np.outer(model.feedback, model.feedback)
+        q_full[mem, mem] += s.memory_process_std**2 * np.eye(model.n_memory)
+        self.process_noise = q_full
+        self.process_noise_decorrelated = q_full - np.outer(cross, cross) / steering_var
+        self.decorrelates = bool(np.any(self.steering_gain != 0))
+        self.measurement_var = np.array([s.speed_noise_std**2, s.camera_noise_std**2, steering_var])
+        lateral_std = s.camera_noise_std if s.initial_lateral_std is None else s.initial_lateral_std
+        p0 = np.zeros((n, n))
+        p0[VX, VX] = s.initial_speed_std**2
+        p0[Y, Y] = lateral_std**2 + s.bias_std**2
+        p0[VY, VY] = s.initial_lateral_velocity_std**2
+        p0[BIAS, BIAS] = s.bias_std**2
+        p0[Y, BIAS] = p0[BIAS, Y] = -(s.bias_std**2)  # y_i = camera - b_i
+        p0[mem, mem] = s.memory_std**2 * np.eye(model.n_memory)
+        self.initial_covariance = p0
+        self._build_fast_path(input_matrix)
+        for arr in (
+            self.process_noise,
+            self.process_noise_decorrelated,
+            self.process_noise_missing_acceleration,
+            self.steering_cross_covariance,
+            self.steering_gain,
+            self.measurement_var,
+            self.initial_covariance,
+        ):
+            arr.setflags(write=False)
+
+    # --------------------------------------------------------------- prior
+    def initial_state(self, measurement: np.ndarray, hypotheses: np.ndarray) -> np.ndarray:
+        """Prior means (R, C, n) from the first measurements (R, 3) and biases (R, C).
+
+        ``v_x`` = speed reading (``v_y`` = 0), ``y_i`` = camera - ``b_i``,
+        ``b`` = ``b_i``, memory = the constant-past memory
+        (:meth:`ARXStateSpace.steady_memory`) of the measured steering and
+        hypothesis i's *own* bearings, never shared between hypotheses (a
+        missing first steering reading counts as 0).
+        """
+        model = self.model
+        speed, camera, steering = measurement[:, 0], measurement[:, 1], measurement[:, 2]
+        if not (np.all(np.isfinite(speed)) and np.all(np.isfinite(camera))):
+            raise ValueError("the first measurement needs a finite speed and camera reading")
+        steering = np.where(np.isfinite(steering), steering, 0.0) * self.settings.steering_ratio
+        x = np.zeros(hypotheses.shape + (model.n_states,))
+        x[..., VX] = speed[:, None]
+        x[..., Y] = camera[:, None] - hypotheses
+        x[..., BIAS] = hypotheses
+        if model.n_memory:
+            x[..., N_PHYSICAL:] = model.steady_memory(
+                np.broadcast_to(steering[:, None], hypotheses.shape), x
+            )
+        return x
+
+    # ------------------------------------------------------ fast-path tables
+    def _build_fast_path(self, input_matrix: np.ndarray) -> None:
+        """Constant tables of the vectorized filter.
+
+        With ``w = [theta + atan(y/near), theta + atan(y/far), v_y]`` (so
+        u = [-w_0, -w_1, w_2]) the transition is ``x' = x A^T + w G^T + a B_D^T
+        [+ J z_3]`` and, with ``D = [dtheta/dv_x, dtheta/dv_y,
+        d atan(y/near)/dy, d atan(y/far)/dy]``, its Jacobian is
+        ``F = F_0 + sum_k D_k T_k``; likewise ``H = H_0 + sum_k D_k U_k`` plus
+        the speed row. Both decorrelated and plain variants are tabulated.
+        """
+        model = self.model
+        n = model.n_states
+        mem = slice(N_PHYSICAL, n)
+        self.input_matrix_t = np.ascontiguousarray(input_matrix.T)
+        sign = np.array([-1.0, -1.0, 1.0])
+        base_a = model.transition_matrix_template()
+        gains = np.zeros((n, 3))
+        gains[mem] = model.bearing_gain * sign
+        last = np.zeros(n)
+        if model.n_memory:
+            last[-1] = 1.0
+        variants = {"full": (base_a, gains)}
+        if self.decorrelates:
+            variants["decorrelated"] = (
+                base_a - np.outer(self.steering_gain, last),
+                gains - np.outer(self.steering_gain, model.output_gain * sign),
+            )
+        self._tables: dict[str, tuple[np.ndarray, ...]] = {}
+        for name, (a_mat, g_mat) in variants.items():
+            jac_base = a_mat.copy()
+            jac_base[:, VY] += g_mat[:, 2]
+            both = g_mat[:, 0] + g_mat[:, 1]
+            maps = np.zeros((4, n, n))
+            maps[0, :, VX] = both
+            maps[1, :, VY] = both
+            maps[2, :, Y] = g_mat[:, 0]
+            maps[3, :, Y] = g_mat[:, 1]
+            self._tables[name] = (
+                np.ascontiguousarray(a_mat.T),
+                np.ascontiguousarray(g_mat.T),
+                jac_base.ravel().copy(),
+                np.ascontiguousarray(jac_base.T).ravel().copy(),
+                maps.reshape(4, n * n).copy(),
+                np.ascontiguousarray(maps.transpose(0, 2, 1)).reshape(4, n * n),
+            )
+        # measurement: h_1 = |v|, [h_2, h_3] = x L^T (+ beta_0' . w)
+        beta0 = model.output_gain * sign
+        linear = np.zeros((2, n))
+        linear[0, Y] = linear[0, BIAS] = 1.0
+        h_base = np.zeros((3, n))
+        h_base[1, Y] = h_base[1, BIAS] = 1.0
+        h_maps = np.zeros((4, 3, n))
+        if model.has_steering:
+            linear[1, VY] = beta0[2]
+            h_base[2, VY] = beta0[2]
+            if model.n_memory:
+                linear[1, -1] = 1.0
+                h_base[2, -1] = 1.0
+            both = beta0[0] + beta0[1]
+            h_maps[0, 2, VX] = both
+            h_maps[1, 2, VY] = both
+            h_maps[2, 2, Y] = beta0[0]
+            h_maps[3, 2, Y] = beta0[1]
+        self._measurement_linear_t = np.ascontiguousarray(linear.T)
+        self._steering_bearing_gain = beta0[:2].copy()
+        self._steering_uses_bearings = bool(model.has_steering and np.any(beta0[:2] != 0))
+        self._h_base = h_base.ravel().copy()
+        self._h_base_t = np.ascontiguousarray(h_base.T).ravel().copy()
+        self._h_maps = h_maps.reshape(4, 3 * n).copy()
+        self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
+        self._speed_index = np.array([VX, VY])
+        self._h_speed_index = np.array([0 * n + VX, 0 * n + VY])
+        self._h_speed_index_t = np.array([VX * 3 + 0, VY * 3 + 0])
+        self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
+        self._eye = np.eye(n)
+        self._swap_vy_vx = np.array([VY, VX])
+        self._theta_sign = np.array([-1.0, 1.0])
+
+    def _features(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """w = [theta + atan(y/near), theta + atan(y/far), v_y] (B, 3) and
+        D = [dtheta/dv_x, dtheta/dv_y, d atan(y/near)/dy, d atan(y/far)/dy] (B, 4)."""
+        vx, vy = x[:, VX], x[:, VY]
+        ratio = x[:, Y, None] * self._inverse_distance
+        w = np.empty((x.shape[0], 3))
+        np.add(np.arctan(ratio), np.arctan2(vy, vx)[:, None], out=w[:, :2])
+        w[:, 2] = vy
+        deriv = np.empty((x.shape[0], 4))
+        # dtheta/dv_x = -v_y / v^2, dtheta/dv_y = v_x / v^2
+        deriv[:, :2] = x[:, self._swap_vy_vx] * (
+            self._theta_sign / np.maximum(vx * vx + vy * vy, 1e-12)[:, None]
+        )
+        deriv[:, 2:] = self._inverse_distance / (1.0 + ratio * ratio)
+        return w, deriv
+
+    def predict_batch(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        acceleration: np.ndarray,
+        previous_steering: np.ndarray,
+        n_comp: int,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """x(k+1|k) (B, n) and P(k+1|k) (B, n, n) for B = R * C flattened hypotheses.
+
+        Args:
+            x, cov: posterior means (B, n) and covariances (B, n, n) at k.
+            acceleration: (R, 2) IMU input over k -> k+1 (NaN: missing).
+            previous_steering: (R,) measured steering at k, model units (NaN: missing).
+            n_comp: C, hypotheses per run.
+        """
+        n_runs = acceleration.shape[0]
+        n = x.shape[1]
+        missing_acc = np.isnan(acceleration)
+        any_missing_acc = missing_acc.any()
+        if any_missing_acc:
+            acceleration = np.where(missing_acc, 0.0, acceleration)
+        variant = "full"
+        if self.decorrelates:
+            known = ~np.isnan(previous_steering)
+            if known.all():
+                variant = "decorrelated"
+            elif known.any():
+                variant = "mixed"
+        has_memory = self.model.n_memory > 0
+        if has_memory:
+            w, deriv = self._features(x)
+
+        def propagate(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            a_t, g_t, jac_base, jac_base_t, maps, maps_t = self._tables[name]
+            x_new = x @ a_t
+            if not has_memory:
+                jac = np.broadcast_to(jac_base.reshape(n, n), (x.shape[0], n, n))
+                return x_new, jac, np.swapaxes(jac, 1, 2)
+            x_new += w @ g_t
+            jac = deriv @ maps
+            jac += jac_base
+            jac_t = deriv @ maps_t
+            jac_t += jac_base_t
+            return x_new, jac.reshape(-1, n, n), jac_t.reshape(-1, n, n)
+
+        drive = acceleration @ self.input_matrix_t  # (R, n)
+        if variant == "mixed":
+            x_f, jac_f, jac_t_f = propagate("full")
+            x_d, jac_d, jac_t_d = propagate("decorrelated")
+            known_b = np.repeat(known, n_comp)
+            x_new = np.where(known_b[:, None], x_d, x_f)
+            jac = np.where(known_b[:, None, None], jac_d, jac_f)
+            jac_t = np.where(known_b[:, None, None], jac_t_d, jac_t_f)
+            q = np.where(
+                known_b[:, None, None], self.process_noise_decorrelated, self.process_noise
+            )
+            drive = drive + np.where(known, previous_steering, 0.0)[:, None] * self.steering_gain
+        else:
+            x_new, jac, jac_t = propagate(variant)
+            if variant == "decorrelated":
+                q = self.process_noise_decorrelated
+                drive += previous_steering[:, None] * self.steering_gain
+            else:
+                q = self.process_noise
+        if n_comp == 1:
+            x_new += drive
+        else:
+            x_new = (x_new.reshape(n_runs, n_comp, n) + drive[:, None, :]).reshape(-1, n)
+        if any_missing_acc:
+            extra = (
+                np.repeat(missing_acc.any(axis=1), n_comp)[:, None, None]
+                * self.process_noise_missing_acceleration
+            )
+            q = q + extra
+        cov_new = (jac @ cov) @ jac_t
+        cov_new += q
+        return x_new, cov_new
+
+    def update_batch(
+        self, x: np.ndarray, cov: np.ndarray, z: np.ndarray, n_comp: int, all_observed: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joseph-form EKF update of every hypothesis and its log-likelihood.
+
+        Args:
+            x, cov: predicted means (B, n) and covariances (B, n, n).
+            z: (R, 3) measurements (steering in model units); NaN = missing.
+            n_comp: C.
+            all_observed: True when z has no NaN.
+
+        Returns:
+            x(k|k) (B, n), P(k|k) (B, n, n), log N(nu; 0, S) (B,).
+        """
+        n = x.shape[1]
+        n_b = x.shape[0]
+        velocity = x[:, self._speed_index]
+        speed = np.sqrt(np.einsum("bi,bi->b", velocity, velocity))
+        h = np.empty((n_b, 3))
+        h[:, 0] = speed
+        h[:, 1:] = x @ self._measurement_linear_t
+        if self._steering_uses_bearings:
+            w, deriv = self._features(x)
+            h[:, 2] += w[:, :2] @ self._steering_bearing_gain
+            jac = deriv @ self._h_maps
+            jac += self._h_base
+            jac_t = deriv @ self._h_maps_t
+            jac_t += self._h_base_t
+        else:
+            jac = np.empty((n_b, 3 * n))
+            jac[:] = self._h_base
+            jac_t = np.empty((n_b, 3 * n))
+            jac_t[:] = self._h_base_t
+        speed_row = velocity / np.maximum(speed, 1e-6)[:, None]
+        jac[:, self._h_speed_index] = speed_row
+        jac_t[:, self._h_speed_index_t] = speed_row
+        jac = jac.reshape(n_b, 3, n)
+        jac_t = jac_t.reshape(n_b, n, 3)
+        innovation = (np.repeat(z, n_comp, axis=0) if n_comp > 1 else z) - h
+        r = self.measurement_var
+        n_obs: float | np.ndarray = 3.0
+        if not all_observed:
+            obs_b = np.repeat(~np.isnan(z), n_comp, axis=0)  # (B, 3)
+            innovation = np.where(obs_b, innovation, 0.0)
+            jac = jac * obs_b[:, :, None]
+            jac_t = jac_t * obs_b[:, None, :]
+            r = np.where(obs_b, r, 1.0)
+            n_obs = obs_b.sum(axis=1)
+        hp = jac @ cov  # H P = (P H^T)^T, (B, 3, n)
+        s = hp @ jac_t
+        s = s.reshape(n_b, 9)
+        s[:, ::4] += r
+        s_inv, det = _inverse_3x3(s)
+        gain_t = s_inv @ hp  # K^T (B, 3, n)
+        x_post = x + (innovation[:, None, :] @ gain_t)[:, 0, :]
+        i_kh = self._eye - np.swapaxes(gain_t, 1, 2) @ jac
+        cov_post = (i_kh @ cov) @ np.swapaxes(i_kh, 1, 2)
+        cov_post += (
+            np.swapaxes(gain_t * (r[:, None] if np.ndim(r) == 1 else r[:, :, None]), 1, 2) @ gain_t
+        )
+        cov_post += np.swapaxes(cov_post, 1, 2)
+        cov_post *= 0.5
+        mahalanobis_sq = np.einsum("bi,bij,bj->b", innovation, s_inv, innovation)
+        log_lik = -0.5 * (mahalanobis_sq + np.log(det) + n_obs * _LOG_2PI)
+        return x_post, cov_post, log_lik
+
+
+# adjugate of a 3x3 matrix s flattened row-major: adj[p] = s[A[p]] s[B[p]] - s[C[p]] s[D[p]]
+_COF_A = np.array([4, 2, 1, 5, 0, 2, 3, 1, 0])
+_COF_B = np.array([8, 7, 5, 6, 8, 3, 7, 6, 4])
+_COF_C = np.array([5, 1, 2, 3, 2, 0, 4, 0, 1])
+_COF_D = np.array([7, 8, 4, 8, 6, 5, 6, 7, 3])
+
+
+def _inverse_3x3(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse and determinant of 3x3 matrices given flattened, (B, 9), by the adjugate.
+
+    Cheaper than ``numpy.linalg.inv`` on many small matrices and the same
+    arithmetic whatever the batch size.
+    """
+    adjugate = s[:, _COF_A] * s[:, _COF_B]
+    adjugate -= s[:, _COF_C] * s[:, _COF_D]
+    det = np.einsum("bi,bi->b", s[:, :3], adjugate[:, ::3])
+    adjugate /= det[:, None]
+    return adjugate.reshape(-1, 3, 3), det
+
+
+class GaussianMixtureEKF:
+    """Gaussian-mixture extended Kalman filter: one EKF per lane hypothesis.
+
+    The human's steering, through an ARX steering model, tells the lanes
+    apart (paper section 5; DESIGN.md section 5). State of hypothesis i:
+    ``x_i = [v_x, y_i, v_y, b_i, m_1 .. m_n]`` (see
+    :class:`estimators.arx_state_space.ARXStateSpace`); measurements
+    ``z = [speed, camera y + b, steering]``; inputs the IMU accelerations a.
+
+    Predict (paper eq. 14 and 16, noise decorrelated as in :class:`FilterMatrices`)::
+
+        x_i(k|k-1) = F(x_i(k-1|k-1)) + B_D a(k) [+ J (z_3(k-1) - h_3(x_i(k-1|k-1)))]
+        P_i(k|k-1) = F'_i P_i(k-1|k-1) F'_i^T + Q
+
+    Update (paper eq. 18-21; eq. 15 and 17 give h and H; Joseph form)::
+
+        nu_i = z(k) - h(x_i(k|k-1))                          innovation
+        S_i  = H_i P_i H_i^T + R                             (the paper's rho_i, eq. 18)
+        K_i  = P_i H_i^T S_i^-1                              (eq. 19)
+        x_i  = x_i + K_i nu_i                                (eq. 20)
+        P_i  = (I - K_i H_i) P_i (I - K_i H_i)^T + K_i R K_i^T   (eq. 21, Joseph form)
+
+    Weights (paper eq. 22 with the full multivariate normal, in log space)::
+
+        log w_i = log w_i - 1/2 (nu_i^T S_i^-1 nu_i + log det S_i + m log 2 pi)
+        log w_i = log w_i - logsumexp_j(log w_j)
+
+    Estimate: ``x = sum_i w_i x_i`` and the mixture covariance (paper
+    section 5.2). A NaN measurement is missing: its row of H, nu and R is
+    dropped (m counts the observed rows). Hypotheses whose weight falls below
+    ``prune_threshold`` are pruned (weight 0, state frozen). Each hypothesis
+    computes its bearings from its *own* y_i, and its memory states start
+    from the measured steering and its own bearings
+    (:meth:`FilterMatrices.initial_state`).
+
+    Every array holds R runs x C hypotheses; one call of :meth:`step`
+    filters all of them.
+
+    Args:
+        steering_model: the steering model's :class:`hasa_env.steering.arx.ARXForm`;
+            None gives the no-steering filter (speed and camera only).
+        settings: noise levels, priors and pruning (:class:`FilterSettings`).
+        dt: sample time (s); default ``steering_model.dt``.
+        decision_lag: samples between the state the driver saw and the
+            steering measurement (see :class:`ARXStateSpace`); default 1, the
+            alignment of recordings and of
+            :func:`hasa_env.steering.features.steering_features`. Use 0 for
+            the paper's eq. 13 taken literally (7 states for its order).
+        **overrides: fields of :class:`FilterSettings` to replace.
+
+    Example::
+
+        from estimators import GaussianMixtureEKF, MEASUREMENT_KEYS, ACCELERATION_KEYS
+        ekf = GaussianMixtureEKF(arx_form, steering_residual_std=2e-3)
+        z = frame[list(MEASUREMENT_KEYS)].to_numpy()
+        a = frame[list(ACCELERATION_KEYS)].to_numpy()
+        est = ekf.reset(z[0], [0.0, -1.8])
+        for k in range(1, len(frame)):
+            est = ekf.step(z[k], a[k])
+        est.lateral_offset, est.weights, est.most_likely
+    """
+
+    uses_true_bias = False
+
+    def __init__(
+        self,
+        steering_model: ARXForm | None,
+        settings: FilterSettings | None = None,
+        *,
+        dt: float | None = None,
+        decision_lag: int = 1,
+        **overrides: Any,
+    ) -> None:
+        settings = settings or FilterSettings()
+        if overrides:
+            settings = replace(settings, **overrides)
+        self.settings = settings
+        self.steering_model = steering_model
+        self.decision_lag = decision_lag
+        self.model = ARXStateSpace(steering_model, dt, decision_lag)
+        self.matrices = FilterMatrices(self.model, settings)
+        self.state_names = self.model.state_names
+        threshold = settings.prune_threshold
+        ratio = settings.steering_ratio if self.model.has_steering else np.nan
+        self._measurement_scale = np.array([1.0, 1.0, ratio])
+        self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
+        self._x: np.ndarray | None = None
+        self._single = False
+        self._n_comp = 0
+
+    @property
+    def dt(self) -> float:
+        """Sample time Ts (s)."""
+        return self.model.dt
+
+    @property
+    def n_states(self) -> int:
+        """Length of each hypothesis' state vector."""
+        return self.model.n_states
+
+    @property
+    def num_runs(self) -> int:
+        """Number of runs in the current batch (0 before reset)."""
+        return 0 if self._x is None else self._log_w.shape[0]
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self,
+        measurement: np.ndarray,
+        hypotheses: Sequence[float] | np.ndarray,
+        *,
+        prior: np.ndarray | None = None,
+        true_bias: np.ndarray | float | None = None,
+        runs: np.ndarray | None = None,
+    ) -> Estimate:
+        """Start (or restart ``runs`` of) the filter from the first measurements.
+
+        Args:
+            measurement: (3,) or (R, 3) first [speed, camera, steering].
+            hypotheses: lane-centre hypotheses, the camera bias b_i (m): (C,) or (R, C).
+            prior: hypothesis probabilities, (C,) or (R, C); default uniform.
+            true_bias: ignored (only the oracle uses it).
+            runs: restart only these runs (indices or a boolean mask) of the
+                current batch; the others are left as they are.
+
+        Returns:
+            The prior estimate (weights = prior).
+        """
+        measurement = np.asarray(measurement, dtype=np.float64)
+        single = measurement.ndim == 1
+        z = measurement.reshape(1, -1) if single else measurement
+        if z.ndim != 2 or z.shape[1] != 3:
+            raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
+        n_runs = z.shape[0]
+        hyp = np.asarray(hypotheses, dtype=np.float64)
+        if hyp.ndim == 1:
+            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
+        if hyp.ndim != 2 or hyp.shape[0] != n_runs or hyp.shape[1] < 1:
+            raise ValueError(
+                f"hypotheses must have shape (C,) or ({n_runs}, C), got {np.shape(hypotheses)}"
+            )
+        if not np.all(np.isfinite(hyp)):
+            raise ValueError("hypotheses must be finite")
+        n_comp = hyp.shape[1]
+        if prior is None:
+            log_w = np.full((n_runs, n_comp), -math.log(n_comp))
+        else:
+            p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
+            if np.any(~np.isfinite(p)) or np.any(p < 0) or not np.allclose(p.sum(axis=1), 1.0):
+                raise ValueError("prior must be non-negative and sum to 1 over the hypotheses")
+            with np.errstate(divide="ignore"):
+                log_w = np.log(p / p.sum(axis=1, keepdims=True))
+        x = self.matrices.initial_state(z, hyp)
+        n = x.shape[-1]
+        cov = np.empty(x.shape + (n,))
+        cov[:] = self.matrices.initial_covariance
+        x, cov = x.reshape(-1, n), cov.reshape(-1, n, n)
+        steering = z[:, 2] * self.settings.steering_ratio
+        active = np.isfinite(log_w)
+        if runs is None:
+            self._single = single
+            self._n_comp = n_comp
+            self._x, self._P, self._log_w = x, cov, log_w
+            self._active, self._hyp, self._steering = active, hyp.copy(), steering
+        else:
+            idx = self._check_runs(runs, n_runs, n_comp)
+            flat = self._flat_index(idx)
+            self._x, self._P = self._x.copy(), self._P.copy()
+            self._log_w, self._active = self._log_w.copy(), self._active.copy()
+            self._hyp, self._steering = self._hyp.copy(), self._steering.copy()
+            self._x[flat], self._P[flat], self._log_w[idx] = x, cov, log_w
+            self._active[idx], self._hyp[idx], self._steering[idx] = active, hyp, steering
+        return self.estimate()
+
+    def step(
+        self,
+        measurement: np.ndarray,
+        acceleration: np.ndarray,
+        *,
+        runs: np.ndarray | None = None,
+    ) -> Estimate:
+        """Predict with the IMU input, update with the measurements, reweight, prune.
+
+        Args:
+            measurement: (3,) or (R, 3) [speed, camera, steering] at k; NaN = missing.
+            acceleration: (2,) or (R, 2) IMU (a_x, a_y) over the sample that ended at k.
+            runs: step only these runs (indices or boolean mask) of the batch.
+        """
+        if self._x is None:
+            raise RuntimeError("call reset() before step()")
+        z = np.asarray(measurement, dtype=np.float64)
+        acc = np.asarray(acceleration, dtype=np.float64)
+        if z.ndim == 1:
+            z = z.reshape(1, -1)
+        if acc.ndim == 1:
+            acc = acc.reshape(1, -1)
+        if runs is None:
+            if z.shape != (self._log_w.shape[0], 3) or acc.shape != (self._log_w.shape[0], 2):
+                raise ValueError(
+                    f"expected measurement ({self.num_runs}, 3) and acceleration "
+                    f"({self.num_runs}, 2), got {np.shape(measurement)} and "
+                    f"{np.shape(acceleration)}"
+                )
+            out = self._step(self._x, self._P, self._log_w, self._active, self._steering, z, acc)
+            self._x, self._P, self._log_w, self._active, self._steering = out
+        else:
+            idx = self._check_runs(runs, z.shape[0], None)
+            if acc.shape != (idx.size, 2) or z.shape != (idx.size, 3):
+                raise ValueError("measurement and acceleration must have one row per selected run")
+            flat = self._flat_index(idx)
+            out = self._step(
+                self._x[flat],
+                self._P[flat],
+                self._log_w[idx],
+                self._active[idx],
+                self._steering[idx],
+                z,
+                acc,
+            )
+            self._x, self._P = self._x.copy(), self._P.copy()
+            self._log_w, self._active, self._steering = (
+                self._log_w.copy(),
+                self._active.copy(),
+                self._steering.copy(),
+            )
+            (
+                self._x[flat],
+                self._P[flat],
+                self._log_w[idx],
+                self._active[idx],
+                self._steering[idx],
+            ) = out
+        return self.estimate()
+
+    def estimate(self) -> Estimate:
+        """The current estimate (mixture and hypotheses)."""
+        if self._x is None:
+            raise RuntimeError("call reset() first")
+        n_runs, n_comp = self._log_w.shape
+        n = self._x.shape[1]
+        w = np.exp(self._log_w)
+        if self._single:
+            x = self._x  # (C, n) for the single run
+            log_w = self._log_w[0]
+            return Estimate(
+                w[0] @ x,
+                x,
+                self._P,
+                w[0],
+                log_w,
+                int(np.argmax(log_w)),
+                self._hyp[0],
+                self.state_names,
+            )
+        x = self._x.reshape(n_runs, n_comp, n)
+        return Estimate(
+            (w[:, None, :] @ x)[:, 0, :],
+            x,
+            self._P.reshape(n_runs, n_comp, n, n),
+            w,
+            self._log_w,
+            np.argmax(self._log_w, axis=1),
+            self._hyp,
+            self.state_names,
+        )
+
+    # ------------------------------------------------------------- internals
+    def _flat_index(self, idx: np.ndarray) -> np.ndarray:
+        c = self._n_comp
+        return (idx[:, None] * c + np.arange(c)).ravel()
+
+    def _check_runs(self, runs: np.ndarray, n_rows: int, n_comp: int | None) -> np.ndarray:
+        if self._x is None:
+            raise RuntimeError("reset the whole batch (runs=None) before resetting single runs")
+        idx = np.asarray(runs)
+        if idx.dtype == bool:
+            if idx.shape != (self.num_runs,):
+                raise ValueError(f"a boolean runs mask must have shape ({self.num_runs},)")
+            idx = np.flatnonzero(idx)
+        idx = idx.astype(np.intp).ravel()
+        if idx.size != n_rows:
+            raise ValueError(f"got {n_rows} measurement rows for {idx.size} selected runs")
+        if idx.size and (idx.min() < 0 or idx.max() >= self.num_runs):
+            raise IndexError(f"runs must index the batch of {self.num_runs} runs")
+        if n_comp is not None and n_comp != self._n_comp:
+            raise ValueError(f"the batch has {self._n_comp} hypotheses per run; got {n_comp}")
+        return idx
+
+    def _step(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        log_w: np.ndarray,
+        active: np.ndarray,
+        previous_steering: np.ndarray,
+        z: np.ndarray,
+        acc: np.ndarray,
+    ) -> tuple[np.ndarray, ...]:
+        mats = self.matrices
+        n_comp = log_w.shape[1]
+        z = z * self._measurement_scale  # steering in model units (NaN without a model)
+        steering = z[:, 2]
+        x_pred, cov_pred = mats.predict_batch(x, cov, acc, previous_steering, n_comp)
+        all_observed = not np.isnan(z).any()
+        x_post, cov_post, log_lik = mats.update_batch(x_pred, cov_pred, z, n_comp, all_observed)
+        # ---- weights (log space)
+        new_log_w = log_w + log_lik.reshape(log_w.shape)
+        all_active = active.all()
+        if not all_active:
+            new_log_w = np.where(active, new_log_w, -np.inf)
+        new_log_w = _normalize_log_weights(new_log_w, log_w)
+        # ---- prune
+        if not all_active:
+            # pruned earlier: frozen at their last posterior
+            keep = active.reshape(-1)
+            x_post = np.where(keep[:, None], x_post, x)
+            cov_post = np.where(keep[:, None, None], cov_post, cov)
+        new_active = active
+        if self._log_prune_threshold is not None:
+            newly = active & (new_log_w < self._log_prune_threshold)
+            if newly.any():
+                newly[np.arange(newly.shape[0]), np.argmax(new_log_w, axis=1)] = False
+                new_active = active & ~newly
+                new_log_w = _normalize_log_weights(
+                    np.where(new_active, new_log_w, -np.inf), new_log_w
+                )
+        return x_post, cov_post, new_log_w, new_active, steering
+
+
+def _normalize_log_weights(log_w: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """``log_w - logsumexp(log_w)`` per run; a run whose weights all vanished keeps ``fallback``."""
+    top = np.max(log_w, axis=1, keepdims=True)
+    if np.isfinite(top).all():
+        return log_w - (np.log(np.sum(np.exp(log_w - top), axis=1, keepdims=True)) + top)
+    ok = np.isfinite(top[:, 0])
+    safe_top = np.where(ok[:, None], top, 0.0)
+    with np.errstate(under="ignore", invalid="ignore"):
+        out = log_w - (np.log(np.sum(np.exp(log_w - safe_top), axis=1, keepdims=True)) + safe_top)
+    return np.where(ok[:, None], out, fallback)

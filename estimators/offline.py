@@ -1,0 +1,239 @@
+"""Run an estimator over recorded runs, many at once.
+
+:func:`run_estimator` feeds one or many recordings (DataFrames with the
+recording columns, :data:`hasa_env.core.RECORDING_COLUMNS`) to an
+estimator as one batch: row 0 resets it, row k steps it with row k's
+measurements and IMU. Runs of different lengths are padded (their padded
+steps are marked invalid).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from estimators.arx_state_space import PHYSICAL_STATE_NAMES
+from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
+
+__all__ = ["EstimationResult", "run_estimator", "hypotheses_of", "TRUTH_COLUMNS"]
+
+TRUTH_COLUMNS = ("longitudinal_velocity", "lateral_offset", "lateral_velocity", "bias")
+"""Recording columns holding the true value of each physical state, in state order."""
+
+DEFAULT_HYPOTHESES = (0.0, -1.8)
+
+
+def hypotheses_of(frame: pd.DataFrame) -> tuple[float, ...]:
+    """The lane hypotheses of a recording: its config's ``markings.hypotheses``
+    (``frame.attrs["config"]``, set by the drivers' runner and the recording
+    loader), else the env default (0, -1.8)."""
+    config = frame.attrs.get("config") if hasattr(frame, "attrs") else None
+    try:
+        return tuple(float(h) for h in config["markings"]["hypotheses"])
+    except (TypeError, KeyError):
+        return DEFAULT_HYPOTHESES
+
+
+@dataclass(frozen=True, eq=False)
+class EstimationResult:
+    """Per-step estimates of R runs over T steps (padded runs: ``valid`` False).
+
+    Attributes:
+        state_names: names of the n states.
+        hypotheses: (R, C) lane hypotheses b_i (m).
+        time: (R, T) time (s) of each step (NaN where invalid).
+        valid: (R, T) True for steps of the recording.
+        lengths: (R,) number of rows of each recording.
+        mean: (R, T, n) mixture mean.
+        std: (R, T, n) mixture standard deviation (square root of the
+            covariance's diagonal).
+        weights: (R, T, C) hypothesis weights.
+        most_likely: (R, T) index of the most probable hypothesis.
+        truth: {column: (R, T)} true values from the recordings
+            (``TRUTH_COLUMNS`` and ``bias_index`` where present; NaN/-1 when padded).
+        component_means: (R, T, C, n) per-hypothesis means, when requested.
+    """
+
+    state_names: tuple[str, ...]
+    hypotheses: np.ndarray
+    time: np.ndarray
+    valid: np.ndarray
+    lengths: np.ndarray
+    mean: np.ndarray
+    std: np.ndarray
+    weights: np.ndarray
+    most_likely: np.ndarray
+    truth: dict[str, np.ndarray] = field(default_factory=dict)
+    component_means: np.ndarray | None = None
+
+    @property
+    def num_runs(self) -> int:
+        return self.mean.shape[0]
+
+    def lateral_error(self) -> np.ndarray:
+        """(R, T) mixture lateral-offset estimate minus the truth (m); NaN where invalid."""
+        if "lateral_offset" not in self.truth:
+            raise ValueError("the recordings had no lateral_offset column (no truth)")
+        err = self.mean[..., 1] - self.truth["lateral_offset"]
+        return np.where(self.valid, err, np.nan)
+
+    def lateral_rmse(self, start: int = 0) -> np.ndarray:
+        """(R,) root-mean-square lateral error of each run (m), over steps >= ``start``."""
+        err = self.lateral_error()[:, start:]
+        return np.sqrt(np.nanmean(err * err, axis=1))
+
+    def true_lane_weight(self) -> np.ndarray:
+        """(R, T) weight of the true hypothesis (needs ``bias_index`` in the recordings)."""
+        index = self.truth.get("bias_index")
+        if index is None:
+            raise ValueError("the recordings had no bias_index column")
+        first = index[:, 0].astype(np.intp)
+        if np.any(first < 0) or np.any(first >= self.weights.shape[2]):
+            raise ValueError("a true bias_index is not one of the hypotheses")
+        return self.weights[np.arange(self.num_runs), :, first]
+
+    def picked_true_lane(self, at: int = -1) -> np.ndarray:
+        """(R,) whether the most likely hypothesis at the run's step ``at``
+        (default: its last valid step) is the true one."""
+        index = self.truth.get("bias_index")
+        if index is None:
+            raise ValueError("the recordings had no bias_index column")
+        steps = self.lengths - 1 if at == -1 else np.minimum(at, self.lengths - 1)
+        rows = np.arange(self.num_runs)
+        return self.most_likely[rows, steps] == index[rows, 0]
+
+    def to_frames(self) -> list[pd.DataFrame]:
+        """One DataFrame per run: time, ``estimate_<state>`` and ``std_<state>`` of
+        the four physical states, ``weight_<i>``, ``most_likely`` and the truth columns."""
+        frames = []
+        n_comp = self.weights.shape[2]
+        for r in range(self.num_runs):
+            length = int(self.lengths[r])
+            data: dict[str, np.ndarray] = {"step": np.arange(length), "time": self.time[r, :length]}
+            for j, name in enumerate(PHYSICAL_STATE_NAMES):
+                data[f"estimate_{name}"] = self.mean[r, :length, j]
+                data[f"std_{name}"] = self.std[r, :length, j]
+            for c in range(n_comp):
+                data[f"weight_{c}"] = self.weights[r, :length, c]
+            data["most_likely"] = self.most_likely[r, :length]
+            for key, values in self.truth.items():
+                data[key] = values[r, :length]
+            frames.append(pd.DataFrame(data))
+        return frames
+
+
+def run_estimator(
+    estimator: LaneEstimator,
+    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    *,
+    hypotheses: Sequence[float] | np.ndarray | None = None,
+    prior: np.ndarray | None = None,
+    store_components: bool = False,
+) -> EstimationResult:
+    """Filter recordings offline, all runs in one batch.
+
+    Args:
+        estimator: any :class:`estimators.base.LaneEstimator` (batched ones
+            filter all runs in one call per step).
+        frames: one recording or a list (columns of
+            :data:`hasa_env.core.RECORDING_COLUMNS`; at least the sensor columns).
+        hypotheses: lane hypotheses (C,) or (R, C); default: each recording's
+            config (:func:`hypotheses_of`).
+        prior: hypothesis probabilities, (C,) or (R, C); default uniform.
+        store_components: also keep the per-hypothesis means (R, T, C, n).
+
+    Returns:
+        An :class:`EstimationResult` (a single recording gives R = 1).
+    """
+    if isinstance(frames, pd.DataFrame):
+        frames = [frames]
+    frames = list(frames)
+    if not frames:
+        raise ValueError("no recordings given")
+    n_runs = len(frames)
+    for i, frame in enumerate(frames):
+        missing = [c for c in (*MEASUREMENT_KEYS, *ACCELERATION_KEYS) if c not in frame.columns]
+        if missing:
+            raise ValueError(f"recording {i} lacks the columns {missing}")
+        if len(frame) < 1:
+            raise ValueError(f"recording {i} is empty")
+    lengths = np.array([len(f) for f in frames])
+    n_steps = int(lengths.max())
+    z = np.full((n_runs, n_steps, 3), np.nan)
+    acc = np.zeros((n_runs, n_steps, 2))
+    time = np.full((n_runs, n_steps), np.nan)
+    truth_keys = [c for c in (*TRUTH_COLUMNS, "bias_index") if all(c in f.columns for f in frames)]
+    truth = {
+        key: np.full((n_runs, n_steps), -1 if key == "bias_index" else np.nan) for key in truth_keys
+    }
+    for r, frame in enumerate(frames):
+        length = lengths[r]
+        z[r, :length] = frame[list(MEASUREMENT_KEYS)].to_numpy(dtype=np.float64)
+        acc[r, :length] = frame[list(ACCELERATION_KEYS)].to_numpy(dtype=np.float64)
+        if "time" in frame.columns:
+            time[r, :length] = frame["time"].to_numpy(dtype=np.float64)
+        for key in truth_keys:
+            truth[key][r, :length] = frame[key].to_numpy()
+    if "bias_index" in truth:
+        truth["bias_index"] = truth["bias_index"].astype(np.int64)
+    valid = np.arange(n_steps)[None, :] < lengths[:, None]
+    if hypotheses is None:
+        per_run = [hypotheses_of(f) for f in frames]
+        if len({len(h) for h in per_run}) != 1:
+            raise ValueError(
+                "the recordings have different numbers of lane hypotheses; pass hypotheses"
+            )
+        hyp = np.array(per_run)
+    else:
+        hyp = np.asarray(hypotheses, dtype=np.float64)
+        if hyp.ndim == 1:
+            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
+    true_bias = None
+    if getattr(estimator, "uses_true_bias", False):
+        if "bias" not in truth:
+            raise ValueError(
+                "this estimator needs the true bias: the recordings lack a 'bias' column"
+            )
+        true_bias = truth["bias"][:, 0]
+    est = estimator.reset(z[:, 0], hyp, prior=prior, true_bias=true_bias)
+    n_states = est.mean.shape[-1]
+    n_comp = est.weights.shape[-1]
+    mean = np.empty((n_runs, n_steps, n_states))
+    std = np.empty((n_runs, n_steps, n_states))
+    weights = np.empty((n_runs, n_steps, n_comp))
+    most_likely = np.empty((n_runs, n_steps), dtype=np.int64)
+    components = np.empty((n_runs, n_steps, n_comp, n_states)) if store_components else None
+
+    def store(k: int, e) -> None:  # noqa: ANN001 - an Estimate
+        mean[:, k] = e.mean
+        w = e.weights
+        spread = (
+            np.diagonal(e.component_covariances, axis1=-2, axis2=-1)
+            + (e.component_means - e.mean[:, None, :]) ** 2
+        )
+        std[:, k] = np.sqrt(np.einsum("rc,rcn->rn", w, spread))
+        weights[:, k] = w
+        most_likely[:, k] = e.most_likely
+        if components is not None:
+            components[:, k] = e.component_means
+
+    store(0, est)
+    for k in range(1, n_steps):
+        est = estimator.step(z[:, k], acc[:, k])
+        store(k, est)
+    return EstimationResult(
+        state_names=tuple(est.state_names),
+        hypotheses=np.array(est.hypotheses, copy=True),
+        time=time,
+        valid=valid,
+        lengths=lengths,
+        mean=mean,
+        std=std,
+        weights=weights,
+        most_likely=most_likely,
+        truth=truth,
+        component_means=components,
+    )
