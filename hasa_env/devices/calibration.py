@@ -107,11 +107,14 @@ class SteeringAxis:
     def travel(self, raw: float) -> float:
         """Signed travel in [-1, 1] (left positive) of a raw axis value (linear, saturating)."""
         raw = _clip(raw)
+        if raw == self.centre:
+            return 0.0
         if (raw - self.centre) * (self.left - self.centre) > 0.0:
             u, sign = (raw - self.centre) / (self.left - self.centre), 1.0
         else:
             u, sign = (raw - self.centre) / (self.right - self.centre), -1.0
-        return sign * _deadzone(min(u, 1.0), self.deadzone)
+        travel = _deadzone(min(u, 1.0), self.deadzone)
+        return sign * travel if travel > 0.0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -127,6 +130,14 @@ class PedalAxis:
         """Pedal travel in [0, 1] (0 at rest, 1 fully pressed) of a raw axis value."""
         u = (_clip(raw) - self.rest) / (self.full - self.rest)
         return _deadzone(min(max(u, 0.0), 1.0), self.deadzone)
+
+    def raw_for_travel(self, travel: float) -> float:
+        """Raw axis value giving pedal ``travel`` in [0, 1] (inverse of :meth:`travel`)."""
+        u = min(max(float(travel), 0.0), 1.0)
+        if u == 0.0:
+            return self.rest
+        d = self.deadzone
+        return self.rest + (d + u * (1.0 - d)) * (self.full - self.rest)
 
 
 @dataclass(frozen=True)

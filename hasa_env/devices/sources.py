@@ -297,6 +297,11 @@ class InputManager:
         """The joystick that drives, or None (keyboard)."""
         self._confirm_keys = {self._pg.K_SPACE, self._pg.K_RETURN, self._pg.K_KP_ENTER}
 
+    @property
+    def pygame(self) -> Any:
+        """The ``pygame`` module this input layer uses."""
+        return self._pg
+
     # ------------------------------------------------------------ devices
     def profile_for(self, name: str) -> JoystickCalibration | None:
         """The first profile meant for a device called ``name`` (None if none)."""

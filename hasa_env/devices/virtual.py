@@ -177,6 +177,8 @@ def sdl_library() -> Any:
         lib.SDL_JoystickSetVirtualAxis.restype = ctypes.c_int
         lib.SDL_JoystickSetVirtualButton.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_uint8]
         lib.SDL_JoystickSetVirtualButton.restype = ctypes.c_int
+        lib.SDL_JoystickName.argtypes = [ctypes.c_void_p]
+        lib.SDL_JoystickName.restype = ctypes.c_char_p
         lib.SDL_GetError.argtypes = []
         lib.SDL_GetError.restype = ctypes.c_char_p
     except AttributeError as exc:
@@ -263,6 +265,9 @@ class VirtualJoystick:
                 f"SDL_JoystickOpen failed: {lib.SDL_GetError().decode()}"
             )
         self.instance_id = int(lib.SDL_JoystickInstanceID(self._handle))
+        reported = lib.SDL_JoystickName(self._handle)
+        self.name = reported.decode("utf-8", "replace") if reported else name
+        """The name SDL reports (``name`` needs SDL >= 2.24)."""
         if pygame.joystick.get_count() != before + 1:
             self._release(index)
             raise VirtualJoystickUnavailable(
