@@ -205,9 +205,11 @@ class KeyboardSource:
 class JoystickDevice:
     """An open joystick and the latest value of each of its axes.
 
-    Pedal axes count as *at rest* until their first motion event: some
-    wheels (the G29 among them) report 0 for a pedal that has not moved since
-    the device was opened, which would read as half pressed.
+    A pedal axis counts as *at rest* until it reports a value different from
+    the one it had when the device was opened: some wheels (the G29 among
+    them) report 0 for a pedal that has not moved since the device was
+    opened, which would read as half pressed, and SDL emits that stale value
+    as motion events when the device opens.
     """
 
     def __init__(self, joystick: Any, calibration: JoystickCalibration) -> None:
@@ -215,12 +217,20 @@ class JoystickDevice:
         self.calibration = calibration
         self.instance_id = int(joystick.get_instance_id())
         self.name = str(joystick.get_name())
-        self.axes: dict[int, float] = {
-            calibration.steering.axis: float(joystick.get_axis(calibration.steering.axis))
+        steer = calibration.steering.axis
+        self.axes: dict[int, float] = {steer: float(joystick.get_axis(steer))}
+        self._unmoved: dict[int, float] = {
+            a: float(joystick.get_axis(a))
+            for a in (calibration.throttle.axis, calibration.brake.axis)
         }
 
     def on_axis(self, axis: int, value: float) -> None:
-        self.axes[axis] = float(value)
+        value = float(value)
+        if axis in self._unmoved:
+            if value == self._unmoved[axis]:
+                return
+            del self._unmoved[axis]
+        self.axes[axis] = value
 
     def read(self) -> InputReading:
         cal = self.calibration

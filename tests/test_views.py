@@ -1,0 +1,193 @@
+"""Rendering: the driver's-eye view, the HUD with hypothesis weights, the paced human window."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from hasa_env.core import build_setup
+from hasa_env.lane_keeping import LaneKeepingEnv
+from hasa_env.rendering import (
+    GRASS_COLOUR,
+    HYPOTHESIS_COLOURS,
+    MARKING_COLOUR,
+    ROAD_COLOUR,
+    HumanWindow,
+    TopDownRenderer,
+    make_renderer,
+    resolve_weights,
+)
+from hasa_env.views import (
+    FAR_POINT_COLOUR,
+    GHOST_FADED_COLOUR,
+    NEAR_POINT_COLOUR,
+    SKY_COLOUR,
+    DriverViewRenderer,
+)
+
+
+def _mask(frame: np.ndarray, colour: tuple[int, int, int], tol: int = 2) -> np.ndarray:
+    return np.all(np.abs(frame.astype(int) - np.array(colour)) <= tol, axis=-1)
+
+
+def _info(config: dict | None = None, **options) -> tuple[object, dict]:
+    env = LaneKeepingEnv(config=config)
+    _, info = env.reset(seed=0, options=options or None)
+    return env.setup, info
+
+
+def test_driver_view_shows_sky_road_markings_and_ghost_markings():
+    setup, info = _info({"render": {"width": 640, "height": 360}}, bias_index=0)
+    frame = DriverViewRenderer(setup, "rgb_array").render(info)
+    assert frame.shape == (360, 640, 3) and frame.dtype == np.uint8
+    horizon = int(0.4 * 360)
+    sky = _mask(frame, SKY_COLOUR)
+    assert sky[:horizon].mean() > 0.8 and sky[horizon + 2 :].sum() == 0
+    road = _mask(frame, ROAD_COLOUR)
+    assert road[horizon:].mean() > 0.3  # the road fills much of the view below the horizon
+    assert road[:horizon].sum() == 0  # and none of the sky
+    white = _mask(frame, MARKING_COLOUR, tol=3)
+    assert white[horizon:].sum() > 1000
+    ghost = _mask(frame, GHOST_FADED_COLOUR)
+    assert ghost.sum() > 300  # the -1.8 m hypothesis' markings
+    assert _mask(frame, GRASS_COLOUR)[horizon:].sum() > 0
+
+
+def test_no_ghost_markings_without_a_wrong_hypothesis():
+    setup, info = _info(
+        {"markings": {"hypotheses": [0.0]}, "render": {"width": 640, "height": 360}}
+    )
+    frame = DriverViewRenderer(setup, "rgb_array").render(info)
+    assert _mask(frame, GHOST_FADED_COLOUR).sum() == 0
+    assert _mask(frame, MARKING_COLOUR, tol=3).sum() > 1000
+
+
+def test_ghost_markings_sit_at_minus_b_plus_minus_half_a_lane():
+    setup, info = _info({"markings": {"hypotheses": [0.0, -1.8]}}, lateral_offset=0.0)
+    view = DriverViewRenderer(setup, "rgb_array")
+    assert sorted(view.ghost_lines) == pytest.approx([0.0, 3.6])
+    # with the car centred in its lane, the ghost line at y = 0 runs straight ahead (screen centre)
+    frame = view.render(info)
+    ghost = _mask(frame, GHOST_FADED_COLOUR)
+    cols = np.flatnonzero(ghost[int(0.75 * view.height)])
+    if cols.size:  # a dash may be in a gap at that row; check where there is one
+        assert abs(cols.mean() - view.width / 2) < 0.05 * view.width
+    rows, cols = np.nonzero(ghost[int(view.horizon) + 5 :])
+    assert cols.size and abs(np.median(cols) - view.width / 2) < 0.1 * view.width
+
+
+def test_perspective_projection_geometry():
+    setup, info = _info(lateral_offset=0.0)
+    view = DriverViewRenderer(setup, "rgb_array", size=(800, 450))
+    camera = view._camera(info)
+    X, Y, _ = setup.road.pose_at(np.array([info["station"] + 1.2 + 20.0]))
+    sx, sy, forward = view.project(X, Y, camera)
+    assert forward[0] == pytest.approx(20.0)
+    assert sx[0] == pytest.approx(400.0)
+    assert sy[0] == pytest.approx(view.horizon + view.focal * view.eye_height / 20.0)
+    assert view.focal == pytest.approx(400.0 / math.tan(0.6))
+    # the car 0.5 m right of the lane centre sees the lane centre left of the screen centre
+    _, info_right = _info(lateral_offset=-0.5)
+    camera = view._camera(info_right)
+    sx, _, _ = view.project(X, Y, camera)
+    assert sx[0] == pytest.approx(400.0 - view.focal * 0.5 / 20.0)
+
+
+def test_near_and_far_points_are_drawn_only_when_asked():
+    setup, info = _info({"render": {"width": 640, "height": 360}})
+    plain = DriverViewRenderer(setup, "rgb_array").render(info)
+    shown = DriverViewRenderer(setup, "rgb_array", show_points=True).render(info)
+    assert _mask(plain, NEAR_POINT_COLOUR).sum() == 0 and _mask(plain, FAR_POINT_COLOUR).sum() == 0
+    assert _mask(shown, NEAR_POINT_COLOUR).sum() > 50 and _mask(shown, FAR_POINT_COLOUR).sum() > 5
+
+
+def test_driver_view_on_the_curved_track_follows_the_bend():
+    env = LaneKeepingEnv(config={"track": "curved", "action": {"type": "physical"}})
+    _, info = env.reset(seed=0)
+    while info["station"] < 250.0:  # into the first (left) bend
+        steer = (
+            math.atan(2.8 * info["road_curvature"])
+            - 0.05 * info["lateral_offset"]
+            - 0.5 * info["heading"]
+        )
+        _, _, _, _, info = env.step([steer, 0.0])
+    view = DriverViewRenderer(env.setup, "rgb_array", size=(640, 360))
+    frame = view.render(info)
+    road = _mask(frame, ROAD_COLOUR)
+    band = road[int(view.horizon) + 3 : int(view.horizon) + 20]
+    cols = np.nonzero(band)[1]
+    assert cols.size and cols.mean() < 320  # a left bend: the far road lies left of centre
+
+
+def test_hud_shows_the_hypothesis_weights():
+    setup, info = _info({"render": {"width": 640, "height": 360}})
+    view = DriverViewRenderer(setup, "rgb_array")
+    plain = view.render(info)
+    with_weights = view.render(info, weights=[0.25, 0.75])
+    bar = _mask(with_weights, HYPOTHESIS_COLOURS[1], tol=0)
+    assert bar.sum() > 50 and _mask(plain, HYPOTHESIS_COLOURS[1], tol=0).sum() == 0
+    # the 0.75 bar is three times the 0.25 bar
+    bar0 = _mask(with_weights[:200, :400], HYPOTHESIS_COLOURS[0], tol=0) & ~_mask(
+        plain[:200, :400], HYPOTHESIS_COLOURS[0], tol=0
+    )
+    assert bar.sum() == pytest.approx(3 * bar0.sum(), rel=0.15)
+    # taken from info when an estimator wrapper put them there
+    from_info = view.render({**info, "estimator_weights": [0.25, 0.75]})
+    assert np.array_equal(from_info, with_weights)
+
+
+def test_resolve_weights_sources():
+    info = {"estimator_weights": np.array([0.9, 0.1])}
+    hyps = (0.0, -1.8)
+    assert resolve_weights(None, info, hyps) == [(0.0, 0.9), (-1.8, 0.1)]
+    assert resolve_weights({-1.8: 1.0}, info, hyps) == [(-1.8, 1.0)]
+    assert resolve_weights(lambda i: [0.5, 0.5], info, hyps) == [(0.0, 0.5), (-1.8, 0.5)]
+    assert resolve_weights(None, {}, hyps) is None
+    info2 = {"estimator_weights": [0.2, 0.3, 0.5], "estimator_hypotheses": [0.0, -1.8, 1.8]}
+    assert resolve_weights(None, info2, hyps)[2] == (1.8, 0.5)
+    with pytest.raises(ValueError, match="3 hypothesis weights for 2 hypotheses"):
+        resolve_weights([0.2, 0.3, 0.5], {}, hyps)
+
+
+def test_env_config_selects_the_view_and_top_down_still_renders():
+    setup = build_setup({"render": {"view": "driver", "width": 320, "height": 240}})
+    assert isinstance(make_renderer(setup, "rgb_array"), DriverViewRenderer)
+    assert isinstance(make_renderer(setup, "rgb_array", view="top_down"), TopDownRenderer)
+    with pytest.raises(ValueError, match="unknown view"):
+        make_renderer(setup, "rgb_array", view="bird")
+    setup, info = _info()
+    frame = TopDownRenderer(setup, "rgb_array", weights=[0.5, 0.5]).render(info)
+    plain = TopDownRenderer(setup, "rgb_array").render(info)
+    assert frame.shape == (480, 640, 3)
+    bar = (
+        _mask(frame, HYPOTHESIS_COLOURS[1], tol=0).sum()
+        - _mask(plain, HYPOTHESIS_COLOURS[1], tol=0).sum()
+    )
+    assert bar > 20
+
+
+def test_human_window_is_paced_by_the_simulation_clock():
+    import pygame
+
+    window = HumanWindow(pygame, (64, 64), fps=30, caption="test")
+    start = time.perf_counter()
+    assert window.frame_due(0.0)
+    frames = 0
+    for k in range(1, 21):  # 0.2 s of simulation at 100 Hz
+        if window.frame_due(k * 0.01):
+            frames += 1
+            window._last_frame = time.perf_counter()
+    elapsed = time.perf_counter() - start
+    assert elapsed >= 0.19  # real time, not as fast as possible
+    assert 4 <= frames <= 8  # about 30 frames per second of simulated time, not one per step
+
+
+def test_driver_view_human_mode_opens_a_window_headless():
+    setup, info = _info({"render": {"width": 160, "height": 120}})
+    view = DriverViewRenderer(setup, "human")
+    assert view.render(info) is None
+    assert view._window.window is not None
+    view.close()
