@@ -164,10 +164,14 @@ def speed_command(
         kappa = np.abs(road.curvature_at(info["station"][:, None] + ahead))
         with np.errstate(divide="ignore"):
             bend_speed2 = np.where(kappa > 0, lateral[:, None] / kappa, np.inf)
-        allowed = np.sqrt(np.min(bend_speed2 + 2.0 * braking[:, None] * ahead, axis=1))
+        envelope = bend_speed2 + 2.0 * braking[:, None] * ahead
+        binding = np.argmin(envelope, axis=1)
+        allowed = np.sqrt(envelope[np.arange(v.size), binding])
         slowing = allowed < reference
         reference = np.minimum(reference, allowed)
-        feed_forward = np.where(slowing, 0.0, feed_forward)
+        # approaching a bend the allowed speed falls at the braking rate: feed it forward
+        approaching = slowing & (ahead[np.arange(v.size), binding] > 1.0)
+        feed_forward = np.where(slowing, np.where(approaching, -braking, 0.0), feed_forward)
     accel = profile["gain"] * (reference - v) + feed_forward
     return np.clip(accel, -profile["limit"], profile["limit"])
 

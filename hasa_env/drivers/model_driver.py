@@ -205,11 +205,9 @@ class ModelBatch:
             self._fresh = False
         else:
             # the measured steering of the step just taken is the newest past value
-            self._delta = np.roll(self._delta, 1, axis=1)
+            for history in (self._delta, self._phi, self._omega, self._vy):
+                history[:, 1:] = history[:, :-1].copy()
             self._delta[:, 0] = measured
-            self._phi = np.roll(self._phi, 1, axis=1)
-            self._omega = np.roll(self._omega, 1, axis=1)
-            self._vy = np.roll(self._vy, 1, axis=1)
         self._phi[:, 0] = phi
         self._omega[:, 0] = omega
         self._vy[:, 0] = lateral_velocity

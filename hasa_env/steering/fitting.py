@@ -344,7 +344,7 @@ def fit_model(
         features = model.features(run, road)
         design = model.design(features)
         previous = lagged(features["delta"].to_numpy(dtype=np.float64), 1)
-        valid = design.valid & np.isfinite(previous)
+        valid = design.valid
         matrices.append(design.matrix[valid])
         targets.append(design.target[valid] - design.offset[valid])
         deltas.append(design.target[valid])
@@ -360,6 +360,9 @@ def fit_model(
     solution = least_squares(X, y, names)
     n, p = X.shape
     log_likelihood, aic, bic = _criteria(solution.rss, n, p)
+    increments_all = np.concatenate(increments)
+    has_previous = np.isfinite(increments_all)
+    residuals_with_previous = solution.residuals[has_previous]
     result = FitResult(
         parameter_names=names,
         parameters=solution.parameters,
@@ -372,7 +375,9 @@ def fit_model(
         rss=solution.rss,
         residual_std=math.sqrt(solution.sigma2),
         r2=_r2(solution.rss, np.concatenate(deltas)),
-        r2_increments=_r2(solution.rss, np.concatenate(increments)),
+        r2_increments=_r2(
+            float(residuals_with_previous @ residuals_with_previous), increments_all[has_previous]
+        ),
         log_likelihood=log_likelihood,
         aic=aic,
         bic=bic,
@@ -436,6 +441,21 @@ def _order_grid(
     return tuple(int(v) for v in out)
 
 
+def _residual_sum_of_squares(matrix: np.ndarray, target: np.ndarray) -> float | None:
+    """RSS of the least-squares fit (None if the columns are linearly dependent)."""
+    if matrix.shape[1] == 0:
+        return float(target @ target)
+    norms = np.linalg.norm(matrix, axis=0)
+    if np.any(norms == 0):
+        return None
+    scaled = matrix / norms
+    solution, _, rank, singular = np.linalg.lstsq(scaled, target, rcond=None)
+    if rank < matrix.shape[1] or singular[-1] < 1e-12 * singular[0]:
+        return None
+    residual = target - scaled @ solution
+    return float(residual @ residual)
+
+
 def select_order(
     runs: pd.DataFrame | Sequence[pd.DataFrame],
     max_orders: Mapping[str, int] | Sequence[int] | None = None,
@@ -484,9 +504,8 @@ def select_order(
         p = len(cols)
         if p >= n:
             continue
-        try:
-            rss = least_squares(X[:, cols], y).rss if p else float(y @ y)
-        except ValueError:
+        rss = _residual_sum_of_squares(X[:, cols], y)
+        if rss is None:
             continue  # collinear candidate: not estimable on these data
         _, aic, bic = _criteria(rss, n, p)
         rows.append({"na": orders[0], "nb": orders[1], "nc": orders[2], "nd": orders[3],

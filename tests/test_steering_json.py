@@ -1,0 +1,181 @@
+"""Model files: exact JSON round trip and clear errors for bad files."""
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hasa_env.steering import GeneralizedModel, ModelFileError, SteeringModel, TwoPointModel
+from hasa_env.steering.base import MODEL_TYPES, Design, Regressor, lagged
+
+any_float = st.floats(allow_nan=False, allow_infinity=False)
+positive = st.floats(1e-6, 1e6, allow_nan=False)
+
+
+@st.composite
+def models(draw):
+    common = {
+        "near_distance": draw(positive),
+        "far_distance": draw(positive),
+        "dt": draw(positive),
+        "decision_lag": draw(st.integers(0, 3)),
+        "name": draw(st.text(max_size=20)),
+    }
+    if draw(st.booleans()):
+        orders = [draw(st.integers(0, 5)) for _ in range(4)]
+        size = sum(orders)
+        model = GeneralizedModel(*orders, **common)
+    else:
+        size = 3
+        model = TwoPointModel(**common)
+    if draw(st.booleans()):
+        params = draw(st.lists(any_float, min_size=size, max_size=size))
+        errors = draw(st.none() | st.lists(st.floats(0, 1e300), min_size=size, max_size=size))
+        model = model.with_parameters(params, errors)
+    return model
+
+
+@settings(max_examples=150, deadline=None)
+@given(model=models())
+def test_json_round_trip_is_exact(model):
+    text = model.to_json()
+    back = SteeringModel.from_json(text)
+    assert type(back) is type(model)
+    assert back == model
+    assert back.to_json() == text
+    if model.is_fitted:
+        assert np.array_equal(back.parameter_vector, model.parameter_vector)
+        assert back.parameters == model.parameters
+    assert type(model).from_json(text) == model
+
+
+def test_save_and_load(tmp_path):
+    path = tmp_path / "model.json"
+    model = GeneralizedModel.paper()
+    model.save(path)
+    assert SteeringModel.load(path) == model
+    assert GeneralizedModel.load(path) == model
+    document = json.loads(path.read_text())
+    assert document["type"] == "generalized"
+    assert document["features"]["regressors"][0] == "delta(k-1)"
+    assert document["parameters"]["a2"] == -0.51
+
+
+def write(tmp_path, document, name="bad.json"):
+    path = tmp_path / name
+    path.write_text(document if isinstance(document, str) else json.dumps(document))
+    return path
+
+
+def good():
+    return GeneralizedModel.paper().to_dict()
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (
+            lambda d: d.update(format="something"),
+            r"field 'format' .* allowed: 'hasa_env.steering_model'",
+        ),
+        (lambda d: d.update(format_version=7), r"field 'format_version' is 7; allowed: 1"),
+        (
+            lambda d: d.update(type="neural"),
+            r"field 'type' is 'neural'; allowed: .*generalized.*two_point",
+        ),
+        (lambda d: d.pop("parameters"), r"missing field 'parameters'"),
+        (lambda d: d.update(colour="red"), r"unknown field 'colour'; allowed fields: dt, features"),
+        (lambda d: d.update(dt=-0.01), r"field 'dt' must be a finite positive number, got -0.01"),
+        (lambda d: d.update(dt="fast"), r"field 'dt' must be a finite positive number"),
+        (lambda d: d["features"].update(near_distance=0), r"field 'features.near_distance'"),
+        (
+            lambda d: d["features"].update(decision_lag=1.5),
+            r"'features.decision_lag' must be a non-neg",
+        ),
+        (lambda d: d["features"].update(eyes=2), r"unknown field 'features.eyes'"),
+        (lambda d: d["structure"].update(nb=-2), r"field 'structure' is not valid .*order nb"),
+        (lambda d: d["structure"].update(ne=1), r"field 'structure' is not valid"),
+        (
+            lambda d: d["parameters"].pop("b3"),
+            r"field 'parameters' has missing \['b3'\].*allowed names",
+        ),
+        (lambda d: d["parameters"].update(b9=1.0), r"field 'parameters' has unexpected \['b9'\]"),
+        (
+            lambda d: d["parameters"].update(b0="big"),
+            r"field 'parameters.b0' must be a finite number",
+        ),
+        (
+            lambda d: d["parameters"].update(b0=float("nan")),
+            r"'parameters.b0' must be a finite number",
+        ),
+        (lambda d: d.update(standard_errors={k: -1.0 for k in d["parameters"]}), r"must be >= 0"),
+        (lambda d: d["features"].update(regressors=["phi(k)"]), r"field 'features.regressors'"),
+        (lambda d: d.update(name=3), r"field 'name' must be a string"),
+    ],
+)
+def test_bad_model_files_give_clear_errors(tmp_path, change, message):
+    document = good()
+    change(document)
+    path = write(tmp_path, document)
+    with pytest.raises(ModelFileError, match=message) as info:
+        SteeringModel.load(path)
+    assert str(path) in str(info.value)
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(ModelFileError, match=r"not valid JSON \(line 1, column"):
+        SteeringModel.load(write(tmp_path, "{not json"))
+    with pytest.raises(ModelFileError, match="expected a JSON object"):
+        SteeringModel.load(write(tmp_path, "[1, 2]"))
+    with pytest.raises(ModelFileError, match="no such model file"):
+        SteeringModel.load(tmp_path / "missing.json")
+    binary = tmp_path / "binary.json"
+    binary.write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(ModelFileError, match="not a UTF-8 text file"):
+        SteeringModel.load(binary)
+    path = write(tmp_path, GeneralizedModel.paper().to_json())
+    with pytest.raises(ModelFileError, match="TwoPointModel.from_json expects 'two_point'"):
+        TwoPointModel.load(path)
+
+
+class NearPointPD(SteeringModel):
+    """A user's model, defined outside the library (as in examples/custom_steering_model.py)."""
+
+    model_type = "test_near_point_pd"
+
+    @property
+    def parameter_names(self):
+        return ("memory", "proportional", "derivative")
+
+    @property
+    def regressors(self):
+        return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 1))
+
+    def design(self, features):
+        delta = features["delta"].to_numpy()
+        phi = features["phi"].to_numpy()
+        matrix = np.column_stack([lagged(delta, 1), phi, phi - lagged(phi, 1)])
+        return Design(delta, np.zeros_like(delta), matrix)
+
+
+def test_a_custom_model_registers_and_round_trips(tmp_path):
+    assert MODEL_TYPES["test_near_point_pd"] is NearPointPD
+    model = NearPointPD([0.9, 0.1, 0.5], name="mine")
+    path = tmp_path / "mine.json"
+    model.save(path)
+    assert SteeringModel.load(path) == model
+    assert model.arx() is None
+
+
+def test_a_model_type_cannot_be_taken_twice():
+    with pytest.raises(TypeError, match="already used"):
+
+        class Impostor(NearPointPD):
+            model_type = "generalized"
+
+    with pytest.raises(TypeError, match="must set the class attribute model_type"):
+
+        class Nameless(NearPointPD):
+            model_type = ""
