@@ -1,0 +1,66 @@
+"""State estimation with the human as advisor (paper section 5, DESIGN.md section 5).
+
+- :class:`GaussianMixtureEKF`: one EKF per lane hypothesis, the human's
+  steering entering through any ARX steering model
+  (:class:`~hasa_env.steering.arx.ARXForm`); vectorized over hypotheses and
+  over many runs at once.
+- :class:`ARXStateSpace`: the augmented state [v_x, y, v_y, b, m_1..m_n] of a
+  car and an ARX steering model, with exact Jacobians.
+- Baselines: :class:`NoSteeringEKF`, :class:`SingleHypothesisEKF`,
+  :class:`OracleEKF`, and :class:`FilterpyGMEKF` (filterpy reference).
+- :func:`run_estimator`: filter recordings offline, batched.
+- Gymnasium wrappers: :class:`EstimatorInfoWrapper`,
+  :class:`EstimatorObservationWrapper` (single and vector envs).
+"""
+
+from estimators.arx_state_space import MEASUREMENT_NAMES, PHYSICAL_STATE_NAMES, ARXStateSpace
+from estimators.base import (
+    ACCELERATION_KEYS,
+    MEASUREMENT_KEYS,
+    Estimate,
+    LaneEstimator,
+    inputs_from_info,
+    measurements_from_info,
+)
+from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
+from estimators.filterpy_ekf import FilterpyGMEKF
+from estimators.gm_ekf import FilterMatrices, FilterSettings, GaussianMixtureEKF
+from estimators.offline import EstimationResult, hypotheses_of, run_estimator
+from estimators.tuning import steering_residual_std
+from estimators.wrappers import (
+    EstimatorInfoWrapper,
+    EstimatorObservationWrapper,
+    VectorEstimatorInfoWrapper,
+    VectorEstimatorObservationWrapper,
+    estimate_info_keys,
+    estimate_observation_names,
+)
+
+__all__ = [
+    "ACCELERATION_KEYS",
+    "ARXStateSpace",
+    "Estimate",
+    "EstimationResult",
+    "EstimatorInfoWrapper",
+    "EstimatorObservationWrapper",
+    "FilterMatrices",
+    "FilterSettings",
+    "FilterpyGMEKF",
+    "GaussianMixtureEKF",
+    "LaneEstimator",
+    "MEASUREMENT_KEYS",
+    "MEASUREMENT_NAMES",
+    "NoSteeringEKF",
+    "OracleEKF",
+    "PHYSICAL_STATE_NAMES",
+    "SingleHypothesisEKF",
+    "VectorEstimatorInfoWrapper",
+    "VectorEstimatorObservationWrapper",
+    "estimate_info_keys",
+    "estimate_observation_names",
+    "hypotheses_of",
+    "inputs_from_info",
+    "measurements_from_info",
+    "run_estimator",
+    "steering_residual_std",
+]

@@ -1,0 +1,395 @@
+"""Gymnasium wrappers that run an estimator alongside a hasa env.
+
+- :class:`EstimatorInfoWrapper`: adds the estimate to ``info`` at ``reset``
+  and every ``step`` (always the same keys, :func:`estimate_info_keys`).
+- :class:`EstimatorObservationWrapper`: replaces the observation with the
+  estimate, a ``Box`` for RL agents (:func:`estimate_observation_names`),
+  and also adds the info keys.
+
+Both accept a single env (``gym.make``) or a vector env (the native one of
+``gym.make_vec(..., vectorization_mode="vector_entry_point")`` or gymnasium's
+sync/async ones); given a vector env they return the vector versions
+:class:`VectorEstimatorInfoWrapper` / :class:`VectorEstimatorObservationWrapper`
+(``gymnasium.vector.VectorWrapper``), which filter all cars in one batch and
+re-initialise a car's slot when the env autoresets it (``NEXT_STEP`` or
+``SAME_STEP`` autoreset).
+
+The estimator needs what a car's computer has: the speed, the biased camera
+and the IMU, plus the human's steering. In an env the steering sensor reads
+the applied steering, which is the human's when a human (or a synthetic
+driver) drives, so the wrappers read ``info``'s ``sensor_*`` keys. The lane
+hypotheses and their prior come from the env's config
+(``markings.hypotheses``, ``markings.probabilities``). The oracle baseline
+gets the true bias from ``info["bias"]``.
+
+Example::
+
+    env = gym.make("hasa_env/LaneKeeping-v0", config={"action": {"type": "physical"}})
+    ekf = GaussianMixtureEKF(
+        GeneralizedModel.paper().arx(),
+        FilterSettings.from_env_config(env.unwrapped.config),
+    )
+    env = EstimatorInfoWrapper(env, ekf)
+    obs, info = env.reset(seed=0)
+    info["estimate_lateral_offset"], info["estimate_weights"]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
+
+from estimators.arx_state_space import PHYSICAL_STATE_NAMES
+from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
+
+__all__ = [
+    "EstimatorInfoWrapper",
+    "EstimatorObservationWrapper",
+    "VectorEstimatorInfoWrapper",
+    "VectorEstimatorObservationWrapper",
+    "estimate_info_keys",
+    "estimate_observation_names",
+]
+
+
+def estimate_info_keys(prefix: str = "estimate_") -> tuple[str, ...]:
+    """Keys the wrappers add to ``info``.
+
+    ``<prefix>lateral_offset`` (m), ``<prefix>lateral_offset_std`` (m),
+    ``<prefix>lateral_velocity`` (m/s), ``<prefix>longitudinal_velocity`` (m/s),
+    ``<prefix>bias`` (m), ``<prefix>lane_index`` (int, index of the most
+    likely of the env's hypotheses), ``<prefix>weights`` (H,) (probability of
+    each of the env's H hypotheses), ``<prefix>mean`` (n,) and ``<prefix>std``
+    (n,) (mixture mean and standard deviations of the estimator's n states).
+    """
+    names = (
+        "lateral_offset",
+        "lateral_offset_std",
+        "lateral_velocity",
+        "longitudinal_velocity",
+        "bias",
+        "lane_index",
+        "weights",
+        "mean",
+        "std",
+    )
+    return tuple(prefix + name for name in names)
+
+
+def estimate_observation_names(num_hypotheses: int) -> tuple[str, ...]:
+    """Entries of the estimate observation: mixture mean and std of
+    [v_x, y, v_y, b], then the probability of each of the env's hypotheses."""
+    return (
+        *(f"mean_{name}" for name in PHYSICAL_STATE_NAMES),
+        *(f"std_{name}" for name in PHYSICAL_STATE_NAMES),
+        *(f"weight_{i}" for i in range(num_hypotheses)),
+    )
+
+
+def _estimate_values(est: Estimate, hypotheses: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(mean, std, weights per env hypothesis, lane index) with a leading run axis.
+
+    The weights are mapped onto the env's hypotheses by bias value, so every
+    estimator (also the one-component oracle and single-hypothesis filters)
+    reports the probability of each of the env's lanes.
+    """
+    mean, std = np.atleast_2d(est.mean), np.atleast_2d(est.std)
+    weights = np.atleast_2d(est.weights)
+    own = np.atleast_2d(est.hypotheses)
+    match = np.isclose(own[:, :, None], hypotheses[None, None, :], rtol=0.0, atol=1e-9)
+    per_lane = np.einsum("rc,rch->rh", weights, match.astype(np.float64))
+    return mean, std, per_lane, np.argmax(per_lane, axis=1)
+
+
+def _info_values(est: Estimate, hypotheses: np.ndarray, prefix: str) -> dict[str, np.ndarray]:
+    mean, std, weights, lane = _estimate_values(est, hypotheses)
+    keys = estimate_info_keys(prefix)
+    values = (
+        mean[:, 1],
+        std[:, 1],
+        mean[:, 2],
+        mean[:, 0],
+        mean[:, 3],
+        lane.astype(np.int64),
+        weights,
+        mean,
+        std,
+    )
+    return dict(zip(keys, values, strict=True))
+
+
+def _observation(est: Estimate, hypotheses: np.ndarray) -> np.ndarray:
+    mean, std, weights, _ = _estimate_values(est, hypotheses)
+    return np.concatenate([mean[:, :4], std[:, :4], weights], axis=1).astype(np.float32)
+
+
+def _observation_space(num_hypotheses: int) -> spaces.Box:
+    inf = np.inf
+    low = np.array([-inf] * 4 + [0.0] * 4 + [0.0] * num_hypotheses, dtype=np.float32)
+    high = np.array([inf] * 8 + [1.0] * num_hypotheses, dtype=np.float32)
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def _markings(config: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray | None]:
+    if config is None:
+        raise ValueError(
+            "cannot find the env's config (markings.hypotheses); pass hypotheses= to the wrapper"
+        )
+    hyp = np.asarray(config["markings"]["hypotheses"], dtype=np.float64)
+    prob = config["markings"].get("probabilities")
+    return hyp, (None if prob is None else np.asarray(prob, dtype=np.float64))
+
+
+def _check_timing(config: Mapping[str, Any] | None, estimator: LaneEstimator) -> None:
+    if config is None:
+        return
+    repeat = int(config.get("action_repeat", 1))
+    if repeat != 1:
+        raise ValueError(
+            f"the env has action_repeat={repeat}: its sensors and IMU are sampled once per "
+            "env step but the IMU averages only the last simulation sample, so the estimator "
+            "cannot predict across a step; use action_repeat=1"
+        )
+    env_dt = 1.0 / float(config["sim_frequency"])
+    est_dt = getattr(estimator, "dt", env_dt)
+    if abs(env_dt - est_dt) > 1e-12 * max(env_dt, 1.0):
+        raise ValueError(
+            f"the estimator's sample time {est_dt:g} s differs from the env's {env_dt:g} s "
+            "(1 / sim_frequency)"
+        )
+
+
+def _single_config(env: gym.Env) -> Mapping[str, Any] | None:
+    return getattr(env.unwrapped, "config", None)
+
+
+def _vector_config(env: VectorEnv) -> Mapping[str, Any] | None:
+    config = getattr(env.unwrapped, "config", None)
+    if config is not None:
+        return config
+    try:
+        return env.get_attr("config")[0]  # gymnasium's sync / async vector envs
+    except (AttributeError, IndexError):
+        return None
+
+
+class EstimatorInfoWrapper(gym.Wrapper):
+    """Runs ``estimator`` on the env's sensors and puts its estimate in ``info``.
+
+    At ``reset`` the estimator is reset with the first measurements and the
+    env's lane hypotheses; each ``step`` feeds it that step's measurements
+    and IMU. ``info`` gains :func:`estimate_info_keys` (same keys every
+    time); :attr:`estimate` holds the last :class:`~estimators.base.Estimate`.
+    Given a vector env this constructs a :class:`VectorEstimatorInfoWrapper`.
+
+    Args:
+        env: a hasa env (``action_repeat`` 1; the estimator's dt must equal
+            the env's 1 / sim_frequency).
+        estimator: any :class:`~estimators.base.LaneEstimator`.
+        hypotheses: lane hypotheses b_i (m); default the env's config.
+        prior: their probabilities; default the env's config (uniform if unset).
+        prefix: prefix of the info keys.
+    """
+
+    def __new__(cls, env: Any, *args: Any, **kwargs: Any) -> Any:
+        if isinstance(env, VectorEnv):
+            vector_cls = (
+                VectorEstimatorObservationWrapper
+                if issubclass(cls, EstimatorObservationWrapper)
+                else VectorEstimatorInfoWrapper
+            )
+            return vector_cls(env, *args, **kwargs)
+        return super().__new__(cls)
+
+    def __init__(
+        self,
+        env: gym.Env,
+        estimator: LaneEstimator,
+        *,
+        hypotheses: np.ndarray | None = None,
+        prior: np.ndarray | None = None,
+        prefix: str = "estimate_",
+    ) -> None:
+        super().__init__(env)
+        config = _single_config(env)
+        _check_timing(config, estimator)
+        if hypotheses is None:
+            hypotheses, config_prior = _markings(config)
+            prior = config_prior if prior is None else prior
+        self.estimator = estimator
+        self.hypotheses = np.asarray(hypotheses, dtype=np.float64)
+        self.prior = prior
+        self.prefix = prefix
+        self.estimate: Estimate | None = None
+
+    def _add(self, info: dict[str, Any], est: Estimate) -> dict[str, Any]:
+        info = dict(info)
+        for key, value in _info_values(est, self.hypotheses, self.prefix).items():
+            value = value[0]
+            if value.ndim:
+                info[key] = value.copy()
+            elif value.dtype.kind == "i":
+                info[key] = int(value)
+            else:
+                info[key] = float(value)
+        return info
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self.estimate = self.estimator.reset(
+            measurements_from_info(info),
+            self.hypotheses,
+            prior=self.prior,
+            true_bias=float(info["bias"]),
+        )
+        return obs, self._add(info, self.estimate)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.estimate = self.estimator.step(measurements_from_info(info), inputs_from_info(info))
+        return obs, reward, terminated, truncated, self._add(info, self.estimate)
+
+
+class EstimatorObservationWrapper(EstimatorInfoWrapper):
+    """Like :class:`EstimatorInfoWrapper`, and the observation becomes the estimate.
+
+    Observation: ``Box`` float32 of length 8 + H,
+    :func:`estimate_observation_names`: mixture mean and standard deviation
+    of [v_x, y, v_y, b], then the probability of each of the env's H lane
+    hypotheses. Given a vector env
+    this constructs a :class:`VectorEstimatorObservationWrapper`.
+    """
+
+    def __init__(self, env: gym.Env, estimator: LaneEstimator, **kwargs: Any) -> None:
+        super().__init__(env, estimator, **kwargs)
+        self.observation_space = _observation_space(self.hypotheses.shape[-1])
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        _, info = super().reset(seed=seed, options=options)
+        return _observation(self.estimate, self.hypotheses)[0], info
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        _, reward, terminated, truncated, info = super().step(action)
+        return _observation(self.estimate, self.hypotheses)[0], reward, terminated, truncated, info
+
+
+class VectorEstimatorInfoWrapper(VectorWrapper):
+    """The vector-env form of :class:`EstimatorInfoWrapper`: one estimator batch for all cars.
+
+    ``infos`` gains :func:`estimate_info_keys` as arrays with a leading car
+    axis (and gymnasium's ``"_key"`` masks). A car the env autoresets
+    (``NEXT_STEP``: on the step after its episode ended; ``SAME_STEP``: on the
+    step it ended) gets its estimator slot re-initialised from its reset
+    measurements; the other cars are stepped.
+    """
+
+    def __init__(
+        self,
+        env: VectorEnv,
+        estimator: LaneEstimator,
+        *,
+        hypotheses: np.ndarray | None = None,
+        prior: np.ndarray | None = None,
+        prefix: str = "estimate_",
+    ) -> None:
+        super().__init__(env)
+        config = _vector_config(env)
+        _check_timing(config, estimator)
+        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError(
+                f"autoreset mode {mode} is not supported; use NEXT_STEP (default) or SAME_STEP"
+            )
+        self.autoreset_mode = mode
+        if hypotheses is None:
+            hypotheses, config_prior = _markings(config)
+            prior = config_prior if prior is None else prior
+        self.estimator = estimator
+        self.hypotheses = np.asarray(hypotheses, dtype=np.float64)
+        self.prior = prior
+        self.prefix = prefix
+        self.estimate: Estimate | None = None
+        self._ended = np.zeros(self.num_envs, dtype=bool)
+
+    def _add(self, infos: dict[str, Any], est: Estimate) -> dict[str, Any]:
+        infos = dict(infos)
+        mask = np.ones(self.num_envs, dtype=bool)
+        for key, value in _info_values(est, self.hypotheses, self.prefix).items():
+            infos[key] = np.array(value, copy=True)
+            infos["_" + key] = mask
+        return infos
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        obs, infos = self.env.reset(seed=seed, options=options)
+        self.estimate = self.estimator.reset(
+            measurements_from_info(infos),
+            self.hypotheses,
+            prior=self.prior,
+            true_bias=np.asarray(infos["bias"], dtype=np.float64),
+        )
+        self._ended[:] = False
+        return obs, self._add(infos, self.estimate)
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        measurement = measurements_from_info(infos)
+        acceleration = inputs_from_info(infos)
+        done = np.asarray(terminated) | np.asarray(truncated)
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            restarted = self._ended.copy()
+            self._ended = done
+        else:  # SAME_STEP: the env already reset the cars that ended, info is their new start
+            restarted = done
+        stepping = ~restarted
+        if stepping.all():
+            est = self.estimator.step(measurement, acceleration)
+        else:
+            est = None
+            if stepping.any():
+                est = self.estimator.step(
+                    measurement[stepping], acceleration[stepping], runs=np.flatnonzero(stepping)
+                )
+            est = self.estimator.reset(
+                measurement[restarted],
+                self.hypotheses,
+                prior=self.prior,
+                true_bias=np.asarray(infos["bias"], dtype=np.float64)[restarted],
+                runs=np.flatnonzero(restarted),
+            )
+        self.estimate = est
+        return obs, rewards, terminated, truncated, self._add(infos, est)
+
+
+class VectorEstimatorObservationWrapper(VectorEstimatorInfoWrapper):
+    """The vector-env form of :class:`EstimatorObservationWrapper`: observations
+    (N, 8 + H) float32 (:func:`estimate_observation_names`)."""
+
+    def __init__(self, env: VectorEnv, estimator: LaneEstimator, **kwargs: Any) -> None:
+        super().__init__(env, estimator, **kwargs)
+        self.single_observation_space = _observation_space(self.hypotheses.shape[-1])
+        self.observation_space = gym.vector.utils.batch_space(
+            self.single_observation_space, self.num_envs
+        )
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        _, infos = super().reset(seed=seed, options=options)
+        return _observation(self.estimate, self.hypotheses), infos
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        _, rewards, terminated, truncated, infos = super().step(actions)
+        return _observation(self.estimate, self.hypotheses), rewards, terminated, truncated, infos
