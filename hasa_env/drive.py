@@ -639,11 +639,13 @@ class VirtualWheelDriver:
 
     def __init__(self, wheel: Any, driver: Any, calibration: JoystickCalibration) -> None:
         self.wheel = wheel
+        """The virtual wheel turned; replace it to drive a re-plugged one."""
         self.driver = driver
         self.calibration = calibration
         self._run: tuple[int, int] | None = None
-        self.commands: list[tuple[float, float]] = []
-        """(road-wheel angle rad, acceleration m/s^2) the driver asked for, in the current run."""
+        self.commands: dict[int, tuple[float, float]] = {}
+        """Step index k -> (road-wheel angle rad, acceleration m/s^2) the driver asked for
+        over step k + 1 of the current run (absent while the wheel was unplugged)."""
 
     def __call__(self, session: DriveSession) -> None:
         if session.state != "driving" or session.info is None:
@@ -654,13 +656,16 @@ class VirtualWheelDriver:
             self.driver.reset(
                 int(np.random.SeedSequence([key[1], 7]).generate_state(1)[0]), dt=session.dt
             )
-            self.commands = []
-        if (
-            len(self.commands) != session.steps
-        ):  # called again before the same step (e.g. after a pause)
+            self.commands = {}
+            self._last_acted = -1
+        if session.steps == self._last_acted:  # called again before the same step
             return
+        # the driver keeps driving (its state must advance every step) even while unplugged
         steer, acc = self.driver.act(session.info, session.road)
-        self.commands.append((float(steer), float(acc)))
+        self._last_acted = session.steps
+        if not getattr(self.wheel, "attached", True):
+            return
+        self.commands[session.steps] = (float(steer), float(acc))
         cal = self.calibration
         self.wheel.set_axis(cal.steering.axis, cal.raw_for_road_wheel_angle(steer))
         throttle = acc / cal.max_acceleration if acc > 0 and cal.max_acceleration > 0 else 0.0
