@@ -1,0 +1,144 @@
+"""hasa-replay: replay checks (and where they diverge), scores, frames; the shipped sample."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hasa_env.drive import load_raw_inputs
+from hasa_env.recording import load_recording
+from hasa_env.replay_cli import check_replay, collect_recordings, main
+
+SAMPLE = Path(__file__).resolve().parent.parent / "recordings" / "sample"
+
+
+def _copy_sample(tmp_path: Path) -> Path:
+    target = tmp_path / "sample"
+    shutil.copytree(SAMPLE, target)
+    return target / "run_000.csv"
+
+
+def test_the_shipped_sample_is_a_labelled_synthetic_30_s_drive_that_replays():
+    rec = load_recording(SAMPLE / "run_000.csv")
+    assert rec.complete and rec.steps == 3000 and rec.meta["end_reason"] == "truncated"
+    meta = rec.meta["metadata"]
+    assert meta["synthetic"] is True and meta["tool"] == "hasa-drive"
+    assert "virtual joystick" in meta["synthetic_driver"]["description"]
+    assert rec.data["speed"].iloc[0] == 15.0 and rec.data["lateral_offset"].iloc[0] == -0.5
+    assert rec.data["bias"].iloc[0] == -1.8
+    raw = load_raw_inputs(SAMPLE / "run_000.csv")
+    assert len(raw) == 3000 and raw["source"].str.contains("G29").all()
+    assert np.array_equal(raw["road_wheel_angle"].to_numpy(), rec.data["steering"].to_numpy()[1:])
+    # bit for bit with this platform's libm; a tolerance keeps the check meaningful elsewhere
+    assert check_replay(rec, atol=1e-9).matches
+
+
+def test_hasa_replay_reports_a_match(capsys):
+    assert main([str(SAMPLE)]) == 0
+    out = capsys.readouterr().out
+    assert "run_000.csv: synthetic, 3000 steps: replay matches the recording" in out
+
+
+def test_hasa_replay_says_where_a_tampered_recording_diverges(tmp_path, capsys):
+    csv = _copy_sample(tmp_path)
+    lines = csv.read_text().split("\n")
+    header = lines[0].split(",")
+    col = header.index("lateral_offset")
+    fields = lines[1 + 1500].split(",")  # row 1500 is on line 1502 (1 = header)
+    fields[col] = repr(float(fields[col]) + 1e-6)
+    lines[1 + 1500] = ",".join(fields)
+    csv.write_text("\n".join(lines))
+    assert main([str(csv)]) == 1
+    out = capsys.readouterr().out
+    assert "DIVERGES at row 1500 (t = 15.00 s), column 'lateral_offset'" in out
+    rec = load_recording(csv)
+    check = check_replay(rec)
+    assert check.divergence[:2] == (1500, "lateral_offset")
+    assert check.divergence[2] == pytest.approx(check.divergence[3] + 1e-6)
+    assert check_replay(rec, atol=1e-5).matches
+
+
+def test_hasa_replay_detects_a_changed_action(tmp_path, capsys):
+    csv = _copy_sample(tmp_path)
+    lines = csv.read_text().split("\n")
+    col = lines[0].split(",").index("steering")
+    fields = lines[1 + 700].split(",")
+    fields[col] = repr(float(fields[col]) + 1e-3)
+    lines[1 + 700] = ",".join(fields)
+    csv.write_text("\n".join(lines))
+    assert main([str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    # row k's steering is the action over the step that ended at row k: replaying the tampered
+    # action changes the state of that very row (station is the first column that depends on it)
+    assert "DIVERGES at row 700 (t = 7.00 s), column 'station'" in out
+
+
+def test_hasa_replay_reports_load_errors(tmp_path, capsys):
+    csv = _copy_sample(tmp_path)
+    csv.with_suffix(".json").unlink()
+    assert main([str(csv)]) == 2
+    assert "missing sidecar" in capsys.readouterr().err
+    assert main([str(tmp_path / "nothing_here")]) == 2
+    recs, problems = collect_recordings([tmp_path])
+    assert recs == [] and len(problems) == 1
+
+
+def test_hasa_replay_writes_frames_with_road_and_ghost_markings(tmp_path, capsys):
+    from hasa_env.views import GHOST_FADED_COLOUR
+
+    out_dir = tmp_path / "frames"
+    code = main(
+        [str(SAMPLE), "--frames", str(out_dir), "--frame-every", "1000", "--size", "320x180"]
+    )
+    assert code == 0
+    frames = sorted(out_dir.glob("frame_*.png"))
+    assert [f.name for f in frames] == [
+        "frame_00000.png",
+        "frame_01000.png",
+        "frame_02000.png",
+        "frame_03000.png",
+    ]
+    import pygame
+
+    image = pygame.surfarray.array3d(pygame.image.load(str(frames[1]))).transpose(1, 0, 2)
+    assert image.shape == (180, 320, 3)
+    road = np.all(np.abs(image.astype(int) - np.array([90, 90, 96])) <= 2, axis=-1)
+    ghost = np.all(np.abs(image.astype(int) - np.array(GHOST_FADED_COLOUR)) <= 2, axis=-1)
+    assert road.mean() > 0.15 and ghost.sum() > 20
+
+
+def test_hasa_replay_video_is_optional(tmp_path, capsys):
+    video = tmp_path / "drive.gif"
+    assert (
+        main([str(SAMPLE), "--video", str(video), "--frame-every", "1500", "--size", "128x72"]) == 0
+    )
+    out = capsys.readouterr().out
+    try:
+        import imageio  # noqa: F401
+    except ImportError:
+        assert "no video" in out and not video.exists()
+    else:  # pragma: no cover - imageio is not a dependency
+        assert video.exists()
+
+
+def test_hasa_replay_scores_a_fitted_steering_model(capsys):
+    assert main([str(SAMPLE), "--model", "two-point", "--fit"]) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if "model two-point:" in ln and "rmse" in ln)
+    rmse = float(line.split("rmse ")[1].split(",")[0])
+    r2 = float(line.split("r2 ")[1].split(",")[0])
+    assert 0 < rmse < 1e-3 and r2 > 0.9
+
+
+@pytest.mark.slow
+def test_hasa_replay_runs_the_estimator_and_it_finds_the_true_lane(capsys):
+    pytest.importorskip("estimators.gm_ekf")
+    assert main([str(SAMPLE), "--model", "two-point", "--fit", "--estimator"]) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if "estimator:" in ln)
+    assert "lateral RMSE" in line
+    final_true = float(line.split("-1.8 m: ")[1].split("]")[0])
+    assert final_true > 0.9  # the sample's true bias is -1.8 m
