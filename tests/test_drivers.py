@@ -20,6 +20,7 @@ from hasa_env.drivers import (
     run_driver,
     run_population,
     run_seeds,
+    save_runs,
 )
 from hasa_env.road import curved_road
 from hasa_env.steering import GeneralizedModel, TwoPointModel
@@ -207,3 +208,18 @@ def test_speed_profiles_ramp_and_slow_for_bends():
     lateral = curved["speed"] ** 2 * curved["road_curvature"].abs()
     assert lateral.max() < 3.0 * 1.15
     assert curved["speed"].max() > 25.0
+
+
+def test_saved_runs_load_and_replay_exactly(tmp_path):
+    from hasa_env.recording import compare_recordings, load_recordings, replay
+
+    frames = run_driver(SyntheticDriver(population()[4]), runs=2, seed=2, config=SHORT)
+    paths = save_runs(frames, tmp_path)
+    assert [p.name for p in paths] == ["run_000.csv", "run_001.csv"]
+    loaded = load_recordings(tmp_path)
+    assert len(loaded) == 2 and not loaded.errors
+    for recording, frame in zip(loaded, frames, strict=True):
+        pd.testing.assert_frame_equal(recording.data, frame, check_exact=True, check_like=True)
+        assert recording.meta["metadata"]["driver"] == "4"
+        assert recording.seed == frame.attrs["seed"]
+        assert compare_recordings(recording.data, replay(recording)) is None  # bit-identical

@@ -144,7 +144,11 @@ def test_a_fit_that_loses_identifiability_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error", IdentifiabilityWarning)
         fitted = GeneralizedModel(1, 1, 1, 1).fit(informative)
-    assert fitted.fit_result.identifiability.ok
+    report = fitted.fit_result.identifiability
+    assert report.ok and not report.integrating
+    expected_snr = abs(report.static_lane_gain) * 1.8 / fitted.fit_result.residual_std
+    assert report.lane_snr == pytest.approx(expected_snr)
+    assert report.steady_state_gain == pytest.approx(-report.static_lane_gain / (1 - 0.8), rel=0.05)
 
 
 def test_residual_diagnostics_tell_white_from_coloured():

@@ -179,3 +179,15 @@ def test_a_model_type_cannot_be_taken_twice():
 
         class Nameless(NearPointPD):
             model_type = ""
+
+
+@pytest.mark.slow
+def test_the_custom_model_example_runs(capsys):
+    import runpy
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "custom_steering_model.py"
+    runpy.run_path(str(example), run_name="__main__")
+    out = capsys.readouterr().out
+    assert "saved and loaded near_far_pd.json" in out and "identical model" in out
+    assert "left the road: False" in out

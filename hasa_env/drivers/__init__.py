@@ -9,12 +9,20 @@
 - :class:`ModelDriver`: any steering model plus noise, with a steering ratio.
 - :class:`ReplayDriver`: plays back a recording's actions.
 - :func:`run_driver`, :func:`run_drivers`, :func:`run_population`: recordings
-  (one DataFrame per run), vectorized over the native vector env.
+  (one DataFrame per run), vectorized over the native vector env;
+  :func:`save_runs` writes them in the recording format.
 """
 
 from hasa_env.drivers.base import BatchDriver, Driver, SpeedProfile, make_batch
 from hasa_env.drivers.model_driver import ModelDriver, ReplayDriver
-from hasa_env.drivers.runner import run_driver, run_drivers, run_population, run_seeds
+from hasa_env.drivers.runner import (
+    recording_meta,
+    run_driver,
+    run_drivers,
+    run_population,
+    run_seeds,
+    save_runs,
+)
 from hasa_env.drivers.synthetic import POPULATIONS, DriverParams, SyntheticDriver, population
 
 __all__ = [
@@ -28,8 +36,10 @@ __all__ = [
     "SyntheticDriver",
     "make_batch",
     "population",
+    "recording_meta",
     "run_driver",
     "run_drivers",
     "run_population",
     "run_seeds",
+    "save_runs",
 ]

@@ -13,7 +13,9 @@ Every run gets an env seed and a driver seed derived deterministically from
 the same whichever function produced it and however many other cars drove
 with it. Frames have the columns :data:`hasa_env.core.RECORDING_COLUMNS`
 (row 0 = reset state) and ``attrs`` with the env id, the full validated
-config, the seeds and the driver's name.
+config, the track, the seeds, the reset options and the driver's name;
+:func:`save_runs` writes them in the recording format
+(:func:`hasa_env.recording.save_recording`), replayable from their sidecars.
 """
 
 from __future__ import annotations
@@ -31,7 +33,15 @@ from hasa_env.core import INFO_KEYS, RECORDING_COLUMNS, recording_row
 from hasa_env.drivers.base import Driver, make_batch
 from hasa_env.drivers.synthetic import DriverParams, SyntheticDriver
 
-__all__ = ["run_driver", "run_drivers", "run_population", "run_seeds", "DEFAULT_ENV_ID"]
+__all__ = [
+    "DEFAULT_ENV_ID",
+    "recording_meta",
+    "run_driver",
+    "run_drivers",
+    "run_population",
+    "run_seeds",
+    "save_runs",
+]
 
 DEFAULT_ENV_ID = "hasa_env/LaneKeeping-v0"
 _INT_COLUMNS = ("step", "bias_index")
@@ -179,7 +189,7 @@ def _run_single(
         "seed": env_seed,
         "driver": getattr(driver, "name", type(driver).__name__),
         "driver_seed": driver_seed,
-        "options": dict(options or {}),
+        "reset_options": dict(options or {}),
     }
     return _frame(rows, attrs)
 
@@ -259,7 +269,7 @@ def run_drivers(
             "seed": int(seeds[i][0]),
             "driver": getattr(drivers[i], "name", type(drivers[i]).__name__),
             "driver_seed": int(seeds[i][1]),
-            "options": dict(options or {}),
+            "reset_options": dict(options or {}),
         }
         frames.append(_frame(data[: length[i] + 1, i, :], attrs))
     return frames
@@ -334,3 +344,43 @@ def run_population(
     for name, frame in zip(owner, frames, strict=True):
         out[name].append(frame)
     return out
+
+
+def recording_meta(frame: pd.DataFrame) -> dict[str, Any]:
+    """The :func:`hasa_env.recording.save_recording` ``meta`` of a run made here.
+
+    Config, env seed, env id and reset options from the frame's ``attrs``;
+    the driver's name and seed go into ``metadata``.
+    """
+    attrs = frame.attrs
+    missing = [k for k in ("config", "seed", "env_id") if k not in attrs]
+    if missing:
+        raise ValueError(f"the frame's attrs lack {missing}: it was not made by hasa_env.drivers")
+    return {
+        "config": attrs["config"],
+        "seed": int(attrs["seed"]),
+        "env_id": attrs["env_id"],
+        "reset_options": dict(attrs.get("reset_options") or {}),
+        "metadata": {
+            "driver": attrs.get("driver"),
+            "driver_seed": attrs.get("driver_seed"),
+            "synthetic": True,
+        },
+    }
+
+
+def save_runs(frames: Sequence[pd.DataFrame], directory: str | Any, prefix: str = "run") -> list[Any]:
+    """Save runs as recordings ``<directory>/<prefix>_000.csv`` (+ JSON sidecars).
+
+    Returns the CSV paths. Uses :func:`hasa_env.recording.save_recording`, so the
+    files load with :func:`hasa_env.recording.load_recordings` and replay exactly.
+    """
+    from pathlib import Path
+
+    from hasa_env.recording import save_recording
+
+    folder = Path(directory)
+    return [
+        save_recording(frame, folder / f"{prefix}_{i:03d}.csv", recording_meta(frame))
+        for i, frame in enumerate(frames)
+    ]

@@ -25,7 +25,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -140,24 +140,33 @@ class IdentifiabilityReport:
     """The static lane-offset gain of a model (DESIGN.md section 3).
 
     Attributes:
-        static_lane_gain: G = sum(b)/near + sum(c)/far (rad/m): with
-            phi ~ -y/near, omega ~ -y/far a steady offset y gives
-            (1 - sum a) delta = -G y.
+        static_lane_gain: G = sum(b)/near + sum(c)/far (rad/m). With
+            phi ~ -y/near, omega ~ -y/far, a lane-centre error of e metres
+            held over the model's memory moves its one-step prediction by
+            -G e; at steady state (1 - sum a) delta = -G y.
         standard_error: SE of G from the fit's covariance (NaN if unknown).
         memory_gain: 1 - sum(a) (0 for an integrating model such as the two-point).
+        memory_standard_error: its SE (NaN if unknown).
+        integrating: 1 - sum(a) is zero or within z SE of zero.
         steady_state_gain: delta/y at steady state = -G / (1 - sum a) (rad/m;
-            inf for an integrating model).
-        identifiable: G is clearly non-zero: |G| > z SE (when the SE is known)
-            and |G| > min_gain.
-        sign_consistent: the model steers towards the lane centre at steady
-            state: G has the sign of 1 - sum(a) (G > 0 when 1 - sum(a) ~ 0).
+            +-inf for an integrating model).
+        lane_snr: |G| * lane_separation / residual std: how many residual
+            standard deviations one prediction moves between two lane
+            hypotheses ``lane_separation`` m apart (NaN without a fit).
+        identifiable: G is clearly non-zero: |G| > z SE when the SE is
+            known, else |G| > min_gain.
+        sign_consistent: at steady state the model steers towards the lane
+            centre: G has the sign of 1 - sum(a), or G > 0 if it integrates.
         message: a sentence saying what was found.
     """
 
     static_lane_gain: float
     standard_error: float
     memory_gain: float
+    memory_standard_error: float
+    integrating: bool
     steady_state_gain: float
+    lane_snr: float
     identifiable: bool
     sign_consistent: bool
     message: str
@@ -168,8 +177,8 @@ class IdentifiabilityReport:
         return self.identifiable and self.sign_consistent
 
 
-def _gain_gradient(model: SteeringModel) -> np.ndarray | None:
-    """d G / d parameters (exact for models whose ARX form is affine in the parameters)."""
+def _arx_gradient(model: SteeringModel, quantity: Callable[[ARXForm], float]) -> np.ndarray | None:
+    """d quantity(arx) / d parameters (exact when the ARX form is affine in the parameters)."""
     theta = model.parameter_vector
     grad = np.zeros(theta.size)
     for j in range(theta.size):
@@ -181,8 +190,14 @@ def _gain_gradient(model: SteeringModel) -> np.ndarray | None:
         arx_down = model.with_parameters(down).arx()
         if arx_up is None or arx_down is None:
             return None
-        grad[j] = (arx_up.static_lane_gain - arx_down.static_lane_gain) / (2.0 * step)
+        grad[j] = (quantity(arx_up) - quantity(arx_down)) / (2.0 * step)
     return grad
+
+
+def _standard_error(grad: np.ndarray | None, covariance: np.ndarray | None) -> float:
+    if grad is None or covariance is None:
+        return float("nan")
+    return float(math.sqrt(max(float(grad @ covariance @ grad), 0.0)))
 
 
 def check_identifiability(
@@ -190,37 +205,60 @@ def check_identifiability(
     covariance: np.ndarray | None = None,
     z: float = 3.0,
     min_gain: float = 1e-6,
+    residual_std: float | None = None,
+    lane_separation: float = 1.8,
 ) -> IdentifiabilityReport | None:
     """Is the lane offset identifiable through this model? (DESIGN.md section 3)
+
+    The paper's "observable if any b_i or c_0 is non-zero" is not enough:
+    b = (0.3, -0.3) is non-zero but carries no information on a constant
+    lane-centre error. What matters is the static lane-offset gain
+    G = sum(b)/near + sum(c)/far.
 
     Args:
         model: a steering model (its :meth:`arx` form is used) or an :class:`ARXForm`.
         covariance: covariance of the model's parameters; default: that of the
-            model's fit, if any. With it the gain must be ``z`` standard errors
-            away from zero.
+            model's fit, if any. With it, "clearly non-zero" means ``z``
+            standard errors away from zero.
         z: how many standard errors "clearly non-zero" means.
-        min_gain: smallest |G| (rad/m) accepted in any case.
+        min_gain: smallest |G| (rad/m) accepted when no standard error is known.
+        residual_std: the one-step residual std (rad) for ``lane_snr``;
+            default: the model's fit's.
+        lane_separation: distance (m) between the lane hypotheses for ``lane_snr``.
 
     Returns:
         An :class:`IdentifiabilityReport`, or None if the model is not an ARX model.
     """
+    grad_gain = grad_memory = None
     if isinstance(model, ARXForm):
-        arx, grad = model, None
+        arx = model
     else:
         arx = model.arx()
         if arx is None:
             return None
-        if covariance is None and model.fit_result is not None:
-            covariance = model.fit_result.covariance
-        grad = _gain_gradient(model) if covariance is not None else None
+        if model.fit_result is not None:
+            if covariance is None:
+                covariance = model.fit_result.covariance
+            if residual_std is None:
+                residual_std = model.fit_result.residual_std
+        if covariance is not None:
+            grad_gain = _arx_gradient(model, lambda f: f.static_lane_gain)
+            grad_memory = _arx_gradient(model, lambda f: 1.0 - sum(f.a))
     gain = arx.static_lane_gain
-    se = float("nan")
-    if grad is not None and covariance is not None:
-        se = float(math.sqrt(max(float(grad @ covariance @ grad), 0.0)))
+    se = _standard_error(grad_gain, covariance)
     memory = 1.0 - sum(arx.a)
-    integrating = abs(memory) < 1e-9
-    steady = math.copysign(math.inf, -gain) if integrating else -gain / memory
-    identifiable = abs(gain) > min_gain and (not math.isfinite(se) or abs(gain) > z * se)
+    memory_se = _standard_error(grad_memory, covariance)
+    integrating = abs(memory) < 1e-9 or (math.isfinite(memory_se) and abs(memory) <= z * memory_se)
+    if integrating:
+        steady = math.copysign(math.inf, -gain) if gain != 0 else float("nan")
+    else:
+        steady = -gain / memory
+    snr = (
+        abs(gain) * lane_separation / residual_std
+        if residual_std is not None and residual_std > 0
+        else float("nan")
+    )
+    identifiable = abs(gain) > z * se if math.isfinite(se) else abs(gain) > min_gain
     sign_consistent = gain > 0 if integrating else gain * memory > 0
     if not identifiable:
         detail = (
@@ -238,12 +276,30 @@ def check_identifiability(
             f"{memory:.3g}: at steady state the model steers away from the lane centre"
         )
     else:
-        message = (
-            f"identifiable: static lane-offset gain {gain:.3g} rad/m"
-            + (f" ({abs(gain) / se:.1f} SE)" if math.isfinite(se) and se > 0 else "")
-            + f", steady-state steering {steady:.3g} rad/m"
-        )
-    return IdentifiabilityReport(gain, se, memory, steady, identifiable, sign_consistent, message)
+        parts = [f"identifiable: static lane-offset gain {gain:.3g} rad/m"]
+        if math.isfinite(se) and se > 0:
+            parts.append(f" ({abs(gain) / se:.1f} SE)")
+        if integrating:
+            parts.append(", integrating (1 - sum(a) ~ 0)")
+        else:
+            parts.append(f", steady-state steering {steady:.3g} rad/m")
+        if math.isfinite(snr):
+            parts.append(
+                f"; lanes {lane_separation:g} m apart move a prediction by {snr:.2g} residual SDs"
+            )
+        message = "".join(parts)
+    return IdentifiabilityReport(
+        gain,
+        se,
+        memory,
+        memory_se,
+        integrating,
+        steady,
+        snr,
+        identifiable,
+        sign_consistent,
+        message,
+    )
 
 
 # ------------------------------------------------------------------- fitting
@@ -383,7 +439,9 @@ def fit_model(
         bic=bic,
     )
     fitted = model.with_parameters(solution.parameters, solution.standard_errors, fit_result=result)
-    report = check_identifiability(fitted, solution.covariance)
+    report = check_identifiability(
+        fitted, solution.covariance, residual_std=math.sqrt(solution.sigma2)
+    )
     result = _replace(result, identifiability=report)
     fitted.fit_result = result
     if warn and report is not None and not report.ok:
