@@ -80,7 +80,7 @@ def _trajectory(steps: int) -> tuple[Any, list[dict[str, Any]]]:
             - 0.5 * info["heading"]
         )
         _, _, _, _, info = env.step([steer, 0.0])
-        infos.append({**info, "estimator_weights": [0.3, 0.7]})
+        infos.append({**info, "estimate_weights": [0.3, 0.7]})
     return env, infos
 
 

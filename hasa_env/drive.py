@@ -66,6 +66,7 @@ __all__ = [
     "DriveSession",
     "RawInputWriter",
     "VirtualWheelDriver",
+    "estimator_wrapper",
     "Calibrator",
     "load_raw_inputs",
     "raw_inputs_path",
@@ -1034,7 +1035,11 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
                 str(args.keyboard), "device", "must be 'keyboard' for --keyboard"
             )
         profiles = _joystick_profiles(args.calibration, log)
-    except (ValueError, ConfigError) as exc:
+        env_wrapper = None
+        if args.estimator is not None:
+            env_wrapper = estimator_wrapper(args.estimator)
+            env_wrapper(_probe_env(settings))  # fail now, not after the countdown
+    except (ValueError, ConfigError, ImportError, OSError) as exc:
         print(f"hasa-drive: {exc}", file=sys.stderr)
         return 2
     try:
@@ -1058,6 +1063,8 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         view=args.view,
         fps=args.fps,
         show_points=args.show_points,
+        env_wrapper=env_wrapper,
+        metadata={"estimator_shown": args.estimator},
     )
     previous = signal.signal(signal.SIGTERM, _raise_exit)
     try:
@@ -1073,6 +1080,35 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         pg.display.quit()
     log(f"hasa-drive: {len(results)} run(s) recorded in {settings.directory}")
     return 0
+
+
+def estimator_wrapper(model: str = "generalized") -> Callable[[Any], Any]:
+    """An ``env_wrapper`` for :class:`DriveSession`: the Gaussian-mixture EKF runs alongside.
+
+    Wraps each run's env in :class:`estimators.wrappers.EstimatorInfoWrapper`
+    with :class:`estimators.gm_ekf.GaussianMixtureEKF` and the steering
+    ``model`` (``"two-point"``, ``"generalized"``: the paper's presets, or a
+    saved model file), so ``info["estimate_weights"]`` carries the live
+    hypothesis weights the HUD shows (the recording keeps its standard columns).
+    """
+    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+    from estimators.wrappers import EstimatorInfoWrapper
+    from hasa_env.replay_cli import make_model
+
+    def wrap(env: Any) -> Any:
+        config = env.unwrapped.config
+        dt = config["action_repeat"] / config["sim_frequency"]
+        steering = make_model(model, dt)
+        ekf = GaussianMixtureEKF(steering.arx(), FilterSettings.from_env_config(config), dt=dt)
+        return EstimatorInfoWrapper(env, ekf)
+
+    return wrap
+
+
+def _probe_env(settings: DriveSettings) -> Any:
+    from hasa_env.lane_keeping import LaneKeepingEnv
+
+    return LaneKeepingEnv(config=settings.env_config())
 
 
 def _raise_exit(signum: int, frame: Any) -> None:
@@ -1233,6 +1269,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--keyboard-only", action="store_true", help="ignore joysticks")
     p.add_argument("--view", choices=("driver", "top_down"), default="driver")
     p.add_argument("--show-points", action="store_true", help="draw the near and far points")
+    p.add_argument(
+        "--estimator",
+        nargs="?",
+        const="generalized",
+        default=None,
+        metavar="MODEL",
+        help="run the Gaussian-mixture EKF alongside; show its lane-hypothesis weights in the HUD "
+        "(steering model: two-point, generalized (default) or a saved model file)",
+    )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)
     p.add_argument(

@@ -71,8 +71,10 @@ WeightSource = Mapping[float, float] | Sequence[float] | Callable[[Mapping[str, 
 sequence with one weight per ``markings.hypotheses`` entry, a callable
 ``info -> either of those``, or None (look in ``info``, see :func:`resolve_weights`)."""
 
-INFO_WEIGHT_KEYS = ("estimator_weights", "hypothesis_weights", "weights")
-"""``info`` keys searched, in order, for hypothesis weights when none are passed explicitly."""
+INFO_WEIGHT_KEYS = ("estimate_weights", "estimator_weights", "hypothesis_weights")
+"""``info`` keys searched, in order, for hypothesis weights when none are passed explicitly
+(``estimate_weights``: :class:`estimators.wrappers.EstimatorInfoWrapper`, one weight per
+``markings.hypotheses`` entry)."""
 
 
 def surface_to_array(surface: Any) -> np.ndarray:

@@ -192,13 +192,13 @@ class EstimatorRun:
 def estimate_recording(recording: Any, steering_model: Any) -> EstimatorRun:
     """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
 
-    It sees what the car's sensors recorded (:data:`estimators.base.MEASUREMENT_KEYS`,
-    :data:`estimators.base.ACCELERATION_KEYS`), with the hypotheses of the
-    recording's config and filter settings from that config; the steering model
-    enters through its ARX form.
+    Through :func:`estimators.offline.run_estimator`: it sees what the car's
+    sensors recorded (speed, biased camera, steering, IMU), with the
+    hypotheses of the recording's config and filter settings from that
+    config; the steering model enters through its ARX form.
     """
-    from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS
     from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+    from estimators.offline import run_estimator
 
     data = recording.data
     cfg = recording.config
@@ -206,16 +206,10 @@ def estimate_recording(recording: Any, steering_model: Any) -> EstimatorRun:
     estimator = GaussianMixtureEKF(
         steering_model.arx(), FilterSettings.from_env_config(cfg), dt=_dt(recording)
     )
-    z = data[list(MEASUREMENT_KEYS)].to_numpy(dtype=np.float64)
-    acc = data[list(ACCELERATION_KEYS)].to_numpy(dtype=np.float64)
+    result = run_estimator(estimator, data, hypotheses=hypotheses)
     n = len(data)
-    weights = np.empty((n, hypotheses.size))
-    lateral = np.empty(n)
-    est = estimator.reset(z[0], hypotheses)
-    weights[0], lateral[0] = est.weights, float(est.lateral_offset)
-    for k in range(1, n):
-        est = estimator.step(z[k], acc[k])
-        weights[k], lateral[k] = est.weights, float(est.lateral_offset)
+    weights = result.weights[0, :n]
+    lateral = result.mean[0, :n, result.state_names.index("lateral_offset")]
     true_y = data["lateral_offset"].to_numpy(dtype=np.float64)
     rmse = float(np.sqrt(np.mean((lateral - true_y) ** 2)))
     true_index = int(data["bias_index"].iloc[0])

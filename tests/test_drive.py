@@ -375,3 +375,26 @@ def test_settings_are_validated(tmp_path):
         "bias": -1.8,
     }
     assert s.env_config()["time_limit"] == 30.0 and s.env_config()["action"]["type"] == "physical"
+
+
+def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):
+    pytest.importorskip("estimators.wrappers")
+    from hasa_env.drive import estimator_wrapper
+
+    wheel = _virtual(VirtualJoystick.g29)
+    seen = []
+
+    def script(session):
+        if session.state == "driving" and session.info is not None:
+            seen.append(session.info.get("estimate_weights"))
+
+    try:
+        session, _, _ = _session(tmp_path, pg, wheel, hook_extra=script, seconds=1.0, bias=-1.8)
+        session.env_wrapper = estimator_wrapper("generalized")
+        results = session.run()
+    finally:
+        wheel.detach()
+    assert len(seen) >= 100 and all(w is not None and len(w) == 2 for w in seen)
+    assert np.allclose([sum(w) for w in seen], 1.0)
+    rec = load_recording(results[0].path)
+    assert rec.steps == 100 and "estimate_weights" not in rec.data.columns

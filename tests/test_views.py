@@ -135,12 +135,12 @@ def test_hud_shows_the_hypothesis_weights():
     )
     assert bar.sum() == pytest.approx(3 * bar0.sum(), rel=0.15)
     # taken from info when an estimator wrapper put them there
-    from_info = view.render({**info, "estimator_weights": [0.25, 0.75]})
+    from_info = view.render({**info, "estimate_weights": [0.25, 0.75]})
     assert np.array_equal(from_info, with_weights)
 
 
 def test_resolve_weights_sources():
-    info = {"estimator_weights": np.array([0.9, 0.1])}
+    info = {"estimate_weights": np.array([0.9, 0.1])}
     hyps = (0.0, -1.8)
     assert resolve_weights(None, info, hyps) == [(0.0, 0.9), (-1.8, 0.1)]
     assert resolve_weights({-1.8: 1.0}, info, hyps) == [(-1.8, 1.0)]
@@ -191,3 +191,28 @@ def test_driver_view_human_mode_opens_a_window_headless():
     assert view.render(info) is None
     assert view._window.window is not None
     view.close()
+
+
+def test_hud_shows_the_weights_an_estimator_wrapper_puts_in_info():
+    wrappers = pytest.importorskip("estimators.wrappers")
+    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+    from hasa_env.steering import GeneralizedModel
+
+    env = LaneKeepingEnv(
+        config={"render": {"width": 640, "height": 360}, "action": {"type": "physical"}}
+    )
+    ekf = GaussianMixtureEKF(
+        GeneralizedModel.paper().arx(), FilterSettings.from_env_config(env.config), dt=0.01
+    )
+    wrapped = wrappers.EstimatorInfoWrapper(env, ekf)
+    _, info = wrapped.reset(seed=0)
+    for _ in range(20):
+        _, _, _, _, info = wrapped.step([0.0, 0.0])
+    weights = np.asarray(info["estimate_weights"])
+    assert weights.shape == (2,)
+    view = DriverViewRenderer(env.setup, "rgb_array")
+    shown = view.render(info)
+    expected = view.render(info, weights=list(weights))
+    assert np.array_equal(shown, expected)  # the HUD found them in info by itself
+    plain = view.render({k: v for k, v in info.items() if not k.startswith("estimate_")})
+    assert not np.array_equal(shown, plain)
