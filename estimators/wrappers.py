@@ -123,16 +123,28 @@ def _info_values(est: Estimate, hypotheses: np.ndarray, prefix: str) -> dict[str
     return dict(zip(keys, values, strict=True))
 
 
+# bounds of the estimate observation (mean of v_x, y, v_y, b; their std), saturating
+_MEAN_LOW = (-10.0, -60.0, -200.0, -60.0)
+_MEAN_HIGH = (200.0, 60.0, 200.0, 60.0)
+_STD_HIGH = 100.0
+
+
+def _observation_bounds(num_hypotheses: int) -> tuple[np.ndarray, np.ndarray]:
+    low = np.array([*_MEAN_LOW, *([0.0] * 4), *([0.0] * num_hypotheses)])
+    high = np.array([*_MEAN_HIGH, *([_STD_HIGH] * 4), *([1.0] * num_hypotheses)])
+    return low, high
+
+
 def _observation(est: Estimate, hypotheses: np.ndarray) -> np.ndarray:
     mean, std, weights, _ = _estimate_values(est, hypotheses)
-    return np.concatenate([mean[:, :4], std[:, :4], weights], axis=1).astype(np.float32)
+    low, high = _observation_bounds(hypotheses.shape[-1])
+    obs = np.concatenate([mean[:, :4], std[:, :4], weights], axis=1)
+    return np.clip(obs, low, high).astype(np.float32)
 
 
 def _observation_space(num_hypotheses: int) -> spaces.Box:
-    inf = np.inf
-    low = np.array([-inf] * 4 + [0.0] * 4 + [0.0] * num_hypotheses, dtype=np.float32)
-    high = np.array([inf] * 8 + [1.0] * num_hypotheses, dtype=np.float32)
-    return spaces.Box(low, high, dtype=np.float32)
+    low, high = _observation_bounds(num_hypotheses)
+    return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
 
 def _markings(config: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -178,7 +190,7 @@ def _vector_config(env: VectorEnv) -> Mapping[str, Any] | None:
         return None
 
 
-class EstimatorInfoWrapper(gym.Wrapper):
+class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Runs ``estimator`` on the env's sensors and puts its estimate in ``info``.
 
     At ``reset`` the estimator is reset with the first measurements and the
@@ -215,7 +227,10 @@ class EstimatorInfoWrapper(gym.Wrapper):
         prior: np.ndarray | None = None,
         prefix: str = "estimate_",
     ) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, estimator=estimator, hypotheses=hypotheses, prior=prior, prefix=prefix
+        )
+        gym.Wrapper.__init__(self, env)
         config = _single_config(env)
         _check_timing(config, estimator)
         if hypotheses is None:
@@ -263,7 +278,9 @@ class EstimatorObservationWrapper(EstimatorInfoWrapper):
     Observation: ``Box`` float32 of length 8 + H,
     :func:`estimate_observation_names`: mixture mean and standard deviation
     of [v_x, y, v_y, b], then the probability of each of the env's H lane
-    hypotheses. Given a vector env
+    hypotheses (values saturate at the space's bounds: means of v_x in
+    [-10, 200] m/s, y in [-60, 60] m, v_y in [-200, 200] m/s, b in [-60, 60] m;
+    standard deviations in [0, 100]). Given a vector env
     this constructs a :class:`VectorEstimatorObservationWrapper`.
     """
 
