@@ -21,7 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hasa_env.road import Road
+from hasa_env.road import Road, curvature_lookup_array
 
 __all__ = [
     "Driver",
@@ -161,7 +161,8 @@ def speed_command(
         braking = profile["braking"]
         reach = v * v / (2.0 * braking) + 2.0 * v + 20.0
         ahead = reach[:, None] * _PREVIEW[None, :]
-        kappa = np.abs(road.curvature_at(info["station"][:, None] + ahead))
+        stations = info["station"][:, None] + ahead
+        kappa = np.abs(curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations))
         with np.errstate(divide="ignore"):
             bend_speed2 = np.where(kappa > 0, lateral[:, None] / kappa, np.inf)
         envelope = bend_speed2 + 2.0 * braking[:, None] * ahead

@@ -369,7 +369,9 @@ def recording_meta(frame: pd.DataFrame) -> dict[str, Any]:
     }
 
 
-def save_runs(frames: Sequence[pd.DataFrame], directory: str | Any, prefix: str = "run") -> list[Any]:
+def save_runs(
+    frames: Sequence[pd.DataFrame], directory: str | Any, prefix: str = "run"
+) -> list[Any]:
     """Save runs as recordings ``<directory>/<prefix>_000.csv`` (+ JSON sidecars).
 
     Returns the CSV paths. Uses :func:`hasa_env.recording.save_recording`, so the

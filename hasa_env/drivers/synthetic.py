@@ -10,7 +10,7 @@ two-point one barely). A synthetic human instead combines:
    to 45 m/s), computed exactly on curved roads.
 2. A sensorimotor delay of ``delay`` s (0.15-0.25): the controller sees the
    bearings of that long ago.
-3. Two-point PI control (Salvucci & Gray, velocity form; paper eq. 8 with
+3. Two-point PI control (Salvucci & Gray, velocity form; paper eq. 10 with
    DESIGN.md's corrected signs) on the delayed bearings::
 
        u(k) = u(k-1) + g(v) [k_f (omega(k) - omega(k-1)) + k_n (phi(k) - phi(k-1)) + k_I Ts phi(k)]

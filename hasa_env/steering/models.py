@@ -27,7 +27,7 @@ _MAX_ORDER = 50
 
 
 class TwoPointModel(SteeringModel):
-    """Salvucci & Gray's two-point model in corrected backward-Euler form (paper eq. 8/12).
+    """Salvucci & Gray's two-point model in corrected backward-Euler form (paper eq. 10/12).
 
     ``delta(k) = delta(k-1) + k_n [phi(k) - phi(k-1)]
     + k_f [Omega(k) - Omega(k-1)] + k_I Ts phi(k)``
