@@ -25,7 +25,11 @@ def _drive(env_id: str, seed: int, seconds: float) -> dict[str, float]:
     done = False
     while not done:
         # geometric curve following plus P-D on the true lateral offset and heading
-        steer = math.atan(2.8 * info["road_curvature"]) - 0.04 * info["lateral_offset"] - 0.4 * info["heading"]
+        steer = (
+            math.atan(2.8 * info["road_curvature"])
+            - 0.04 * info["lateral_offset"]
+            - 0.4 * info["heading"]
+        )
         _, _, term, trunc, info = env.step(np.array([steer, 0.0]))
         errors.append(info["lateral_offset"])
         camera_errors.append(info["sensor_camera_lateral"] - info["lateral_offset"])
@@ -48,7 +52,9 @@ def demo_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--seconds", type=float, default=30.0, help="episode length (s)")
     args = parser.parse_args(argv)
-    print(f"hasa-env {hasa_env.__version__}: one {args.seconds:g} s drive per env, seed {args.seed}")
+    print(
+        f"hasa-env {hasa_env.__version__}: one {args.seconds:g} s drive per env, seed {args.seed}"
+    )
     for env_id in hasa_env.ENV_IDS:
         r = _drive(env_id, args.seed, args.seconds)
         print(

@@ -66,12 +66,19 @@ _SCHEMA: dict[str, Any] = {
         kind="choice",
         choices=("straight", "curved"),
     ),
-    "sim_frequency": _Spec(100.0, "Simulation rate (Hz); Ts = 1 / sim_frequency.", low=10.0, high=10000.0),
-    "action_repeat": _Spec(
-        1, "Simulation steps per env step (policy rate = sim_frequency / action_repeat).",
-        kind="int", low=1, high=1000,
+    "sim_frequency": _Spec(
+        100.0, "Simulation rate (Hz); Ts = 1 / sim_frequency.", low=10.0, high=10000.0
     ),
-    "time_limit": _Spec(30.0, "Episode length (s); then truncated=True.", low=0.0, high=1e6, low_open=True),
+    "action_repeat": _Spec(
+        1,
+        "Simulation steps per env step (policy rate = sim_frequency / action_repeat).",
+        kind="int",
+        low=1,
+        high=1000,
+    ),
+    "time_limit": _Spec(
+        30.0, "Episode length (s); then truncated=True.", low=0.0, high=1e6, low_open=True
+    ),
     "vehicle": {
         "wheelbase": _Spec(2.8, "Wheelbase L (m).", low=0.5, high=20.0),
         "max_speed": _Spec(60.0, "Speed saturation (m/s).", low=1.0, high=150.0),
@@ -81,28 +88,43 @@ _SCHEMA: dict[str, Any] = {
         "lanes_left": _Spec(1, "Lanes left of the ego lane.", kind="int", low=0, high=5),
         "lanes_right": _Spec(0, "Lanes right of the ego lane.", kind="int", low=0, high=5),
         "offroad_margin": _Spec(
-            0.5, "How far (m) the rear-axle centre may pass the road edge before termination.",
-            low=0.0, high=10.0,
+            0.5,
+            "How far (m) the rear-axle centre may pass the road edge before termination.",
+            low=0.0,
+            high=10.0,
         ),
     },
     "initial_state": {
-        "lateral_offset": _Spec(-0.5, "Initial lateral offset y (m, left positive).", low=-10.0, high=10.0),
+        "lateral_offset": _Spec(
+            -0.5, "Initial lateral offset y (m, left positive).", low=-10.0, high=10.0
+        ),
         "heading": _Spec(0.0, "Initial heading relative to the road (rad).", low=-1.0, high=1.0),
         "speed": _Spec(15.0, "Initial speed (m/s).", low=0.0, high=150.0),
         "steering": _Spec(0.0, "Initial road-wheel angle (rad).", low=-1.0, high=1.0),
-        "lateral_offset_std": _Spec(0.0, "Std of a Gaussian added to the initial offset (m).", low=0.0, high=5.0),
-        "heading_std": _Spec(0.0, "Std of a Gaussian added to the initial heading (rad).", low=0.0, high=0.5),
-        "speed_std": _Spec(0.0, "Std of a Gaussian added to the initial speed (m/s).", low=0.0, high=20.0),
+        "lateral_offset_std": _Spec(
+            0.0, "Std of a Gaussian added to the initial offset (m).", low=0.0, high=5.0
+        ),
+        "heading_std": _Spec(
+            0.0, "Std of a Gaussian added to the initial heading (rad).", low=0.0, high=0.5
+        ),
+        "speed_std": _Spec(
+            0.0, "Std of a Gaussian added to the initial speed (m/s).", low=0.0, high=20.0
+        ),
     },
     "markings": {
         "hypotheses": _Spec(
             [0.0, -1.8],
             "Lane-centre hypotheses: the camera bias b (m) of each; camera reads y + b.",
-            kind="list", low=-20.0, high=20.0,
+            kind="list",
+            low=-20.0,
+            high=20.0,
         ),
         "probabilities": _Spec(
-            None, "Probability of each hypothesis being true (null: uniform).",
-            kind="optional_list", low=0.0, high=1.0,
+            None,
+            "Probability of each hypothesis being true (null: uniform).",
+            kind="optional_list",
+            low=0.0,
+            high=1.0,
         ),
     },
     "noise": {
@@ -112,17 +134,23 @@ _SCHEMA: dict[str, Any] = {
         "imu": _Spec(0.05, "IMU acceleration noise std, both axes (m/s^2).", low=0.0, high=50.0),
         "steering": _Spec(1e-4, "Steering-sensor noise std (rad).", low=0.0, high=1.0),
         "block_size": _Spec(
-            1000, "Steps of noise drawn per generator call (same in single and vector env).",
-            kind="int", low=1, high=1_000_000,
+            1000,
+            "Steps of noise drawn per generator call (same in single and vector env).",
+            kind="int",
+            low=1,
+            high=1_000_000,
         ),
     },
     "action": {
         "type": _Spec(
             "normalized",
             "'normalized': Box(-1, 1, (2,)) mapped linearly onto the limits; 'physical': Box in rad, m/s^2.",
-            kind="choice", choices=("normalized", "physical"),
+            kind="choice",
+            choices=("normalized", "physical"),
         ),
-        "max_steering": _Spec(0.5, "Road-wheel angle limit (rad), symmetric.", low=0.0, high=1.2, low_open=True),
+        "max_steering": _Spec(
+            0.5, "Road-wheel angle limit (rad), symmetric.", low=0.0, high=1.2, low_open=True
+        ),
         "min_acceleration": _Spec(-6.0, "Lowest acceleration (m/s^2).", low=-30.0, high=0.0),
         "max_acceleration": _Spec(6.0, "Highest acceleration (m/s^2).", low=0.0, high=30.0),
     },
@@ -130,7 +158,8 @@ _SCHEMA: dict[str, Any] = {
         "type": _Spec(
             "sensors",
             "'sensors' (biased camera etc.), 'state' (true state, oracle) or 'both' (Dict).",
-            kind="choice", choices=("sensors", "state", "both"),
+            kind="choice",
+            choices=("sensors", "state", "both"),
         ),
     },
     "reward": {
@@ -138,7 +167,9 @@ _SCHEMA: dict[str, Any] = {
         "steering_rate_weight": _Spec(
             0.5, "Weight of (change of steering per env step / max_steering)^2.", low=0.0, high=1e3
         ),
-        "offroad_penalty": _Spec(10.0, "Subtracted once when the car leaves the road.", low=0.0, high=1e6),
+        "offroad_penalty": _Spec(
+            10.0, "Subtracted once when the car leaves the road.", low=0.0, high=1e6
+        ),
     },
     "render": {
         "width": _Spec(640, "Frame width (pixels).", kind="int", low=64, high=4096),
@@ -148,10 +179,13 @@ _SCHEMA: dict[str, Any] = {
         "view": _Spec(
             "top_down",
             "'top_down' (map view following the car) or 'driver' (first-person perspective).",
-            kind="choice", choices=("top_down", "driver"),
+            kind="choice",
+            choices=("top_down", "driver"),
         ),
         "show_points": _Spec(
-            False, "Driver view: draw the near (6.2 m) and far (20 m) lane-centre points.", kind="bool"
+            False,
+            "Driver view: draw the near (6.2 m) and far (20 m) lane-centre points.",
+            kind="bool",
         ),
         "horizontal_field_of_view": _Spec(
             1.2, "Driver view: horizontal field of view (rad).", low=0.2, high=2.8
@@ -162,7 +196,10 @@ _SCHEMA: dict[str, Any] = {
 
 
 def _defaults(schema: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: (_defaults(v) if isinstance(v, Mapping) else copy.deepcopy(v.default)) for k, v in schema.items()}
+    return {
+        k: (_defaults(v) if isinstance(v, Mapping) else copy.deepcopy(v.default))
+        for k, v in schema.items()
+    }
 
 
 def default_config() -> dict[str, Any]:
@@ -236,7 +273,9 @@ def _check_number(path: str, value: Any, spec: _Spec) -> float:
     bad_low = spec.low is not None and (value <= spec.low if spec.low_open else value < spec.low)
     bad_high = spec.high is not None and value > spec.high
     if bad_low or bad_high:
-        raise ConfigError(f"config key '{path}' = {value!r} is out of range: allowed {spec.allowed()}")
+        raise ConfigError(
+            f"config key '{path}' = {value!r} is out of range: allowed {spec.allowed()}"
+        )
     return value
 
 
@@ -281,7 +320,9 @@ def _validate(config: Mapping[str, Any], schema: Mapping[str, Any], prefix: str)
         value = config[key]
         if isinstance(spec, Mapping):
             if not isinstance(value, Mapping):
-                raise ConfigError(f"config key '{path}' must be a mapping of {sorted(spec)}, got {value!r}")
+                raise ConfigError(
+                    f"config key '{path}' must be a mapping of {sorted(spec)}, got {value!r}"
+                )
             out[key] = _validate(value, spec, path + ".")
         else:
             out[key] = _validate_leaf(path, value, spec)

@@ -21,7 +21,16 @@ from hasa_env.config import make_config
 from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState
 from hasa_env.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
 
-__all__ = ["EnvSetup", "INFO_KEYS", "RECORDING_COLUMNS", "recording_row", "STATE_NAMES", "RESET_OPTIONS", "build_setup", "draw_episode"]
+__all__ = [
+    "EnvSetup",
+    "INFO_KEYS",
+    "RECORDING_COLUMNS",
+    "recording_row",
+    "STATE_NAMES",
+    "RESET_OPTIONS",
+    "build_setup",
+    "draw_episode",
+]
 
 STATE_NAMES = ("lateral_offset", "heading", "speed", "steering", "road_curvature")
 """True-state observation channels (units: m, rad, m/s, rad, 1/m)."""
@@ -53,10 +62,17 @@ reproduces the run.
 """
 
 
-
-def recording_row(step: int, info: Mapping[str, Any], reward: float, terminated: bool, truncated: bool) -> list:
+def recording_row(
+    step: int, info: Mapping[str, Any], reward: float, terminated: bool, truncated: bool
+) -> list:
     """One recording row (values in :data:`RECORDING_COLUMNS` order) from an env's ``info``."""
-    return [int(step), *(info[k] for k in INFO_KEYS), float(reward), bool(terminated), bool(truncated)]
+    return [
+        int(step),
+        *(info[k] for k in INFO_KEYS),
+        float(reward),
+        bool(terminated),
+        bool(truncated),
+    ]
 
 
 RESET_OPTIONS = ("bias", "bias_index", "lateral_offset", "heading", "speed", "steering")
@@ -185,7 +201,9 @@ def _finite_option(options: Mapping[str, Any], key: str, low: float, high: float
     except (TypeError, ValueError):
         raise ValueError(f"reset option '{key}' must be a number, got {value!r}") from None
     if not (low <= value <= high):
-        raise ValueError(f"reset option '{key}' = {value!r} is out of range: allowed [{low:g}, {high:g}]")
+        raise ValueError(
+            f"reset option '{key}' = {value!r} is out of range: allowed [{low:g}, {high:g}]"
+        )
     return value
 
 
@@ -200,7 +218,9 @@ def draw_episode(
     options = dict(options or {})
     unknown = [k for k in options if k not in RESET_OPTIONS]
     if unknown:
-        raise ValueError(f"unknown reset option {unknown[0]!r}; allowed: {', '.join(RESET_OPTIONS)}")
+        raise ValueError(
+            f"unknown reset option {unknown[0]!r}; allowed: {', '.join(RESET_OPTIONS)}"
+        )
     u = float(rng.random())
     jitter = rng.standard_normal(3)
     block = draw_noise_block(rng, setup)
@@ -209,7 +229,11 @@ def draw_episode(
     bias = setup.hypotheses[index]
     if "bias_index" in options:
         idx = options["bias_index"]
-        if isinstance(idx, bool) or not isinstance(idx, int | np.integer) or not 0 <= idx < len(setup.hypotheses):
+        if (
+            isinstance(idx, bool)
+            or not isinstance(idx, int | np.integer)
+            or not 0 <= idx < len(setup.hypotheses)
+        ):
             raise ValueError(
                 f"reset option 'bias_index' = {idx!r} is out of range: allowed integers "
                 f"0..{len(setup.hypotheses) - 1} (one per markings.hypotheses)"

@@ -49,7 +49,9 @@ def _where(cond, a, b):  # noqa: ANN001 - scalar backend helper
     return a if cond else b
 
 
-SCALAR_OPS = SimpleNamespace(sin=math.sin, cos=math.cos, sqrt=math.sqrt, minimum=min, maximum=max, where=_where)
+SCALAR_OPS = SimpleNamespace(
+    sin=math.sin, cos=math.cos, sqrt=math.sqrt, minimum=min, maximum=max, where=_where
+)
 """Backend for one car: Python floats and the math module."""
 
 ARRAY_OPS = SimpleNamespace(
@@ -159,7 +161,9 @@ def road_frame_acceleration(
     v, th = state.speed, state.heading
     cos_t, sin_t = ops.cos(th), ops.sin(th)
     s_dot = v * cos_t / (1.0 - curvature * state.lateral_offset)
-    yaw_rate = v * ops.sin(state.steering) / ops.cos(state.steering) / params.wheelbase - curvature * s_dot
+    yaw_rate = (
+        v * ops.sin(state.steering) / ops.cos(state.steering) / params.wheelbase - curvature * s_dot
+    )
     return acceleration * cos_t - v * sin_t * yaw_rate, acceleration * sin_t + v * cos_t * yaw_rate
 
 
@@ -228,4 +232,9 @@ def lane_keeping_reward(
     """
     ey = lateral_offset / half_lane
     ed = steering_change / max_steering
-    return 1.0 - lateral_weight * ey * ey - steering_rate_weight * ed * ed - offroad_penalty * terminated
+    return (
+        1.0
+        - lateral_weight * ey * ey
+        - steering_rate_weight * ed * ed
+        - offroad_penalty * terminated
+    )

@@ -261,6 +261,9 @@ class LaneKeepingEnv(gym.Env):
 def _clipped(values: tuple, low: list[float], high: list[float]) -> np.ndarray:
     """float32 observation of ``values`` saturated at the bounds."""
     return np.array(
-        [lo if v < lo else (hi if v > hi else v) for v, lo, hi in zip(values, low, high)],
+        [
+            lo if v < lo else (hi if v > hi else v)
+            for v, lo, hi in zip(values, low, high, strict=True)
+        ],
         dtype=np.float32,
     )

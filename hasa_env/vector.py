@@ -51,7 +51,11 @@ class LaneKeepingVectorEnv(VectorEnv):
     ``step`` (its action is ignored, reward 0, flags False).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP, "render_fps": 30}
+    metadata = {
+        "render_modes": ["rgb_array"],
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+        "render_fps": 30,
+    }
 
     def __init__(
         self,
@@ -64,9 +68,13 @@ class LaneKeepingVectorEnv(VectorEnv):
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode={render_mode!r} is not supported by the vector env; allowed: None, 'rgb_array'")
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported by the vector env; allowed: None, 'rgb_array'"
+            )
         if max_episode_steps is not None:
-            raise ValueError("max_episode_steps is not supported; set config['time_limit'] (s) instead")
+            raise ValueError(
+                "max_episode_steps is not supported; set config['time_limit'] (s) instead"
+            )
         self.setup = build_setup(config, track)
         self.config = self.setup.config
         self.num_envs = int(num_envs)
@@ -90,7 +98,9 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._state: VehicleState | None = None
         self._arange = np.arange(n)
         self._renderers: list[Any] | None = None
-        self._sensor_lo, self._sensor_hi = (b.astype(np.float64) for b in self.setup.sensor_bounds())
+        self._sensor_lo, self._sensor_hi = (
+            b.astype(np.float64) for b in self.setup.sensor_bounds()
+        )
         self._state_lo, self._state_hi = (b.astype(np.float64) for b in self.setup.state_bounds())
 
     # ------------------------------------------------------------------ API
@@ -168,11 +178,15 @@ class LaneKeepingVectorEnv(VectorEnv):
         if self._renderers is None:
             from hasa_env.rendering import TopDownRenderer
 
-            self._renderers = [TopDownRenderer(self.setup, "rgb_array") for _ in range(self.num_envs)]
+            self._renderers = [
+                TopDownRenderer(self.setup, "rgb_array") for _ in range(self.num_envs)
+            ]
         info = self._info()
         frames = []
         for i, renderer in enumerate(self._renderers):
-            frames.append(renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")}))
+            frames.append(
+                renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")})
+            )
         return tuple(frames)
 
     def close_extras(self, **kwargs: Any) -> None:

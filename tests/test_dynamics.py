@@ -14,7 +14,12 @@ from hasa_env.dynamics import (
     road_frame_acceleration,
     step_vehicle,
 )
-from hasa_env.road import curvature_lookup_array, curvature_lookup_scalar, curved_road, straight_road
+from hasa_env.road import (
+    curvature_lookup_array,
+    curvature_lookup_scalar,
+    curved_road,
+    straight_road,
+)
 
 
 def _zero_curvature(s):
@@ -63,7 +68,11 @@ def test_integration_error_is_negligible_against_fine_steps():
     coarse = VehicleState(0.0, -0.5, 0.0, 20.0, 0.0)
     fine = coarse
     for _ in range(3000):  # 30 s, through several bends; the controller acts at 100 Hz on both
-        delta = math.atan(2.8 * kappa(coarse.station)) - 0.02 * coarse.lateral_offset - 0.3 * coarse.heading
+        delta = (
+            math.atan(2.8 * kappa(coarse.station))
+            - 0.02 * coarse.lateral_offset
+            - 0.3 * coarse.heading
+        )
         coarse = step_vehicle(coarse, delta, 0.1, VehicleParams(dt=0.01), kappa, SCALAR_OPS)
         for _ in range(20):
             fine = step_vehicle(fine, delta, 0.1, VehicleParams(dt=5e-4), kappa, SCALAR_OPS)
@@ -86,13 +95,21 @@ def test_scalar_and_array_backends_are_bit_identical(station, y, th, v, delta, a
     inv = 1 / road.spacing
     params = VehicleParams()
     s1 = step_vehicle(
-        VehicleState(station, y, th, v, 0.0), delta, acc, params,
-        lambda s: curvature_lookup_scalar(road.curvature_list, inv, s), SCALAR_OPS,
+        VehicleState(station, y, th, v, 0.0),
+        delta,
+        acc,
+        params,
+        lambda s: curvature_lookup_scalar(road.curvature_list, inv, s),
+        SCALAR_OPS,
     )
     arr = VehicleState(*(np.array([x]) for x in (station, y, th, v, 0.0)))
     s2 = step_vehicle(
-        arr, np.array([delta]), np.array([acc]), params,
-        lambda s: curvature_lookup_array(road.curvature, inv, s), ARRAY_OPS,
+        arr,
+        np.array([delta]),
+        np.array([acc]),
+        params,
+        lambda s: curvature_lookup_array(road.curvature, inv, s),
+        ARRAY_OPS,
     )
     for a, b in zip(s1, s2, strict=True):
         assert a == float(np.asarray(b)[0])

@@ -104,7 +104,10 @@ def test_many_hypotheses_and_probabilities():
 
 
 def test_normalized_and_physical_actions():
-    env = gym.make("hasa_env/LaneKeeping-v0", config={"action": {"min_acceleration": -8, "max_acceleration": 4}})
+    env = gym.make(
+        "hasa_env/LaneKeeping-v0",
+        config={"action": {"min_acceleration": -8, "max_acceleration": 4}},
+    )
     env.reset(seed=0)
     *_, info = env.step(np.array([-1.0, 1.0]))
     assert info["steering"] == -0.5 and info["acceleration"] == 4.0
@@ -141,7 +144,10 @@ def test_step_before_reset_raises():
 @pytest.mark.parametrize(
     ("config", "message"),
     [
-        ({"noise": {"camera": -1.0}}, r"'noise.camera' = -1.0 is out of range: allowed .*\[0, 10\]"),
+        (
+            {"noise": {"camera": -1.0}},
+            r"'noise.camera' = -1.0 is out of range: allowed .*\[0, 10\]",
+        ),
         ({"noise": {"camra": 0.1}}, r"unknown config key 'noise.camra'"),
         ({"bogus": 1}, r"unknown config key 'bogus'"),
         ({"track": "oval"}, r"'track' = 'oval' is not allowed: one of 'straight', 'curved'"),
@@ -235,7 +241,16 @@ def test_curved_track_state_observation_sees_curvature():
     env.reset(seed=0, options={"lateral_offset": 0.0})
     curvatures = []
     for _ in range(1500):
-        obs, _, term, trunc, info = env.step(np.array([math.atan(2.8 * info_k) / 0.5 if (info_k := (curvatures[-1] if curvatures else 0.0)) else 0.0, 0.0]))
+        obs, _, term, trunc, info = env.step(
+            np.array(
+                [
+                    math.atan(2.8 * info_k) / 0.5
+                    if (info_k := (curvatures[-1] if curvatures else 0.0))
+                    else 0.0,
+                    0.0,
+                ]
+            )
+        )
         curvatures.append(float(obs[4]))
         if term or trunc:
             break

@@ -19,7 +19,9 @@ CONFIG = {
 @pytest.mark.parametrize("env_id", hasa_env.ENV_IDS)
 def test_vector_env_matches_sync_vector_of_single_envs(env_id):
     n = 5
-    native = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", config=CONFIG)
+    native = gym.make_vec(
+        env_id, num_envs=n, vectorization_mode="vector_entry_point", config=CONFIG
+    )
     sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", config=CONFIG)
     assert isinstance(native.unwrapped, hasa_env.LaneKeepingVectorEnv)
     assert native.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
@@ -45,7 +47,9 @@ def test_vector_env_matches_sync_vector_of_single_envs(env_id):
 
 
 def test_vector_env_spaces_and_info_masks():
-    env = gym.make_vec("hasa_env/LaneKeeping-v0", num_envs=3, vectorization_mode="vector_entry_point")
+    env = gym.make_vec(
+        "hasa_env/LaneKeeping-v0", num_envs=3, vectorization_mode="vector_entry_point"
+    )
     obs, info = env.reset(seed=0)
     assert obs.shape == (3, 6) and obs.dtype == np.float32
     assert env.observation_space.contains(obs)
