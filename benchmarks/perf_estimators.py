@@ -110,7 +110,8 @@ def run(quick: bool = False) -> dict[str, Any]:
         (median), its ``min``/``max``, ``steps``, ``repeats``, ``runs``,
         ``hypotheses`` and, for the batch, ``seconds_per_run_step``.
     """
-    from estimators import FilterpyGMEKF, FilterSettings, GaussianMixtureEKF
+    from estimators.filterpy_ekf import FilterpyGMEKF
+    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 
     plan = _PLAN_QUICK if quick else _PLAN_FULL
     z, acc, arx = _workload()

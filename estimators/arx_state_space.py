@@ -1,7 +1,11 @@
 """The augmented state-space model: vehicle + bias + an ARX steering model's memory.
 
-Paper section 5.1 (eqs. 14-17), generalised to any ARX order and corrected
-as in DESIGN.md section 5.
+Paper section 5.1 (eqs. 11-14), generalised to any ARX order and corrected
+as in DESIGN.md section 5. Equation numbers count the equations of the
+paper's source (``paper/000_27bb222d17a6bc2b.txt``): (4) discrete vehicle
+model, (5)-(6) bearings, (8) generalized steering model, (10) its fitted
+form, (11) augmented transition, (12) sensor model, (13) A_h, (14) C_h,
+(15)-(18) EKF correction, (19) weights, (20) initial mixture.
 
 State (SI units), for an ARX steering model with ``n`` memory states::
 
@@ -20,12 +24,12 @@ Visual features of a state (DESIGN.md section 3, straight-road formulas)::
     Omega = -(theta + atan(y / far))           far-point bearing (rad)
     u     = [phi, Omega, v_y]
 
-Steering model (paper eq. 11/13; ``a_j`` multiplies delta(k-j), ``beta_j``
+Steering model (paper eq. 8, fitted form eq. 10; ``a_j`` multiplies delta(k-j), ``beta_j``
 the vector (b_j, c_j, d_j) multiplying u(k-j), zero beyond each order)::
 
     delta(k) = sum_{j=1}^{n} a_j delta(k-j) + sum_{j=0}^{n} beta_j . u(k-j) + e(k)
 
-Observer canonical form (the corrected, non-circular paper eq. 14; for the
+Observer canonical form (the corrected, non-circular g_i of paper eq. 11; for the
 paper's order it is DESIGN.md's g1, g2, g3 and h3)::
 
     delta(k)   = m_n(k) + beta_0 . u(k) + e(k)                                 (h3)
@@ -40,14 +44,14 @@ Vehicle (paper eq. 4) with the IMU's road-frame accelerations as inputs::
     v_y(k+1) = v_y + Ts a_y
     b(k+1)   = b
 
-Measurements (paper eq. 15, with DESIGN.md's erratum: the speedometer
+Measurements (paper eq. 12, with DESIGN.md's erratum: the speedometer
 measures the speed, so h1 is the exact speed, not v_x)::
 
     h1 = sqrt(v_x^2 + v_y^2)      speedometer (m/s)
     h2 = y + b                    camera (m)
     h3 = m_n + beta_0 . u         steering, in the model's units (rad)
 
-Jacobians (paper eqs. 16-17, exact: DESIGN.md notes the paper's A_h has
+Jacobians (paper eqs. 13-14, exact: DESIGN.md notes the paper's A_h has
 a_2 c_0 / 6.2 where / 20 belongs, and its entries are small-angle ones)::
 
     d theta / d v_x = -v_y / (v_x^2 + v_y^2),   d theta / d v_y = v_x / (v_x^2 + v_y^2)
@@ -87,7 +91,7 @@ class ARXStateSpace:
             and bias only (the no-steering baseline; then h3 = 0).
         dt: sample time Ts (s); defaults to ``arx.dt`` (0.01 s without a model).
         decision_lag: samples between the state the driver saw and the
-            steering measurement the model predicts. 0: the paper's eq. 13 as
+            steering measurement the model predicts. 0: the paper's eq. 10 as
             written (delta(k) uses u(k)); 1: a recording's alignment, where
             row k's steering was applied over the step ending at row k and so
             decided from row k-1 (:mod:`hasa_env.steering.features`, default
@@ -186,7 +190,7 @@ class ARXStateSpace:
         return PHYSICAL_STATE_NAMES + tuple(f"memory_{i}" for i in range(1, self.n_memory + 1))
 
     def transition_matrix_template(self) -> np.ndarray:
-        """The state-independent part of dF/dx (paper eq. 16) as an (n, n) array."""
+        """The state-independent part of dF/dx (paper eq. 13) as an (n, n) array."""
         n = self.n_states
         out = np.eye(n)
         out[Y, VY] = self.dt
@@ -194,7 +198,7 @@ class ARXStateSpace:
         return out
 
     def input_matrix(self) -> np.ndarray:
-        """B_D (paper eq. 4/14): (n, 2) map of (a_x, a_y) into the state."""
+        """B_D (paper eq. 4/11): (n, 2) map of (a_x, a_y) into the state."""
         dt = self.dt
         out = np.zeros((self.n_states, 2))
         out[VX, 0] = dt
@@ -233,7 +237,7 @@ class ARXStateSpace:
 
     # ------------------------------------------------------------ transition
     def transition(self, x: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
-        """F(x) + B_D [a_x, a_y] (paper eq. 14 without noise): the state one sample later.
+        """F(x) + B_D [a_x, a_y] (paper eq. 11 without noise): the state one sample later.
 
         Args:
             x: states, shape (..., n_states).
@@ -256,7 +260,7 @@ class ARXStateSpace:
         return out
 
     def transition_jacobian(self, x: np.ndarray) -> np.ndarray:
-        """dF/dx at ``x[..., n_states]`` (paper eq. 16, exact), shape (..., n, n)."""
+        """dF/dx at ``x[..., n_states]`` (paper eq. 13, exact), shape (..., n, n)."""
         out = np.broadcast_to(
             self.transition_matrix_template(), x.shape[:-1] + (self.n_states,) * 2
         ).copy()
@@ -267,7 +271,7 @@ class ARXStateSpace:
 
     # ----------------------------------------------------------- measurement
     def measurement(self, x: np.ndarray) -> np.ndarray:
-        """h(x) = [speed, y + b, predicted steering] (paper eq. 15), shape (..., 3)."""
+        """h(x) = [speed, y + b, predicted steering] (paper eq. 12), shape (..., 3)."""
         out = np.empty(x.shape[:-1] + (3,))
         vx, vy = x[..., VX], x[..., VY]
         out[..., 0] = np.sqrt(vx * vx + vy * vy)
@@ -285,7 +289,7 @@ class ARXStateSpace:
         return value
 
     def measurement_jacobian(self, x: np.ndarray) -> np.ndarray:
-        """dh/dx at ``x[..., n_states]`` (paper eq. 17, exact), shape (..., 3, n)."""
+        """dh/dx at ``x[..., n_states]`` (paper eq. 14, exact), shape (..., 3, n)."""
         out = np.zeros(x.shape[:-1] + (3, self.n_states))
         vx, vy = x[..., VX], x[..., VY]
         speed = np.sqrt(np.maximum(vx * vx + vy * vy, _MIN_SPEED_SQ))

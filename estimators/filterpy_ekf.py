@@ -68,7 +68,7 @@ class FilterpyGMEKF:
     """The Gaussian-mixture EKF built from filterpy EKFs (reference implementation).
 
     Same interface and results as :class:`estimators.gm_ekf.GaussianMixtureEKF`
-    (see it for the equations; paper eq. 14-22): filterpy's
+    (see it for the equations; paper eq. 11-19): filterpy's
     ``ExtendedKalmanFilter.update`` uses the Joseph form and its
     ``log_likelihood`` the full multivariate normal of the innovation. Missing
     measurements drop their rows from z, H and R.

@@ -13,7 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimators import GaussianMixtureEKF, NoSteeringEKF, run_estimator
+from estimators.baselines import NoSteeringEKF
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.offline import run_estimator
 from hasa_env.drivers import population, run_population
 from hasa_env.steering import GeneralizedModel
 

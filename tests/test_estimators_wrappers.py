@@ -9,20 +9,19 @@ import numpy as np
 import pandas as pd
 import pytest
 from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode
 
 import hasa_env  # noqa: F401  (registers the env ids)
-from estimators import (
+from estimators.baselines import NoSteeringEKF, OracleEKF
+from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.offline import run_estimator
+from estimators.wrappers import (
     EstimatorInfoWrapper,
     EstimatorObservationWrapper,
-    FilterSettings,
-    GaussianMixtureEKF,
-    NoSteeringEKF,
-    OracleEKF,
     VectorEstimatorInfoWrapper,
     VectorEstimatorObservationWrapper,
     estimate_info_keys,
     estimate_observation_names,
-    run_estimator,
 )
 from hasa_env.core import RECORDING_COLUMNS, recording_row
 from hasa_env.steering.arx import ARXForm
@@ -103,10 +102,18 @@ def run_vector(env, steps: int) -> list[dict]:  # noqa: ANN001
     return out
 
 
-@pytest.mark.parametrize("mode", ["vector_entry_point", "sync"])
+@pytest.mark.parametrize("mode", ["vector_entry_point", "sync", "sync_same_step"])
 def test_vector_wrapper_equals_single_envs_across_autoresets(mode):
     config = {**PHYSICAL, "time_limit": 0.3}  # 30 steps: several autoresets
-    venv = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode=mode, config=config)
+    same_step = mode == "sync_same_step"
+    kwargs = {"vector_kwargs": {"autoreset_mode": AutoresetMode.SAME_STEP}} if same_step else {}
+    venv = gym.make_vec(
+        ENV_ID,
+        num_envs=3,
+        vectorization_mode=mode.replace("_same_step", ""),
+        config=config,
+        **kwargs,
+    )
     wrapped = EstimatorInfoWrapper(venv, make_ekf(config))
     assert isinstance(wrapped, VectorEstimatorInfoWrapper)
     infos = run_vector(wrapped, 70)
@@ -116,12 +123,15 @@ def test_vector_wrapper_equals_single_envs_across_autoresets(mode):
         expected = [info]
         done = False
         for _ in range(70):
-            if done:  # NEXT_STEP autoreset, as the vector env does it
+            if done:  # NEXT_STEP autoreset: the step after the end resets
                 _, info = env.reset()
                 done = False
             else:
                 _, _, terminated, truncated, info = env.step(steer(info))
                 done = terminated or truncated
+                if done and same_step:  # SAME_STEP: reset at once, report the new start
+                    _, info = env.reset()
+                    done = False
             expected.append(info)
         for k in range(71):
             for key in ("estimate_lateral_offset", "estimate_bias", "time"):
