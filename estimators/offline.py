@@ -85,25 +85,23 @@ class EstimationResult:
         err = self.lateral_error()[:, start:]
         return np.sqrt(np.nanmean(err * err, axis=1))
 
+    def _true_component(self) -> np.ndarray:
+        """(R, C) mask of the hypotheses equal to each run's true bias."""
+        bias = self.truth.get("bias")
+        if bias is None:
+            raise ValueError("the recordings had no bias column (no truth)")
+        return np.isclose(self.hypotheses, bias[:, :1], rtol=0.0, atol=1e-9)
+
     def true_lane_weight(self) -> np.ndarray:
-        """(R, T) weight of the true hypothesis (needs ``bias_index`` in the recordings)."""
-        index = self.truth.get("bias_index")
-        if index is None:
-            raise ValueError("the recordings had no bias_index column")
-        first = index[:, 0].astype(np.intp)
-        if np.any(first < 0) or np.any(first >= self.weights.shape[2]):
-            raise ValueError("a true bias_index is not one of the hypotheses")
-        return self.weights[np.arange(self.num_runs), :, first]
+        """(R, T) total weight of the hypotheses equal to the true bias."""
+        return np.einsum("rtc,rc->rt", self.weights, self._true_component().astype(np.float64))
 
     def picked_true_lane(self, at: int = -1) -> np.ndarray:
-        """(R,) whether the most likely hypothesis at the run's step ``at``
-        (default: its last valid step) is the true one."""
-        index = self.truth.get("bias_index")
-        if index is None:
-            raise ValueError("the recordings had no bias_index column")
+        """(R,) whether the most likely hypothesis at step ``at`` (default: each
+        run's last valid step) has the true bias."""
         steps = self.lengths - 1 if at == -1 else np.minimum(at, self.lengths - 1)
         rows = np.arange(self.num_runs)
-        return self.most_likely[rows, steps] == index[rows, 0]
+        return self._true_component()[rows, self.most_likely[rows, steps]]
 
     def to_frames(self) -> list[pd.DataFrame]:
         """One DataFrame per run: time, ``estimate_<state>`` and ``std_<state>`` of

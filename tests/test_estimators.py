@@ -241,10 +241,13 @@ def test_no_steering_baseline_confuses_lanes_1_8_m_apart(runs):
 
 
 def test_single_hypothesis_and_oracle_baselines(runs):
-    single = run_estimator(SingleHypothesisEKF(), runs[0] + runs[1]).lateral_rmse()
+    single_res = run_estimator(SingleHypothesisEKF(), runs[0] + runs[1])
+    single = single_res.lateral_rmse()
     assert np.all(single[:4] < 0.05) and np.all(np.abs(single[4:] - 1.8) < 0.05)
+    np.testing.assert_array_equal(single_res.picked_true_lane(), [True] * 4 + [False] * 4)
     oracle = run_estimator(OracleEKF(), runs[0] + runs[1])
-    assert np.all(oracle.lateral_rmse() < 0.05)
+    assert np.all(oracle.lateral_rmse() < 0.05) and oracle.picked_true_lane().all()
+    np.testing.assert_array_equal(oracle.true_lane_weight(), 1.0)
     np.testing.assert_array_equal(oracle.hypotheses[:, 0], [0.0] * 4 + [-1.8] * 4)
     with pytest.raises(ValueError, match="true_bias"):
         OracleEKF().reset(np.array([15.0, 0.0, 0.0]), HYPOTHESES)
