@@ -1082,7 +1082,9 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     return 0
 
 
-def estimator_wrapper(model: str = "generalized") -> Callable[[Any], Any]:
+def estimator_wrapper(
+    model: str = "generalized", steering_ratio: float | None = None
+) -> Callable[[Any], Any]:
     """An ``env_wrapper`` for :class:`DriveSession`: the Gaussian-mixture EKF runs alongside.
 
     Wraps each run's env in :class:`estimators.wrappers.EstimatorInfoWrapper`
@@ -1090,16 +1092,23 @@ def estimator_wrapper(model: str = "generalized") -> Callable[[Any], Any]:
     ``model`` (``"two-point"``, ``"generalized"``: the paper's presets, or a
     saved model file), so ``info["estimate_weights"]`` carries the live
     hypothesis weights the HUD shows (the recording keeps its standard columns).
+    ``steering_ratio``: model units per road-wheel radian (default 15 for the
+    paper's presets, 1 for a model file; :func:`hasa_env.replay_cli.default_steering_ratio`).
     """
     from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
     from estimators.wrappers import EstimatorInfoWrapper
-    from hasa_env.replay_cli import make_model
+    from hasa_env.replay_cli import default_steering_ratio, make_model
+
+    ratio = (
+        default_steering_ratio(model, fitted=False) if steering_ratio is None else steering_ratio
+    )
 
     def wrap(env: Any) -> Any:
         config = env.unwrapped.config
         dt = config["action_repeat"] / config["sim_frequency"]
         steering = make_model(model, dt)
-        ekf = GaussianMixtureEKF(steering.arx(), FilterSettings.from_env_config(config), dt=dt)
+        settings = FilterSettings.from_env_config(config, steering_ratio=ratio)
+        ekf = GaussianMixtureEKF(steering.arx(), settings, dt=dt)
         return EstimatorInfoWrapper(env, ekf)
 
     return wrap

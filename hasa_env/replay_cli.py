@@ -44,6 +44,9 @@ __all__ = [
     "check_replay",
     "collect_recordings",
     "estimate_recording",
+    "default_steering_ratio",
+    "in_model_units",
+    "make_model",
     "write_frames",
     "main",
 ]
@@ -138,6 +141,32 @@ def collect_recordings(paths: Sequence[str | os.PathLike[str]]) -> tuple[list[An
 
 
 # ------------------------------------------------------------ steering model
+PAPER_PRESETS = ("two-point", "generalized")
+PAPER_STEERING_RATIO = 15.0
+"""Model units per road-wheel radian of the paper's presets: their coefficients describe the
+G29's steering-wheel angle (DESIGN.md section 4: the generalized preset centres the car at
+15-45 m/s only with a steering ratio of 15)."""
+
+
+def default_steering_ratio(spec: str, fitted: bool) -> float:
+    """Steering ratio (model units per recorded road-wheel radian) for a model given by ``spec``.
+
+    The paper's presets (not refitted) work in steering-wheel units: 15; a model
+    fitted on recordings, or loaded from a file, is taken to work in road-wheel units: 1.
+    """
+    return PAPER_STEERING_RATIO if spec in PAPER_PRESETS and not fitted else 1.0
+
+
+def in_model_units(frame: Any, steering_ratio: float) -> Any:
+    """A copy of a recording frame with ``steering`` and ``sensor_steering`` times the ratio."""
+    if steering_ratio == 1.0:
+        return frame
+    out = frame.copy()
+    for column in ("steering", "sensor_steering"):
+        out[column] = frame[column] * steering_ratio
+    return out
+
+
 def make_model(spec: str, dt: float) -> Any:
     """A steering model: ``two-point`` / ``generalized`` (paper presets) or a saved model file."""
     from hasa_env.steering import GeneralizedModel, SteeringModel, TwoPointModel
@@ -189,13 +218,17 @@ class EstimatorRun:
     trusted_from: float
 
 
-def estimate_recording(recording: Any, steering_model: Any) -> EstimatorRun:
+def estimate_recording(
+    recording: Any, steering_model: Any, steering_ratio: float = 1.0
+) -> EstimatorRun:
     """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
 
     Through :func:`estimators.offline.run_estimator`: it sees what the car's
     sensors recorded (speed, biased camera, steering, IMU), with the
     hypotheses of the recording's config and filter settings from that
-    config; the steering model enters through its ARX form.
+    config; the steering model enters through its ARX form, and
+    ``steering_ratio`` (model units per recorded road-wheel radian) goes to
+    the filter settings.
     """
     from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
     from estimators.offline import run_estimator
@@ -204,7 +237,9 @@ def estimate_recording(recording: Any, steering_model: Any) -> EstimatorRun:
     cfg = recording.config
     hypotheses = np.asarray(cfg["markings"]["hypotheses"], dtype=np.float64)
     estimator = GaussianMixtureEKF(
-        steering_model.arx(), FilterSettings.from_env_config(cfg), dt=_dt(recording)
+        steering_model.arx(),
+        FilterSettings.from_env_config(cfg, steering_ratio=steering_ratio),
+        dt=_dt(recording),
     )
     result = run_estimator(estimator, data, hypotheses=hypotheses)
     n = len(data)
@@ -349,6 +384,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--fit", action="store_true", help="fit --model on the first recording, score on all"
     )
     p.add_argument(
+        "--steering-ratio",
+        type=float,
+        default=None,
+        help="model units per recorded road-wheel rad (default: 15 for the paper's presets, "
+        "which describe the steering-wheel angle; 1 for fitted or saved models)",
+    )
+    p.add_argument(
         "--estimator",
         action="store_true",
         help="run the Gaussian-mixture EKF with --model (default generalized) on each recording",
@@ -401,11 +443,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.fit:
             model = model.fit(recordings[0].data, road)
             print(f"model {spec}: fitted on {recordings[0].path}")
+        ratio = args.steering_ratio
+        if ratio is None:
+            ratio = default_steering_ratio(spec, args.fit)
+        print(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
         if args.model is not None:
             from hasa_env.steering import score
 
             for rec in recordings:
-                scores = score(model, rec.data, _road(rec))
+                scores = score(model, in_model_units(rec.data, ratio), _road(rec))
                 shown = ", ".join(
                     f"{k} {_fmt(v)}"
                     for k, v in scores.items()
@@ -416,7 +462,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs: dict[int, EstimatorRun] = {}
     if args.estimator:
         for i, rec in enumerate(recordings):
-            result = estimate_recording(rec, model)
+            result = estimate_recording(rec, model, ratio)
             runs[i] = result
             hyp = ", ".join(
                 f"{b:+g} m: {w:.3f}"

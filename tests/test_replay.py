@@ -142,3 +142,26 @@ def test_hasa_replay_runs_the_estimator_and_it_finds_the_true_lane(capsys):
     assert "lateral RMSE" in line
     final_true = float(line.split("-1.8 m: ")[1].split("]")[0])
     assert final_true > 0.9  # the sample's true bias is -1.8 m
+
+
+def test_paper_presets_are_scored_in_steering_wheel_units(capsys):
+    from hasa_env.replay_cli import default_steering_ratio, in_model_units
+
+    assert default_steering_ratio("generalized", fitted=False) == 15.0
+    assert default_steering_ratio("generalized", fitted=True) == 1.0
+    assert default_steering_ratio("my_model.json", fitted=False) == 1.0
+    rec = load_recording(SAMPLE / "run_000.csv")
+    scaled = in_model_units(rec.data, 15.0)
+    assert np.array_equal(scaled["steering"], rec.data["steering"] * 15.0)
+    assert np.array_equal(scaled["lateral_offset"], rec.data["lateral_offset"])
+
+    def r2(argv):
+        assert main([str(SAMPLE), "--model", "generalized", *argv]) == 0
+        line = next(
+            ln for ln in capsys.readouterr().out.splitlines() if "model generalized: rmse" in ln
+        )
+        return float(line.split("r2 ")[1].split(",")[0])
+
+    # the paper's generalized coefficients describe the steering-wheel angle (ratio 15)
+    assert r2([]) > 0.5
+    assert r2(["--steering-ratio", "1"]) < 0.0
