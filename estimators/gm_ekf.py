@@ -254,22 +254,20 @@ class FilterMatrices:
                 np.ascontiguousarray(a_mat.T),
                 np.ascontiguousarray(g_mat.T),
                 jac_base.ravel().copy(),
-                np.ascontiguousarray(jac_base.T).ravel().copy(),
                 maps.reshape(4, n * n).copy(),
-                np.ascontiguousarray(maps.transpose(0, 2, 1)).reshape(4, n * n),
             )
         # measurement: h_1 = |v|, [h_2, h_3] = x L^T (+ beta_0' . w)
         beta0 = model.output_gain * sign
-        linear = np.zeros((2, n))
-        linear[0, Y] = linear[0, BIAS] = 1.0
+        linear = np.zeros((3, n))  # row 0 (speed) is nonlinear, filled separately
+        linear[1, Y] = linear[1, BIAS] = 1.0
         h_base = np.zeros((3, n))
         h_base[1, Y] = h_base[1, BIAS] = 1.0
         h_maps = np.zeros((4, 3, n))
         if model.has_steering:
-            linear[1, VY] = beta0[2]
+            linear[2, VY] = beta0[2]
             h_base[2, VY] = beta0[2]
             if model.n_memory:
-                linear[1, -1] = 1.0
+                linear[2, -1] = 1.0
                 h_base[2, -1] = 1.0
             both = beta0[0] + beta0[1]
             h_maps[0, 2, VX] = both
@@ -283,12 +281,9 @@ class FilterMatrices:
         self._h_base_t = np.ascontiguousarray(h_base.T).ravel().copy()
         self._h_maps = h_maps.reshape(4, 3 * n).copy()
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
-        self._speed_index = np.array([VX, VY])
-        self._h_speed_index = np.array([0 * n + VX, 0 * n + VY])
-        self._h_speed_index_t = np.array([VX * 3 + 0, VY * 3 + 0])
+        self._h_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._measurement_var_column = self.measurement_var[:, None].copy()
         self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
-        self._eye = np.eye(n)
-        self._swap_vy_vx = np.array([VY, VX])
         self._theta_sign = np.array([-1.0, 1.0])
 
     def _features(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -300,11 +295,12 @@ class FilterMatrices:
         np.add(np.arctan(ratio), np.arctan2(vy, vx)[:, None], out=w[:, :2])
         w[:, 2] = vy
         deriv = np.empty((x.shape[0], 4))
-        # dtheta/dv_x = -v_y / v^2, dtheta/dv_y = v_x / v^2
-        deriv[:, :2] = x[:, self._swap_vy_vx] * (
-            self._theta_sign / np.maximum(vx * vx + vy * vy, 1e-12)[:, None]
-        )
-        deriv[:, 2:] = self._inverse_distance / (1.0 + ratio * ratio)
+        # dtheta/dv_x = -v_y / v^2, dtheta/dv_y = v_x / v^2 (x[:, 2::-2] = [v_y, v_x])
+        speed_sq = np.hypot(vx, vy)
+        speed_sq *= speed_sq
+        np.maximum(speed_sq, 1e-12, out=speed_sq)
+        np.multiply(x[:, VY::-VY], self._theta_sign / speed_sq[:, None], out=deriv[:, :2])
+        np.divide(self._inverse_distance, 1.0 + ratio * ratio, out=deriv[:, 2:])
         return w, deriv
 
     def predict_batch(
@@ -325,48 +321,45 @@ class FilterMatrices:
         """
         n_runs = acceleration.shape[0]
         n = x.shape[1]
-        missing_acc = np.isnan(acceleration)
-        any_missing_acc = missing_acc.any()
+        any_missing_acc = math.isnan(acceleration.sum())
         if any_missing_acc:
+            missing_acc = np.isnan(acceleration)
             acceleration = np.where(missing_acc, 0.0, acceleration)
         variant = "full"
         if self.decorrelates:
-            known = ~np.isnan(previous_steering)
-            if known.all():
+            if not math.isnan(previous_steering.sum()):
                 variant = "decorrelated"
-            elif known.any():
-                variant = "mixed"
+            else:
+                known = ~np.isnan(previous_steering)
+                if known.any():
+                    variant = "mixed"
         has_memory = self.model.n_memory > 0
         if has_memory:
             w, deriv = self._features(x)
 
-        def propagate(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            a_t, g_t, jac_base, jac_base_t, maps, maps_t = self._tables[name]
+        def propagate(name: str) -> tuple[np.ndarray, np.ndarray]:
+            a_t, g_t, jac_base, maps = self._tables[name]
             x_new = x @ a_t
             if not has_memory:
-                jac = np.broadcast_to(jac_base.reshape(n, n), (x.shape[0], n, n))
-                return x_new, jac, np.swapaxes(jac, 1, 2)
+                return x_new, np.broadcast_to(jac_base.reshape(n, n), (x.shape[0], n, n))
             x_new += w @ g_t
             jac = deriv @ maps
             jac += jac_base
-            jac_t = deriv @ maps_t
-            jac_t += jac_base_t
-            return x_new, jac.reshape(-1, n, n), jac_t.reshape(-1, n, n)
+            return x_new, jac.reshape(-1, n, n)
 
         drive = acceleration @ self.input_matrix_t  # (R, n)
         if variant == "mixed":
-            x_f, jac_f, jac_t_f = propagate("full")
-            x_d, jac_d, jac_t_d = propagate("decorrelated")
+            x_f, jac_f = propagate("full")
+            x_d, jac_d = propagate("decorrelated")
             known_b = np.repeat(known, n_comp)
             x_new = np.where(known_b[:, None], x_d, x_f)
             jac = np.where(known_b[:, None, None], jac_d, jac_f)
-            jac_t = np.where(known_b[:, None, None], jac_t_d, jac_t_f)
             q = np.where(
                 known_b[:, None, None], self.process_noise_decorrelated, self.process_noise
             )
             drive = drive + np.where(known, previous_steering, 0.0)[:, None] * self.steering_gain
         else:
-            x_new, jac, jac_t = propagate(variant)
+            x_new, jac = propagate(variant)
             if variant == "decorrelated":
                 q = self.process_noise_decorrelated
                 drive += previous_steering[:, None] * self.steering_gain
@@ -382,7 +375,8 @@ class FilterMatrices:
                 * self.process_noise_missing_acceleration
             )
             q = q + extra
-        cov_new = (jac @ cov) @ jac_t
+        # F P F^T = F (F P)^T: P is exactly symmetric (symmetrized after each update)
+        cov_new = jac @ (jac @ cov).transpose(0, 2, 1)
         cov_new += q
         return x_new, cov_new
 
@@ -402,29 +396,30 @@ class FilterMatrices:
         """
         n = x.shape[1]
         n_b = x.shape[0]
-        velocity = x[:, self._speed_index]
-        speed = np.sqrt(np.einsum("bi,bi->b", velocity, velocity))
-        h = np.empty((n_b, 3))
+        speed = np.hypot(x[:, VX], x[:, VY])
+        h = x @ self._measurement_linear_t  # [0, y + b, linear part of h_3]
         h[:, 0] = speed
-        h[:, 1:] = x @ self._measurement_linear_t
+        jac_base, jac_base_t = self._measurement_jacobian_bases(n_b)
         if self._steering_uses_bearings:
             w, deriv = self._features(x)
             h[:, 2] += w[:, :2] @ self._steering_bearing_gain
             jac = deriv @ self._h_maps
-            jac += self._h_base
+            jac += jac_base
             jac_t = deriv @ self._h_maps_t
-            jac_t += self._h_base_t
+            jac_t += jac_base_t
         else:
-            jac = np.empty((n_b, 3 * n))
-            jac[:] = self._h_base
-            jac_t = np.empty((n_b, 3 * n))
-            jac_t[:] = self._h_base_t
-        speed_row = velocity / np.maximum(speed, 1e-6)[:, None]
-        jac[:, self._h_speed_index] = speed_row
-        jac_t[:, self._h_speed_index_t] = speed_row
+            jac = jac_base.copy()
+            jac_t = jac_base_t.copy()
+        # speed row: d|v|/dv_x = v_x / |v|, d|v|/dv_y = v_y / |v| (flat indices (0, VX), (0, VY))
+        speed_row = x[:, VX : VY + 1 : VY - VX] / np.maximum(speed, 1e-6)[:, None]
+        jac[:, VX : VY + 1 : VY - VX] = speed_row
+        jac_t[:, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
         jac = jac.reshape(n_b, 3, n)
         jac_t = jac_t.reshape(n_b, n, 3)
-        innovation = (np.repeat(z, n_comp, axis=0) if n_comp > 1 else z) - h
+        if n_comp > 1:
+            innovation = (z[:, None, :] - h.reshape(-1, n_comp, 3)).reshape(n_b, 3)
+        else:
+            innovation = z - h
         r = self.measurement_var
         n_obs: float | np.ndarray = 3.0
         if not all_observed:
@@ -440,17 +435,33 @@ class FilterMatrices:
         s[:, ::4] += r
         s_inv, det = _inverse_3x3(s)
         gain_t = s_inv @ hp  # K^T (B, 3, n)
-        x_post = x + (innovation[:, None, :] @ gain_t)[:, 0, :]
-        i_kh = self._eye - np.swapaxes(gain_t, 1, 2) @ jac
-        cov_post = (i_kh @ cov) @ np.swapaxes(i_kh, 1, 2)
-        cov_post += (
-            np.swapaxes(gain_t * (r[:, None] if np.ndim(r) == 1 else r[:, :, None]), 1, 2) @ gain_t
-        )
-        cov_post += np.swapaxes(cov_post, 1, 2)
+        gain = gain_t.transpose(0, 2, 1)
+        x_post = (innovation[:, None, :] @ gain_t)[:, 0, :]
+        x_post += x
+        # Joseph form (I - K H) P (I - K H)^T + K R K^T, evaluated as
+        # A = (I - K H) P = P - K (H P), then A (I - K H)^T + K R K^T
+        # = A + (R K^T - (A H^T)^T)^T K^T
+        joseph = cov - gain @ hp
+        r_col = self._measurement_var_column if np.ndim(r) == 1 else r[:, :, None]
+        correction = gain_t * r_col
+        correction -= (joseph @ jac_t).transpose(0, 2, 1)
+        joseph += correction.transpose(0, 2, 1) @ gain_t
+        cov_post = joseph
+        cov_post += joseph.transpose(0, 2, 1)
         cov_post *= 0.5
         mahalanobis_sq = np.einsum("bi,bij,bj->b", innovation, s_inv, innovation)
-        log_lik = -0.5 * (mahalanobis_sq + np.log(det) + n_obs * _LOG_2PI)
-        return x_post, cov_post, log_lik
+        mahalanobis_sq += np.log(det)
+        mahalanobis_sq += n_obs * _LOG_2PI
+        mahalanobis_sq *= -0.5
+        return x_post, cov_post, mahalanobis_sq
+
+    def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
+        """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
+        cached = self._h_cache.get(n_b)
+        if cached is None:
+            cached = (np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1)))
+            self._h_cache = {n_b: cached}  # keep only the latest batch size
+        return cached
 
 
 # adjugate of a 3x3 matrix s flattened row-major: adj[p] = s[A[p]] s[B[p]] - s[C[p]] s[D[p]]
@@ -466,9 +477,12 @@ def _inverse_3x3(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Cheaper than ``numpy.linalg.inv`` on many small matrices and the same
     arithmetic whatever the batch size.
     """
-    adjugate = s[:, _COF_A] * s[:, _COF_B]
-    adjugate -= s[:, _COF_C] * s[:, _COF_D]
-    det = np.einsum("bi,bi->b", s[:, :3], adjugate[:, ::3])
+    adjugate = s.take(_COF_A, axis=1)
+    adjugate *= s.take(_COF_B, axis=1)
+    adjugate -= s.take(_COF_C, axis=1) * s.take(_COF_D, axis=1)
+    det = s[:, 0] * adjugate[:, 0]
+    det += s[:, 1] * adjugate[:, 3]
+    det += s[:, 2] * adjugate[:, 6]
     adjugate /= det[:, None]
     return adjugate.reshape(-1, 3, 3), det
 
@@ -795,7 +809,7 @@ class GaussianMixtureEKF:
         z = z * self._measurement_scale  # steering in model units (NaN without a model)
         steering = z[:, 2]
         x_pred, cov_pred = mats.predict_batch(x, cov, acc, previous_steering, n_comp)
-        all_observed = not np.isnan(z).any()
+        all_observed = not math.isnan(z.sum())
         x_post, cov_post, log_lik = mats.update_batch(x_pred, cov_pred, z, n_comp, all_observed)
         # ---- weights (log space)
         new_log_w = log_w + log_lik.reshape(log_w.shape)
@@ -811,9 +825,11 @@ class GaussianMixtureEKF:
             cov_post = np.where(keep[:, None, None], cov_post, cov)
         new_active = active
         if self._log_prune_threshold is not None:
-            newly = active & (new_log_w < self._log_prune_threshold)
+            newly = new_log_w < self._log_prune_threshold
+            if not all_active:
+                newly &= active
             if newly.any():
-                newly[np.arange(newly.shape[0]), np.argmax(new_log_w, axis=1)] = False
+                newly[np.arange(newly.shape[0]), new_log_w.argmax(axis=1)] = False
                 new_active = active & ~newly
                 new_log_w = _normalize_log_weights(
                     np.where(new_active, new_log_w, -np.inf), new_log_w
@@ -823,11 +839,9 @@ class GaussianMixtureEKF:
 
 def _normalize_log_weights(log_w: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     """``log_w - logsumexp(log_w)`` per run; a run whose weights all vanished keeps ``fallback``."""
-    top = np.max(log_w, axis=1, keepdims=True)
-    if np.isfinite(top).all():
-        return log_w - (np.log(np.sum(np.exp(log_w - top), axis=1, keepdims=True)) + top)
-    ok = np.isfinite(top[:, 0])
-    safe_top = np.where(ok[:, None], top, 0.0)
-    with np.errstate(under="ignore", invalid="ignore"):
-        out = log_w - (np.log(np.sum(np.exp(log_w - safe_top), axis=1, keepdims=True)) + safe_top)
-    return np.where(ok[:, None], out, fallback)
+    total = np.logaddexp.reduce(log_w, axis=1, keepdims=True)  # logsumexp, stable
+    if math.isfinite(total.sum()):
+        return log_w - total
+    ok = np.isfinite(total)
+    with np.errstate(invalid="ignore"):
+        return np.where(ok, log_w - total, fallback)
