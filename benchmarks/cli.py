@@ -1,0 +1,409 @@
+"""The ``hasa-bench`` command: the paper's benchmark, scoring your model, performance.
+
+Usage::
+
+    hasa-bench paper [options]                       # the paper's protocol, built-in models
+    hasa-bench score my_pkg.my_module:MyModel [...]  # the same, ranking your model(s)
+    hasa-bench perf [--quick] [--json FILE]          # the performance benchmarks
+
+``paper`` and ``score`` print the tables and write into ``--out``
+(default ``hasa-bench-results``): ``results.json``, CSV tables,
+``report.md`` and PNG figures. Exit status: 0 success; 1 a user model
+failed (its error names it; every other result is written); 2 invalid
+arguments or data (nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["main", "build_parser", "perf_rows", "format_perf_table", "PERF_MODULES"]
+
+PERF_MODULES = ("perf_env", "perf_estimators", "perf_render")
+"""Performance benchmark modules of :mod:`benchmarks` run by ``hasa-bench perf``."""
+
+EXIT_OK, EXIT_MODEL_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
+    data = parser.add_argument_group("runs (synthetic population)")
+    data.add_argument("--population", default="paper", help="population name (default: paper)")
+    data.add_argument(
+        "--population-seed",
+        type=int,
+        default=None,
+        metavar="N",
+        help="seed of the drivers' parameters (default: --seed)",
+    )
+    data.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the runs (0)")
+    data.add_argument("--drivers", type=int, default=9, metavar="N", help="drivers: Ill, 1.. (9)")
+    data.add_argument("--runs", type=int, default=10, metavar="N", help="runs per driver (10)")
+    data.add_argument(
+        "--ill-runs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="runs of the illustrative driver 'Ill', incl. the training run (default: runs + 4)",
+    )
+    data.add_argument(
+        "--duration", type=float, default=30.0, metavar="S", help="run length in s (30)"
+    )
+    data.add_argument(
+        "--track", choices=("straight", "curved"), default="straight", help="main track"
+    )
+    data.add_argument(
+        "--curved-runs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="extra curved-track runs of 'Ill' (steering scores; 0: none; default 1)",
+    )
+    noise = parser.add_argument_group("sensor noise (std; default: the env's)")
+    noise.add_argument("--speed-noise", type=float, metavar="M/S", help="speedometer (0.05)")
+    noise.add_argument("--camera-noise", type=float, metavar="M", help="camera offset (0.05)")
+    noise.add_argument("--imu-noise", type=float, metavar="M/S2", help="IMU (0.05)")
+    noise.add_argument("--steering-noise", type=float, metavar="RAD", help="steering (1e-4)")
+    rec = parser.add_argument_group("recorded drives instead")
+    rec.add_argument(
+        "--recordings",
+        metavar="DIR",
+        help="directory of recordings (hasa_env format); drivers from metadata.driver or "
+        "metadata.participant, else the sub-directory",
+    )
+    rec.add_argument(
+        "--illustrative",
+        metavar="NAME",
+        help="driver whose run trains the models (default 'Ill', or the first driver)",
+    )
+    rec.add_argument(
+        "--training-run",
+        type=int,
+        default=0,
+        metavar="N",
+        help="which of its main-track runs trains the models (0)",
+    )
+    run = parser.add_argument_group("execution and output")
+    run.add_argument(
+        "--workers", type=int, default=None, metavar="N", help="local processes (default: CPUs)"
+    )
+    run.add_argument(
+        "--scheduler",
+        metavar="ADDR",
+        help="Dask scheduler address (tcp://host:8786): run the tasks on that cluster",
+    )
+    run.add_argument(
+        "--batch-size",
+        type=int,
+        default=24,
+        metavar="N",
+        help="runs per task, vectorized together (speed only; results do not depend on it)",
+    )
+    run.add_argument("--out", default="hasa-bench-results", metavar="DIR", help="output directory")
+    run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    run.add_argument("--quiet", action="store_true", help="no progress, no tables")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasa-bench``."""
+    parser = argparse.ArgumentParser(
+        prog="hasa-bench",
+        description="The human-as-advisor benchmark (Mai et al.): steering-model prediction "
+        "and lane estimation on a synthetic population or recorded drives.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{paper,score,perf}")
+    paper = sub.add_parser(
+        "paper",
+        help="the paper's protocol with the two built-in models",
+        description="Fit the two-point and generalized models on one run of 'Ill', score "
+        "steering prediction (paper table 1) and lateral estimation (table 2) on every "
+        "other run; the paper's values are printed beside ours.",
+    )
+    _add_protocol_options(paper)
+    score = sub.add_parser(
+        "score",
+        help="score your steering model(s) with the same protocol",
+        description="Import each MODEL ('package.module:ClassName', a SteeringModel subclass), "
+        "fit it on the training run like the built-ins and rank it against them.",
+    )
+    score.add_argument("models", nargs="+", metavar="MODEL", help="package.module:ClassName")
+    _add_protocol_options(score)
+    perf = sub.add_parser(
+        "perf",
+        help="the performance benchmarks, one table of ratios",
+        description="Run benchmarks.perf_env, perf_estimators and perf_render (those present) "
+        "and print their measured ratios against the targets.",
+    )
+    perf.add_argument("--quick", action="store_true", help="seconds-long runs, rough numbers")
+    perf.add_argument("--json", metavar="FILE", help="also write every number as JSON")
+    perf.add_argument(
+        "--only",
+        metavar="NAMES",
+        help=f"comma-separated subset of {', '.join(m.removeprefix('perf_') for m in PERF_MODULES)}",
+    )
+    perf.add_argument("--strict", action="store_true", help="exit 1 if a target fails")
+    return parser
+
+
+# -------------------------------------------------------------------- paper/score
+def _config(args: argparse.Namespace) -> Any:
+    from benchmarks.protocol import ProtocolConfig
+
+    noise = {
+        key: value
+        for key, value in (
+            ("speed", args.speed_noise),
+            ("camera", args.camera_noise),
+            ("imu", args.imu_noise),
+            ("steering", args.steering_noise),
+        )
+        if value is not None
+    }
+    return ProtocolConfig(
+        population=args.population,
+        population_seed=args.population_seed,
+        seed=args.seed,
+        drivers=args.drivers,
+        runs=args.runs,
+        ill_runs=args.ill_runs,
+        duration=args.duration,
+        track=args.track,
+        curved_runs=args.curved_runs,
+        noise=noise,
+        recordings=args.recordings,
+        illustrative=args.illustrative,
+        training_run=args.training_run,
+        batch_size=args.batch_size,
+    )
+
+
+class _Progress:
+    """tqdm progress over runs, phase messages on stderr (nothing when quiet)."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar: Any = None
+        self.start = time.perf_counter()
+
+    def __call__(self, phase: str, done: int, total: int) -> None:
+        if self.quiet:
+            return
+        if phase == "runs":
+            if self.bar is None:
+                from tqdm import tqdm
+
+                self.bar = tqdm(total=total, unit="run", desc="scoring runs", file=sys.stderr)
+            self.bar.update(done - self.bar.n)
+            return
+        self.close()
+        print(f"[{time.perf_counter() - self.start:5.1f} s] {phase}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
+    from benchmarks.protocol import BenchmarkError, run_protocol
+    from benchmarks.report import format_tables, write_outputs
+
+    if args.workers is not None and args.workers < 1:
+        print(f"hasa-bench: --workers must be >= 1, got {args.workers}", file=sys.stderr)
+        return EXIT_USAGE
+    progress = _Progress(args.quiet)
+    try:
+        config = _config(args)
+        result = run_protocol(
+            config,
+            user_models,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=progress,
+        )
+    except BenchmarkError as exc:
+        progress.close()
+        print(f"hasa-bench: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    progress("writing results, tables and figures", 0, 0)
+    written = write_outputs(result, args.out, figures=not args.no_plots)
+    progress.close()
+    if not args.quiet:
+        print(format_tables(result))
+        print()
+        print(
+            f"wrote {len(written)} files to {Path(args.out)}/ (results.json, report.md, "
+            f"CSV tables{', figures' if not args.no_plots else ''}) in "
+            f"{result.timing['total']:.1f} s"
+        )
+    for error in result.errors:
+        print(f"hasa-bench: error: {error['message']}", file=sys.stderr)
+    return EXIT_MODEL_FAILED if result.errors else EXIT_OK
+
+
+# -------------------------------------------------------------------------- perf
+def perf_rows(name: str, results: dict[str, Any], module: Any = None) -> list[dict[str, Any]]:
+    """One row per measured ratio of a performance benchmark's ``run()`` result.
+
+    Rows: ``benchmark``, ``measure``, ``value``, ``target`` (minimum, or None),
+    ``ratio_to_target`` (value / target) and ``passed`` (None without target).
+    """
+    rows: list[dict[str, Any]] = []
+    if "targets" in results:
+        for key, t in results["targets"].items():
+            value, minimum = t.get("value"), t.get("minimum")
+            ratio = value / minimum if value is not None and minimum else None
+            rows.append(
+                {
+                    "benchmark": name,
+                    "measure": t.get("description", key),
+                    "value": value,
+                    "target": minimum,
+                    "ratio_to_target": ratio,
+                    "passed": t.get("passed"),
+                }
+            )
+        for key, value in (results.get("ratios") or {}).items():
+            if key not in results["targets"]:
+                rows.append(
+                    {
+                        "benchmark": name,
+                        "measure": key.replace("_", " "),
+                        "value": value,
+                        "target": None,
+                        "ratio_to_target": None,
+                        "passed": None,
+                    }
+                )
+    elif "ratios_to_target" in results:
+        targets = getattr(module, "TARGETS", {}) if module is not None else {}
+        for key, ratio in results["ratios_to_target"].items():
+            text, minimum = targets.get(key, (key, None))
+            measured = (results.get("results") or {}).get(key, {}).get("frames_per_second")
+            rows.append(
+                {
+                    "benchmark": name,
+                    "measure": f"{key} frames/s ({text})",
+                    "value": measured,
+                    "target": minimum,
+                    "ratio_to_target": ratio,
+                    "passed": None if ratio is None else bool(ratio >= 1.0),
+                }
+            )
+    return rows
+
+
+def format_perf_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The rows of :func:`perf_rows` as one plain-text table."""
+
+    def num(x: Any) -> str:
+        if x is None:
+            return "-"
+        return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.2f}"
+
+    header = ("benchmark", "measure", "measured", "target", "measured/target", "result")
+    lines = [
+        (
+            r["benchmark"],
+            r["measure"],
+            num(r["value"]),
+            ">= " + num(r["target"]) if r["target"] is not None else "-",
+            "-" if r["ratio_to_target"] is None else f"{r['ratio_to_target']:.2f}x",
+            {True: "PASS", False: "FAIL", None: ""}.get(r["passed"], str(r["passed"]))
+            if not r.get("error")
+            else "ERROR",
+        )
+        for r in rows
+    ]
+    widths = [max(len(h), *(len(line[i]) for line in lines)) for i, h in enumerate(header)]
+    left = {0, 1}
+
+    def render(cells: Sequence[str]) -> str:
+        return "  ".join(
+            c.ljust(w) if i in left else c.rjust(w)
+            for i, (c, w) in enumerate(zip(cells, widths, strict=True))
+        ).rstrip()
+
+    out = [render(header), "  ".join("-" * w for w in widths)]
+    out += [render(line) for line in lines]
+    return "\n".join(out)
+
+
+def _perf(args: argparse.Namespace) -> int:
+    names = list(PERF_MODULES)
+    if args.only:
+        wanted = [f"perf_{n.strip().removeprefix('perf_')}" for n in args.only.split(",") if n]
+        unknown = [w for w in wanted if w not in PERF_MODULES]
+        if unknown:
+            print(
+                f"hasa-bench perf: unknown benchmark(s) {unknown}; "
+                f"allowed: {', '.join(m.removeprefix('perf_') for m in PERF_MODULES)}",
+                file=sys.stderr,
+            )
+            return EXIT_USAGE
+        names = wanted
+    rows: list[dict[str, Any]] = []
+    everything: dict[str, Any] = {}
+    failed = False
+    for name in names:
+        try:
+            module = importlib.import_module(f"benchmarks.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"benchmarks.{name}":
+                everything[name] = {"status": "not present"}
+                continue
+            raise
+        print(f"running benchmarks.{name}{' (quick)' if args.quick else ''} ...", file=sys.stderr)
+        start = time.perf_counter()
+        try:
+            results = module.run(quick=args.quick)
+        except Exception as exc:  # noqa: BLE001 - report and continue with the others
+            failed = True
+            message = f"{type(exc).__name__}: {exc}"
+            everything[name] = {"status": "error", "error": message}
+            rows.append(
+                {
+                    "benchmark": name,
+                    "measure": message[:80],
+                    "value": None,
+                    "target": None,
+                    "ratio_to_target": None,
+                    "passed": None,
+                    "error": True,
+                }
+            )
+            continue
+        everything[name] = {"seconds": time.perf_counter() - start, "results": results}
+        rows += perf_rows(name, results, module)
+    print(format_perf_table(rows))
+    if args.quick:
+        print("(quick mode: few steps, rough numbers)")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"rows": rows, "benchmarks": everything}, fh, indent=2, default=str)
+            fh.write("\n")
+    if failed:
+        return 1
+    if args.strict and any(r["passed"] is False for r in rows):
+        return 1
+    return EXIT_OK
+
+
+# -------------------------------------------------------------------------- main
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``hasa-bench`` (returns the exit status)."""
+    args = build_parser().parse_args(argv)
+    if args.command == "perf":
+        return _perf(args)
+    user_models = args.models if args.command == "score" else []
+    return _run_protocol(args, user_models)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

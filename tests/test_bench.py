@@ -1,0 +1,446 @@
+"""hasa-bench: the paper's protocol on a reduced population, user models, executors, CLI.
+
+The reduced protocol (3 drivers, 2 runs of 4 s each, "Ill" 3 runs, one curved
+run) keeps every test fast; the numbers are checked for structure and for
+what the code must show on any population (the oracle beats everything, the
+no-steering filter cannot tell two lanes 1.8 m apart, ...).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from benchmarks.cli import format_perf_table, main, perf_rows
+from benchmarks.protocol import (
+    BenchmarkError,
+    ModelError,
+    ProtocolConfig,
+    load_user_model,
+    run_protocol,
+)
+from benchmarks.report import CSV_TABLES, FIGURES, format_tables, write_outputs
+
+SMALL = {"drivers": 3, "runs": 2, "ill_runs": 3, "duration": 4.0, "curved_runs": 1}
+SMALL_ARGS = ["--drivers", "3", "--runs", "2", "--ill-runs", "3", "--duration", "4"]
+TABLES = ("steering", "curved", "estimation", "runs_steering", "runs_estimation")
+
+USER_MODULE = '''
+"""Steering models for the hasa-bench tests: one good, several broken."""
+import numpy as np
+
+from hasa_env.steering import ARXForm, Design, Regressor, SteeringModel, lagged
+
+
+class NearFarPD(SteeringModel):
+    """delta(k) = m delta(k-1) + k_p phi(k) + k_d [phi(k) - phi(k-1)] + k_f Omega(k)."""
+
+    model_type = "bench_test_near_far_pd"
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("name", "near_far_pd")
+        super().__init__(**kwargs)
+
+    @property
+    def parameter_names(self):
+        return ("memory", "proportional", "derivative", "far")
+
+    @property
+    def regressors(self):
+        return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 1),
+                Regressor("omega", 0))
+
+    def design(self, features):
+        delta = features["delta"].to_numpy(dtype=float)
+        phi = features["phi"].to_numpy(dtype=float)
+        omega = features["omega"].to_numpy(dtype=float)
+        matrix = np.column_stack([lagged(delta, 1), phi, phi - lagged(phi, 1), omega])
+        return Design(target=delta, offset=np.zeros_like(delta), matrix=matrix)
+
+    def arx(self):
+        if not self.is_fitted:
+            return None
+        m, k_p, k_d, k_f = self.parameter_vector.tolist()
+        return ARXForm(a=(m,), b=(k_p + k_d, -k_d), c=(k_f,), near_distance=self.near_distance,
+                       far_distance=self.far_distance, dt=self.dt)
+
+
+class NaNModel(NearFarPD):
+    """Fits fine, then predicts NaN."""
+
+    model_type = "bench_test_nan"
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("name", "nan_model")
+        super().__init__(**kwargs)
+
+    def predict_features(self, features):
+        return np.full(len(features), np.nan)
+
+
+class FitRaises(NearFarPD):
+    model_type = "bench_test_fit_raises"
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("name", "fit_raises")
+        super().__init__(**kwargs)
+
+    def fit(self, runs, road=None):
+        raise RuntimeError("cannot fit this")
+
+
+class NotAModel:
+    """Has predict and fit but is no SteeringModel."""
+
+    def fit(self, runs):
+        return self
+
+    def predict(self, run):
+        return np.zeros(len(run))
+'''
+
+
+@pytest.fixture(scope="module")
+def user_module(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """A module with test steering models on sys.path; returns its name."""
+    folder = tmp_path_factory.mktemp("user_models")
+    (folder / "bench_user_models.py").write_text(textwrap.dedent(USER_MODULE))
+    sys.path.insert(0, str(folder))
+    yield "bench_user_models"
+    sys.path.remove(str(folder))
+    sys.modules.pop("bench_user_models", None)
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory: pytest.TempPathFactory, user_module: str):
+    """The reduced protocol with a good user model, in this process, written to a folder."""
+    result = run_protocol(ProtocolConfig(**SMALL), [f"{user_module}:NearFarPD"], workers=1)
+    out = tmp_path_factory.mktemp("bench_out")
+    written = write_outputs(result, out)
+    return result, out, written
+
+
+def _tables(result) -> dict:
+    doc = result.to_json_dict()
+    return {key: doc[key] for key in TABLES}
+
+
+# ------------------------------------------------------------------- structure
+def test_results_json_structure(outputs) -> None:
+    result, out, _ = outputs
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["format"] == "hasa_bench.results"
+    for key in ("config", "versions", "models", "steering", "estimation", "curved", "summary"):
+        assert key in doc
+    assert doc["config"]["drivers"] == 3 and doc["config"]["duration"] == 4.0
+    assert doc["versions"]["numpy"]
+    drivers = ["Ill", "1", "2"]
+    models = ["two_point", "generalized", "near_far_pd"]
+    steering = doc["steering"]
+    assert [(r["driver"], r["model"]) for r in steering] == [
+        (d, m) for d in drivers for m in models
+    ]
+    for row in steering:
+        for key in ("rmse", "r2", "r2_increments"):
+            assert isinstance(row[key], float) and math.isfinite(row[key])
+        assert row["n_runs"] == 2  # "Ill": 3 runs minus the training run
+        assert row["rmse"] > 0 and row["r2"] <= 1.0 and row["r2_increments"] <= 1.0
+    estimation = doc["estimation"]
+    expected = models + ["no_steering", "oracle"]
+    assert [(r["driver"], r["model"]) for r in estimation] == [
+        (d, m) for d in drivers for m in expected
+    ]
+    for row in estimation:
+        assert row["lateral_rmse_mean"] >= 0 and row["lateral_rmse_std"] >= 0
+        assert row["n_runs"] == 2
+    assert [(r["driver"], r["model"]) for r in doc["curved"]] == [("Ill", m) for m in models]
+    assert len(doc["runs_steering"]) == (6 + 1) * 3
+    assert len(doc["runs_estimation"]) == 6 * 5
+    assert doc["errors"] == []
+    # the paper's values sit beside ours
+    ill = {r["model"]: r for r in steering if r["driver"] == "Ill"}
+    assert ill["generalized"]["paper_rmse"] == 7e-4
+    assert ill["near_far_pd"]["paper_rmse"] is None
+    assert doc["paper"]["table_2"]["Ill"]["generalized_mean"] == 0.22
+
+
+def test_results_sanity(outputs) -> None:
+    """What any population must show."""
+    result, _, _ = outputs
+    est = {(r["driver"], r["model"]): r for r in result.estimation}
+    for driver in ("Ill", "1", "2"):
+        oracle = est[(driver, "oracle")]["lateral_rmse_mean"]
+        blind = est[(driver, "no_steering")]["lateral_rmse_mean"]
+        # two lanes 1.8 m apart and no steering: the mixture mean sits ~0.9 m from the truth
+        assert 0.8 < blind < 1.0
+        assert est[(driver, "no_steering")]["decided_runs"] == 0
+        assert oracle < 0.05
+        assert est[(driver, "oracle")]["steps_to_decide_median"] == 0
+        for model in ("two_point", "generalized", "near_far_pd"):
+            assert oracle <= est[(driver, model)]["lateral_rmse_mean"]
+    steer = {(r["driver"], r["model"]): r for r in result.steering}
+    for driver in ("Ill", "1", "2"):
+        two_point, general = steer[(driver, "two_point")], steer[(driver, "generalized")]
+        # the generalized model nests more dynamics than the two-point model
+        assert general["rmse"] < two_point["rmse"]
+        assert general["rmse_decrease_vs_two_point"] == pytest.approx(
+            1 - general["rmse"] / two_point["rmse"]
+        )
+        assert two_point["rmse_decrease_vs_two_point"] is None
+    runs = pd.DataFrame(result.runs_steering)
+    mean = runs[(runs.driver == "1") & (runs.model == "two_point") & (runs.track == "straight")]
+    assert steer[("1", "two_point")]["rmse"] == pytest.approx(mean["rmse"].mean())
+    ranks = {r["model"]: r["rank_steering"] for r in result.summary}
+    assert sorted(v for v in ranks.values() if v is not None) == [1, 2, 3]
+
+
+def test_output_files(outputs) -> None:
+    result, out, written = outputs
+    for name in ["results.json", "report.md", *CSV_TABLES.values(), *FIGURES.values()]:
+        assert (out / name).is_file(), name
+        assert name in written
+    for name in FIGURES.values():
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    csv = pd.read_csv(out / "estimation.csv")
+    first = result.estimation[0]
+    assert csv.loc[0, "model"] == first["model"]
+    assert csv.loc[0, "lateral_rmse_mean"] == pytest.approx(first["lateral_rmse_mean"], rel=1e-12)
+    report = (out / "report.md").read_text()
+    assert "| Driver | Model |" in report and "![lateral_error](lateral_error.png)" in report
+    text = format_tables(result)
+    assert "paper RMSE" in text and "near_far_pd" in text and "no_steering" in text
+
+
+# ------------------------------------------------------------------ user models
+def test_user_model_is_scored_and_ranked(outputs) -> None:
+    result, _, _ = outputs
+    info = {m["name"]: m for m in result.models}
+    assert info["near_far_pd"]["kind"] == "user"
+    assert info["near_far_pd"]["spec"] == "bench_user_models:NearFarPD"
+    assert set(info["near_far_pd"]["parameters"]) == {"memory", "proportional", "derivative", "far"}
+    assert info["near_far_pd"]["arx"] is True
+    summary = {r["model"]: r for r in result.summary}
+    assert summary["near_far_pd"]["rank_lateral"] in (1, 2, 3)
+    assert summary["near_far_pd"]["lateral_rmse"] < summary["no_steering"]["lateral_rmse"]
+
+
+def test_load_user_model_errors(user_module: str) -> None:
+    with pytest.raises(ModelError, match="no_such_module_xyz.*cannot import module") as info:
+        load_user_model("no_such_module_xyz:Model")
+    assert info.value.stage == "import"
+    with pytest.raises(ModelError, match="has no attribute 'Missing'"):
+        load_user_model(f"{user_module}:Missing")
+    with pytest.raises(ModelError, match="NotAModel is not a SteeringModel") as info:
+        load_user_model(f"{user_module}:NotAModel")
+    assert info.value.stage == "interface"
+    with pytest.raises(ModelError, match="package.module:ClassName"):
+        load_user_model("no_colon_here")
+    model = load_user_model(f"{user_module}:NearFarPD")
+    assert model.name == "near_far_pd" and not model.is_fitted
+
+
+def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: Path) -> None:
+    specs = [
+        "no_such_module_xyz:Model",
+        f"{user_module}:NotAModel",
+        f"{user_module}:NaNModel",
+        f"{user_module}:FitRaises",
+        f"{user_module}:NearFarPD",
+    ]
+    args = ["score", *specs, *SMALL_ARGS, "--curved-runs", "0", "--workers", "2"]
+    code = main([*args, "--out", str(tmp_path), "--quiet", "--no-plots"])
+    assert code == 1
+    doc = json.loads((tmp_path / "results.json").read_text())
+    errors = {e["model"]: e for e in doc["errors"]}
+    assert set(errors) == {"no_such_module_xyz:Model", f"{user_module}:NotAModel", "nan_model",
+                           "fit_raises"}  # fmt: skip
+    assert errors["no_such_module_xyz:Model"]["stage"] == "import"
+    assert "no_such_module_xyz" in errors["no_such_module_xyz:Model"]["message"]
+    assert errors[f"{user_module}:NotAModel"]["stage"] == "interface"
+    assert errors["nan_model"]["stage"] == "predict"
+    assert "'nan_model'" in errors["nan_model"]["message"]
+    assert "NaN" in errors["nan_model"]["message"]
+    assert errors["fit_raises"]["stage"] == "fit"
+    assert "cannot fit this" in errors["fit_raises"]["message"]
+    scored = {r["model"] for r in doc["steering"]}
+    assert scored == {"two_point", "generalized", "near_far_pd"}
+    assert {r["model"] for r in doc["estimation"]} == scored | {"no_steering", "oracle"}
+    assert all(r["driver"] in ("Ill", "1", "2") for r in doc["steering"])
+    assert (tmp_path / "report.md").read_text().count("fit_raises") >= 1
+
+
+# --------------------------------------------------------------- determinism
+def test_same_results_with_one_and_two_workers_and_any_batch_size(outputs) -> None:
+    reference = _tables(outputs[0])
+    two = run_protocol(
+        ProtocolConfig(**SMALL, batch_size=2), ["bench_user_models:NearFarPD"], workers=2
+    )
+    assert two.executor["tasks"] > 2
+    assert _tables(two) == reference
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("n_workers", "processes"), [(2, False), (1, True)])
+def test_same_results_through_dask(outputs, n_workers: int, processes: bool) -> None:
+    distributed = pytest.importorskip("distributed")
+    reference = outputs[0]
+    config = ProtocolConfig(**SMALL, batch_size=3)
+    with distributed.LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=1,
+        processes=processes,
+        dashboard_address=None,
+    ) as cluster:
+        result = run_protocol(config, workers=None, scheduler=cluster.scheduler_address)
+    assert result.executor["kind"] == "dask"
+    user = "near_far_pd"
+    expected = {
+        key: [r for r in rows if r["model"] != user] for key, rows in _tables(reference).items()
+    }
+    assert _tables(result) == expected
+
+
+# ------------------------------------------------------------------ recordings
+@pytest.mark.slow
+def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) -> None:
+    """Saved runs (the recording format writes floats exactly) score exactly as generated."""
+    from hasa_env.drivers import population, run_population, save_runs
+
+    config = ProtocolConfig(drivers=2, runs=2, ill_runs=3, duration=3.0, curved_runs=1)
+    synthetic = run_protocol(config, workers=1)
+    drivers = population("paper", seed=0, size=2)
+    env = {"time_limit": 3.0}
+    straight = run_population(drivers, runs=2, seed=0, config=env, runs_by_name={"Ill": 3})
+    curved = run_population(
+        drivers[:1], runs=1, seed=0, env_id="hasa_env/LaneKeepingCurved-v0", config=env
+    )
+    for name, frames in straight.items():
+        save_runs(frames, tmp_path / name, prefix="straight")
+    save_runs(curved["Ill"], tmp_path / "Ill", prefix="curved")
+    recorded = run_protocol(replace_recordings(config, tmp_path), workers=1)
+    assert recorded.config["illustrative"] == "Ill"
+    assert _tables(recorded) == _tables(synthetic)
+
+
+def replace_recordings(config: ProtocolConfig, folder: Path) -> ProtocolConfig:
+    from dataclasses import replace
+
+    return replace(config, recordings=str(folder))
+
+
+def test_recordings_errors(tmp_path: Path) -> None:
+    with pytest.raises(BenchmarkError, match="does not exist"):
+        run_protocol(ProtocolConfig(recordings=str(tmp_path / "nope")))
+    with pytest.raises(BenchmarkError, match="no recordings"):
+        run_protocol(ProtocolConfig(recordings=str(tmp_path)))
+
+
+# -------------------------------------------------------------------------- CLI
+def test_cli_paper_writes_everything(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    args = ["paper", *SMALL_ARGS, "--drivers", "2", "--curved-runs", "0", "--workers", "1"]
+    code = main([*args, "--out", str(tmp_path / "out"), "--camera-noise", "0.1"])
+    assert code == 0
+    shown = capsys.readouterr().out
+    assert "Steering prediction (paper table 1)" in shown and "Lateral estimation" in shown
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert doc["config"]["noise"] == {"camera": 0.1}
+    assert doc["curved"] == []
+    assert {r["driver"] for r in doc["steering"]} == {"Ill", "1"}
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["paper", "--runs", "0"],
+        ["paper", "--track", "none"],
+        ["paper", "--workers", "0"],
+        ["paper", "--population", "nobody"],
+        ["perf", "--only", "nothing"],
+    ],  # fmt: skip
+)
+def test_cli_rejects_bad_arguments(args: list[str], tmp_path: Path) -> None:
+    try:
+        code = main([*args, *(["--out", str(tmp_path / "o")] if args[0] == "paper" else [])])
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    assert code == 2
+    assert not (tmp_path / "o" / "results.json").exists()
+
+
+def test_protocol_config_validation() -> None:
+    with pytest.raises(BenchmarkError, match="training_run 3"):
+        ProtocolConfig(ill_runs=3, training_run=3)
+    with pytest.raises(BenchmarkError, match="unknown noise key 'lidar'"):
+        ProtocolConfig(noise={"lidar": 0.1})
+    with pytest.raises(BenchmarkError, match="duration"):
+        ProtocolConfig(duration=0.1)
+
+
+# ------------------------------------------------------------------------- perf
+def test_perf_rows_read_every_benchmark_layout() -> None:
+    env_like = {
+        "ratios": {"hasa_over_pendulum": 3.0, "hasa_over_highway": None},
+        "targets": {
+            "hasa_over_pendulum": {
+                "description": "hasa / Pendulum",
+                "value": 3.0,
+                "minimum": 2.0,
+                "passed": True,
+            },  # fmt: skip
+            "hasa_over_highway": {
+                "description": "hasa / highway",
+                "value": None,
+                "minimum": 10.0,
+                "passed": None,
+            },  # fmt: skip
+        },
+    }
+    est_like = {
+        "ratios": {"filterpy_over_ours_2": 4.0, "filterpy_over_ours_8": 9.0},
+        "targets": {
+            "filterpy_over_ours_2": {
+                "description": "filterpy / ours",
+                "value": 4.0,
+                "minimum": 5.0,
+                "passed": False,
+            },  # fmt: skip
+        },
+    }
+
+    class Render:
+        TARGETS = {"driver_draw": ("60 fps", 60.0)}
+
+    render_like = {
+        "ratios_to_target": {"driver_draw": 2.5},
+        "results": {"driver_draw": {"frames_per_second": 150.0}},
+    }
+    rows = (
+        perf_rows("perf_env", env_like)
+        + perf_rows("perf_estimators", est_like)
+        + perf_rows("perf_render", render_like, Render)
+    )
+    assert [r["passed"] for r in rows] == [True, None, False, None, True]
+    assert rows[0]["ratio_to_target"] == pytest.approx(1.5)
+    assert rows[3]["measure"] == "filterpy over ours 8" and rows[3]["target"] is None
+    assert rows[4]["value"] == 150.0 and rows[4]["target"] == 60.0
+    table = format_perf_table(rows)
+    assert "FAIL" in table and "PASS" in table and "2.50x" in table
+
+
+@pytest.mark.slow
+def test_cli_perf_quick_runs_a_real_benchmark(
+    capsys: pytest.CaptureFixture, tmp_path: Path
+) -> None:
+    path = tmp_path / "perf.json"
+    code = main(["perf", "--quick", "--only", "estimators", "--json", str(path)])
+    assert code == 0
+    shown = capsys.readouterr().out
+    assert "perf_estimators" in shown and "filterpy" in shown
+    doc = json.loads(path.read_text())
+    assert doc["rows"] and all(r["benchmark"] == "perf_estimators" for r in doc["rows"])
