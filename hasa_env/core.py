@@ -106,7 +106,13 @@ class EnvSetup:
 
     @property
     def dt(self) -> float:
+        """Simulation sample time Ts (s)."""
         return self.params.dt
+
+    @property
+    def env_step_duration(self) -> float:
+        """Time between two observations (s): action_repeat * Ts."""
+        return self.action_repeat * self.params.dt
 
     def curvature_scalar(self):  # noqa: ANN201
         """kappa(s) for one car (Python float in, float out); a constant 0.0 on a straight road."""

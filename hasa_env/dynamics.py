@@ -38,6 +38,7 @@ __all__ = [
     "step_vehicle",
     "road_frame_velocity",
     "road_frame_acceleration",
+    "mean_road_frame_acceleration",
     "sensor_readings",
     "lane_keeping_reward",
     "left_road",
@@ -144,6 +145,20 @@ def step_vehicle(
 def road_frame_velocity(state: VehicleState, ops: SimpleNamespace) -> tuple:
     """Road-frame velocity (v_x, v_y) = (v cos theta, v sin theta) (m/s); v_y = dy/dt."""
     return state.speed * ops.cos(state.heading), state.speed * ops.sin(state.heading)
+
+
+def mean_road_frame_acceleration(
+    start: VehicleState, end: VehicleState, interval: float, ops: SimpleNamespace
+) -> tuple:
+    """Road-frame acceleration (m/s^2) averaged over ``interval`` s from ``start`` to ``end``.
+
+    What the IMU reports at each observation: the change of (v_x, v_y) since
+    the previous observation divided by the time between them, i.e. exactly
+    the input of the paper's discrete model (eq. 4) at the observation rate.
+    """
+    vx0, vy0 = road_frame_velocity(start, ops)
+    vx1, vy1 = road_frame_velocity(end, ops)
+    return (vx1 - vx0) / interval, (vy1 - vy0) / interval
 
 
 def road_frame_acceleration(

@@ -20,6 +20,7 @@ from hasa_env.dynamics import (
     VehicleState,
     lane_keeping_reward,
     left_road,
+    mean_road_frame_acceleration,
     road_frame_acceleration,
     road_frame_velocity,
     sensor_readings,
@@ -66,8 +67,9 @@ class LaneKeepingEnv(gym.Env):
     | 4     | imu_lateral       | m/s^2  | mean d(v sin theta)/dt + noise | [-200, 200]        |
     | 5     | steering          | rad    | delta + noise                  | [-(d_max+1), ...]  |
 
-    The IMU reports the road-frame acceleration averaged over the last sample
-    (the input of the paper's eq. 4). ``"state"`` (oracle), ``Box(5,)``:
+    The IMU reports the road-frame acceleration averaged over the time since
+    the previous observation (``action_repeat`` samples; the input of the
+    paper's discrete model, eq. 4). ``"state"`` (oracle), ``Box(5,)``:
 
     | index | state            | unit | bounds             |
     |-------|------------------|------|--------------------|
@@ -153,13 +155,11 @@ class LaneKeepingEnv(gym.Env):
         previous_steering = self._state.steering
         state = self._state
         params = setup.params
+        start = state
         for _ in range(setup.action_repeat):
-            before = state
             state = step_vehicle(state, steer, acc, params, self._curvature, SCALAR_OPS)
         self._sim_step += setup.action_repeat
-        vx0, vy0 = road_frame_velocity(before, SCALAR_OPS)
-        vx1, vy1 = road_frame_velocity(state, SCALAR_OPS)
-        imu = ((vx1 - vx0) / params.dt, (vy1 - vy0) / params.dt)
+        imu = mean_road_frame_acceleration(start, state, setup.env_step_duration, SCALAR_OPS)
         self._state = state
         self._acceleration = acc
         self._finish_sample(imu, self._curvature(state.station))

@@ -33,6 +33,7 @@ from hasa_env.dynamics import (
     VehicleState,
     lane_keeping_reward,
     left_road,
+    mean_road_frame_acceleration,
     road_frame_acceleration,
     road_frame_velocity,
     sensor_readings,
@@ -133,13 +134,10 @@ class LaneKeepingVectorEnv(VectorEnv):
         resetting = self._autoreset.copy()
         state = self._state
         previous_steering = state.steering
+        start = state
         for _ in range(setup.action_repeat):
-            before = state
             state = step_vehicle(state, steer, acc, setup.params, self._curvature, ARRAY_OPS)
-        vx0, vy0 = road_frame_velocity(before, ARRAY_OPS)
-        vx1, vy1 = road_frame_velocity(state, ARRAY_OPS)
-        dt = setup.params.dt
-        imu = ((vx1 - vx0) / dt, (vy1 - vy0) / dt)
+        imu = mean_road_frame_acceleration(start, state, setup.env_step_duration, ARRAY_OPS)
         self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in state))
         self._sim_step += setup.action_repeat
         self._acceleration = acc

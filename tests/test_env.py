@@ -283,3 +283,20 @@ def test_render_without_mode_warns_and_human_mode_accepted():
     human.reset(seed=0)
     human.step(np.zeros(2))
     human.close()
+
+
+def test_imu_averages_over_the_whole_env_step_with_action_repeat():
+    """With action_repeat, the IMU is the mean acceleration since the previous observation."""
+    env = gym.make(
+        "hasa_env/LaneKeeping-v0",
+        config={"action_repeat": 5, "noise": {"imu": 0.0}, "action": {"type": "physical"}},
+    )
+    _, info0 = env.reset(seed=0)
+    *_, info1 = env.step(np.array([0.05, 2.0]))
+    interval = 5 * 0.01
+    assert info1["sensor_imu_lateral"] == pytest.approx(
+        (info1["lateral_velocity"] - info0["lateral_velocity"]) / interval, rel=1e-12
+    )
+    assert info1["sensor_imu_longitudinal"] == pytest.approx(
+        (info1["longitudinal_velocity"] - info0["longitudinal_velocity"]) / interval, rel=1e-12
+    )
