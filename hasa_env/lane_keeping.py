@@ -88,7 +88,7 @@ class LaneKeepingEnv(gym.Env):
     ## Episode end
     | flag       | when                                                               |
     |------------|--------------------------------------------------------------------|
-    | terminated | the car is past a road edge by more than offroad_margin, or faces backwards |
+    | terminated | at any simulation sample of the step, the car is past a road edge by more than offroad_margin, or faces backwards |
     | truncated  | simulated time reaches ``time_limit`` (30 s, the paper's run length) |
 
     ## Info
@@ -156,14 +156,17 @@ class LaneKeepingEnv(gym.Env):
         state = self._state
         params = setup.params
         start = state
+        lower, upper = setup.lower_edge, setup.upper_edge
+        off_road = False
         for _ in range(setup.action_repeat):
             state = step_vehicle(state, steer, acc, params, self._curvature, SCALAR_OPS)
+            off_road = off_road or left_road(state, lower, upper, SCALAR_OPS)
         self._sim_step += setup.action_repeat
         imu = mean_road_frame_acceleration(start, state, setup.env_step_duration, SCALAR_OPS)
         self._state = state
         self._acceleration = acc
         self._finish_sample(imu, self._curvature(state.station))
-        terminated = bool(left_road(state, setup.lower_edge, setup.upper_edge, SCALAR_OPS))
+        terminated = bool(off_road)
         truncated = self._sim_step >= setup.max_sim_steps
         rc = self.config["reward"]
         reward = lane_keeping_reward(
@@ -190,9 +193,9 @@ class LaneKeepingEnv(gym.Env):
         if self._state is None:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
-            from hasa_env.rendering import TopDownRenderer
+            from hasa_env.rendering import make_renderer
 
-            self._renderer = TopDownRenderer(self.setup, self.render_mode)
+            self._renderer = make_renderer(self.setup, self.render_mode)
         return self._renderer.render(self._info())
 
     def close(self) -> None:

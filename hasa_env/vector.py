@@ -23,6 +23,7 @@ from gymnasium.vector.utils import batch_space
 
 from hasa_env.core import (
     INFO_KEYS,
+    RESET_OPTIONS,
     build_setup,
     draw_episode,
     draw_noise_block,
@@ -109,6 +110,18 @@ class LaneKeepingVectorEnv(VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         n = self.num_envs
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if mask is not None:
+            mask = np.asarray(mask)
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise ValueError(
+                    f"reset option 'reset_mask' must be a bool array of shape ({n},), got {mask!r}"
+                )
+            if self._state is None and not mask.all():
+                raise ValueError(
+                    "the first reset() must reset every car (no 'reset_mask' or all True)"
+                )
         if seed is None:
             seeds: list[int | None] = [None] * n
         elif isinstance(seed, int | np.integer):
@@ -117,13 +130,20 @@ class LaneKeepingVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != n:
                 raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
-        for i, s in enumerate(seeds):
-            if s is not None:
-                self._rngs[i] = np.random.default_rng(s)
-        fields = [np.zeros(n) for _ in range(5)]
-        self._state = VehicleState(*fields)
-        self._reset_envs(self._arange, options)
-        self._autoreset[:] = False
+        idx = self._arange if mask is None else np.flatnonzero(mask)
+        # validate the options before touching any state
+        for key in options:
+            if key not in RESET_OPTIONS:
+                raise ValueError(
+                    f"unknown reset option {key!r}; allowed: {', '.join(RESET_OPTIONS)}, reset_mask"
+                )
+        for i in idx.tolist():
+            if seeds[i] is not None:
+                self._rngs[i] = np.random.default_rng(seeds[i])
+        if self._state is None:
+            self._state = VehicleState(*(np.zeros(n) for _ in range(5)))
+        self._reset_envs(idx, options)
+        self._autoreset[idx] = False
         return self._observation(), self._info()
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -135,8 +155,10 @@ class LaneKeepingVectorEnv(VectorEnv):
         state = self._state
         previous_steering = state.steering
         start = state
+        off_road = np.zeros(self.num_envs, dtype=bool)
         for _ in range(setup.action_repeat):
             state = step_vehicle(state, steer, acc, setup.params, self._curvature, ARRAY_OPS)
+            off_road |= left_road(state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
         imu = mean_road_frame_acceleration(start, state, setup.env_step_duration, ARRAY_OPS)
         self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in state))
         self._sim_step += setup.action_repeat
@@ -147,7 +169,7 @@ class LaneKeepingVectorEnv(VectorEnv):
         else:
             active = self._arange
         self._sample(active, imu, self._curvature_of(self._state.station[active]))
-        terminated = left_road(self._state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
+        terminated = off_road
         truncated = self._sim_step >= setup.max_sim_steps
         rc = self.config["reward"]
         rewards = lane_keeping_reward(

@@ -218,11 +218,6 @@ def test_hud_shows_the_weights_an_estimator_wrapper_puts_in_info():
     assert not np.array_equal(shown, plain)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="LaneKeepingEnv.render() still builds TopDownRenderer directly; once it calls "
-    "hasa_env.rendering.make_renderer (requested from the env's owner) this passes: drop the marker",
-)
 def test_env_render_honours_the_render_view_config():
     import gymnasium as gym
 
