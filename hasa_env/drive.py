@@ -186,6 +186,9 @@ class RawInputWriter:
 
     def __init__(self, path: str | os.PathLike[str], fsync: bool = False) -> None:
         self.path = Path(path)
+        if self.path.exists():
+            # left over from a recording whose CSV and sidecar were removed: keep it, aside
+            self.path.rename(self.path.with_name(f"{self.path.name}.orphaned-{time.time_ns()}"))
         self._file = open(self.path, "x", encoding="utf-8", newline="\n")  # noqa: SIM115
         self.fsync = fsync
         self._file.write("\t".join(RAW_INPUT_HEADER) + "\n")

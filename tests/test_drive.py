@@ -398,3 +398,19 @@ def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):
     assert np.allclose([sum(w) for w in seen], 1.0)
     rec = load_recording(results[0].path)
     assert rec.steps == 100 and "estimate_weights" not in rec.data.columns
+
+
+def test_raw_input_file_never_overwrites_an_orphaned_one(tmp_path):
+    from hasa_env.devices import InputReading
+    from hasa_env.drive import RawInputWriter
+
+    path = tmp_path / "run_000.inputs.tsv"
+    path.write_text("old data\n")
+    writer = RawInputWriter(path)
+    writer.write(1, 0.01, 0.0, InputReading("keyboard", 0.01, 0.01, 0.0, 0.0, 0.0))
+    writer.close()
+    (orphan,) = tmp_path.glob("run_000.inputs.tsv.orphaned-*")
+    assert orphan.read_text() == "old data\n"
+    frame = load_raw_inputs(path)
+    assert list(frame["step"]) == [1] and frame["road_wheel_angle"].iloc[0] == 0.01
+    assert np.isnan(frame["raw_steering"].iloc[0]) and frame["source"].iloc[0] == "keyboard"
