@@ -17,12 +17,14 @@ CONFIG = {
 
 
 @pytest.mark.parametrize("env_id", hasa_env.ENV_IDS)
-def test_vector_env_matches_sync_vector_of_single_envs(env_id):
+@pytest.mark.parametrize("action_repeat", [1, 3])
+def test_vector_env_matches_sync_vector_of_single_envs(env_id, action_repeat):
     n = 5
+    config = {**CONFIG, "action_repeat": action_repeat}
     native = gym.make_vec(
-        env_id, num_envs=n, vectorization_mode="vector_entry_point", config=CONFIG
+        env_id, num_envs=n, vectorization_mode="vector_entry_point", config=config
     )
-    sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", config=CONFIG)
+    sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", config=config)
     assert isinstance(native.unwrapped, hasa_env.LaneKeepingVectorEnv)
     assert native.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
     assert native.single_observation_space == sync.single_observation_space
