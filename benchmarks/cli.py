@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -101,9 +102,10 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--batch-size",
         type=int,
-        default=24,
+        default=None,
         metavar="N",
-        help="runs per task, vectorized together (speed only; results do not depend on it)",
+        help="runs per task, vectorized together (speed only; results do not depend on it; "
+        "default: one task per local worker, 16 runs per task on Dask)",
     )
     run.add_argument("--out", default="hasa-bench-results", metavar="DIR", help="output directory")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -129,8 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
     score = sub.add_parser(
         "score",
         help="score your steering model(s) with the same protocol",
-        description="Import each MODEL ('package.module:ClassName', a SteeringModel subclass), "
-        "fit it on the training run like the built-ins and rank it against them.",
+        description="Import each MODEL ('package.module:ClassName', a SteeringModel subclass, "
+        "from the working directory or the installed packages), fit it on the training run "
+        "like the built-ins and rank it against them.",
     )
     score.add_argument("models", nargs="+", metavar="MODEL", help="package.module:ClassName")
     _add_protocol_options(score)
@@ -402,6 +405,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "perf":
         return _perf(args)
     user_models = args.models if args.command == "score" else []
+    if user_models and os.getcwd() not in sys.path:
+        # like other tools that import user code by path: modules in the working directory
+        sys.path.insert(0, os.getcwd())
     return _run_protocol(args, user_models)
 
 

@@ -90,6 +90,7 @@ _NOISE_KEYS = ("speed", "camera", "camera_heading", "imu", "steering")
 _TABLE_1_KEYS = (
     "two_point_rmse", "two_point_r2_acc", "generalized_rmse", "generalized_r2_acc", "rmse_decrease"
 )  # fmt: skip
+_DASK_BATCH = 16
 _TABLE_2_KEYS = ("two_point_mean", "two_point_std", "generalized_mean", "generalized_std")
 
 
@@ -111,6 +112,10 @@ class ModelError(Exception):
         self.stage = stage
         self.detail = detail
         super().__init__(f"model {model!r} failed ({stage}): {detail}")
+
+    def __reduce__(self) -> tuple[Any, tuple[str, str, str]]:
+        # picklable, so it can come back from a worker process
+        return (type(self), (self.model, self.stage, self.detail))
 
     def to_dict(self) -> dict[str, str]:
         return {"model": self.model, "stage": self.stage, "message": str(self)}
@@ -143,7 +148,9 @@ class ProtocolConfig:
             default "Ill" if present, else the first driver by name).
         training_run: index of the training run among the illustrative
             driver's main-track runs.
-        batch_size: runs per task (performance only; results do not depend on it).
+        batch_size: runs per task (speed only; results do not depend on it).
+            None: the validation runs split evenly over the local workers
+            (one task per worker), or 16 runs per task on a Dask cluster.
         ljung_box_lags: lags of the Ljung-Box whiteness test.
         acf_lags: lags of the residual autocorrelation plot.
         weight_threshold: the true-lane weight that counts as "decided".
@@ -163,7 +170,7 @@ class ProtocolConfig:
     recordings: str | None = None
     illustrative: str | None = None
     training_run: int = 0
-    batch_size: int = 24
+    batch_size: int | None = None
     ljung_box_lags: int = 20
     acf_lags: int = 50
     weight_threshold: float = 0.95
@@ -179,7 +186,8 @@ class ProtocolConfig:
         positive_int("seed", self.seed, 0)
         positive_int("curved_runs", self.curved_runs, 0)
         positive_int("training_run", self.training_run, 0)
-        positive_int("batch_size", self.batch_size)
+        if self.batch_size is not None:
+            positive_int("batch_size", self.batch_size)
         positive_int("ljung_box_lags", self.ljung_box_lags)
         positive_int("acf_lags", self.acf_lags)
         if self.population_seed is not None:
@@ -306,7 +314,7 @@ def load_user_model(spec: str) -> Any:
 def _describe(exc: BaseException) -> str:
     """``Type: message (file:line)`` of an exception, the line being its innermost frame."""
     text = f"{type(exc).__name__}: {exc}"
-    frames = traceback.extract_tb(exc.__traceback__)
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<")]
     if frames:
         last = frames[-1]
         text += f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
@@ -529,7 +537,10 @@ def run_protocol(
         )
     validation = [r for r in main_runs if r is not training]
     if not validation:
-        raise BenchmarkError("no validation runs: the protocol needs runs besides the training run")
+        raise BenchmarkError(
+            f"no validation runs: found only the training run ({len(main_runs)} run(s) on the "
+            f"{config.track} track); the protocol scores the models on the other runs"
+        )
     notes.extend(plan.get("notes", []))
 
     # 2. fit on the training run
@@ -557,13 +568,19 @@ def run_protocol(
         "trace_runs": frozenset(trace_runs),
         "detail_driver": illustrative,
     }
+    from benchmarks.executor import default_workers, map_tasks
+
+    n_workers = default_workers() if workers is None else max(1, int(workers))
+    batch = config.batch_size
+    if batch is None:
+        batch = _DASK_BATCH if scheduler is not None else -(-len(validation) // n_workers)
     tasks = [
         ChunkTask(runs=tuple(chunk), track="curved", estimate=False, **common)
-        for chunk in _chunks(curved_runs, config.batch_size)
+        for chunk in _chunks(curved_runs, batch)
     ]
     tasks += [
         ChunkTask(runs=tuple(chunk), track=config.track, estimate=True, **common)
-        for chunk in _chunks(validation, config.batch_size)
+        for chunk in _chunks(validation, batch)
     ]
     total_runs = sum(len(t.runs) for t in tasks)
     done_runs = np.cumsum([len(t.runs) for t in tasks])
@@ -571,8 +588,6 @@ def run_protocol(
 
     def on_task(done: int) -> None:
         say("runs", int(done_runs[done - 1]), total_runs)
-
-    from benchmarks.executor import default_workers, map_tasks
 
     t_tasks = time.perf_counter()
     chunk_results: list[ChunkResult] = map_tasks(
@@ -617,13 +632,12 @@ def run_protocol(
     timing["total"] = time.perf_counter() - start
     executor = {
         "kind": "dask" if scheduler is not None else "processes",
-        "workers": None
-        if scheduler is not None
-        else (default_workers() if workers is None else int(workers)),
+        "workers": None if scheduler is not None else n_workers,
         "scheduler": None
         if scheduler is None
         else str(getattr(scheduler, "scheduler_address", scheduler)),
         "tasks": len(tasks),
+        "batch_size": batch,
     }
     return BenchmarkResult(
         config=config.to_dict() | {"illustrative": illustrative, "user_models": list(user_models)},

@@ -381,7 +381,8 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
         f"Executor: {ex['kind']}"
         + (f", {ex['workers']} workers" if ex.get("workers") else "")
         + (f", scheduler {ex['scheduler']}" if ex.get("scheduler") else "")
-        + f", {ex['tasks']} tasks. Wall time {result.timing.get('total', float('nan')):.1f} s."
+        + f", {ex['tasks']} tasks of up to {ex.get('batch_size')} runs. Protocol wall time "
+        f"{result.timing.get('total', float('nan')):.1f} s (writing files and figures excluded)."
     )
     lines.append("")
     lines.append(

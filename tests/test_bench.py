@@ -257,6 +257,7 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     code = main([*args, "--out", str(tmp_path), "--quiet", "--no-plots"])
     assert code == 1
     doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["executor"]["tasks"] == 2  # the NaN model failed in worker processes
     errors = {e["model"]: e for e in doc["errors"]}
     assert set(errors) == {"no_such_module_xyz:Model", f"{user_module}:NotAModel", "nan_model",
                            "fit_raises"}  # fmt: skip
