@@ -40,7 +40,6 @@ from hasa_env.vector import LaneKeepingVectorEnv
 
 __all__ = [
     "SB3VecEnv",  # noqa: F822 - built on first access by the module __getattr__
-    "PartialResetVectorEnv",
     "make_vector_env",
     "SteeringOnly",
     "VectorSteeringOnly",
@@ -121,76 +120,13 @@ def _autoreset_mode(venv: VectorEnv) -> AutoresetMode:
     return mode
 
 
-def _reset_cars(
-    env: LaneKeepingVectorEnv,
-    mask: np.ndarray,
-    seeds: Sequence[int | None],
-    options: Mapping[str, Any] | None,
-) -> tuple[Any, dict[str, Any]]:
-    """Reset the cars ``mask`` of a native vector env now, the others untouched.
-
-    A car without a seed continues its own generator, so it draws exactly what
-    the env's next-step autoreset would have drawn. Returns the whole batch's
-    observation and an info whose ``"_key"`` masks are ``mask``.
-    """
-    idx = np.flatnonzero(mask)
-    for i in idx.tolist():
-        if seeds[i] is not None:
-            env._rngs[i] = np.random.default_rng(seeds[i])
-    env._reset_envs(idx, dict(options) if options else None)
-    env._autoreset[idx] = False
-    info = env._info()
-    for key in list(info):
-        if key.startswith("_"):
-            info[key] = np.array(mask, dtype=bool, copy=True)
-    return env._observation(), info
-
-
-class PartialResetVectorEnv(LaneKeepingVectorEnv):
-    """The native vector env plus gymnasium's partial reset, ``reset(options={"reset_mask": m})``.
-
-    ``m`` is a bool array of shape (num_envs,): only those cars are reset (a
-    car given no seed continues its generator, as its autoreset would); the
-    other cars keep their state and pending autoresets. This is the API
-    gymnasium's own vector envs offer for resetting finished envs at once,
-    which :class:`SB3VecEnv` uses under vector wrappers. Everything else is
-    :class:`hasa_env.LaneKeepingVectorEnv`; make one with :func:`make_vector_env`.
-    """
-
-    def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[Any, dict[str, Any]]:
-        if not options or "reset_mask" not in options:
-            return super().reset(seed=seed, options=options)
-        options = dict(options)
-        mask = options.pop("reset_mask")
-        n = self.num_envs
-        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (n,):
-            raise ValueError(
-                f"options['reset_mask'] must be a numpy bool array of shape ({n},), got {mask!r}"
-            )
-        if not mask.any():
-            raise ValueError("options['reset_mask'] must select at least one env")
-        if self._state is None:
-            raise RuntimeError("reset() without reset_mask must come first")
-        if seed is None:
-            seeds: list[int | None] = [None] * n
-        elif isinstance(seed, int | np.integer):
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
-        return _reset_cars(self, mask, seeds, options)
-
-
 def make_vector_env(
     env_id: str = "hasa_env/LaneKeeping-v0",
     num_envs: int = 8,
     config: Mapping[str, Any] | None = None,
     steering_only: bool = False,
 ) -> VectorEnv:
-    """A native vector env of ``env_id`` that can reset single cars (a PartialResetVectorEnv).
+    """A native vector env of ``env_id`` (it resets single cars with ``reset_mask``).
 
     ``steering_only`` wraps it in :class:`VectorSteeringOnly`. The registered
     id only chooses the default track (``config["track"]`` wins), as with
@@ -201,7 +137,7 @@ def make_vector_env(
         raise ValueError(
             f"{env_id!r} is not a hasa_env id (vector entry point {spec.vector_entry_point!r})"
         )
-    env: VectorEnv = PartialResetVectorEnv(
+    env: VectorEnv = LaneKeepingVectorEnv(
         num_envs=num_envs, config=config, track=spec.kwargs.get("track")
     )
     env.spec = spec
@@ -209,15 +145,7 @@ def make_vector_env(
 
 
 def _partial_reset(venv: VectorEnv, mask: np.ndarray) -> tuple[Any, dict[str, Any]]:
-    """Reset only the envs in ``mask`` now; returns the whole batch's (obs, info).
-
-    gymnasium's vector envs (and :class:`PartialResetVectorEnv`) do this with
-    ``reset(options={"reset_mask": mask})``; a bare
-    :class:`~hasa_env.LaneKeepingVectorEnv` (which has no such option) is reset
-    car by car directly.
-    """
-    if type(venv) is LaneKeepingVectorEnv:
-        return _reset_cars(venv, mask, [None] * venv.num_envs, None)
+    """Reset only the envs in ``mask`` now (gymnasium's ``reset(options={"reset_mask": mask})``)."""
     return venv.reset(options={"reset_mask": np.asarray(mask, dtype=np.bool_)})
 
 
@@ -232,8 +160,7 @@ _STATELESS_WRAPPERS = (
 def _check_partial_reset(venv: VectorEnv, trusted: tuple[type, ...]) -> None:
     """Raise unless every layer of ``venv`` resets a subset of envs correctly.
 
-    The base must be the bare native env, a :class:`PartialResetVectorEnv` or
-    gymnasium's sync / async vector env; wrappers in between must be
+    The base must be the native env or gymnasium's sync / async vector env; wrappers in between must be
     stateless action / observation / reward wrappers, or in ``trusted``.
     """
     env: Any = venv
@@ -247,13 +174,6 @@ def _check_partial_reset(venv: VectorEnv, trusted: tuple[type, ...]) -> None:
                 f"SB3VecEnv(venv, trusted_wrappers=({type(env).__name__},))."
             )
         env = env.env
-    if type(env) is LaneKeepingVectorEnv and env is not venv:
-        raise TypeError(
-            "SB3VecEnv cannot reset single cars of a LaneKeepingVectorEnv under vector "
-            "wrappers: it does not accept reset(options={'reset_mask': ...}). Build it with "
-            "hasa_env.rl.make_vector_env(...) (a PartialResetVectorEnv), or pass the bare "
-            "native env."
-        )
     if not isinstance(
         env, LaneKeepingVectorEnv | gym.vector.SyncVectorEnv | gym.vector.AsyncVectorEnv
     ):
@@ -285,8 +205,7 @@ class _SB3VecEnvBody:
     so the episodes are those of SB3's ``DummyVecEnv`` over single envs
     seeded ``seed + i`` (``seed(seed)`` then ``reset()``).
 
-    The partial reset is gymnasium's ``reset(options={"reset_mask": m})``
-    (the bare native env, which lacks it, is reset car by car directly).
+    The partial reset is gymnasium's ``reset(options={"reset_mask": m})``.
     Vector wrappers between the adapter and the base env must pass it on
     correctly: stateless action, observation and reward wrappers do; any
     other wrapper is refused unless listed in ``trusted_wrappers``.

@@ -118,9 +118,11 @@ class LaneKeepingVectorEnv(VectorEnv):
                 raise ValueError(
                     f"reset option 'reset_mask' must be a bool array of shape ({n},), got {mask!r}"
                 )
+            if not mask.any():
+                raise ValueError("reset option 'reset_mask' must select at least one env")
             if self._state is None and not mask.all():
-                raise ValueError(
-                    "the first reset() must reset every car (no 'reset_mask' or all True)"
+                raise RuntimeError(
+                    "reset() without reset_mask must come first (it resets every car)"
                 )
         if seed is None:
             seeds: list[int | None] = [None] * n
@@ -144,7 +146,11 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._state = VehicleState(*(np.zeros(n) for _ in range(5)))
         self._reset_envs(idx, options)
         self._autoreset[idx] = False
-        return self._observation(), self._info()
+        info = self._info()
+        if mask is not None:  # as gymnasium's vector envs: info entries of the reset cars only
+            for key in INFO_KEYS:
+                info["_" + key] = mask.copy()
+        return self._observation(), info
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if self._state is None:

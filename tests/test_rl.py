@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import hasa_env
+from hasa_env import LaneKeepingVectorEnv
 from hasa_env.core import INFO_KEYS
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population
 from hasa_env.rl import (
@@ -14,7 +15,6 @@ from hasa_env.rl import (
     ConstantSteering,
     DriverPolicy,
     HumanAdvisor,
-    PartialResetVectorEnv,
     SteeringOnly,
     VectorSteeringOnly,
     env_action,
@@ -32,8 +32,8 @@ def _driver() -> SyntheticDriver:
 
 def test_partial_reset_resets_only_masked_cars_like_their_autoreset():
     config = {"time_limit": 0.2, "initial_state": {"lateral_offset_std": 0.5}}
-    a = PartialResetVectorEnv(num_envs=3, config=config)
-    b = PartialResetVectorEnv(num_envs=3, config=config)
+    a = LaneKeepingVectorEnv(num_envs=3, config=config)
+    b = LaneKeepingVectorEnv(num_envs=3, config=config)
     a.reset(seed=4)
     b.reset(seed=4)
     actions = np.tile([0.1, 0.0], (3, 1))
@@ -57,12 +57,12 @@ def test_partial_reset_resets_only_masked_cars_like_their_autoreset():
 
 
 def test_partial_reset_rejects_bad_masks():
-    env = PartialResetVectorEnv(num_envs=2)
+    env = LaneKeepingVectorEnv(num_envs=2)
     with pytest.raises(RuntimeError, match="reset_mask must come first"):
         env.reset(options={"reset_mask": np.array([True, False])})
     env.reset(seed=0)
     with pytest.raises(ValueError, match="bool array of shape"):
-        env.reset(options={"reset_mask": [True, False]})
+        env.reset(options={"reset_mask": np.array([True, False, True])})
     with pytest.raises(ValueError, match="at least one"):
         env.reset(options={"reset_mask": np.zeros(2, dtype=bool)})
     with pytest.raises(ValueError, match="unknown reset option"):
@@ -72,7 +72,7 @@ def test_partial_reset_rejects_bad_masks():
 def test_make_vector_env_uses_the_ids_track():
     env = make_vector_env("hasa_env/LaneKeepingCurved-v0", num_envs=2, steering_only=True)
     assert env.unwrapped.config["track"] == "curved"
-    assert isinstance(env.unwrapped, PartialResetVectorEnv)
+    assert isinstance(env.unwrapped, LaneKeepingVectorEnv)
     assert env.single_action_space.shape == (1,)
     with pytest.raises(ValueError, match="not a hasa_env id"):
         make_vector_env("CartPole-v1")

@@ -161,10 +161,10 @@ def test_adapter_seed_options_and_errors():
     assert env.env_is_wrapped(gym.Wrapper) == [False, False, False]
     with pytest.raises(NotImplementedError, match="per-env objects"):
         env.env_method("render")
-    # a plain native env under a vector wrapper cannot reset single cars
+    # the native env made by gym.make_vec resets single cars itself (reset_mask)
     plain = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point")
-    with pytest.raises(TypeError, match="make_vector_env"):
-        SB3VecEnv(VectorSteeringOnly(plain))
+    adapted = SB3VecEnv(VectorSteeringOnly(plain))
+    assert adapted.reset().shape == (2, 6)
     with pytest.raises(TypeError, match="VectorEnv"):
         SB3VecEnv(gym.make(ENV_ID))
 
