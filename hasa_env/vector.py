@@ -202,11 +202,9 @@ class LaneKeepingVectorEnv(VectorEnv):
             gym.logger.warn("render() called without render_mode='rgb_array'")
             return None
         if self._renderers is None:
-            from hasa_env.rendering import TopDownRenderer
+            from hasa_env.rendering import make_renderer
 
-            self._renderers = [
-                TopDownRenderer(self.setup, "rgb_array") for _ in range(self.num_envs)
-            ]
+            self._renderers = [make_renderer(self.setup, "rgb_array") for _ in range(self.num_envs)]
         info = self._info()
         frames = []
         for i, renderer in enumerate(self._renderers):

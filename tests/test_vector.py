@@ -107,3 +107,18 @@ def test_off_road_detected_at_every_sample_within_an_action_repeat():
     # steer hard right: the car leaves the left edge (2.3 m) and comes back within the step
     _, _, term, _, info = env.step(np.array([-0.5, 0.0]))
     assert term and info["lateral_offset"] < 2.3
+
+
+def test_vector_render_honours_the_view_config():
+    env = hasa_env.LaneKeepingVectorEnv(
+        num_envs=1,
+        render_mode="rgb_array",
+        config={"render": {"view": "driver", "width": 320, "height": 180}},
+    )
+    env.reset(seed=0)
+    top = hasa_env.LaneKeepingVectorEnv(
+        num_envs=1, render_mode="rgb_array", config={"render": {"width": 320, "height": 180}}
+    )
+    top.reset(seed=0)
+    assert env.render()[0].shape == (180, 320, 3)
+    assert not np.array_equal(env.render()[0], top.render()[0])
