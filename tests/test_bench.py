@@ -253,7 +253,17 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
         f"{user_module}:FitRaises",
         f"{user_module}:NearFarPD",
     ]
-    args = ["score", *specs, *SMALL_ARGS, "--curved-runs", "0", "--workers", "2"]
+    args = [
+        "score",
+        *specs,
+        *SMALL_ARGS,
+        "--curved-runs",
+        "0",
+        "--workers",
+        "2",
+        "--batch-size",
+        "3",
+    ]
     code = main([*args, "--out", str(tmp_path), "--quiet", "--no-plots"])
     assert code == 1
     doc = json.loads((tmp_path / "results.json").read_text())
@@ -277,13 +287,23 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
 
 
 # --------------------------------------------------------------- determinism
-def test_same_results_with_one_and_two_workers_and_any_batch_size(outputs) -> None:
-    reference = _tables(outputs[0])
-    two = run_protocol(
-        ProtocolConfig(**SMALL, batch_size=2), ["bench_user_models:NearFarPD"], workers=2
-    )
-    assert two.executor["tasks"] > 2
-    assert _tables(two) == reference
+def test_same_results_with_one_and_two_workers(outputs) -> None:
+    config = ProtocolConfig(**SMALL, batch_size=2)
+    one = run_protocol(config, ["bench_user_models:NearFarPD"], workers=1)
+    two = run_protocol(config, ["bench_user_models:NearFarPD"], workers=2)
+    assert one.executor["tasks"] == two.executor["tasks"] == 4
+    assert _tables(two) == _tables(one)
+    # another batch size: the same runs and the same numbers up to rounding
+    other = _tables(outputs[0])
+    for key, rows in _tables(one).items():
+        assert len(rows) == len(other[key])
+        for mine, theirs in zip(rows, other[key], strict=True):
+            assert mine.keys() == theirs.keys()
+            for field, value in mine.items():
+                if isinstance(value, float):
+                    assert value == pytest.approx(theirs[field], rel=1e-9, abs=1e-15), field
+                else:
+                    assert value == theirs[field], field
 
 
 @pytest.mark.slow
@@ -291,7 +311,7 @@ def test_same_results_with_one_and_two_workers_and_any_batch_size(outputs) -> No
 def test_same_results_through_dask(outputs, n_workers: int, processes: bool) -> None:
     distributed = pytest.importorskip("distributed")
     reference = outputs[0]
-    config = ProtocolConfig(**SMALL, batch_size=3)
+    config = ProtocolConfig(**SMALL)
     with distributed.LocalCluster(
         n_workers=n_workers,
         threads_per_worker=1,
