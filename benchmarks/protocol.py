@@ -38,8 +38,8 @@ over local processes or a Dask cluster
 (:func:`benchmarks.executor.map_tasks`). Every run is seeded on its own and
 the tasks depend only on the protocol (never on the executor or the number
 of workers), so results are identical on any executor and worker count. A
-different ``batch_size`` can change per-run numbers in their last digits
-(batched floating-point arithmetic), never more.
+different ``batch_size`` can change per-run numbers by floating-point
+rounding (batched arithmetic; in practice in their last digits).
 
 A user model that cannot be imported, does not implement
 :class:`hasa_env.steering.SteeringModel`, raises while fitting, predicting
@@ -592,9 +592,16 @@ def run_protocol(
         say("runs", int(done_runs[done - 1]), total_runs)
 
     t_tasks = time.perf_counter()
-    chunk_results: list[ChunkResult] = map_tasks(
-        run_chunk, tasks, workers=workers, scheduler=scheduler, progress=on_task
-    )
+    try:
+        chunk_results: list[ChunkResult] = map_tasks(
+            run_chunk, tasks, workers=workers, scheduler=scheduler, progress=on_task
+        )
+    except (OSError, TimeoutError) as exc:
+        if scheduler is None:
+            raise
+        raise BenchmarkError(
+            f"cannot run the tasks on the Dask scheduler {scheduler!r}: {_describe(exc)}"
+        ) from None
     timing["tasks"] = time.perf_counter() - t_tasks
     timing["task_cpu_seconds"] = float(sum(c.seconds for c in chunk_results))
 
@@ -1030,7 +1037,7 @@ def _score_model(
                 "n": int(row["n"]),
             }
         )
-        if ref.driver == task.detail_driver and ref.track == task.track:
+        if task.estimate and ref.driver == task.detail_driver:
             residual = features["delta"].to_numpy(dtype=np.float64) - prediction
             diag = residual_diagnostics(residual[np.isfinite(residual)], lags=task.acf_lags)
             out.acf.setdefault(fm.name, []).append(diag.autocorrelation)

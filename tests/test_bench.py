@@ -327,6 +327,14 @@ def test_same_results_through_dask(outputs, n_workers: int, processes: bool) -> 
     assert _tables(result) == expected
 
 
+def test_unreachable_scheduler_is_a_clear_error(tmp_path: Path) -> None:
+    dask = pytest.importorskip("dask")
+    pytest.importorskip("distributed")
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        with pytest.raises(BenchmarkError, match="cannot run the tasks on the Dask scheduler"):
+            run_protocol(ProtocolConfig(**SMALL), scheduler="tcp://127.0.0.1:9")
+
+
 # ------------------------------------------------------------------ recordings
 @pytest.mark.slow
 def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) -> None:
