@@ -95,6 +95,19 @@ class FitRaises(NearFarPD):
         raise RuntimeError("cannot fit this")
 
 
+class NoARX(NearFarPD):
+    """A good model without an ARX form: steering scores only."""
+
+    model_type = "bench_test_no_arx"
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("name", "no_arx")
+        super().__init__(**kwargs)
+
+    def arx(self):
+        return None
+
+
 class NotAModel:
     """Has predict and fit but is no SteeringModel."""
 
@@ -252,6 +265,7 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
         f"{user_module}:NaNModel",
         f"{user_module}:FitRaises",
         f"{user_module}:NearFarPD",
+        f"{user_module}:NoARX",
     ]
     args = [
         "score",
@@ -280,8 +294,13 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert errors["fit_raises"]["stage"] == "fit"
     assert "cannot fit this" in errors["fit_raises"]["message"]
     scored = {r["model"] for r in doc["steering"]}
-    assert scored == {"two_point", "generalized", "near_far_pd"}
-    assert {r["model"] for r in doc["estimation"]} == scored | {"no_steering", "oracle"}
+    assert scored == {"two_point", "generalized", "near_far_pd", "no_arx"}
+    estimated = {"two_point", "generalized", "near_far_pd", "no_steering", "oracle"}
+    assert {r["model"] for r in doc["estimation"]} == estimated
+    no_arx = next(m for m in doc["models"] if m["name"] == "no_arx")
+    assert no_arx["arx"] is False and "not an ARX model" in no_arx["note"]
+    ranks = {r["model"]: (r["rank_steering"], r["rank_lateral"]) for r in doc["summary"]}
+    assert ranks["no_arx"][0] is not None and ranks["no_arx"][1] is None
     assert all(r["driver"] in ("Ill", "1", "2") for r in doc["steering"])
     assert (tmp_path / "report.md").read_text().count("fit_raises") >= 1
 
@@ -473,3 +492,19 @@ def test_cli_perf_quick_runs_a_real_benchmark(
     assert "perf_estimators" in shown and "filterpy" in shown
     doc = json.loads(path.read_text())
     assert doc["rows"] and all(r["benchmark"] == "perf_estimators" for r in doc["rows"])
+
+
+def test_python_dash_m_benchmarks_is_the_cli() -> None:
+    import subprocess
+
+    done = subprocess.run(
+        [sys.executable, "-m", "benchmarks", "score", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=Path(__file__).resolve().parent.parent,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    for option in ("--recordings", "--scheduler", "--workers", "--population", "--quiet"):
+        assert option in done.stdout
