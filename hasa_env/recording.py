@@ -769,6 +769,17 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
                 json_path,
                 column="steps",
             )
+    # the same attrs as the drivers' runner gives its frames, so downstream code
+    # (road of the track, lane hypotheses) treats loaded and generated runs alike
+    frame.attrs = {
+        "env_id": meta.get("env_id"),
+        "config": meta["config"],
+        "track": meta["config"]["track"],
+        "seed": meta.get("seed"),
+        "reset_options": dict(meta.get("reset_options") or {}),
+        "metadata": dict(meta.get("metadata") or {}),
+        "path": str(csv_path),
+    }
     return Recording(frame, meta, csv_path, notes)
 
 

@@ -548,3 +548,18 @@ def test_no_warnings_on_a_clean_round_trip(tmp_path):
         env, _ = _record(tmp_path, 3)
         load_recordings(tmp_path)
     assert not [name for name in os.listdir(tmp_path) if name.endswith(".tmp")]
+
+
+def test_loaded_frames_carry_the_config_for_downstream_code(tmp_path):
+    """Estimators and steering features read the track and hypotheses from frame.attrs."""
+    from estimators.offline import hypotheses_of
+
+    cfg = {"track": "curved", "markings": {"hypotheses": [0.0, 1.8, -1.8]}}
+    env = RecordingWrapper(gym.make("hasa_env/LaneKeeping-v0", config=cfg), tmp_path, seed=3)
+    env.reset()
+    for _ in range(5):
+        env.step(np.zeros(2))
+    env.close()
+    rec = load_recording(env.paths[0])
+    assert rec.data.attrs["track"] == "curved"
+    assert hypotheses_of(rec.data) == (0.0, 1.8, -1.8)
