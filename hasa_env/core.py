@@ -18,7 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from hasa_env.config import make_config
-from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState
+from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState, road_frame_velocity
 from hasa_env.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
 
 __all__ = [
@@ -60,6 +60,39 @@ the step that ended at row k (row 0: the initial steering and 0), so replaying
 rows 1..n's (steering, acceleration) with ``action.type = "physical"``
 reproduces the run.
 """
+
+
+def info_values(
+    sim_step: Any,
+    state: VehicleState,
+    acceleration: Any,
+    curvature: Any,
+    bias: Any,
+    bias_index: Any,
+    sensors: Any,
+    setup: EnvSetup,
+    ops: Any,
+) -> tuple:
+    """The values of ``info`` in :data:`INFO_KEYS` order (floats for one car, arrays for N).
+
+    ``sensors`` is the sequence of the six sensor readings (or its columns).
+    """
+    vx, vy = road_frame_velocity(state, ops)
+    return (
+        sim_step * setup.dt,
+        state.station,
+        state.lateral_offset,
+        state.heading,
+        state.speed,
+        state.steering,
+        acceleration,
+        curvature,
+        vx,
+        vy,
+        bias,
+        bias_index,
+        *sensors,
+    )
 
 
 def recording_row(

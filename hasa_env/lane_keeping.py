@@ -13,6 +13,7 @@ from hasa_env.core import (
     build_setup,
     draw_episode,
     draw_noise_block,
+    info_values,
     physical_action,
 )
 from hasa_env.dynamics import (
@@ -22,7 +23,6 @@ from hasa_env.dynamics import (
     left_road,
     mean_road_frame_acceleration,
     road_frame_acceleration,
-    road_frame_velocity,
     sensor_readings,
     step_vehicle,
 )
@@ -230,30 +230,18 @@ class LaneKeepingEnv(gym.Env):
         return _clipped(values, *self._bounds["state"])
 
     def _info(self) -> dict[str, Any]:
-        s = self._state
-        vx, vy = road_frame_velocity(s, SCALAR_OPS)
-        sensors = self._sensors
-        return dict(
-            zip(
-                INFO_KEYS,
-                (
-                    self._sim_step * self.setup.dt,
-                    s.station,
-                    s.lateral_offset,
-                    s.heading,
-                    s.speed,
-                    s.steering,
-                    self._acceleration,
-                    self._kappa,
-                    vx,
-                    vy,
-                    self._bias,
-                    self._bias_index,
-                    *sensors,
-                ),
-                strict=True,
-            )
+        values = info_values(
+            self._sim_step,
+            self._state,
+            self._acceleration,
+            self._kappa,
+            self._bias,
+            self._bias_index,
+            self._sensors,
+            self.setup,
+            SCALAR_OPS,
         )
+        return dict(zip(INFO_KEYS, values, strict=True))
 
     @property
     def state(self) -> VehicleState | None:

@@ -27,6 +27,7 @@ from hasa_env.core import (
     build_setup,
     draw_episode,
     draw_noise_block,
+    info_values,
     physical_actions,
 )
 from hasa_env.dynamics import (
@@ -36,7 +37,6 @@ from hasa_env.dynamics import (
     left_road,
     mean_road_frame_acceleration,
     road_frame_acceleration,
-    road_frame_velocity,
     sensor_readings,
     step_vehicle,
 )
@@ -273,22 +273,16 @@ class LaneKeepingVectorEnv(VectorEnv):
         return np.clip(values, self._state_lo, self._state_hi).astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
-        s = self._state
-        vx, vy = road_frame_velocity(s, ARRAY_OPS)
-        values = (
-            self._sim_step * self.setup.dt,
-            s.station,
-            s.lateral_offset,
-            s.heading,
-            s.speed,
-            s.steering,
+        values = info_values(
+            self._sim_step,
+            self._state,
             self._acceleration,
             self._kappa,
-            vx,
-            vy,
             self._bias,
             self._bias_index,
-            *self._sensors.T,
+            self._sensors.T,
+            self.setup,
+            ARRAY_OPS,
         )
         info: dict[str, Any] = {}
         mask = np.ones(self.num_envs, dtype=bool)
