@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -92,10 +91,7 @@ class FilterpyGMEKF:
         decision_lag: int = 1,
         **overrides: Any,
     ) -> None:
-        settings = settings or FilterSettings()
-        if overrides:
-            settings = replace(settings, **overrides)
-        self.settings = settings
+        self.settings = settings = FilterSettings.with_overrides(settings, overrides)
         self.steering_model = steering_model
         self.model = ARXStateSpace(steering_model, dt, decision_lag)
         self.matrices = FilterMatrices(self.model, settings)

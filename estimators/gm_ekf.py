@@ -89,6 +89,14 @@ class FilterSettings:
             raise ValueError(f"prune_threshold must be < 1, got {self.prune_threshold!r}")
 
     @classmethod
+    def with_overrides(
+        cls, settings: FilterSettings | None, overrides: Mapping[str, Any]
+    ) -> FilterSettings:
+        """``settings`` (default: the defaults) with the named fields replaced."""
+        settings = settings or cls()
+        return replace(settings, **overrides) if overrides else settings
+
+    @classmethod
     def from_env_config(cls, config: Mapping[str, Any], **overrides: Any) -> FilterSettings:
         """Settings with the sensor noise levels of an env config (``env.unwrapped.config``)."""
         noise = config["noise"]
@@ -579,10 +587,7 @@ class GaussianMixtureEKF:
         decision_lag: int = 1,
         **overrides: Any,
     ) -> None:
-        settings = settings or FilterSettings()
-        if overrides:
-            settings = replace(settings, **overrides)
-        self.settings = settings
+        self.settings = settings = FilterSettings.with_overrides(settings, overrides)
         self.steering_model = steering_model
         self.decision_lag = decision_lag
         self.model = ARXStateSpace(steering_model, dt, decision_lag)
