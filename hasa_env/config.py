@@ -134,8 +134,9 @@ _SCHEMA: dict[str, Any] = {
         "imu": _Spec(0.05, "IMU acceleration noise std, both axes (m/s^2).", low=0.0, high=50.0),
         "steering": _Spec(1e-4, "Steering-sensor noise std (rad).", low=0.0, high=1.0),
         "block_size": _Spec(
-            1000,
-            "Steps of noise drawn per generator call (same in single and vector env).",
+            256,
+            "Steps of noise drawn per generator call (same in single and vector env); each "
+            "reset starts a new block, so short episodes favour small blocks.",
             kind="int",
             low=1,
             high=1_000_000,

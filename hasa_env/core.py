@@ -18,7 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from hasa_env.config import make_config
-from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState, road_frame_velocity
+from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState
 from hasa_env.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
 
 __all__ = [
@@ -65,19 +65,20 @@ reproduces the run.
 def info_values(
     sim_step: Any,
     state: VehicleState,
+    velocity: tuple,
     acceleration: Any,
     curvature: Any,
     bias: Any,
     bias_index: Any,
     sensors: Any,
     setup: EnvSetup,
-    ops: Any,
 ) -> tuple:
     """The values of ``info`` in :data:`INFO_KEYS` order (floats for one car, arrays for N).
 
-    ``sensors`` is the sequence of the six sensor readings (or its columns).
+    ``velocity`` is the road-frame (v_x, v_y) of ``state``; ``sensors`` the
+    sequence of the six sensor readings (or its columns).
     """
-    vx, vy = road_frame_velocity(state, ops)
+    vx, vy = velocity
     return (
         sim_step * setup.dt,
         state.station,
@@ -115,6 +116,9 @@ RESET_OPTIONS = ("bias", "bias_index", "lateral_offset", "heading", "speed", "st
 def _zero_curvature(station: Any) -> float:
     """kappa(s) of a straight road: 0.0 (broadcasts against arrays, same arithmetic for both backends)."""
     return 0.0
+
+
+_zero_curvature.is_zero = True  # lets step_vehicle drop the curvature terms
 
 
 @dataclass(frozen=True, eq=False)

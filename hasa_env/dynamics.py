@@ -109,7 +109,8 @@ def step_vehicle(
         steering: road-wheel angle delta (rad) applied over the sample.
         acceleration: a (m/s^2) applied over the sample.
         params: vehicle parameters (L, v_max, Ts).
-        curvature: kappa(s) (1/m) of the road, for the backend's type.
+        curvature: kappa(s) (1/m) of the road, for the backend's type; a
+            function with the attribute ``is_zero = True`` marks a straight road.
         ops: :data:`SCALAR_OPS` or :data:`ARRAY_OPS`.
 
     Returns:
@@ -122,10 +123,18 @@ def step_vehicle(
     v_half = ops.minimum(ops.maximum(v0 + acceleration * (0.5 * h), 0.0), v_max)
     v1 = ops.minimum(ops.maximum(v0 + acceleration * h, 0.0), v_max)
 
-    def deriv(s, y, th, v):  # noqa: ANN001, ANN202
-        k = curvature(s)
-        s_dot = v * ops.cos(th) / (1.0 - k * y)
-        return s_dot, v * ops.sin(th), v * yaw_gain - k * s_dot
+    if getattr(curvature, "is_zero", False):
+        # straight road: the curvature terms vanish exactly (x / 1.0 and x - 0.0 * y
+        # are exact), so this shortcut gives the same bits as the general form
+        def deriv(s, y, th, v):  # noqa: ANN001, ANN202
+            return v * ops.cos(th), v * ops.sin(th), v * yaw_gain
+
+    else:
+
+        def deriv(s, y, th, v):  # noqa: ANN001, ANN202
+            k = curvature(s)
+            s_dot = v * ops.cos(th) / (1.0 - k * y)
+            return s_dot, v * ops.sin(th), v * yaw_gain - k * s_dot
 
     s, y, th = state.station, state.lateral_offset, state.heading
     k1s, k1y, k1t = deriv(s, y, th, v0)
@@ -148,17 +157,19 @@ def road_frame_velocity(state: VehicleState, ops: SimpleNamespace) -> tuple:
 
 
 def mean_road_frame_acceleration(
-    start: VehicleState, end: VehicleState, interval: float, ops: SimpleNamespace
+    start_velocity: tuple, end_velocity: tuple, interval: float
 ) -> tuple:
-    """Road-frame acceleration (m/s^2) averaged over ``interval`` s from ``start`` to ``end``.
+    """Road-frame acceleration (m/s^2) averaged over ``interval`` s.
 
-    What the IMU reports at each observation: the change of (v_x, v_y) since
-    the previous observation divided by the time between them, i.e. exactly
-    the input of the paper's discrete model (eq. 4) at the observation rate.
+    What the IMU reports at each observation: the change of the road-frame
+    velocity (v_x, v_y) (see :func:`road_frame_velocity`) since the previous
+    observation divided by the time between them, i.e. exactly the input of
+    the paper's discrete model (eq. 4) at the observation rate.
     """
-    vx0, vy0 = road_frame_velocity(start, ops)
-    vx1, vy1 = road_frame_velocity(end, ops)
-    return (vx1 - vx0) / interval, (vy1 - vy0) / interval
+    return (
+        (end_velocity[0] - start_velocity[0]) / interval,
+        (end_velocity[1] - start_velocity[1]) / interval,
+    )
 
 
 def road_frame_acceleration(

@@ -23,6 +23,7 @@ from hasa_env.dynamics import (
     left_road,
     mean_road_frame_acceleration,
     road_frame_acceleration,
+    road_frame_velocity,
     sensor_readings,
     step_vehicle,
 )
@@ -140,6 +141,7 @@ class LaneKeepingEnv(gym.Env):
         self._noise, self._noise_pos = block.tolist(), 0
         self._sim_step = 0
         self._acceleration = 0.0
+        self._velocity = road_frame_velocity(state, SCALAR_OPS)
         kappa = self._curvature(state.station)
         imu = road_frame_acceleration(state, 0.0, kappa, self.setup.params, SCALAR_OPS)
         self._finish_sample(imu, kappa)
@@ -155,14 +157,15 @@ class LaneKeepingEnv(gym.Env):
         previous_steering = self._state.steering
         state = self._state
         params = setup.params
-        start = state
         lower, upper = setup.lower_edge, setup.upper_edge
         off_road = False
         for _ in range(setup.action_repeat):
             state = step_vehicle(state, steer, acc, params, self._curvature, SCALAR_OPS)
             off_road = off_road or left_road(state, lower, upper, SCALAR_OPS)
         self._sim_step += setup.action_repeat
-        imu = mean_road_frame_acceleration(start, state, setup.env_step_duration, SCALAR_OPS)
+        velocity = road_frame_velocity(state, SCALAR_OPS)
+        imu = mean_road_frame_acceleration(self._velocity, velocity, setup.env_step_duration)
+        self._velocity = velocity
         self._state = state
         self._acceleration = acc
         self._finish_sample(imu, self._curvature(state.station))
@@ -233,13 +236,13 @@ class LaneKeepingEnv(gym.Env):
         values = info_values(
             self._sim_step,
             self._state,
+            self._velocity,
             self._acceleration,
             self._kappa,
             self._bias,
             self._bias_index,
             self._sensors,
             self.setup,
-            SCALAR_OPS,
         )
         return dict(zip(INFO_KEYS, values, strict=True))
 

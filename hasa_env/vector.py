@@ -37,6 +37,7 @@ from hasa_env.dynamics import (
     left_road,
     mean_road_frame_acceleration,
     road_frame_acceleration,
+    road_frame_velocity,
     sensor_readings,
     step_vehicle,
 )
@@ -96,9 +97,11 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._bias_index = np.zeros(n, dtype=np.int64)
         self._autoreset = np.zeros(n, dtype=bool)
         self._kappa = np.zeros(n)
-        self._sensors = np.zeros((n, len(self.setup.noise_std)))
+        self._velocity = (np.zeros(n), np.zeros(n))
+        self._sensors = np.zeros((len(self.setup.noise_std), n))  # one row per channel
         self._state: VehicleState | None = None
         self._arange = np.arange(n)
+        self._row_base = self._arange * self.setup.noise_block  # car i's block in the flat noise
         self._renderers: list[Any] | None = None
         self._sensor_lo, self._sensor_hi = (
             b.astype(np.float64) for b in self.setup.sensor_bounds()
@@ -160,21 +163,18 @@ class LaneKeepingVectorEnv(VectorEnv):
         resetting = self._autoreset.copy()
         state = self._state
         previous_steering = state.steering
-        start = state
         off_road = np.zeros(self.num_envs, dtype=bool)
         for _ in range(setup.action_repeat):
             state = step_vehicle(state, steer, acc, setup.params, self._curvature, ARRAY_OPS)
             off_road |= left_road(state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
-        imu = mean_road_frame_acceleration(start, state, setup.env_step_duration, ARRAY_OPS)
         self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in state))
+        velocity = road_frame_velocity(self._state, ARRAY_OPS)
+        imu = mean_road_frame_acceleration(self._velocity, velocity, setup.env_step_duration)
+        self._velocity = velocity
         self._sim_step += setup.action_repeat
         self._acceleration = acc
-        if resetting.any():
-            active = self._arange[~resetting]
-            imu = (imu[0][active], imu[1][active])
-        else:
-            active = self._arange
-        self._sample(active, imu, self._curvature_of(self._state.station[active]))
+        # every car's next sample; the cars about to be reset are overwritten below
+        self._sample_all(imu, self._curvature_of(self._state.station), skip=resetting)
         terminated = off_road
         truncated = self._sim_step >= setup.max_sim_steps
         rc = self.config["reward"]
@@ -229,32 +229,49 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._sim_step[i] = 0
             self._acceleration[i] = 0.0
         self._state = VehicleState(*fields)
-        # the reset cars' first sample: instantaneous IMU at zero acceleration
         start_state = VehicleState(*(f[idx] for f in fields))
+        velocity = road_frame_velocity(start_state, ARRAY_OPS)
+        self._velocity[0][idx], self._velocity[1][idx] = velocity
+        # the reset cars' first sample: instantaneous IMU at zero acceleration
         kappa = self._curvature_of(start_state.station)
         imu = road_frame_acceleration(start_state, 0.0, kappa, self.setup.params, ARRAY_OPS)
-        self._sample(idx, imu, kappa)
+        self._refill_exhausted(idx)
+        noise = self._noise[idx, self._noise_pos[idx]]
+        self._noise_pos[idx] += 1
+        readings = sensor_readings(start_state, imu, self._bias[idx], noise.T, self.setup.noise_std)
+        self._kappa[idx] = kappa
+        for channel, reading in zip(self._sensors, readings, strict=True):
+            channel[idx] = reading
 
     def _curvature_of(self, station: np.ndarray) -> np.ndarray:
         """Road curvature (1/m) at the given stations, same shape."""
         kappa = self._curvature(station)
         return np.broadcast_to(np.asarray(kappa, dtype=np.float64), station.shape)
 
-    def _sample(self, rows: np.ndarray, imu: tuple, kappa: np.ndarray) -> None:
-        """Draw the next noise row of the cars ``rows``; store their sensors and curvature.
-
-        ``imu`` (x'', y'') and ``kappa`` are given for those rows only.
-        """
+    def _refill_exhausted(self, rows: np.ndarray) -> None:
+        """Draw a new noise block for each car of ``rows`` whose block is used up."""
         exhausted = rows[self._noise_pos[rows] >= self.setup.noise_block]
         for i in exhausted.tolist():
             self._noise[i] = draw_noise_block(self._rngs[i], self.setup)
             self._noise_pos[i] = 0
-        noise = self._noise[rows, self._noise_pos[rows]]
-        self._noise_pos[rows] += 1
-        state = VehicleState(*(f[rows] for f in self._state))
-        readings = sensor_readings(state, imu, self._bias[rows], noise.T, self.setup.noise_std)
-        self._kappa[rows] = kappa
-        self._sensors[rows] = np.stack(readings, axis=1)
+
+    def _sample_all(self, imu: tuple, kappa: np.ndarray, skip: np.ndarray) -> None:
+        """Every car's next noise row, sensors and curvature.
+
+        Cars in ``skip`` (about to be reset, which draws them a new block) draw
+        nothing from their generators; their values here are placeholders.
+        """
+        block = self.setup.noise_block
+        pos = self._noise_pos
+        if pos.max() >= block:
+            self._refill_exhausted(self._arange[~skip])
+            pos = np.minimum(pos, block - 1)  # skipped cars: any row, overwritten at reset
+        noise = self._noise.reshape(-1, self._noise.shape[2])[self._row_base + pos]
+        self._noise_pos += 1
+        readings = sensor_readings(self._state, imu, self._bias, noise.T, self.setup.noise_std)
+        self._kappa = np.array(kappa, dtype=np.float64)
+        for channel, reading in zip(self._sensors, readings, strict=True):
+            channel[:] = reading
 
     def _observation(self) -> Any:
         kind = self.setup.observation_type
@@ -265,7 +282,7 @@ class LaneKeepingVectorEnv(VectorEnv):
         return {"sensors": self._sensor_obs(), "state": self._state_obs()}
 
     def _sensor_obs(self) -> np.ndarray:
-        return np.clip(self._sensors, self._sensor_lo, self._sensor_hi).astype(np.float32)
+        return np.clip(self._sensors.T, self._sensor_lo, self._sensor_hi).astype(np.float32)
 
     def _state_obs(self) -> np.ndarray:
         s = self._state
@@ -276,13 +293,13 @@ class LaneKeepingVectorEnv(VectorEnv):
         values = info_values(
             self._sim_step,
             self._state,
+            self._velocity,
             self._acceleration,
             self._kappa,
             self._bias,
             self._bias_index,
-            self._sensors.T,
+            self._sensors,
             self.setup,
-            ARRAY_OPS,
         )
         info: dict[str, Any] = {}
         mask = np.ones(self.num_envs, dtype=bool)

@@ -156,3 +156,20 @@ def test_road_frame_acceleration_is_the_derivative_of_velocity():
     vx1, vy1 = nxt.speed * math.cos(nxt.heading), nxt.speed * math.sin(nxt.heading)
     assert abs((vx1 - vx0) / params.dt - ax) < 1e-3
     assert abs((vy1 - vy0) / params.dt - ay) < 1e-3
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    y=st.floats(-3, 5),
+    th=st.floats(-0.5, 0.5),
+    v=st.floats(0, 60),
+    delta=st.floats(-0.5, 0.5),
+    acc=st.floats(-6, 6),
+)
+def test_straight_road_shortcut_is_bit_identical_to_the_general_form(y, th, v, delta, acc):
+    from hasa_env.core import _zero_curvature
+
+    state = VehicleState(10.0, y, th, v, 0.0)
+    general = step_vehicle(state, delta, acc, VehicleParams(), lambda s: 0.0, SCALAR_OPS)
+    shortcut = step_vehicle(state, delta, acc, VehicleParams(), _zero_curvature, SCALAR_OPS)
+    assert general == shortcut
