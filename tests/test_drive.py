@@ -278,9 +278,9 @@ def test_real_time_loop_paces_physics_by_the_simulation_clock(tmp_path, pg):
     session.close()
     assert results[0].steps == 50  # 0.5 s at 100 Hz, whatever the frame rate
     assert elapsed >= 0.5 + 0.2 - 0.02  # run in real time after the countdown
-    assert elapsed < 3.0
+    assert elapsed < 10.0  # generous: a loaded CI machine is slow, but not this slow
     driving = [t for t in frames if t > 0]
-    assert 10 <= len(driving) <= 45  # ~60 fps for 0.5 s: frames are not one per step
+    assert 5 <= len(driving) <= 45  # ~60 fps for 0.5 s (fewer on a loaded machine): not one per step
     rec = load_recording(results[0].path)
     assert rec.data["steering"].iloc[-1] > 0.0  # the held left key steered left
     raw = load_raw_inputs(rec.path)
