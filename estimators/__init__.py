@@ -23,7 +23,6 @@ from estimators.base import (
     measurements_from_info,
 )
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
-from estimators.filterpy_ekf import FilterpyGMEKF
 from estimators.gm_ekf import FilterMatrices, FilterSettings, GaussianMixtureEKF
 from estimators.offline import EstimationResult, hypotheses_of, run_estimator
 from estimators.tuning import steering_residual_std
@@ -64,3 +63,13 @@ __all__ = [
     "run_estimator",
     "steering_residual_std",
 ]
+
+
+def __getattr__(name: str):  # noqa: ANN202 - PEP 562
+    # the filterpy reference filter imports filterpy (and with it scipy.stats,
+    # about a second); load it only when asked for
+    if name == "FilterpyGMEKF":
+        from estimators.filterpy_ekf import FilterpyGMEKF
+
+        return FilterpyGMEKF
+    raise AttributeError(f"module 'estimators' has no attribute {name!r}")
