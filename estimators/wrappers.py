@@ -349,13 +349,25 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         obs, infos = self.env.reset(seed=seed, options=options)
-        self.estimate = self.estimator.reset(
-            measurements_from_info(infos),
-            self.hypotheses,
-            prior=self.prior,
-            true_bias=np.asarray(infos["bias"], dtype=np.float64),
-        )
-        self._ended[:] = False
+        mask = None if options is None else options.get("reset_mask")
+        if mask is None or self.estimate is None:
+            self.estimate = self.estimator.reset(
+                measurements_from_info(infos),
+                self.hypotheses,
+                prior=self.prior,
+                true_bias=np.asarray(infos["bias"], dtype=np.float64),
+            )
+            self._ended[:] = False
+        else:  # gymnasium's partial reset: restart only those cars' filters
+            idx = np.flatnonzero(np.asarray(mask, dtype=bool))
+            self.estimate = self.estimator.reset(
+                measurements_from_info(infos)[idx],
+                self.hypotheses,
+                prior=self.prior,
+                true_bias=np.asarray(infos["bias"], dtype=np.float64)[idx],
+                runs=idx,
+            )
+            self._ended[idx] = False
         return obs, self._add(infos, self.estimate)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:

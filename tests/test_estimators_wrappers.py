@@ -166,3 +166,30 @@ def test_wrapper_rejects_mismatched_timing():
         EstimatorInfoWrapper(gym.make(ENV_ID, config={"action_repeat": 2}), make_ekf())
     with pytest.raises(ValueError, match="sample time"):
         EstimatorInfoWrapper(gym.make(ENV_ID, config={"sim_frequency": 50.0}), make_ekf())
+
+
+def test_vector_wrapper_partial_reset_restarts_only_the_masked_cars():
+    """reset(options={"reset_mask": m}) restarts those cars' filters and leaves the others running."""
+    venv = gym.make_vec(
+        ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", config=PHYSICAL
+    )
+    wrapped = EstimatorInfoWrapper(venv, make_ekf())
+    _, info = wrapped.reset(seed=3)
+    for _ in range(40):
+        *_, info = wrapped.step(steer(info))
+    before = {k: np.array(v, copy=True) for k, v in info.items() if k.startswith("estimate_")}
+    mask = np.array([False, True, False])
+    _, info = wrapped.reset(options={"reset_mask": mask})
+    for car in (0, 2):  # untouched filters
+        np.testing.assert_array_equal(
+            info["estimate_lateral_offset"][car], before["estimate_lateral_offset"][car]
+        )
+    # car 1 starts afresh: the same as a filter reset on its first measurements alone
+    first = np.array(
+        [info["sensor_speed"][1], info["sensor_camera_lateral"][1], info["sensor_steering"][1]]
+    )
+    est = make_ekf().reset(first, wrapped.hypotheses)
+    np.testing.assert_allclose(info["estimate_lateral_offset"][1], est.lateral_offset, atol=1e-12)
+    # the others keep filtering on the next step
+    *_, info = wrapped.step(steer(info))
+    assert info["estimate_lateral_offset"][0] != before["estimate_lateral_offset"][0]
