@@ -24,10 +24,7 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-__all__ = [
-    "ConfigError",
-    "LaneKeepingEnv",
-    "LaneKeepingVectorEnv",
+_RECORDING_NAMES = (
     "Recording",
     "RecordingError",
     "RecordingWrapper",
@@ -37,32 +34,26 @@ __all__ = [
     "replay",
     "replay_actions",
     "save_recording",
+)
+"""Loaded from :mod:`hasa_env.recording` on first use (it imports pandas)."""
+
+__all__ = [
+    "ConfigError",
+    "LaneKeepingEnv",
+    "LaneKeepingVectorEnv",
     "default_config",
     "describe_config",
     "make_config",
     "register_envs",
     "ENV_IDS",
     "__version__",
+    *_RECORDING_NAMES,
 ]
 
 ENV_IDS = ("hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0")
 
 
-_LAZY = {
-    # hasa_env.recording imports pandas; load it on first use to keep `import hasa_env` light.
-    name: "hasa_env.recording"
-    for name in (
-        "Recording",
-        "RecordingError",
-        "RecordingWrapper",
-        "compare_recordings",
-        "load_recording",
-        "load_recordings",
-        "replay",
-        "replay_actions",
-        "save_recording",
-    )
-}
+_LAZY = dict.fromkeys(_RECORDING_NAMES, "hasa_env.recording")
 
 
 def __getattr__(name: str):  # noqa: ANN202 - PEP 562 lazy attributes

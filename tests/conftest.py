@@ -7,3 +7,17 @@ os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def pg():
+    """pygame with its event queue (and joysticks) initialised, the queue empty."""
+    from hasa_env.devices import init_pygame_input
+
+    pygame = init_pygame_input()
+    pygame.event.clear()
+    yield pygame
+    pygame.event.clear()

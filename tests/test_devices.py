@@ -13,6 +13,7 @@ import sys
 import types
 
 import pytest
+from _input_helpers import virtual_or_skip
 
 from hasa_env.devices import (
     CalibrationError,
@@ -21,36 +22,20 @@ from hasa_env.devices import (
     KeyboardCalibration,
     PedalAxis,
     SteeringAxis,
-    init_pygame_input,
     load_calibration,
     parse_calibration,
     save_calibration,
     shipped_calibration,
     shipped_calibration_path,
 )
-from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
+from hasa_env.devices.virtual import VirtualJoystick
 
 G29_WHEEL_LOCK = math.radians(450.0)
 
 
 @pytest.fixture
-def pg():
-    pygame = init_pygame_input()
-    pygame.event.clear()
-    yield pygame
-    pygame.event.clear()
-
-
-def _virtual(factory):
-    try:
-        return factory()
-    except VirtualJoystickUnavailable as exc:  # pragma: no cover - depends on the pygame build
-        pytest.skip(f"no SDL virtual joystick: {exc}")
-
-
-@pytest.fixture
 def wheel(pg):
-    w = _virtual(VirtualJoystick.g29)
+    w = virtual_or_skip(VirtualJoystick.g29)
     yield w
     w.detach()
 
@@ -310,7 +295,7 @@ def test_unplug_falls_back_to_the_keyboard_and_ignores_the_recentring_events(pg,
     assert manager.poll() == []
     assert manager.read(0.01).source == "keyboard"
     # plugged in again: a new instance id, picked up
-    again = _virtual(VirtualJoystick.g29)
+    again = virtual_or_skip(VirtualJoystick.g29)
     try:
         notices = manager.poll()
         assert [n.kind for n in notices] == ["connected"]
@@ -322,7 +307,7 @@ def test_unplug_falls_back_to_the_keyboard_and_ignores_the_recentring_events(pg,
 
 def test_pedals_count_as_at_rest_until_they_move(pg):
     # a G29 reports 0 for a pedal that has not moved since it was opened: that is not "half pressed"
-    wheel = _virtual(
+    wheel = virtual_or_skip(
         lambda: VirtualJoystick(num_axes=4, name="Logitech G29 Driving Force Racing Wheel")
     )
     try:
@@ -339,7 +324,9 @@ def test_pedals_count_as_at_rest_until_they_move(pg):
 
 
 def test_a_device_too_small_for_its_profile_is_ignored_with_a_notice(pg):
-    small = _virtual(lambda: VirtualJoystick(num_axes=2, name="Logitech G29 (two axes only)"))
+    small = virtual_or_skip(
+        lambda: VirtualJoystick(num_axes=2, name="Logitech G29 (two axes only)")
+    )
     try:
         g29 = shipped_calibration("g29")
         manager = InputManager(profiles=[g29], pygame_module=pg)
@@ -355,7 +342,7 @@ def test_a_device_too_small_for_its_profile_is_ignored_with_a_notice(pg):
 
 
 def test_generic_gamepad_profile_for_unknown_devices_and_button_confirm(pg):
-    pad = _virtual(
+    pad = virtual_or_skip(
         lambda: VirtualJoystick(num_axes=2, num_buttons=4, name="Some Gamepad", joystick_type=1)
     )
     try:

@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _input_helpers import virtual_or_skip
 
-from hasa_env.devices import InputManager, JoystickCalibration, init_pygame_input, load_calibration
+from hasa_env.devices import InputManager, JoystickCalibration, load_calibration
 from hasa_env.devices.calibration import shipped_calibration
-from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
+from hasa_env.devices.virtual import VirtualJoystick
 from hasa_env.drive import (
     EXIT_NO_SCREEN,
     DriveSession,
@@ -32,21 +33,6 @@ from hasa_env.recording import load_recording
 
 # one int16 step of a G29 axis at the road wheel: 450 deg / 32767 / 15
 QUANTUM = math.radians(450.0) / 32767 / 15.0
-
-
-@pytest.fixture
-def pg():
-    pygame = init_pygame_input()
-    pygame.event.clear()
-    yield pygame
-    pygame.event.clear()
-
-
-def _virtual(factory):
-    try:
-        return factory()
-    except VirtualJoystickUnavailable as exc:  # pragma: no cover - depends on the pygame build
-        pytest.skip(f"no SDL virtual joystick: {exc}")
 
 
 def _g29_for(wheel: VirtualJoystick) -> JoystickCalibration:
@@ -86,7 +72,7 @@ def test_without_a_screen_hasa_drive_says_so_and_exits_nonzero(tmp_path, capsys,
 
 
 def test_scripted_drive_with_a_virtual_wheel_is_reproduced_by_hasa_replay(tmp_path, pg, capsys):
-    wheel = _virtual(VirtualJoystick.g29)
+    wheel = virtual_or_skip(VirtualJoystick.g29)
     try:
         session, driver, _ = _session(tmp_path, pg, wheel, seconds=5.0)
         results = session.run()
@@ -119,7 +105,7 @@ def test_scripted_drive_with_a_virtual_wheel_is_reproduced_by_hasa_replay(tmp_pa
 
 
 def test_unplugging_mid_run_pauses_falls_back_to_the_keyboard_and_records_no_junk(tmp_path, pg):
-    wheel = _virtual(VirtualJoystick.g29)
+    wheel = virtual_or_skip(VirtualJoystick.g29)
     spare: list[VirtualJoystick] = []
     events: list[tuple[int, str]] = []
 
@@ -133,7 +119,7 @@ def test_unplugging_mid_run_pauses_falls_back_to_the_keyboard_and_records_no_jun
             pg.event.post(pg.event.Event(pg.KEYDOWN, key=pg.K_SPACE, mod=0))
             events.append((session.steps, "space"))
         elif session.state == "driving" and session.steps == 200 and len(events) == 2:
-            spare.append(_virtual(VirtualJoystick.g29))  # plugged in again
+            spare.append(virtual_or_skip(VirtualJoystick.g29))  # plugged in again
             wheel_driver.wheel = spare[0]
             events.append((session.steps, "plugged"))
         elif session.state == "paused" and len(events) == 3:
@@ -170,7 +156,7 @@ def test_unplugging_mid_run_pauses_falls_back_to_the_keyboard_and_records_no_jun
 
 
 def test_escape_mid_run_keeps_every_completed_step(tmp_path, pg):
-    wheel = _virtual(VirtualJoystick.g29)
+    wheel = virtual_or_skip(VirtualJoystick.g29)
 
     def script(session):
         if session.state == "driving" and session.steps == 50:
@@ -188,7 +174,7 @@ def test_escape_mid_run_keeps_every_completed_step(tmp_path, pg):
 
 
 def test_an_exception_mid_run_keeps_every_completed_step(tmp_path, pg):
-    wheel = _virtual(VirtualJoystick.g29)
+    wheel = virtual_or_skip(VirtualJoystick.g29)
 
     def script(session):
         if session.state == "driving" and session.steps == 80:
@@ -280,7 +266,9 @@ def test_real_time_loop_paces_physics_by_the_simulation_clock(tmp_path, pg):
     assert elapsed >= 0.5 + 0.2 - 0.02  # run in real time after the countdown
     assert elapsed < 10.0  # generous: a loaded CI machine is slow, but not this slow
     driving = [t for t in frames if t > 0]
-    assert 5 <= len(driving) <= 45  # ~60 fps for 0.5 s (fewer on a loaded machine): not one per step
+    assert (
+        5 <= len(driving) <= 45
+    )  # ~60 fps for 0.5 s (fewer on a loaded machine): not one per step
     rec = load_recording(results[0].path)
     assert rec.data["steering"].iloc[-1] > 0.0  # the held left key steered left
     raw = load_raw_inputs(rec.path)
@@ -289,7 +277,7 @@ def test_real_time_loop_paces_physics_by_the_simulation_clock(tmp_path, pg):
 
 def test_calibrate_finds_the_axes_by_movement_and_writes_a_valid_file(tmp_path, pg):
     # a wheel whose pedal axes come in another order than the shipped G29 profile's
-    wheel = _virtual(
+    wheel = virtual_or_skip(
         lambda: VirtualJoystick(num_axes=4, num_buttons=4, name="Racing Wheel (other order)")
     )
     for axis in (1, 2, 3):
@@ -381,7 +369,7 @@ def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):
     pytest.importorskip("estimators.wrappers")
     from hasa_env.drive import estimator_wrapper
 
-    wheel = _virtual(VirtualJoystick.g29)
+    wheel = virtual_or_skip(VirtualJoystick.g29)
     seen = []
 
     def script(session):
