@@ -67,7 +67,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 
 __all__ = ["ARXStateSpace", "PHYSICAL_STATE_NAMES", "MEASUREMENT_NAMES"]
 
@@ -140,7 +140,7 @@ class ARXStateSpace:
             )
         if arx is None:
             n = 0
-            near, far = 6.2, 20.0
+            near, far = NEAR_POINT_DISTANCE, FAR_POINT_DISTANCE
             a = np.zeros(0)
             beta = np.zeros((1, 3))
         else:

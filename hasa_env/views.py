@@ -42,6 +42,7 @@ from hasa_env.rendering import (
     resolve_weights,
     surface_to_array,
 )
+from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 
 __all__ = [
     "DriverViewRenderer",
@@ -65,10 +66,6 @@ GHOST_FADED_COLOUR = tuple(
 NEAR_POINT_COLOUR = (0, 210, 255)
 FAR_POINT_COLOUR = (255, 70, 200)
 
-NEAR_POINT_DISTANCE = 6.2
-"""Near point distance ahead (m), Salvucci & Gray (DESIGN.md section 3)."""
-FAR_POINT_DISTANCE = 20.0
-"""Far point distance ahead (m)."""
 EYE_FORWARD = 1.2
 """Driver's eye ahead of the rear axle (m)."""
 HORIZON_FRACTION = 0.4

@@ -26,7 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARXForm"]
+__all__ = ["ARXForm", "NEAR_POINT_DISTANCE", "FAR_POINT_DISTANCE"]
+
+NEAR_POINT_DISTANCE = 6.2
+"""Default near-point look-ahead (m), Salvucci & Gray (DESIGN.md section 3)."""
+FAR_POINT_DISTANCE = 20.0
+"""Default far-point look-ahead (m) (DESIGN.md section 3)."""
 
 
 @dataclass(frozen=True)
@@ -47,8 +52,8 @@ class ARXForm:
     b: tuple[float, ...]
     c: tuple[float, ...] = ()
     d: tuple[float, ...] = ()
-    near_distance: float = 6.2
-    far_distance: float = 20.0
+    near_distance: float = NEAR_POINT_DISTANCE
+    far_distance: float = FAR_POINT_DISTANCE
     dt: float = 0.01
 
     def __post_init__(self) -> None:

@@ -73,7 +73,7 @@ import numpy as np
 import pandas as pd
 
 from hasa_env.road import Road
-from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 from hasa_env.steering.features import is_feature_frame, steering_features
 
 if TYPE_CHECKING:
@@ -235,8 +235,8 @@ class SteeringModel(ABC):
         self,
         parameters: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
         *,
-        near_distance: float = 6.2,
-        far_distance: float = 20.0,
+        near_distance: float = NEAR_POINT_DISTANCE,
+        far_distance: float = FAR_POINT_DISTANCE,
         dt: float = 0.01,
         decision_lag: int = 1,
         name: str | None = None,
@@ -563,9 +563,11 @@ class SteeringModel(ABC):
                 f"allowed: {', '.join(sorted(allowed_features))}"
             )
         near = _finite_positive(
-            features.get("near_distance", 6.2), "features.near_distance", source
+            features.get("near_distance", NEAR_POINT_DISTANCE), "features.near_distance", source
         )
-        far = _finite_positive(features.get("far_distance", 20.0), "features.far_distance", source)
+        far = _finite_positive(
+            features.get("far_distance", FAR_POINT_DISTANCE), "features.far_distance", source
+        )
         lag = features.get("decision_lag", 1)
         if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
             raise ModelFileError(

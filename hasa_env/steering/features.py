@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from hasa_env.road import Road, lane_centre_bearing, make_road
+from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 
 __all__ = [
     "FEATURE_COLUMNS",
@@ -57,8 +58,8 @@ def near_far_bearings(
     station: np.ndarray | float,
     lateral_offset: np.ndarray | float,
     heading: np.ndarray | float,
-    near: float = 6.2,
-    far: float = 20.0,
+    near: float = NEAR_POINT_DISTANCE,
+    far: float = FAR_POINT_DISTANCE,
     exact: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Near- and far-point bearings (phi, omega) of the lane centre (rad, left positive).
@@ -119,8 +120,8 @@ def is_feature_frame(frame: pd.DataFrame) -> bool:
 def steering_features(
     frame: pd.DataFrame,
     road: Road | None = None,
-    near: float = 6.2,
-    far: float = 20.0,
+    near: float = NEAR_POINT_DISTANCE,
+    far: float = FAR_POINT_DISTANCE,
     *,
     decision_lag: int = 1,
     exact: bool = True,
