@@ -5,7 +5,7 @@ while the simulation runs at 100 Hz in real time. Measured here, headless
 (``SDL_VIDEODRIVER=dummy``), on frames of a drive along the curved track
 (bends, posts, ghost markings, near/far points and the HUD with weights):
 
-- ``driver_draw``: :meth:`hasa_env.views.DriverViewRenderer.draw` onto an
+- ``driver_draw``: :meth:`hasa_env.render.driver_view.DriverViewRenderer.draw` onto an
   off-screen surface (the drawing work of one frame);
 - ``driver_rgb_array``: the same plus the copy into an (H, W, 3) array
   (``render_mode="rgb_array"``, what ``hasa-replay --frames`` and RL users pay);
@@ -15,7 +15,7 @@ while the simulation runs at 100 Hz in real time. Measured here, headless
   frame (the simulation's share of a frame at 100 Hz and 60 fps): the
   frame rate the whole loop could reach unthrottled;
 - ``top_down_draw``: the top-down view at the same size, for comparison;
-- ``drive_loop``: :class:`hasa_env.drive.DriveSession` itself in real time
+- ``drive_loop``: :class:`hasa_env.session.DriveSession` itself in real time
   (keyboard input, frame cap 60 fps) for a few seconds: the frames it
   actually drew per second and how far the simulation clock lagged the
   wall clock.
@@ -62,7 +62,7 @@ TARGETS: dict[str, tuple[str, float]] = {
 
 def _trajectory(steps: int) -> tuple[Any, list[dict[str, Any]]]:
     """Infos of a drive along the curved track (varied frames), and the env's set-up."""
-    from hasa_env.lane_keeping import LaneKeepingEnv
+    from hasa_env.envs.lane_keeping import LaneKeepingEnv
 
     env = LaneKeepingEnv(
         config={
@@ -104,9 +104,9 @@ def _rate(work: Callable[[int], None], frames: int, repeats: int) -> dict[str, A
 def _drive_loop(seconds: float) -> dict[str, Any]:
     """Run hasa-drive's real-time loop (keyboard, dummy window) and count frames."""
     import pygame
+    from hasa_env.session import DriveSession, DriveSettings
 
     from hasa_env.devices import InputManager, init_pygame_input
-    from hasa_env.drive import DriveSession, DriveSettings
 
     pg = init_pygame_input()
     display = pg.display.set_mode(SIZE)
@@ -164,7 +164,7 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
     import pygame
 
-    from hasa_env.rendering import TopDownRenderer, make_renderer
+    from hasa_env.render import TopDownRenderer, make_renderer
 
     say = progress or (lambda message: None)
     frames = 60 if quick else 300

@@ -34,6 +34,7 @@ from estimators.wrappers import (
     estimate_info_keys,
     estimate_observation_names,
 )
+from hasa_env._lazy import lazy_attributes
 
 __all__ = [
     "ACCELERATION_KEYS",
@@ -44,7 +45,7 @@ __all__ = [
     "EstimatorObservationWrapper",
     "FilterMatrices",
     "FilterSettings",
-    "FilterpyGMEKF",
+    "FilterpyGMEKF",  # noqa: F822 - a lazy attribute (see below)
     "GaussianMixtureEKF",
     "LaneEstimator",
     "MEASUREMENT_KEYS",
@@ -65,11 +66,10 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):  # noqa: ANN202 - PEP 562
-    # the filterpy reference filter imports filterpy (and with it scipy.stats,
-    # about a second); load it only when asked for
-    if name == "FilterpyGMEKF":
-        from estimators.filterpy_ekf import FilterpyGMEKF
-
-        return FilterpyGMEKF
-    raise AttributeError(f"module 'estimators' has no attribute {name!r}")
+# the filterpy reference filter imports filterpy (and with it scipy.stats, about a
+# second); it loads on first access
+__getattr__, __dir__ = lazy_attributes(
+    __name__,
+    {"FilterpyGMEKF": "estimators.filterpy_ekf"},
+    eager=[n for n in __all__ if n != "FilterpyGMEKF"],
+)

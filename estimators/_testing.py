@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from hasa_env.core import INFO_KEYS, RECORDING_COLUMNS
+from hasa_env.envs.vector import LaneKeepingVectorEnv
+from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS
 from hasa_env.steering.arx import ARXForm
-from hasa_env.vector import LaneKeepingVectorEnv
 
 __all__ = ["drive_arx"]
 
@@ -36,7 +36,7 @@ def drive_arx(
 ) -> list[pd.DataFrame]:
     """Drive ``runs`` episodes of the straight-road env with an ARX driver.
 
-    Returns one DataFrame per run with :data:`hasa_env.core.RECORDING_COLUMNS`
+    Returns one DataFrame per run with :data:`hasa_env.sim.setup.RECORDING_COLUMNS`
     (row 0 = reset state). ``bias_index`` fixes the true lane hypothesis
     (None: drawn by the env).
     """

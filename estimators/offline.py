@@ -1,7 +1,7 @@
 """Run an estimator over recorded runs, many at once.
 
 :func:`run_estimator` feeds one or many recordings (DataFrames with the
-recording columns, :data:`hasa_env.core.RECORDING_COLUMNS`) to an
+recording columns, :data:`hasa_env.sim.setup.RECORDING_COLUMNS`) to an
 estimator as one batch: row 0 resets it, row k steps it with row k's
 measurements and IMU. Runs of different lengths are padded (their padded
 steps are marked invalid).
@@ -9,6 +9,7 @@ steps are marked invalid).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -17,8 +18,18 @@ import pandas as pd
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
+from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from hasa_env.recording.format import Recording
+from hasa_env.steering.design import SteeringModelLike
 
-__all__ = ["EstimationResult", "run_estimator", "hypotheses_of", "TRUTH_COLUMNS"]
+__all__ = [
+    "EstimationResult",
+    "EstimatorRun",
+    "TRUTH_COLUMNS",
+    "estimate_recording",
+    "hypotheses_of",
+    "run_estimator",
+]
 
 TRUTH_COLUMNS = ("longitudinal_velocity", "lateral_offset", "lateral_velocity", "bias")
 """Recording columns holding the true value of each physical state, in state order."""
@@ -137,7 +148,7 @@ def run_estimator(
         estimator: any :class:`estimators.base.LaneEstimator` (batched ones
             filter all runs in one call per step).
         frames: one recording or a list (columns of
-            :data:`hasa_env.core.RECORDING_COLUMNS`; at least the sensor columns).
+            :data:`hasa_env.sim.setup.RECORDING_COLUMNS`; at least the sensor columns).
         hypotheses: lane hypotheses (C,) or (R, C); default: each recording's
             config (:func:`hypotheses_of`).
         prior: hypothesis probabilities, (C,) or (R, C); default uniform.
@@ -235,3 +246,70 @@ def run_estimator(
         truth=truth,
         component_means=components,
     )
+
+
+@dataclass(frozen=True)
+class EstimatorRun:
+    """The mixture estimator over one recording.
+
+    Attributes:
+        weights: (rows, C) hypothesis weights per row.
+        hypotheses: (C,) camera biases b (m).
+        lateral_offset: (rows,) mixture estimate of y (m).
+        lateral_rmse: RMS of estimate - true y over all rows (m).
+        true_index: index of the recording's true hypothesis (-1 if it is none of them).
+        final_true_weight: weight of the true hypothesis at the end (NaN if not among them).
+        trusted_from: first time (s) from which the true hypothesis' weight stays above 0.9
+            (NaN if never).
+    """
+
+    weights: np.ndarray
+    hypotheses: np.ndarray
+    lateral_offset: np.ndarray
+    lateral_rmse: float
+    true_index: int
+    final_true_weight: float
+    trusted_from: float
+
+
+def estimate_recording(
+    recording: Recording, steering_model: SteeringModelLike, steering_ratio: float = 1.0
+) -> EstimatorRun:
+    """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
+
+    Through :func:`estimators.offline.run_estimator`: it sees what the car's
+    sensors recorded (speed, biased camera, steering, IMU), with the
+    hypotheses of the recording's config and filter settings from that
+    config; the steering model enters through its ARX form, and
+    ``steering_ratio`` (model units per recorded road-wheel radian) goes to
+    the filter settings.
+    """
+    data = recording.data
+    cfg = recording.config
+    hypotheses = np.asarray(cfg["markings"]["hypotheses"], dtype=np.float64)
+    estimator = GaussianMixtureEKF(
+        steering_model.arx(),
+        FilterSettings.from_env_config(cfg, steering_ratio=steering_ratio),
+        dt=recording.dt,
+    )
+    result = run_estimator(estimator, data, hypotheses=hypotheses)
+    n = len(data)
+    weights = result.weights[0, :n]
+    lateral = result.mean[0, :n, result.state_names.index("lateral_offset")]
+    true_y = data["lateral_offset"].to_numpy(dtype=np.float64)
+    rmse = float(np.sqrt(np.mean((lateral - true_y) ** 2)))
+    true_index = int(data["bias_index"].iloc[0])
+    if not 0 <= true_index < hypotheses.size:
+        matches = np.flatnonzero(np.isclose(hypotheses, float(data["bias"].iloc[0])))
+        true_index = int(matches[0]) if matches.size else -1
+    if true_index < 0:
+        return EstimatorRun(weights, hypotheses, lateral, rmse, -1, math.nan, math.nan)
+    w_true = weights[:, true_index]
+    below = np.flatnonzero(w_true <= 0.9)
+    if below.size == 0:
+        trusted = 0.0
+    elif below[-1] + 1 < n:
+        trusted = float(data["time"].iloc[below[-1] + 1])
+    else:
+        trusted = math.nan
+    return EstimatorRun(weights, hypotheses, lateral, rmse, true_index, float(w_true[-1]), trusted)

@@ -36,7 +36,7 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -46,6 +46,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
+from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from hasa_env.steering.design import SteeringModelLike
 
 __all__ = [
     "EstimatorInfoWrapper",
@@ -54,6 +56,7 @@ __all__ = [
     "VectorEstimatorObservationWrapper",
     "estimate_info_keys",
     "estimate_observation_names",
+    "estimator_wrapper",
 ]
 
 
@@ -422,3 +425,33 @@ class VectorEstimatorObservationWrapper(VectorEstimatorInfoWrapper):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         _, rewards, terminated, truncated, infos = super().step(actions)
         return _observation(self.estimate, self.hypotheses), rewards, terminated, truncated, infos
+
+
+def estimator_wrapper(
+    model: SteeringModelLike, steering_ratio: float = 1.0
+) -> Callable[[gym.Env], EstimatorInfoWrapper]:
+    """A wrapper factory: the Gaussian-mixture EKF runs alongside each env it wraps.
+
+    Used as ``hasa_env.session.DriveSession(env_wrapper=...)`` by ``hasa-drive
+    --estimator``: each run's env is wrapped in :class:`EstimatorInfoWrapper`
+    with :class:`estimators.gm_ekf.GaussianMixtureEKF` on the steering
+    ``model``'s ARX form and filter settings from the env's config, so
+    ``info["estimate_weights"]`` carries the live hypothesis weights the HUD
+    shows (the recording keeps its standard columns). ``steering_ratio``:
+    model units per road-wheel radian (15 for the paper's presets,
+    :func:`hasa_env.steering.loading.default_steering_ratio`).
+    """
+    arx = model.arx()
+    if arx is None:
+        raise ValueError(
+            f"the steering model {model.name!r} has no ARX form (arx() is None): the estimator "
+            "needs one"
+        )
+
+    def wrap(env: gym.Env) -> EstimatorInfoWrapper:
+        config = env.unwrapped.config
+        dt = config["action_repeat"] / config["sim_frequency"]
+        settings = FilterSettings.from_env_config(config, steering_ratio=steering_ratio)
+        return EstimatorInfoWrapper(env, GaussianMixtureEKF(arx, settings, dt=dt))
+
+    return wrap

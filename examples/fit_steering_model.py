@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from hasa_env.drivers import population, run_population, save_runs
-from hasa_env.road import curved_road
+from hasa_env.sim.road import curved_road
 from hasa_env.steering import GeneralizedModel, TwoPointModel, score, select_order
 
 

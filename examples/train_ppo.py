@@ -44,7 +44,6 @@ from typing import Any
 import gymnasium as gym
 
 import hasa_env  # noqa: F401 - registers the env ids
-from hasa_env.config import deep_merge
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population
 from hasa_env.rl import (
     ActionRepeat,
@@ -58,6 +57,7 @@ from hasa_env.rl import (
     make_vector_env,
     require_sb3,
 )
+from hasa_env.sim.config import deep_merge
 
 ENV_ID = "hasa_env/LaneKeeping-v0"
 BASE_CONFIG: dict[str, Any] = {

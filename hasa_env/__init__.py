@@ -7,6 +7,11 @@ Importing ``hasa_env`` registers the environment ids:
 
 Both have a native vector entry point
 (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
+The package's layers (docs/design.md §2): :mod:`hasa_env.sim` (config, road,
+dynamics, the pure transition) at the bottom, then :mod:`hasa_env.steering`,
+:mod:`hasa_env.render` and :mod:`hasa_env.devices`, :mod:`hasa_env.envs`,
+:mod:`hasa_env.recording`, :mod:`hasa_env.drivers`, and :mod:`hasa_env.rl`
+and :mod:`hasa_env.session` at the top.
 """
 
 from __future__ import annotations
@@ -15,14 +20,18 @@ from importlib.metadata import PackageNotFoundError, version
 
 import gymnasium as gym
 
-from hasa_env.config import ConfigError, default_config, describe_config, make_config
-from hasa_env.lane_keeping import LaneKeepingEnv
-from hasa_env.vector import LaneKeepingVectorEnv
+from hasa_env._lazy import lazy_attributes
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.envs.vector import LaneKeepingVectorEnv
+from hasa_env.sim.config import ConfigError, default_config, describe_config, make_config
 
 try:
     __version__ = version("hasa-env")
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
+
+ENV_IDS = ("hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0")
+"""The registered environment ids."""
 
 _RECORDING_NAMES = (
     "Recording",
@@ -35,7 +44,6 @@ _RECORDING_NAMES = (
     "replay_actions",
     "save_recording",
 )
-"""Loaded from :mod:`hasa_env.recording` on first use (it imports pandas)."""
 
 __all__ = [
     "ConfigError",
@@ -50,19 +58,12 @@ __all__ = [
     *_RECORDING_NAMES,
 ]
 
-ENV_IDS = ("hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0")
-
-
-_LAZY = dict.fromkeys(_RECORDING_NAMES, "hasa_env.recording")
-
-
-def __getattr__(name: str):  # noqa: ANN202 - PEP 562 lazy attributes
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'hasa_env' has no attribute {name!r}")
-    from importlib import import_module
-
-    return getattr(import_module(module), name)
+# the recording API imports pandas (~0.3 s), which env users need not pay for
+__getattr__, __dir__ = lazy_attributes(
+    __name__,
+    dict.fromkeys(_RECORDING_NAMES, "hasa_env.recording"),
+    eager=[n for n in __all__ if n not in _RECORDING_NAMES],
+)
 
 
 def register_envs() -> None:
@@ -72,8 +73,8 @@ def register_envs() -> None:
             continue
         gym.register(
             id=env_id,
-            entry_point="hasa_env.lane_keeping:LaneKeepingEnv",
-            vector_entry_point="hasa_env.vector:LaneKeepingVectorEnv",
+            entry_point="hasa_env.envs.lane_keeping:LaneKeepingEnv",
+            vector_entry_point="hasa_env.envs.vector:LaneKeepingVectorEnv",
             kwargs={"track": track},
         )
 

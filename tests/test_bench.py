@@ -17,7 +17,6 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from benchmarks.cli import format_perf_table, main, perf_rows
 from benchmarks.protocol import (
     BenchmarkError,
     ModelError,
@@ -26,6 +25,7 @@ from benchmarks.protocol import (
     run_protocol,
 )
 from benchmarks.report import CSV_TABLES, FIGURES, format_tables, write_outputs
+from hasa_cli.bench import format_perf_table, main, perf_rows
 
 SMALL = {"drivers": 3, "runs": 2, "ill_runs": 3, "duration": 4.0, "curved_runs": 1}
 SMALL_ARGS = ["--drivers", "3", "--runs", "2", "--ill-runs", "3", "--duration", "4"]
@@ -498,7 +498,7 @@ def test_python_dash_m_benchmarks_is_the_cli() -> None:
     import subprocess
 
     done = subprocess.run(
-        [sys.executable, "-m", "benchmarks", "score", "--help"],
+        [sys.executable, "-m", "hasa_cli.bench", "score", "--help"],
         capture_output=True,
         text=True,
         timeout=60,

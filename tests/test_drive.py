@@ -15,21 +15,15 @@ import numpy as np
 import pytest
 from _input_helpers import virtual_or_skip
 
+from hasa_cli.drive import EXIT_NO_SCREEN, main
 from hasa_env.devices import InputManager, JoystickCalibration, load_calibration
 from hasa_env.devices.calibration import shipped_calibration
+from hasa_env.devices.calibrator import calibrate
 from hasa_env.devices.virtual import VirtualJoystick
-from hasa_env.drive import (
-    EXIT_NO_SCREEN,
-    DriveSession,
-    DriveSettings,
-    VirtualWheelDriver,
-    calibrate,
-    load_raw_inputs,
-    main,
-    raw_inputs_path,
-)
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.recording import load_recording
+from hasa_env.recording.raw_inputs import load_raw_inputs, raw_inputs_path
+from hasa_env.session import DriveSession, DriveSettings, VirtualWheelDriver
 
 # one int16 step of a G29 axis at the road wheel: 450 deg / 32767 / 15
 QUANTUM = math.radians(450.0) / 32767 / 15.0
@@ -96,7 +90,7 @@ def test_scripted_drive_with_a_virtual_wheel_is_reproduced_by_hasa_replay(tmp_pa
     assert np.array_equal(raw["road_wheel_angle"].to_numpy(), recorded)  # bit for bit
     assert np.allclose(raw["raw_throttle"], 1.0, atol=1e-4)  # G29 pedals at rest read +1
     # hasa-replay re-simulates the recorded actions and finds the same trajectory bit for bit
-    from hasa_env.replay_cli import main as replay_main
+    from hasa_cli.replay import main as replay_main
 
     capsys.readouterr()
     assert replay_main([str(tmp_path)]) == 0
@@ -198,7 +192,7 @@ def test_a_killed_process_keeps_every_completed_step(tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "hasa_env.drive",
+        "hasa_cli.drive",
         "synthetic",
         "--seconds",
         "600",
@@ -367,7 +361,8 @@ def test_settings_are_validated(tmp_path):
 
 def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):
     pytest.importorskip("estimators.wrappers")
-    from hasa_env.drive import estimator_wrapper
+    from estimators.wrappers import estimator_wrapper
+    from hasa_env.steering import GeneralizedModel
 
     wheel = virtual_or_skip(VirtualJoystick.g29)
     seen = []
@@ -378,7 +373,7 @@ def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):
 
     try:
         session, _, _ = _session(tmp_path, pg, wheel, hook_extra=script, seconds=1.0, bias=-1.8)
-        session.env_wrapper = estimator_wrapper("generalized")
+        session.env_wrapper = estimator_wrapper(GeneralizedModel.paper(), 15.0)
         results = session.run()
     finally:
         wheel.detach()
@@ -390,7 +385,7 @@ def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):
 
 def test_raw_input_file_never_overwrites_an_orphaned_one(tmp_path):
     from hasa_env.devices import InputReading
-    from hasa_env.drive import RawInputWriter
+    from hasa_env.recording.raw_inputs import RawInputWriter
 
     path = tmp_path / "run_000.inputs.tsv"
     path.write_text("old data\n")

@@ -8,7 +8,6 @@ import pandas as pd
 import pytest
 
 import hasa_env  # noqa: F401  (registers the env ids)
-from hasa_env.core import RECORDING_COLUMNS
 from hasa_env.drivers import (
     Driver,
     DriverParams,
@@ -22,7 +21,8 @@ from hasa_env.drivers import (
     run_seeds,
     save_runs,
 )
-from hasa_env.road import curved_road
+from hasa_env.sim.road import curved_road
+from hasa_env.sim.setup import RECORDING_COLUMNS
 from hasa_env.steering import GeneralizedModel, TwoPointModel
 from hasa_env.steering.base import Design, Regressor, SteeringModel, lagged
 

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hasa_env.dynamics import (
+from hasa_env.sim.dynamics import (
     ARRAY_OPS,
     SCALAR_OPS,
     VehicleParams,
@@ -14,7 +14,7 @@ from hasa_env.dynamics import (
     road_frame_acceleration,
     step_vehicle,
 )
-from hasa_env.road import (
+from hasa_env.sim.road import (
     curvature_lookup_array,
     curvature_lookup_scalar,
     curved_road,
@@ -167,7 +167,7 @@ def test_road_frame_acceleration_is_the_derivative_of_velocity():
     acc=st.floats(-6, 6),
 )
 def test_straight_road_shortcut_is_bit_identical_to_the_general_form(y, th, v, delta, acc):
-    from hasa_env.core import _zero_curvature
+    from hasa_env.sim.setup import _zero_curvature
 
     state = VehicleState(10.0, y, th, v, 0.0)
     general = step_vehicle(state, delta, acc, VehicleParams(), lambda s: 0.0, SCALAR_OPS)

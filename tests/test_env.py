@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 
 import hasa_env
 from hasa_env import ConfigError, default_config, make_config
-from hasa_env.core import INFO_KEYS
+from hasa_env.sim.setup import INFO_KEYS
 
 
 @pytest.mark.parametrize("env_id", hasa_env.ENV_IDS)

@@ -23,7 +23,7 @@ from estimators.wrappers import (
     estimate_info_keys,
     estimate_observation_names,
 )
-from hasa_env.core import RECORDING_COLUMNS, recording_row
+from hasa_env.sim.setup import RECORDING_COLUMNS, recording_row
 from hasa_env.steering.arx import ARXForm
 
 ENV_ID = "hasa_env/LaneKeeping-v0"

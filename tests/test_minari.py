@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import hasa_env  # noqa: F401 - registers the ids
-from hasa_env.config import deep_merge
-from hasa_env.datasets import action_columns, export_minari, observations, require_minari
 from hasa_env.recording import RecordingWrapper, load_recording, load_recordings, save_recording
+from hasa_env.recording.export import action_columns, export_minari, observations, require_minari
+from hasa_env.sim.config import deep_merge
 
 minari = pytest.importorskip("minari")
 pytest.importorskip("pyarrow")

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import hasa_env  # noqa: F401 - registers the ids
-from hasa_env.datasets import read_parquet, summarize, to_parquet
-from hasa_env.rec_cli import main
+from hasa_cli.rec import main
 from hasa_env.recording import RecordingError, RecordingWrapper, load_recording
+from hasa_env.recording.export import read_parquet, summarize, to_parquet
 
 ENV_ID = "hasa_env/LaneKeeping-v0"
 

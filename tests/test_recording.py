@@ -20,7 +20,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hasa_env  # noqa: F401 - registers the ids
-from hasa_env.core import RECORDING_COLUMNS, recording_row
 from hasa_env.recording import (
     COLUMN_UNITS,
     SCHEMA_VERSION,
@@ -35,6 +34,7 @@ from hasa_env.recording import (
     replay_actions,
     save_recording,
 )
+from hasa_env.sim.setup import RECORDING_COLUMNS, recording_row
 
 ENV_ID = "hasa_env/LaneKeeping-v0"
 

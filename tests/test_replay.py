@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hasa_env.drive import load_raw_inputs
-from hasa_env.recording import load_recording
-from hasa_env.replay_cli import check_replay, collect_recordings, main
+from hasa_cli.replay import main
+from hasa_env.recording import check_replay, load_recording
+from hasa_env.recording.raw_inputs import load_raw_inputs
+from hasa_env.recording.reader import load_paths
 
 SAMPLE = Path(__file__).resolve().parent.parent / "recordings" / "sample"
 
@@ -82,12 +83,12 @@ def test_hasa_replay_reports_load_errors(tmp_path, capsys):
     assert main([str(csv)]) == 2
     assert "missing sidecar" in capsys.readouterr().err
     assert main([str(tmp_path / "nothing_here")]) == 2
-    recs, problems = collect_recordings([tmp_path])
-    assert recs == [] and len(problems) == 1
+    recs = load_paths([tmp_path])
+    assert list(recs) == [] and len(recs.errors) == 1
 
 
 def test_hasa_replay_writes_frames_with_road_and_ghost_markings(tmp_path, capsys):
-    from hasa_env.views import GHOST_FADED_COLOUR
+    from hasa_env.render.driver_view import GHOST_FADED_COLOUR
 
     out_dir = tmp_path / "frames"
     code = main(
@@ -145,7 +146,7 @@ def test_hasa_replay_runs_the_estimator_and_it_finds_the_true_lane(capsys):
 
 
 def test_paper_presets_are_scored_in_steering_wheel_units(capsys):
-    from hasa_env.replay_cli import default_steering_ratio, in_model_units
+    from hasa_env.steering.loading import default_steering_ratio, in_model_units
 
     assert default_steering_ratio("generalized", fitted=False) == 15.0
     assert default_steering_ratio("generalized", fitted=True) == 1.0

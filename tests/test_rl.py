@@ -8,7 +8,6 @@ import pytest
 
 import hasa_env
 from hasa_env import LaneKeepingVectorEnv
-from hasa_env.core import INFO_KEYS
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population
 from hasa_env.rl import (
     ActionRepeat,
@@ -21,6 +20,7 @@ from hasa_env.rl import (
     evaluate,
     make_vector_env,
 )
+from hasa_env.sim.setup import INFO_KEYS
 
 ENV_ID = "hasa_env/LaneKeeping-v0"
 

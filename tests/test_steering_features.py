@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hasa_env.core import RECORDING_COLUMNS
-from hasa_env.road import curved_road, straight_road
+from hasa_env.sim.road import curved_road, straight_road
+from hasa_env.sim.setup import RECORDING_COLUMNS
 from hasa_env.steering.features import near_far_bearings, road_of_frame, steering_features
 
 finite = st.floats(allow_nan=False, allow_infinity=False)

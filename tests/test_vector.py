@@ -6,7 +6,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import hasa_env
-from hasa_env.core import INFO_KEYS
+from hasa_env.sim.setup import INFO_KEYS
 
 CONFIG = {
     "time_limit": 0.37,  # several autoresets within the test

@@ -8,25 +8,24 @@ import time
 import numpy as np
 import pytest
 
-from hasa_env.core import build_setup
-from hasa_env.lane_keeping import LaneKeepingEnv
-from hasa_env.rendering import (
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.render import TopDownRenderer, make_renderer
+from hasa_env.render.common import (
     GRASS_COLOUR,
     HYPOTHESIS_COLOURS,
     MARKING_COLOUR,
     ROAD_COLOUR,
     HumanWindow,
-    TopDownRenderer,
-    make_renderer,
     resolve_weights,
 )
-from hasa_env.views import (
+from hasa_env.render.driver_view import (
     FAR_POINT_COLOUR,
     GHOST_FADED_COLOUR,
     NEAR_POINT_COLOUR,
     SKY_COLOUR,
     DriverViewRenderer,
 )
+from hasa_env.sim.setup import build_setup
 
 
 def _mask(frame: np.ndarray, colour: tuple[int, int, int], tol: int = 2) -> np.ndarray:

@@ -5,6 +5,7 @@
   linear axis mapping;
 - :mod:`~hasa_env.devices.sources`: the event-driven input layer with
   hot-plug (:class:`InputManager`);
+- :mod:`~hasa_env.devices.calibrator`: the ``hasa-drive calibrate`` dialogue;
 - :mod:`~hasa_env.devices.virtual`: SDL virtual joysticks (tests, scripted
   drives);
 - :mod:`~hasa_env.devices.force_feedback`: optional autocentre via evdev.
@@ -31,9 +32,11 @@ from hasa_env.devices.sources import (
     KeyboardSource,
     Notice,
     init_pygame_input,
+    no_screen_reason,
 )
 
 __all__ = [
+    "no_screen_reason",
     "CalibrationError",
     "JoystickCalibration",
     "KeyboardCalibration",

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -41,6 +42,7 @@ from hasa_env.devices.calibration import (
 )
 
 __all__ = [
+    "no_screen_reason",
     "InputReading",
     "Notice",
     "KeyboardSource",
@@ -439,3 +441,14 @@ class InputManager:
             device.close()
         self.devices.clear()
         self.active = None
+
+
+def no_screen_reason() -> str | None:
+    """Why there is no screen to drive on (None if there seems to be one)."""
+    driver = os.environ.get("SDL_VIDEODRIVER", "").lower()
+    if driver in ("dummy", "offscreen", "evdev"):
+        return f"SDL_VIDEODRIVER={driver} (a video driver without a screen)"
+    if sys.platform.startswith("linux") and not driver:
+        if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+            return "neither DISPLAY nor WAYLAND_DISPLAY is set (no X11 or Wayland session)"
+    return None

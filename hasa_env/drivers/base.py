@@ -21,7 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hasa_env.road import Road, curvature_lookup_array
+from hasa_env.sim.road import Road, curvature_lookup_array
 
 __all__ = [
     "Driver",
@@ -41,7 +41,7 @@ class Driver(Protocol):
 
     ``reset(seed, dt=...)`` starts a new run (``dt`` is the env step, s);
     ``act(info, road)`` gets the env's ``info`` at time k (the dict of
-    :data:`hasa_env.core.INFO_KEYS`, true state) and the road, and returns
+    :data:`hasa_env.sim.setup.INFO_KEYS`, true state) and the road, and returns
     ``(steering, acceleration)``: the road-wheel angle (rad) and acceleration
     (m/s^2) to apply over the next step.
     """

@@ -8,8 +8,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from hasa_env.drivers.base import SpeedProfile, _profile_arrays, info_arrays, speed_command
-from hasa_env.road import Road
+from hasa_env.drivers.base import (
+    LoopBatch,
+    SpeedProfile,
+    _profile_arrays,
+    info_arrays,
+    speed_command,
+)
+from hasa_env.sim.road import Road
 from hasa_env.steering.base import SteeringModel
 from hasa_env.steering.features import near_far_bearings
 
@@ -80,8 +86,6 @@ class ModelDriver:
         """A vectorized batch if every model is an ARX model, else car-by-car."""
         if all(d.model.arx() is not None for d in drivers):
             return ModelBatch(drivers)
-        from hasa_env.drivers.base import LoopBatch
-
         return LoopBatch(drivers)
 
     def reset(self, seed: int | None = None, *, dt: float = 0.01) -> None:

@@ -11,7 +11,7 @@
 Every run gets an env seed and a driver seed derived deterministically from
 ``seed``, the driver's name and the track (:func:`run_seeds`), so a run is
 the same whichever function produced it and however many other cars drove
-with it. Frames have the columns :data:`hasa_env.core.RECORDING_COLUMNS`
+with it. Frames have the columns :data:`hasa_env.sim.setup.RECORDING_COLUMNS`
 (row 0 = reset state) and ``attrs`` with the env id, the full validated
 config, the track, the seeds, the reset options and the driver's name;
 :func:`save_runs` writes them in the recording format
@@ -22,16 +22,18 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from hasa_env.config import deep_merge
-from hasa_env.core import INFO_KEYS, RECORDING_COLUMNS, recording_row
 from hasa_env.drivers.base import Driver, make_batch
 from hasa_env.drivers.synthetic import DriverParams, SyntheticDriver
+from hasa_env.recording.writer import save_recording
+from hasa_env.sim.config import deep_merge
+from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS, recording_row
 
 __all__ = [
     "DEFAULT_ENV_ID",
@@ -120,7 +122,7 @@ def run_driver(
             as one after another, up to floating-point rounding.
 
     Returns:
-        One DataFrame per run (:data:`hasa_env.core.RECORDING_COLUMNS`).
+        One DataFrame per run (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`).
     """
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise ValueError(f"runs must be a positive integer, got {runs!r}")
@@ -377,10 +379,6 @@ def save_runs(
     Returns the CSV paths. Uses :func:`hasa_env.recording.save_recording`, so the
     files load with :func:`hasa_env.recording.load_recordings` and replay exactly.
     """
-    from pathlib import Path
-
-    from hasa_env.recording import save_recording
-
     folder = Path(directory)
     return [
         save_recording(frame, folder / f"{prefix}_{i:03d}.csv", recording_meta(frame))

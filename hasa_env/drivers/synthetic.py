@@ -45,7 +45,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from hasa_env.drivers.base import SpeedProfile, _profile_arrays, info_arrays, speed_command
-from hasa_env.road import Road, lane_centre_bearing
+from hasa_env.sim.road import Road, lane_centre_bearing
 
 __all__ = ["DriverParams", "SyntheticDriver", "SyntheticBatch", "population", "POPULATIONS"]
 

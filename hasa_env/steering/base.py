@@ -66,18 +66,23 @@ import math
 import os
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Self
+from typing import Any, ClassVar, Self
 
 import numpy as np
 import pandas as pd
 
-from hasa_env.road import Road
+from hasa_env.sim.road import Road
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
+from hasa_env.steering.design import FEATURE_NAMES, Design, Regressor, lagged
 from hasa_env.steering.features import is_feature_frame, steering_features
-
-if TYPE_CHECKING:
-    from hasa_env.steering.fitting import FitResult
+from hasa_env.steering.fitting import FitResult, fit_model, simulate_arx
+from hasa_env.steering.model_file import (
+    MODEL_FILE_FORMAT,
+    MODEL_FILE_VERSION,
+    MODEL_TYPES,
+    ModelFileError,
+    model_from_dict,
+)
 
 __all__ = [
     "FEATURE_NAMES",
@@ -89,113 +94,6 @@ __all__ = [
     "SteeringModel",
     "lagged",
 ]
-
-FEATURE_NAMES = ("delta", "phi", "omega", "lateral_velocity", "speed")
-"""Features a regressor may refer to (the columns of
-:func:`~hasa_env.steering.features.steering_features`)."""
-
-MODEL_FILE_FORMAT = "hasa_env.steering_model"
-"""Value of the ``"format"`` field of a model file."""
-
-MODEL_FILE_VERSION = 1
-
-MODEL_TYPES: dict[str, type[SteeringModel]] = {}
-"""Registered model types: JSON ``"type"`` -> class (filled when a subclass is defined)."""
-
-
-class ModelFileError(ValueError):
-    """A steering-model file or JSON document that cannot be read; the message names the field."""
-
-
-@dataclass(frozen=True)
-class Regressor:
-    """A feature at a lag: ``Regressor("phi", 1)`` is phi(k-1).
-
-    Attributes:
-        feature: one of :data:`FEATURE_NAMES` (or a column a custom model adds).
-        lag: samples back (0 = the current sample k).
-    """
-
-    feature: str
-    lag: int
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.feature, str) or not self.feature:
-            raise ValueError(f"Regressor.feature must be a non-empty string, got {self.feature!r}")
-        if isinstance(self.lag, bool) or not isinstance(self.lag, int | np.integer) or self.lag < 0:
-            raise ValueError(f"Regressor.lag must be a non-negative integer, got {self.lag!r}")
-
-    def __str__(self) -> str:
-        return f"{self.feature}(k)" if self.lag == 0 else f"{self.feature}(k-{self.lag})"
-
-
-@dataclass(frozen=True)
-class Design:
-    """A model's equation over one run, linear in its parameters.
-
-    ``target(k) = offset(k) + matrix(k, :) @ parameters + error(k)`` for every
-    sample k where all entries are finite (rows with NaN are left out).
-
-    Attributes:
-        target: delta(k), the recorded steering (rad), shape (n,).
-        offset: the part of delta(k) that is not fitted (e.g. delta(k-1) of the
-            two-point model; zeros for a plain ARX model), shape (n,).
-        matrix: one column per parameter, in ``parameter_names`` order, shape (n, p).
-    """
-
-    target: np.ndarray
-    offset: np.ndarray
-    matrix: np.ndarray
-
-    def __post_init__(self) -> None:
-        target = np.asarray(self.target, dtype=np.float64)
-        offset = np.asarray(self.offset, dtype=np.float64)
-        matrix = np.asarray(self.matrix, dtype=np.float64)
-        if matrix.ndim == 1:
-            matrix = matrix[:, None]
-        if target.ndim != 1 or offset.shape != target.shape or matrix.ndim != 2:
-            raise ValueError(
-                "Design needs target (n,), offset (n,) and matrix (n, p); got shapes "
-                f"{target.shape}, {offset.shape}, {matrix.shape}"
-            )
-        if matrix.shape[0] != target.size:
-            raise ValueError(f"Design.matrix has {matrix.shape[0]} rows, target has {target.size}")
-        object.__setattr__(self, "target", target)
-        object.__setattr__(self, "offset", offset)
-        object.__setattr__(self, "matrix", matrix)
-
-    @property
-    def valid(self) -> np.ndarray:
-        """Rows where target, offset and every column are finite."""
-        return (
-            np.isfinite(self.target)
-            & np.isfinite(self.offset)
-            & np.all(np.isfinite(self.matrix), axis=1)
-        )
-
-
-def lagged(values: np.ndarray, lag: int) -> np.ndarray:
-    """``values(k - lag)`` aligned with ``values`` (NaN for k < lag)."""
-    values = np.asarray(values, dtype=np.float64)
-    if lag == 0:
-        return values.copy()
-    out = np.full(values.shape, np.nan)
-    if lag < values.shape[0]:
-        out[lag:] = values[:-lag]
-    return out
-
-
-def _finite_positive(value: Any, field: str, source: str) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value <= 0
-    ):
-        raise ModelFileError(
-            f"{source}: field '{field}' must be a finite positive number, got {value!r}"
-        )
-    return float(value)
 
 
 class SteeringModel(ABC):
@@ -445,8 +343,6 @@ class SteeringModel(ABC):
         start = int(finite[0])
         arx = self.arx()
         if arx is not None:
-            from hasa_env.steering.fitting import simulate_arx
-
             return simulate_arx(arx, features, start)
         delta = features["delta"].to_numpy(dtype=np.float64).copy()
         window = self.max_lag + 1
@@ -471,8 +367,6 @@ class SteeringModel(ABC):
         identifiability of the lane offset warns (DESIGN.md section 3). See
         :func:`hasa_env.steering.fitting.fit_model`.
         """
-        from hasa_env.steering.fitting import fit_model
-
         return fit_model(self, runs, road=road)
 
     # ------------------------------------------------------------------ JSON
@@ -501,157 +395,14 @@ class SteeringModel(ABC):
 
     @classmethod
     def from_dict(cls, document: Mapping[str, Any], source: str = "<model>") -> SteeringModel:
-        """Build a model from :meth:`to_dict`'s form, validating every field.
-
-        Fields: ``format`` (= "hasa_env.steering_model"), ``format_version``
-        (1), ``type`` (a registered model type), ``name``, ``dt`` (s, > 0),
-        ``features`` {``near_distance``, ``far_distance`` (m, > 0),
-        ``decision_lag`` (int >= 0), ``regressors`` (optional; checked)},
-        ``structure`` (the model's keyword arguments), ``parameters`` (name ->
-        number, or null) and ``standard_errors`` (same, or null).
+        """Build a model from :meth:`to_dict`'s form, validating every field
+        (:func:`hasa_env.steering.model_file.model_from_dict`).
 
         Raises:
             ModelFileError: naming ``source``, the field and the allowed values.
         """
-        if not isinstance(document, Mapping):
-            raise ModelFileError(f"{source}: expected a JSON object, got {type(document).__name__}")
-        known = {
-            "format", "format_version", "type", "name", "dt", "features", "structure",
-            "parameters", "standard_errors",
-        }  # fmt: skip
-        unknown = sorted(set(document) - known)
-        if unknown:
-            raise ModelFileError(
-                f"{source}: unknown field '{unknown[0]}'; "
-                f"allowed fields: {', '.join(sorted(known))}"
-            )
-        for field in ("format", "type", "dt", "features", "parameters"):
-            if field not in document:
-                raise ModelFileError(f"{source}: missing field '{field}'")
-        if document["format"] != MODEL_FILE_FORMAT:
-            raise ModelFileError(
-                f"{source}: field 'format' is {document['format']!r}; "
-                f"allowed: {MODEL_FILE_FORMAT!r}"
-            )
-        version = document.get("format_version", MODEL_FILE_VERSION)
-        if version != MODEL_FILE_VERSION:
-            raise ModelFileError(
-                f"{source}: field 'format_version' is {version!r}; allowed: {MODEL_FILE_VERSION}"
-            )
-        model_type = document["type"]
-        if model_type not in MODEL_TYPES:
-            raise ModelFileError(
-                f"{source}: field 'type' is {model_type!r}; "
-                f"allowed: {', '.join(sorted(MODEL_TYPES))} "
-                "(a custom model's class must be defined (imported) before loading its file)"
-            )
-        target = MODEL_TYPES[model_type]
-        if cls is not SteeringModel and not issubclass(target, cls):
-            raise ModelFileError(
-                f"{source}: field 'type' is {model_type!r} but {cls.__name__}.from_json expects "
-                f"{cls.model_type!r}; use SteeringModel.load to read any model"
-            )
-        dt = _finite_positive(document["dt"], "dt", source)
-        features = document["features"]
-        if not isinstance(features, Mapping):
-            raise ModelFileError(f"{source}: field 'features' must be an object, got {features!r}")
-        allowed_features = {"near_distance", "far_distance", "decision_lag", "regressors"}
-        bad = sorted(set(features) - allowed_features)
-        if bad:
-            raise ModelFileError(
-                f"{source}: unknown field 'features.{bad[0]}'; "
-                f"allowed: {', '.join(sorted(allowed_features))}"
-            )
-        near = _finite_positive(
-            features.get("near_distance", NEAR_POINT_DISTANCE), "features.near_distance", source
-        )
-        far = _finite_positive(
-            features.get("far_distance", FAR_POINT_DISTANCE), "features.far_distance", source
-        )
-        lag = features.get("decision_lag", 1)
-        if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
-            raise ModelFileError(
-                f"{source}: field 'features.decision_lag' must be a non-negative integer, "
-                f"got {lag!r}"
-            )
-        name = document.get("name", model_type)
-        if not isinstance(name, str):
-            raise ModelFileError(f"{source}: field 'name' must be a string, got {name!r}")
-        structure = document.get("structure", {})
-        if not isinstance(structure, Mapping):
-            raise ModelFileError(
-                f"{source}: field 'structure' must be an object, got {structure!r}"
-            )
-        try:
-            skeleton = target(
-                **structure,
-                near_distance=near,
-                far_distance=far,
-                dt=dt,
-                decision_lag=lag,
-                name=name,
-            )
-        except (TypeError, ValueError) as exc:
-            raise ModelFileError(
-                f"{source}: field 'structure' is not valid for {model_type!r}: {exc}"
-            ) from None
-        names = skeleton.parameter_names
-        values = {}
-        for field in ("parameters", "standard_errors"):
-            raw = document.get(field)
-            if raw is None:
-                values[field] = None
-                continue
-            if not isinstance(raw, Mapping):
-                raise ModelFileError(
-                    f"{source}: field '{field}' must be an object name -> number or null, "
-                    f"got {raw!r}"
-                )
-            missing = [n for n in names if n not in raw]
-            extra = [k for k in raw if k not in names]
-            if missing or extra:
-                raise ModelFileError(
-                    f"{source}: field '{field}' has "
-                    f"{'missing ' + str(missing) if missing else ''}"
-                    f"{' and ' if missing and extra else ''}"
-                    f"{'unexpected ' + str(extra) if extra else ''}; "
-                    f"allowed names for this structure: {list(names)}"
-                )
-            for key in names:
-                item = raw[key]
-                if (
-                    isinstance(item, bool)
-                    or not isinstance(item, int | float)
-                    or not math.isfinite(item)
-                ):
-                    raise ModelFileError(
-                        f"{source}: field '{field}.{key}' must be a finite number, got {item!r}"
-                    )
-                if field == "standard_errors" and item < 0:
-                    raise ModelFileError(
-                        f"{source}: field '{field}.{key}' must be >= 0, got {item!r}"
-                    )
-            values[field] = {n: float(raw[n]) for n in names}
-        if values["parameters"] is None and values["standard_errors"] is not None:
-            raise ModelFileError(f"{source}: field 'standard_errors' given without 'parameters'")
-        listed = features.get("regressors")
-        if listed is not None:
-            expected = [str(r) for r in skeleton.regressors]
-            if not isinstance(listed, list) or listed != expected:
-                raise ModelFileError(
-                    f"{source}: field 'features.regressors' is {listed!r} but this structure uses "
-                    f"{expected}"
-                )
-        return target(
-            **structure,
-            parameters=values["parameters"],
-            standard_errors=values["standard_errors"],
-            near_distance=near,
-            far_distance=far,
-            dt=dt,
-            decision_lag=lag,
-            name=name,
-        )
+        return model_from_dict(document, source, None if cls is SteeringModel else cls)
+
 
     @classmethod
     def from_json(

@@ -11,7 +11,7 @@ the point lies to the left (ISO 8855). On a straight road they are
 ``phi = -(theta + atan(y / near))`` and ``omega = -(theta + atan(y / far))``
 (the paper's eq. 8-9 with its xi_1/xi_2 typo fixed); on a curved road the
 exact bearing of the lane-centre point at that arc length ahead is used
-(:func:`hasa_env.road.lane_centre_bearing`). The generalized model also uses
+(:func:`hasa_env.sim.road.lane_centre_bearing`). The generalized model also uses
 the lateral velocity ``v_y = v sin(theta)`` (m/s, the paper's xi_3).
 
 Sample alignment
@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from hasa_env.road import Road, lane_centre_bearing, make_road
+from hasa_env.sim.road import Road, lane_centre_bearing, make_road
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 
 __all__ = [
@@ -72,7 +72,7 @@ def near_far_bearings(
         near: near-point distance (m), 6.2 in the paper.
         far: far-point distance (m), 20 in the paper's equations.
         exact: True: the exact bearing of the lane-centre point ``near``/``far`` m
-            of arc length ahead (:func:`hasa_env.road.lane_centre_bearing`);
+            of arc length ahead (:func:`hasa_env.sim.road.lane_centre_bearing`);
             False: the paper's straight-road formula
             ``phi = -(theta + atan(y / near))``, ``omega = -(theta + atan(y / far))``
             (eq. 8-9), whatever the road. Both agree on a straight road.
@@ -130,7 +130,7 @@ def steering_features(
 
     Args:
         frame: one run in the recording format (columns
-            :data:`hasa_env.core.RECORDING_COLUMNS`; at least ``steering``,
+            :data:`hasa_env.sim.setup.RECORDING_COLUMNS`; at least ``steering``,
             ``lateral_offset``, ``heading``, ``speed``, and ``station`` on curved roads).
         road: the road of the run. ``None``: the road named in the frame's
             metadata (:func:`road_of_frame`), else the straight-road formula
@@ -160,7 +160,7 @@ def steering_features(
     if missing:
         raise ValueError(
             f"frame lacks the recording columns {missing}; steering_features needs "
-            f"{needed} (+ station on curved roads); see hasa_env.core.RECORDING_COLUMNS"
+            f"{needed} (+ station on curved roads); see hasa_env.sim.setup.RECORDING_COLUMNS"
         )
     if road is None:
         road = road_of_frame(frame)

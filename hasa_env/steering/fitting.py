@@ -2,8 +2,6 @@
 
 - :func:`fit_model` (what ``model.fit(runs)`` calls): ordinary least squares
   on one or many runs, with standard errors and the identifiability check.
-- :func:`select_order`: BIC (or AIC) search over the generalized model's
-  orders on a *common* sample (the paper's future work 1).
 - :func:`residual_diagnostics`: autocorrelation and Ljung-Box whiteness
   (statsmodels) of residuals.
 - :func:`check_identifiability`: the static lane-offset gain
@@ -15,37 +13,34 @@
   increments delta(k) - delta(k-1) and Ljung-Box p-value, for one-step
   prediction (measured past steering) and free-run simulation.
 
-Runs are recordings (:data:`hasa_env.core.RECORDING_COLUMNS`) or features
+Runs are recordings (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`) or features
 frames (:func:`hasa_env.steering.features.steering_features`), one
 ``pandas.DataFrame`` per run; lags never cross from one run into another.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 import warnings
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from scipy import signal
+from statsmodels.stats.diagnostic import acorr_ljungbox
+from statsmodels.tsa.stattools import acf
 
-from hasa_env.road import Road
+from hasa_env.sim.road import Road
 from hasa_env.steering.arx import ARXForm
-from hasa_env.steering.base import lagged
-
-if TYPE_CHECKING:
-    from hasa_env.steering.base import SteeringModel
-    from hasa_env.steering.models import GeneralizedModel
+from hasa_env.steering.design import SteeringModelLike as SteeringModel
+from hasa_env.steering.design import lagged
 
 __all__ = [
     "FitResult",
     "IdentifiabilityReport",
     "IdentifiabilityWarning",
-    "OrderSelection",
     "ResidualDiagnostics",
     "check_identifiability",
     "fit_model",
@@ -53,7 +48,6 @@ __all__ = [
     "residual_diagnostics",
     "score",
     "score_runs",
-    "select_order",
     "simulate_arx",
 ]
 
@@ -450,134 +444,7 @@ def fit_model(
 
 
 def _replace(result: FitResult, **changes: Any) -> FitResult:
-    from dataclasses import replace
-
     return replace(result, **changes)
-
-
-# ------------------------------------------------------------- order search
-@dataclass(frozen=True)
-class OrderSelection:
-    """Result of :func:`select_order`.
-
-    Attributes:
-        orders: the selected orders {"na", "nb", "nc", "nd"}.
-        criterion: "bic" or "aic".
-        table: every candidate (orders, n_params, rss, aic, bic), best first.
-        n_common: samples of the common estimation sample.
-        model: a :class:`~hasa_env.steering.models.GeneralizedModel` of the
-            selected orders fitted on all the data (not only the common sample).
-    """
-
-    orders: dict[str, int]
-    criterion: str
-    table: pd.DataFrame
-    n_common: int
-    model: GeneralizedModel
-
-
-def _order_grid(
-    value: Mapping[str, int] | Sequence[int] | None, default: Sequence[int], label: str
-) -> tuple[int, ...]:
-    keys = ("na", "nb", "nc", "nd")
-    if value is None:
-        return tuple(default)
-    if isinstance(value, Mapping):
-        unknown = [k for k in value if k not in keys]
-        if unknown:
-            raise ValueError(f"{label}: unknown key {unknown[0]!r}; allowed: {', '.join(keys)}")
-        merged = dict(zip(keys, default, strict=True))
-        merged.update(value)
-        out = tuple(merged[k] for k in keys)
-    else:
-        out = tuple(value)
-        if len(out) != 4:
-            raise ValueError(f"{label} must give 4 orders (na, nb, nc, nd), got {out}")
-    for k, v in zip(keys, out, strict=True):
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 0:
-            raise ValueError(f"{label}[{k!r}] must be a non-negative integer, got {v!r}")
-    return tuple(int(v) for v in out)
-
-
-def _residual_sum_of_squares(matrix: np.ndarray, target: np.ndarray) -> float | None:
-    """RSS of the least-squares fit (None if the columns are linearly dependent)."""
-    if matrix.shape[1] == 0:
-        return float(target @ target)
-    norms = np.linalg.norm(matrix, axis=0)
-    if np.any(norms == 0):
-        return None
-    scaled = matrix / norms
-    solution, _, rank, singular = np.linalg.lstsq(scaled, target, rcond=None)
-    if rank < matrix.shape[1] or singular[-1] < 1e-12 * singular[0]:
-        return None
-    residual = target - scaled @ solution
-    return float(residual @ residual)
-
-
-def select_order(
-    runs: pd.DataFrame | Sequence[pd.DataFrame],
-    max_orders: Mapping[str, int] | Sequence[int] | None = None,
-    min_orders: Mapping[str, int] | Sequence[int] | None = None,
-    criterion: str = "bic",
-    road: Road | None = None,
-    **model_kwargs: Any,
-) -> OrderSelection:
-    """Search the generalized model's orders by BIC (or AIC) on a common sample.
-
-    Every candidate (na, nb, nc, nd) between ``min_orders`` (default
-    (1, 1, 0, 0)) and ``max_orders`` (default (4, 6, 3, 3)) is fitted on the
-    *same* samples: those where the largest model has its full history, so the
-    criteria compare like with like. BIC = n log(rss/n) + p log(n).
-
-    Args:
-        runs: one run or a list of runs.
-        max_orders, min_orders: mappings {"na", "nb", "nc", "nd"} or 4-sequences.
-        criterion: "bic" or "aic".
-        road: the road of the runs (None: from their metadata, else straight).
-        **model_kwargs: options of the models (near_distance, far_distance, dt, ...).
-    """
-    from hasa_env.steering.models import GeneralizedModel
-
-    if criterion not in ("bic", "aic"):
-        raise ValueError(f"criterion must be 'bic' or 'aic', got {criterion!r}")
-    high = _order_grid(max_orders, (4, 6, 3, 3), "max_orders")
-    low = _order_grid(min_orders, (1, 1, 0, 0), "min_orders")
-    if any(lo > hi for lo, hi in zip(low, high, strict=True)):
-        raise ValueError(f"min_orders {low} exceed max_orders {high}")
-    frames = _as_runs(runs)
-    largest = GeneralizedModel(*high, **model_kwargs)
-    matrices, targets = [], []
-    for run in frames:
-        design = largest.design(largest.features(run, road))
-        valid = design.valid
-        matrices.append(design.matrix[valid])
-        targets.append(design.target[valid])
-    X = np.vstack(matrices)
-    y = np.concatenate(targets)
-    n = y.size
-    offsets = np.cumsum([0, *high])  # column blocks a | b | c | d of the largest design
-    rows = []
-    for orders in itertools.product(*(range(lo, hi + 1) for lo, hi in zip(low, high, strict=True))):
-        cols = [offsets[block] + i for block, order in enumerate(orders) for i in range(order)]
-        p = len(cols)
-        if p >= n:
-            continue
-        rss = _residual_sum_of_squares(X[:, cols], y)
-        if rss is None:
-            continue  # collinear candidate: not estimable on these data
-        _, aic, bic = _criteria(rss, n, p)
-        rows.append({"na": orders[0], "nb": orders[1], "nc": orders[2], "nd": orders[3],
-                     "n_params": p, "rss": rss, "aic": aic, "bic": bic})  # fmt: skip
-    if not rows:
-        raise ValueError("no candidate order could be fitted on these data")
-    table = (
-        pd.DataFrame(rows)
-        .sort_values([criterion, "n_params"], kind="stable")
-        .reset_index(drop=True)
-    )
-    best = {k: int(table.loc[0, k]) for k in ("na", "nb", "nc", "nd")}
-    model = GeneralizedModel(**best, **model_kwargs).fit(frames, road=road)
-    return OrderSelection(best, criterion, table, n, model)
 
 
 # --------------------------------------------------------------- diagnostics
@@ -615,9 +482,6 @@ def residual_diagnostics(
     Several runs are concatenated (NaNs dropped); the few lag products that
     straddle two runs do not matter at thousands of samples per run.
     """
-    from statsmodels.stats.diagnostic import acorr_ljungbox
-    from statsmodels.tsa.stattools import acf
-
     if isinstance(residuals, np.ndarray) and residuals.ndim == 1:
         parts = [residuals]
     else:

@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 
 from hasa_env.steering.arx import ARXForm
-from hasa_env.steering.base import Design, Regressor, SteeringModel, lagged
+from hasa_env.steering.base import SteeringModel
+from hasa_env.steering.design import Design, Regressor, lagged
 
 __all__ = ["TwoPointModel", "GeneralizedModel", "PAPER_ORDERS"]
 

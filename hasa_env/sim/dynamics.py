@@ -46,17 +46,26 @@ __all__ = [
 ]
 
 
+_HALF_PI = 0.5 * math.pi
+
+
 def _where(cond, a, b):  # noqa: ANN001 - scalar backend helper
     return a if cond else b
 
 
 SCALAR_OPS = SimpleNamespace(
-    sin=math.sin, cos=math.cos, sqrt=math.sqrt, minimum=min, maximum=max, where=_where
+    sin=math.sin, cos=math.cos, sqrt=math.sqrt, abs=abs, minimum=min, maximum=max, where=_where
 )
 """Backend for one car: Python floats and the math module."""
 
 ARRAY_OPS = SimpleNamespace(
-    sin=np.sin, cos=np.cos, sqrt=np.sqrt, minimum=np.minimum, maximum=np.maximum, where=np.where
+    sin=np.sin,
+    cos=np.cos,
+    sqrt=np.sqrt,
+    abs=np.abs,
+    minimum=np.minimum,
+    maximum=np.maximum,
+    where=np.where,
 )
 """Backend for N cars: float64 arrays of shape (N,)."""
 
@@ -233,11 +242,13 @@ def sensor_readings(
 def left_road(
     state: VehicleState, lower: float, upper: float, ops: SimpleNamespace
 ) -> bool | np.ndarray:
-    """True when the car is off the road (y outside [lower, upper]) or faces backwards."""
+    """True when the car is off the road (y outside [lower, upper]) or faces backwards.
+
+    ``|`` is the same operator on Python bools and numpy bool arrays, so one
+    expression serves both backends.
+    """
     y = state.lateral_offset
-    if ops is SCALAR_OPS:
-        return y < lower or y > upper or abs(state.heading) > 0.5 * math.pi
-    return (y < lower) | (y > upper) | (np.abs(state.heading) > 0.5 * np.pi)
+    return (y < lower) | (y > upper) | (ops.abs(state.heading) > _HALF_PI)
 
 
 def lane_keeping_reward(

@@ -62,7 +62,7 @@ def _range_text(low: float | None, high: float | None, low_open: bool) -> str:
 _SCHEMA: dict[str, Any] = {
     "track": _Spec(
         "straight",
-        "Road: 'straight' or 'curved' (the shipped curved track, see hasa_env.road).",
+        "Road: 'straight' or 'curved' (the shipped curved track, see hasa_env.sim.road).",
         kind="choice",
         choices=("straight", "curved"),
     ),

@@ -40,19 +40,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from hasa_env.config import deep_merge
-from hasa_env.core import INFO_KEYS, RECORDING_COLUMNS, STATE_NAMES, EnvSetup, build_setup
-from hasa_env.dynamics import SENSOR_NAMES
-from hasa_env.recording import (
+from hasa_env.recording.format import (
     Recording,
     RecordingError,
     RecordingWarning,
     _validate_meta,
-    load_recording,
 )
+from hasa_env.recording.reader import load_recording, load_recordings
+from hasa_env.sim.config import deep_merge
+from hasa_env.sim.dynamics import SENSOR_NAMES
+from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS, STATE_NAMES, EnvSetup, build_setup
 
 __all__ = [
     "ExportResult",
@@ -114,7 +115,7 @@ def observations(data: pd.DataFrame, config: Mapping[str, Any], kind: str | None
     """The env's observations of every recording row, recomputed from the columns.
 
     Args:
-        data: recording rows (:data:`hasa_env.core.RECORDING_COLUMNS`).
+        data: recording rows (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`).
         config: the env's full config (the recording's sidecar ``config``).
         kind: ``"sensors"``, ``"state"`` or ``"both"``; default the config's
             ``observation.type``.
@@ -180,7 +181,7 @@ def episode_arrays(
 
     Returns a dict with ``observations`` (n + 1 rows), ``actions``,
     ``rewards`` (float64), ``terminations``, ``truncations`` (n each),
-    ``infos`` (every :data:`~hasa_env.core.INFO_KEYS` column, n + 1 rows),
+    ``infos`` (every :data:`~hasa_env.sim.setup.INFO_KEYS` column, n + 1 rows),
     and ``cut``: True when the recording ended without termination or
     truncation (stopped, or incomplete); its last step is then marked
     truncated, as Minari's own collector does for an episode cut short.
@@ -275,8 +276,6 @@ def _load_sources(
     source: str | os.PathLike[str] | Sequence[Recording | str | os.PathLike[str]],
 ) -> tuple[list[Recording], list[tuple[Path | None, str]]]:
     """Recordings from a folder or a list (of Recordings or paths), plus the corrupt ones."""
-    from hasa_env.recording import load_recordings
-
     skipped: list[tuple[Path | None, str]] = []
     if isinstance(source, str | os.PathLike):
         root = Path(source)
@@ -352,7 +351,7 @@ def export_minari(
             without ``overwrite``, or no exportable recording.
     """
     minari = require_minari()
-    import gymnasium as gym
+    # minari is the optional 'minari' extra: imported only when exporting
     from minari.data_collector.episode_buffer import EpisodeBuffer
     from minari.dataset.minari_dataset import parse_dataset_id
 
@@ -463,7 +462,7 @@ def to_parquet(
 ) -> Path:
     """Write one recording as a Parquet file; returns its path.
 
-    Columns and dtypes are the recording's (:data:`hasa_env.core.RECORDING_COLUMNS`:
+    Columns and dtypes are the recording's (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`:
     int64 ``step``/``bias_index``, bool flags, float64 values, bit-exact);
     the sidecar JSON is stored in the schema metadata under
     ``hasa_env.recording`` (read it back with :func:`read_parquet`). ``path``

@@ -25,6 +25,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
+from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
+from benchmarks.report import format_tables, write_outputs
+
 __all__ = ["main", "build_parser", "perf_rows", "format_perf_table", "PERF_MODULES"]
 
 PERF_MODULES = ("perf_env", "perf_estimators", "perf_render")
@@ -159,8 +164,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 # -------------------------------------------------------------------- paper/score
 def _config(args: argparse.Namespace) -> Any:
-    from benchmarks.protocol import ProtocolConfig
-
     noise = {
         key: value
         for key, value in (
@@ -202,8 +205,6 @@ class _Progress:
             return
         if phase == "runs":
             if self.bar is None:
-                from tqdm import tqdm
-
                 self.bar = tqdm(total=total, unit="run", desc="scoring runs", file=sys.stderr)
             self.bar.update(done - self.bar.n)
             return
@@ -217,9 +218,6 @@ class _Progress:
 
 
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
-    from benchmarks.protocol import BenchmarkError, run_protocol
-    from benchmarks.report import format_tables, write_outputs
-
     if args.workers is not None and args.workers < 1:
         print(f"hasa-bench: --workers must be >= 1, got {args.workers}", file=sys.stderr)
         return EXIT_USAGE

@@ -19,7 +19,8 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from hasa_env.recording import RecordingError, RecordingWarning
+from hasa_env.recording import RecordingError, RecordingWarning, load_recording, load_recordings
+from hasa_env.recording.export import export_minari, require_pyarrow, summarize, to_parquet
 
 __all__ = ["main"]
 
@@ -31,8 +32,6 @@ def _err(message: str) -> None:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from hasa_env.datasets import summarize
-
     status = EXIT_OK
     for i, name in enumerate(args.files):
         if i:
@@ -53,9 +52,6 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _convert(args: argparse.Namespace) -> int:
-    from hasa_env.datasets import require_pyarrow, to_parquet
-    from hasa_env.recording import load_recording, load_recordings
-
     try:
         require_pyarrow()
     except ImportError as exc:
@@ -96,8 +92,6 @@ def _convert(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from hasa_env.datasets import export_minari
-
     root = Path(args.directory)
     if not root.is_dir():
         _err(f"error: recordings folder {str(root)!r} does not exist")

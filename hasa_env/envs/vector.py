@@ -21,26 +21,23 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from hasa_env.core import (
+from hasa_env.sim.dynamics import (
+    ARRAY_OPS,
+    VehicleState,
+    road_frame_acceleration,
+    road_frame_velocity,
+    sensor_readings,
+)
+from hasa_env.sim.setup import (
     INFO_KEYS,
     RESET_OPTIONS,
     build_setup,
     draw_episode,
     draw_noise_block,
     info_values,
-    physical_actions,
+    physical_action,
 )
-from hasa_env.dynamics import (
-    ARRAY_OPS,
-    VehicleState,
-    lane_keeping_reward,
-    left_road,
-    mean_road_frame_acceleration,
-    road_frame_acceleration,
-    road_frame_velocity,
-    sensor_readings,
-    step_vehicle,
-)
+from hasa_env.sim.transition import env_step
 
 __all__ = ["LaneKeepingVectorEnv"]
 
@@ -159,35 +156,20 @@ class LaneKeepingVectorEnv(VectorEnv):
         if self._state is None:
             raise RuntimeError("call reset() before step()")
         setup = self.setup
-        steer, acc = physical_actions(setup, actions, self.num_envs)
+        steer, acc = physical_action(setup, actions, self.num_envs)
         resetting = self._autoreset.copy()
-        state = self._state
-        previous_steering = state.steering
-        off_road = np.zeros(self.num_envs, dtype=bool)
-        for _ in range(setup.action_repeat):
-            state = step_vehicle(state, steer, acc, setup.params, self._curvature, ARRAY_OPS)
-            off_road |= left_road(state, setup.lower_edge, setup.upper_edge, ARRAY_OPS)
-        self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in state))
-        velocity = road_frame_velocity(self._state, ARRAY_OPS)
-        imu = mean_road_frame_acceleration(self._velocity, velocity, setup.env_step_duration)
-        self._velocity = velocity
+        outcome = env_step(
+            self._state, self._velocity, steer, acc, setup, self._curvature, ARRAY_OPS
+        )
+        self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in outcome.state))
+        self._velocity = outcome.velocity
         self._sim_step += setup.action_repeat
         self._acceleration = acc
         # every car's next sample; the cars about to be reset are overwritten below
-        self._sample_all(imu, self._curvature_of(self._state.station), skip=resetting)
-        terminated = off_road
+        self._sample_all(outcome.imu, self._curvature_of(self._state.station), skip=resetting)
+        terminated = np.asarray(outcome.off_road, dtype=bool)
         truncated = self._sim_step >= setup.max_sim_steps
-        rc = self.config["reward"]
-        rewards = lane_keeping_reward(
-            self._state.lateral_offset,
-            steer - previous_steering,
-            terminated,
-            0.5 * setup.road.lane_width,
-            setup.steering_limit,
-            rc["lateral_weight"],
-            rc["steering_rate_weight"],
-            rc["offroad_penalty"],
-        )
+        rewards = np.asarray(outcome.reward, dtype=np.float64)
         if resetting.any():
             idx = np.flatnonzero(resetting)
             self._reset_envs(idx, None)
@@ -202,7 +184,7 @@ class LaneKeepingVectorEnv(VectorEnv):
             gym.logger.warn("render() called without render_mode='rgb_array'")
             return None
         if self._renderers is None:
-            from hasa_env.rendering import make_renderer
+            from hasa_env.render import make_renderer  # pygame: only when rendering
 
             self._renderers = [make_renderer(self.setup, "rgb_array") for _ in range(self.num_envs)]
         info = self._info()

@@ -8,7 +8,7 @@ camera reads y + b, so that hypothesis puts the lane centre at y = -b and its
 markings at y = -b +- lane_width / 2), drawn dashed and faded, and
 optionally the near (6.2 m) and far (20 m) lane-centre points of the
 two-point steering model (filled for the true lane, rings for the ghost
-lanes). The HUD (:class:`hasa_env.rendering.Hud`) shows time, speed,
+lanes). The HUD (:class:`hasa_env.render.common.Hud`) shows time, speed,
 steering angle and, when an estimator runs alongside, the hypothesis weights.
 
 Camera model: a pinhole camera at the driver's eye, ``EYE_FORWARD`` m ahead
@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from hasa_env.rendering import (
+from hasa_env.render.common import (
     GHOST_COLOUR,
     GRASS_COLOUR,
     MARKING_COLOUR,
@@ -90,10 +90,10 @@ class DriverViewRenderer:
     """First-person perspective renderer of an env's ``info`` dict; one instance per env.
 
     Args:
-        setup: the env's :class:`hasa_env.core.EnvSetup` (road, hypotheses, config).
+        setup: the env's :class:`hasa_env.sim.setup.EnvSetup` (road, hypotheses, config).
         render_mode: ``"rgb_array"`` (frames as arrays) or ``"human"`` (a window).
         weights: where the HUD takes hypothesis weights from
-            (:data:`hasa_env.rendering.WeightSource`); default: look in ``info``.
+            (:data:`hasa_env.render.common.WeightSource`); default: look in ``info``.
         steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
         size: frame (width, height) in pixels; default ``render.width``/``height``.
         show_points: draw the near and far points; default ``render.show_points``.
@@ -268,7 +268,7 @@ class DriverViewRenderer:
         """Draw the driver's view of the scene described by an env ``info`` dict.
 
         Args:
-            info: the env's info (keys of :data:`hasa_env.core.INFO_KEYS`).
+            info: the env's info (keys of :data:`hasa_env.sim.setup.INFO_KEYS`).
             weights: hypothesis weights for the HUD (default: the constructor's).
             message: text centred over the scene (e.g. a countdown), or None.
             target: surface to draw on (same size); default the off-screen surface.

@@ -1,9 +1,10 @@
 """What the single and the vector env share: set-up from a config, episode
-draws, noise blocks, spaces, and the info/observation layout.
+draws, noise blocks, actions, spaces, and the info/observation layout.
 
 Both envs draw their randomness through these functions from one
 ``numpy.random.Generator`` per car, in the same order, so the vector env
-reproduces N single envs exactly (DESIGN.md section 2).
+reproduces N single envs exactly (docs/design.md §3). The transition itself
+is :func:`hasa_env.sim.transition.env_step`.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from hasa_env.config import make_config
-from hasa_env.dynamics import SENSOR_NAMES, VehicleParams, VehicleState
-from hasa_env.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
+from hasa_env.sim.config import make_config
+from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, SENSOR_NAMES, VehicleParams, VehicleState
+from hasa_env.sim.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
 
 __all__ = [
     "EnvSetup",
@@ -140,6 +141,8 @@ class EnvSetup:
     action_repeat: int
     max_sim_steps: int
     observation_type: str
+    reward_weights: tuple[float, float, float]
+    """(lateral_weight, steering_rate_weight, offroad_penalty) of the reward."""
 
     @property
     def dt(self) -> float:
@@ -234,6 +237,11 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
         action_repeat=int(cfg["action_repeat"]),
         max_sim_steps=max(1, round(cfg["time_limit"] * cfg["sim_frequency"])),
         observation_type=cfg["observation"]["type"],
+        reward_weights=(
+            float(cfg["reward"]["lateral_weight"]),
+            float(cfg["reward"]["steering_rate_weight"]),
+            float(cfg["reward"]["offroad_penalty"]),
+        ),
     )
 
 
@@ -308,39 +316,56 @@ def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:
     return rng.standard_normal((setup.noise_block, len(setup.noise_std)))
 
 
-def physical_action(setup: EnvSetup, action: Any) -> tuple[float, float]:
-    """Validate an action and map it to (steering rad, acceleration m/s^2), clipped to the limits."""
-    arr = np.asarray(action, dtype=np.float64)
-    if arr.shape != (2,):
-        raise ValueError(
-            f"action must have shape (2,) = [steering, acceleration], got shape {arr.shape}"
-        )
-    steer, acc = arr.tolist()
-    if not (math.isfinite(steer) and math.isfinite(acc)):
-        raise ValueError(f"action must be finite, got [steering={steer!r}, acceleration={acc!r}]")
+def physical_action(
+    setup: EnvSetup, action: Any, num_envs: int | None = None
+) -> tuple[Any, Any]:
+    """Validate an action and map it to (steering rad, acceleration m/s^2), clipped to the limits.
+
+    ``num_envs`` None: one car, ``action`` of shape (2,), returns two floats;
+    an int N: N cars, ``action`` of shape (N, 2), returns two (N,) arrays.
+    The same arithmetic for both (the backends of :mod:`hasa_env.sim.dynamics`).
+    """
+    single = num_envs is None
+    expected = (2,) if single else (num_envs, 2)
+    arr = _action_array(action, expected)
+    if single:
+        steer, acc = arr.tolist()
+        if not (math.isfinite(steer) and math.isfinite(acc)):
+            raise ValueError(
+                f"action must be finite, got [steering={steer!r}, acceleration={acc!r}]"
+            )
+        ops = SCALAR_OPS
+    else:
+        if not np.all(np.isfinite(arr)):
+            bad = int(np.argwhere(~np.isfinite(arr))[0][0])
+            raise ValueError(f"actions must be finite; env {bad} got {arr[bad].tolist()}")
+        steer, acc = arr[:, 0], arr[:, 1]
+        ops = ARRAY_OPS
     lo, hi = setup.acceleration_limits
     limit = setup.steering_limit
     if setup.normalized_actions:
-        steer = min(max(steer, -1.0), 1.0) * limit
-        acc = min(max(acc, -1.0), 1.0)
-        acc = lo + (acc + 1.0) * 0.5 * (hi - lo)
-        return steer, acc
-    return min(max(steer, -limit), limit), min(max(acc, lo), hi)
-
-
-def physical_actions(setup: EnvSetup, actions: Any, num_envs: int) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorized :func:`physical_action` for an (N, 2) batch (same arithmetic)."""
-    arr = np.asarray(actions, dtype=np.float64)
-    if arr.shape != (num_envs, 2):
-        raise ValueError(f"actions must have shape ({num_envs}, 2), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.argwhere(~np.isfinite(arr))[0][0])
-        raise ValueError(f"actions must be finite; env {bad} got {arr[bad].tolist()}")
-    lo, hi = setup.acceleration_limits
-    limit = setup.steering_limit
-    steer, acc = arr[:, 0], arr[:, 1]
-    if setup.normalized_actions:
-        steer = np.minimum(np.maximum(steer, -1.0), 1.0) * limit
-        acc = np.minimum(np.maximum(acc, -1.0), 1.0)
+        steer = ops.minimum(ops.maximum(steer, -1.0), 1.0) * limit
+        acc = ops.minimum(ops.maximum(acc, -1.0), 1.0)
         return steer, lo + (acc + 1.0) * 0.5 * (hi - lo)
-    return np.minimum(np.maximum(steer, -limit), limit), np.minimum(np.maximum(acc, lo), hi)
+    return ops.minimum(ops.maximum(steer, -limit), limit), ops.minimum(ops.maximum(acc, lo), hi)
+
+
+def _action_array(action: Any, expected: tuple[int, ...]) -> np.ndarray:
+    """``action`` as a float64 array of shape ``expected``, or a ValueError saying why not.
+
+    Only real numbers are actions: strings, complex numbers, dates, masked
+    arrays and other objects are refused rather than converted.
+    """
+    what = "action" if len(expected) == 1 else "actions"
+    layout = "[steering, acceleration]" if len(expected) == 1 else "one [steering, acceleration] row per env"
+    if isinstance(action, np.ma.MaskedArray):
+        raise ValueError(f"{what} must be a plain array of numbers, got a masked array")
+    raw = np.asarray(action)
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(
+            f"{what} must be real numbers (int or float), got dtype {raw.dtype} ({action!r:.80})"
+        )
+    arr = raw.astype(np.float64, copy=False)
+    if arr.shape != expected:
+        raise ValueError(f"{what} must have shape {expected} ({layout}), got shape {arr.shape}")
+    return arr

@@ -8,7 +8,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hasa_env.core import (
+from hasa_env.sim.dynamics import (
+    SCALAR_OPS,
+    VehicleState,
+    road_frame_acceleration,
+    road_frame_velocity,
+    sensor_readings,
+)
+from hasa_env.sim.setup import (
     INFO_KEYS,
     build_setup,
     draw_episode,
@@ -16,17 +23,7 @@ from hasa_env.core import (
     info_values,
     physical_action,
 )
-from hasa_env.dynamics import (
-    SCALAR_OPS,
-    VehicleState,
-    lane_keeping_reward,
-    left_road,
-    mean_road_frame_acceleration,
-    road_frame_acceleration,
-    road_frame_velocity,
-    sensor_readings,
-    step_vehicle,
-)
+from hasa_env.sim.transition import env_step
 
 __all__ = ["LaneKeepingEnv"]
 
@@ -35,7 +32,7 @@ class LaneKeepingEnv(gym.Env):
     """A kinematic bicycle keeping its lane while the camera sees a biased lane.
 
     ## Description
-    The car (paper eq. 1, DESIGN.md section 2) starts off-centre in its lane
+    The car (paper eq. 1, docs/design.md §4) starts off-centre in its lane
     (y = -0.5 m, v = 15 m/s by default) on a straight or curved road. Lane
     markings are ambiguous: the camera reports the lateral offset relative to
     one of several lane-centre hypotheses, ``y + b``, where the true bias ``b``
@@ -93,7 +90,7 @@ class LaneKeepingEnv(gym.Env):
     | truncated  | simulated time reaches ``time_limit`` (30 s, the paper's run length) |
 
     ## Info
-    The same keys at ``reset`` and every ``step`` (:data:`hasa_env.core.INFO_KEYS`):
+    The same keys at ``reset`` and every ``step`` (:data:`hasa_env.sim.setup.INFO_KEYS`):
     time (s), station (m), the true state, the applied acceleration,
     road_curvature, road-frame velocities, the true ``bias`` and ``bias_index``,
     and every raw (unclipped) sensor reading as ``sensor_<name>``.
@@ -154,34 +151,16 @@ class LaneKeepingEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         setup = self.setup
         steer, acc = physical_action(setup, action)
-        previous_steering = self._state.steering
-        state = self._state
-        params = setup.params
-        lower, upper = setup.lower_edge, setup.upper_edge
-        off_road = False
-        for _ in range(setup.action_repeat):
-            state = step_vehicle(state, steer, acc, params, self._curvature, SCALAR_OPS)
-            off_road = off_road or left_road(state, lower, upper, SCALAR_OPS)
-        self._sim_step += setup.action_repeat
-        velocity = road_frame_velocity(state, SCALAR_OPS)
-        imu = mean_road_frame_acceleration(self._velocity, velocity, setup.env_step_duration)
-        self._velocity = velocity
-        self._state = state
-        self._acceleration = acc
-        self._finish_sample(imu, self._curvature(state.station))
-        terminated = bool(off_road)
-        truncated = self._sim_step >= setup.max_sim_steps
-        rc = self.config["reward"]
-        reward = lane_keeping_reward(
-            state.lateral_offset,
-            steer - previous_steering,
-            terminated,
-            0.5 * setup.road.lane_width,
-            setup.steering_limit,
-            rc["lateral_weight"],
-            rc["steering_rate_weight"],
-            rc["offroad_penalty"],
+        outcome = env_step(
+            self._state, self._velocity, steer, acc, setup, self._curvature, SCALAR_OPS
         )
+        self._sim_step += setup.action_repeat
+        self._state, self._velocity = outcome.state, outcome.velocity
+        self._acceleration = acc
+        self._finish_sample(outcome.imu, self._curvature(outcome.state.station))
+        terminated = bool(outcome.off_road)
+        truncated = self._sim_step >= setup.max_sim_steps
+        reward = outcome.reward
         if self.render_mode == "human":
             self.render()
         return self._observation(), float(reward), terminated, truncated, self._info()
@@ -196,7 +175,7 @@ class LaneKeepingEnv(gym.Env):
         if self._state is None:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
-            from hasa_env.rendering import make_renderer
+            from hasa_env.render import make_renderer  # pygame: only when rendering
 
             self._renderer = make_renderer(self.setup, self.render_mode)
         return self._renderer.render(self._info())

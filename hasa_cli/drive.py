@@ -1,0 +1,383 @@
+"""``hasa-drive``: people drive the lane-keeping env with a wheel, a joystick or the keyboard.
+
+Commands::
+
+    hasa-drive --participant P07 [--track straight|curved] [--bias random|B] [--runs 10]
+    hasa-drive calibrate [--output FILE]
+    hasa-drive synthetic --driver Ill [--population paper] [--participant NAME]
+
+The drive follows the paper's protocol (:class:`hasa_env.session.DriveSession`):
+every run lasts 30 s, starts at 15 m/s and y = -0.5 m in the right lane; a
+countdown precedes it. Each run is recorded under
+``recordings/<participant>/run_NNN.csv`` (+ ``.json`` sidecar, + the raw
+wheel and pedal values in ``run_NNN.inputs.tsv``), every step flushed at
+once (a killed process keeps every completed step). ``--estimator`` runs the
+Gaussian-mixture EKF alongside and shows its lane weights in the HUD.
+
+``hasa-drive synthetic`` drives through the same loop, headless and as fast
+as possible, with a synthetic driver (:mod:`hasa_env.drivers`) turning an SDL
+virtual G29 (:mod:`hasa_env.devices.virtual`); its recordings are labelled
+``"synthetic": true`` in the sidecar metadata. ``recordings/sample`` was made
+that way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from estimators.wrappers import estimator_wrapper
+from hasa_cli import EXIT_ENVIRONMENT
+from hasa_env.devices.calibration import (
+    CalibrationError,
+    JoystickCalibration,
+    KeyboardCalibration,
+    load_calibration,
+    shipped_calibration,
+    user_calibration_path,
+)
+from hasa_env.devices.calibrator import calibrate
+from hasa_env.devices.force_feedback import Autocentre, ForceFeedbackUnavailable
+from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_reason
+from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
+from hasa_env.drivers import SyntheticDriver, population
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.session import DriveSession, DriveSettings, VirtualWheelDriver
+from hasa_env.sim.config import ConfigError
+from hasa_env.steering.loading import default_steering_ratio, load_model
+
+__all__ = ["EXIT_NO_SCREEN", "main"]
+
+EXIT_NO_SCREEN = EXIT_ENVIRONMENT
+"""Exit status of ``hasa-drive`` when there is no screen to drive on."""
+
+
+def _bias(text: str) -> float | None:
+    if text == "random":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"bias must be 'random' or a number of metres, got {text!r}"
+        ) from None
+
+
+def _add_session_arguments(p: argparse.ArgumentParser, participant_required: bool) -> None:
+    p.add_argument(
+        "--participant", required=participant_required, help="participant id (folder name)"
+    )
+    p.add_argument("--track", choices=("straight", "curved"), default="straight")
+    p.add_argument(
+        "--bias",
+        type=_bias,
+        default=None,
+        help="camera bias b in metres for every run, or 'random' (default: drawn per run)",
+    )
+    p.add_argument("--runs", type=int, default=10, help="number of runs (default 10)")
+    p.add_argument("--seconds", type=float, default=30.0, help="length of a run in s (default 30)")
+    p.add_argument("--speed", type=float, default=15.0, help="initial speed in m/s (default 15)")
+    p.add_argument(
+        "--lateral-offset", type=float, default=-0.5, help="initial y in m (default -0.5)"
+    )
+    p.add_argument(
+        "--output",
+        type=Path,
+        default=Path("recordings"),
+        help="root directory (default recordings)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=None, help="root seed of the runs (default: fresh, recorded)"
+    )
+    p.add_argument(
+        "--fsync", action="store_true", help="fsync every recorded step (survives power loss)"
+    )
+
+
+def _joystick_profiles(path: Path | None, log: Callable[[str], None]) -> list[JoystickCalibration]:
+    profiles: list[JoystickCalibration] = []
+    if path is None and user_calibration_path().exists():
+        path = user_calibration_path()
+    if path is not None:
+        cal = load_calibration(path)
+        if not isinstance(cal, JoystickCalibration):
+            raise CalibrationError(str(path), "device", "must be 'joystick' for --calibration")
+        log(f"hasa-drive: using the calibration {path}")
+        profiles.append(cal)
+    profiles += [shipped_calibration("g29"), shipped_calibration("gamepad")]  # type: ignore[list-item]
+    return profiles
+
+
+def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
+    reason = no_screen_reason()
+    if reason is not None:
+        print(
+            f"hasa-drive: no screen to drive on: {reason}.\n"
+            "hasa-drive shows the road to a human driver and needs a display. Run it in a desktop "
+            "session (for a test without one: xvfb-run hasa-drive ...). Headless work: hasa-replay "
+            "replays and checks recordings, and 'hasa-drive synthetic' drives a synthetic driver "
+            "through a virtual wheel.",
+            file=sys.stderr,
+        )
+        return EXIT_NO_SCREEN
+    try:
+        settings = DriveSettings(
+            participant=args.participant,
+            track=args.track,
+            bias=args.bias,
+            runs=args.runs,
+            seconds=args.seconds,
+            speed=args.speed,
+            lateral_offset=args.lateral_offset,
+            output=args.output,
+            seed=args.seed,
+            countdown=args.countdown,
+            fsync=args.fsync,
+        )
+        settings.env_config()
+        keyboard = (
+            load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
+        )
+        if not isinstance(keyboard, KeyboardCalibration):
+            raise CalibrationError(
+                str(args.keyboard), "device", "must be 'keyboard' for --keyboard"
+            )
+        profiles = _joystick_profiles(args.calibration, log)
+        env_wrapper = None
+        if args.estimator is not None:
+            probe = _probe_env(settings)
+            model = load_model(args.estimator, probe.setup.env_step_duration)
+            ratio = default_steering_ratio(args.estimator, fitted=False)
+            env_wrapper = estimator_wrapper(model, ratio)
+            env_wrapper(probe)  # fail now, not after the countdown
+    except (ValueError, ConfigError, ImportError, OSError) as exc:
+        print(f"hasa-drive: {exc}", file=sys.stderr)
+        return 2
+    try:
+        pg = init_pygame_input()
+        flags = pg.FULLSCREEN if args.fullscreen else 0
+        display = pg.display.set_mode((args.width, args.height), flags)
+    except Exception as exc:  # noqa: BLE001 - pygame.error and friends: no usable screen
+        print(
+            f"hasa-drive: no screen to drive on: pygame could not open a window ({exc})",
+            file=sys.stderr,
+        )
+        return EXIT_NO_SCREEN
+    pg.display.set_caption(f"hasa-drive: {settings.participant}")
+    inputs = InputManager(keyboard, profiles, use_joystick=not args.keyboard_only, pygame_module=pg)
+    autocentre = None
+    session = DriveSession(
+        settings,
+        inputs,
+        display=display,
+        realtime=True,
+        view=args.view,
+        fps=args.fps,
+        show_points=args.show_points,
+        env_wrapper=env_wrapper,
+        metadata={"estimator_shown": args.estimator},
+    )
+    previous = signal.signal(signal.SIGTERM, _raise_exit)
+    try:
+        if args.autocentre is not None:
+            autocentre = _start_autocentre(inputs, args.autocentre, log)
+        results = session.run()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if autocentre is not None:
+            autocentre.close()
+        session.close()
+        inputs.close()
+        pg.display.quit()
+    log(f"hasa-drive: {len(results)} run(s) recorded in {settings.directory}")
+    return 0
+
+
+def _probe_env(settings: DriveSettings) -> Any:
+    return LaneKeepingEnv(config=settings.env_config())
+
+
+def _raise_exit(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _start_autocentre(inputs: InputManager, strength: float, log: Callable[[str], None]) -> Any:
+    inputs.poll()
+    if inputs.active is None:
+        log("hasa-drive: --autocentre: no wheel connected; driving without force feedback")
+        return None
+    try:
+        return Autocentre(inputs.active.name, strength)
+    except ForceFeedbackUnavailable as exc:
+        log(f"hasa-drive: --autocentre: {exc}")
+        return None
+
+
+def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
+    drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
+    if args.driver not in drivers:
+        print(
+            f"hasa-drive: unknown driver {args.driver!r}; this population has {', '.join(drivers)}",
+            file=sys.stderr,
+        )
+        return 2
+    params = drivers[args.driver]
+    participant = (
+        args.participant or f"synthetic-{args.population}-{args.population_seed}-{args.driver}"
+    )
+    try:
+        settings = DriveSettings(
+            participant=participant,
+            track=args.track,
+            bias=args.bias,
+            runs=args.runs,
+            seconds=args.seconds,
+            speed=args.speed,
+            lateral_offset=args.lateral_offset,
+            output=args.output,
+            seed=args.seed,
+            countdown=0.0,
+            fsync=args.fsync,
+        )
+        settings.env_config()
+    except (ValueError, ConfigError) as exc:
+        print(f"hasa-drive: {exc}", file=sys.stderr)
+        return 2
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    pg = init_pygame_input()
+    try:
+        wheel = VirtualJoystick.g29()
+    except VirtualJoystickUnavailable as exc:
+        print(f"hasa-drive: cannot create the virtual wheel: {exc}", file=sys.stderr)
+        return 1
+    g29 = shipped_calibration("g29")
+    assert isinstance(g29, JoystickCalibration)
+    profile = JoystickCalibration(**{**_fields(g29), "match_names": (wheel.name,)})
+    inputs = InputManager(shipped_calibration("keyboard"), [profile], pygame_module=pg)  # type: ignore[arg-type]
+    hook = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
+    metadata = {
+        "synthetic": True,
+        "synthetic_driver": {
+            "description": (
+                "Not a human: a synthetic driver (hasa_env.drivers.SyntheticDriver) turned an SDL "
+                "virtual joystick laid out like a G29, read back through hasa-drive's input layer "
+                "with the G29 profile."
+            ),
+            "population": args.population,
+            "population_seed": args.population_seed,
+            "driver": params.name,
+            "params": params.to_dict(),
+        },
+    }
+    session = DriveSession(settings, inputs, realtime=False, hook=hook, metadata=metadata, log=log)
+    try:
+        results = session.run()
+    finally:
+        session.close()
+        inputs.close()
+        wheel.detach()
+    for r in results:
+        log(f"hasa-drive synthetic: {r.path} ({r.steps} steps, {r.end_reason})")
+    return 0 if len(results) == settings.runs else 1
+
+
+def _fields(cal: JoystickCalibration) -> dict[str, Any]:
+    return {k: getattr(cal, k) for k in cal.__dataclass_fields__ if k != "device"}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``hasa-drive`` (see the module docstring)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    log = print
+    if argv and argv[0] == "calibrate":
+        p = argparse.ArgumentParser(
+            prog="hasa-drive calibrate",
+            description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
+        )
+        p.add_argument("--output", type=Path, default=user_calibration_path(), help="file to write")
+        p.add_argument(
+            "--wheel-range", type=float, default=900.0, help="lock-to-lock range in degrees"
+        )
+        p.add_argument(
+            "--steering-ratio", type=float, default=15.0, help="steering ratio (default 15)"
+        )
+        p.add_argument(
+            "--timeout", type=float, default=300.0, help="give up after this many seconds"
+        )
+        args = p.parse_args(argv[1:])
+        return calibrate(
+            args.output,
+            wheel_range_deg=args.wheel_range,
+            steering_ratio=args.steering_ratio,
+            timeout=args.timeout,
+        )
+    if argv and argv[0] == "synthetic":
+        p = argparse.ArgumentParser(
+            prog="hasa-drive synthetic",
+            description="Drive through hasa-drive's loop with a synthetic driver turning a "
+            "virtual G29 "
+            "(headless; the recordings are labelled synthetic).",
+        )
+        _add_session_arguments(p, participant_required=False)
+        p.add_argument(
+            "--driver", default="Ill", help="driver name in the population (default Ill)"
+        )
+        p.add_argument("--population", default="paper", help="population name (default paper)")
+        p.add_argument("--population-seed", type=int, default=0, help="population seed (default 0)")
+        p.set_defaults(runs=1)
+        return _synthetic(p.parse_args(argv[1:]), log)
+    p = argparse.ArgumentParser(
+        prog="hasa-drive",
+        description="Drive the lane-keeping env with a wheel (G29), a joystick or the keyboard; "
+        "record each run. "
+        "Subcommands: 'hasa-drive calibrate', 'hasa-drive synthetic' (see their --help).",
+    )
+    _add_session_arguments(p, participant_required=True)
+    p.add_argument(
+        "--countdown", type=float, default=3.0, help="countdown before each run in s (default 3)"
+    )
+    p.add_argument(
+        "--calibration",
+        type=Path,
+        default=None,
+        help="joystick calibration file (default: the one "
+        f"written by 'hasa-drive calibrate' ({user_calibration_path()}) if present, "
+        "else the shipped G29 and "
+        "gamepad profiles)",
+    )
+    p.add_argument("--keyboard", type=Path, default=None, help="keyboard calibration file")
+    p.add_argument("--keyboard-only", action="store_true", help="ignore joysticks")
+    p.add_argument("--view", choices=("driver", "top_down"), default="driver")
+    p.add_argument("--show-points", action="store_true", help="draw the near and far points")
+    p.add_argument(
+        "--estimator",
+        nargs="?",
+        const="generalized",
+        default=None,
+        metavar="MODEL",
+        help="run the Gaussian-mixture EKF alongside; show its lane-hypothesis weights in the HUD "
+        "(steering model: two-point, generalized (default) or a saved model file)",
+    )
+    p.add_argument("--width", type=int, default=1280)
+    p.add_argument("--height", type=int, default=720)
+    p.add_argument(
+        "--fps", type=int, default=60, help="frame-rate cap (the physics runs at 100 Hz regardless)"
+    )
+    p.add_argument("--fullscreen", action="store_true")
+    p.add_argument(
+        "--autocentre",
+        type=float,
+        default=None,
+        metavar="STRENGTH",
+        help="force feedback: wheel autocentre spring strength 0..1 (Linux, needs evdev)",
+    )
+    return _drive(p.parse_args(argv), log)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

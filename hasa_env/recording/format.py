@@ -1,0 +1,499 @@
+"""The recording format: columns, units, errors, the loaded container, value
+formatting and parsing, and the sidecar's schema.
+
+A recording is a pair of files in one directory:
+
+- ``run_000.csv``: one row per env step in the column order of
+  :data:`hasa_env.sim.setup.RECORDING_COLUMNS` (units in :data:`COLUMN_UNITS`).
+  Row 0 is the reset state; the ``steering`` and ``acceleration`` of row k
+  are the physical action applied over the step that ended at row k (row 0:
+  the initial steering and 0). Floats are written with ``repr`` so they read
+  back bit-exactly; ``bias_index`` and ``step`` are integers; ``terminated``
+  and ``truncated`` are ``true`` / ``false``.
+- ``run_000.json``: the sidecar (schema version, env id, full config, seed,
+  reset options, versions, columns and units, times, completeness, free-form
+  ``metadata``). See ``recordings/README.md`` for every field.
+
+Writing: :mod:`hasa_env.recording.writer`; reading: :mod:`hasa_env.recording.reader`;
+re-simulating: :mod:`hasa_env.recording.replay`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _dist_version
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+from hasa_env.sim.config import ConfigError, make_config
+from hasa_env.sim.road import Road, make_road
+from hasa_env.sim.setup import RECORDING_COLUMNS
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "COLUMN_UNITS",
+    "RecordingError",
+    "RecordingWarning",
+    "Recording",
+    "RecordingList",
+]
+
+SCHEMA_VERSION = 1
+"""Version of the recording format written by this module (the only one it reads)."""
+
+COLUMN_UNITS: dict[str, str] = {
+    "step": "1",
+    "time": "s",
+    "station": "m",
+    "lateral_offset": "m",
+    "heading": "rad",
+    "speed": "m/s",
+    "steering": "rad",
+    "acceleration": "m/s^2",
+    "road_curvature": "1/m",
+    "longitudinal_velocity": "m/s",
+    "lateral_velocity": "m/s",
+    "bias": "m",
+    "bias_index": "1",
+    "sensor_speed": "m/s",
+    "sensor_camera_lateral": "m",
+    "sensor_camera_heading": "rad",
+    "sensor_imu_longitudinal": "m/s^2",
+    "sensor_imu_lateral": "m/s^2",
+    "sensor_steering": "rad",
+    "reward": "1",
+    "terminated": "bool",
+    "truncated": "bool",
+}
+"""Unit of every recording column ("1": dimensionless count or index)."""
+
+_INT_COLUMNS = frozenset({"step", "bias_index"})
+_BOOL_COLUMNS = frozenset({"terminated", "truncated"})
+_INT_RE = re.compile(r"[+-]?[0-9]+")
+_SIDECAR_KEYS = (
+    "config",
+    "seed",
+    "env_id",
+    "reset_options",
+    "metadata",
+    "complete",
+    "end_reason",
+    "created",
+)
+_END_REASONS = ("terminated", "truncated", "stopped")
+
+
+# --------------------------------------------------------------------- errors
+class RecordingError(ValueError):
+    """A corrupt or invalid recording (or DataFrame to be saved as one).
+
+    The message names the file, and where known the line (1 = the CSV header)
+    and the column; they are also available as :attr:`path`, :attr:`line` and
+    :attr:`column`.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        path: str | os.PathLike[str] | None = None,
+        line: int | None = None,
+        column: str | None = None,
+    ) -> None:
+        self.path = None if path is None else Path(path)
+        self.line = line
+        self.column = column
+        self.reason = message
+        where = []
+        if path is not None:
+            where.append(str(path))
+        if line is not None:
+            where.append(f"line {line}")
+        if column is not None:
+            where.append(f"column {column!r}")
+        super().__init__(f"{', '.join(where)}: {message}" if where else message)
+
+
+class RecordingWarning(UserWarning):
+    """Something about a recording worth knowing that does not stop it loading."""
+
+
+# ------------------------------------------------------------------ container
+@dataclass
+class Recording:
+    """One loaded recording.
+
+    Attributes:
+        data: one row per env step, columns :data:`hasa_env.sim.setup.RECORDING_COLUMNS`
+            (``step``, ``bias_index`` int64; ``terminated``, ``truncated`` bool;
+            the rest float64, units in :data:`COLUMN_UNITS`).
+        meta: the JSON sidecar as a dict (``config``, ``seed``, ``complete``, ...).
+        path: the CSV file (None for a recording built in memory, e.g. by :func:`replay`).
+        warnings: non-fatal notes from loading (e.g. a partly written last line dropped).
+    """
+
+    data: pd.DataFrame
+    meta: dict[str, Any]
+    path: Path | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def seed(self) -> int | None:
+        """The episode's seed (passed to ``env.reset``), or None if unknown."""
+        return self.meta.get("seed")
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The env's full configuration."""
+        return self.meta["config"]
+
+    @property
+    def complete(self) -> bool:
+        """False for a recording whose writer never finalized it (a crash)."""
+        return bool(self.meta.get("complete"))
+
+    @property
+    def steps(self) -> int:
+        """Number of env steps recorded (rows after row 0)."""
+        return len(self.data) - 1
+
+    @property
+    def dt(self) -> float:
+        """Time between two rows (s): the env step, action_repeat / sim_frequency."""
+        config = self.config
+        return config["action_repeat"] / config["sim_frequency"]
+
+    @property
+    def road(self) -> Road:
+        """The road the recording was made on (its config's track and lane width)."""
+        return make_road(self.config["track"], lane_width=self.config["road"]["lane_width"])
+
+
+class RecordingList(list):
+    """The recordings that loaded, plus an ``errors`` list of the files that did not.
+
+    A plain ``list`` of :class:`Recording`; ``errors`` holds one
+    :class:`RecordingError` per corrupt file (its ``path`` names the file).
+    """
+
+    def __init__(self, recordings: Iterable[Recording] = (), errors: Iterable[RecordingError] = ()):
+        super().__init__(recordings)
+        self.errors: list[RecordingError] = list(errors)
+
+
+# ------------------------------------------------------------------- helpers
+def _versions() -> dict[str, str]:
+    def dist(name: str) -> str:
+        try:
+            return _dist_version(name)
+        except PackageNotFoundError:  # pragma: no cover - source tree without install
+            return "unknown"
+
+    return {
+        "hasa_env": dist("hasa-env"),
+        "gymnasium": gym.__version__,
+        "numpy": np.__version__,
+        "pandas": pd.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise TypeError(f"{type(value).__name__} {value!r} is not JSON serializable")
+
+
+def _to_json(obj: Any) -> str:
+    return json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
+
+
+def _write_atomic(path: Path, text: str, fsync: bool = True) -> None:
+    """Write ``text`` to ``path`` via a temporary file and ``os.replace``."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)
+        f.flush()
+        if fsync:
+            os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _format_value(column: str, value: Any) -> str:
+    """One CSV field; raises ValueError/TypeError with a reason on a bad value."""
+    if column in _BOOL_COLUMNS:
+        if isinstance(value, bool | np.bool_) or (
+            isinstance(value, int | np.integer | float | np.floating) and value in (0, 1)
+        ):
+            return "true" if value else "false"
+        raise ValueError(f"expected a bool, got {value!r}")
+    if column in _INT_COLUMNS:
+        if isinstance(value, bool | np.bool_):
+            raise ValueError(f"expected an integer, got {value!r}")
+        if isinstance(value, float | np.floating):
+            if not (math.isfinite(value) and float(value).is_integer()):
+                raise ValueError(f"expected an integer, got {value!r}")
+        return str(int(value))
+    if isinstance(value, bool | np.bool_):
+        raise ValueError(f"expected a number, got {value!r}")
+    return repr(float(value))
+
+
+def _format_row(values: Sequence[Any]) -> str:
+    return (
+        ",".join(_format_value(c, v) for c, v in zip(RECORDING_COLUMNS, values, strict=True)) + "\n"
+    )
+
+
+_HEADER = ",".join(RECORDING_COLUMNS) + "\n"
+
+
+def _base_sidecar(csv_name: str) -> dict[str, Any]:
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "format": "hasa_env recording",
+        "csv": csv_name,
+        "env_id": None,
+        "seed": None,
+        "seed_source": None,
+        "reset_options": None,
+        "config": None,
+        "versions": _versions(),
+        "columns": list(RECORDING_COLUMNS),
+        "units": {c: COLUMN_UNITS.get(c, "unknown") for c in RECORDING_COLUMNS},
+        "created": _now(),
+        "finished": None,
+        "complete": False,
+        "steps": None,
+        "end_reason": None,
+        "metadata": {},
+    }
+
+
+def _check_json_able(name: str, value: Any) -> Any:
+    """Round-trip ``value`` through JSON (so the sidecar holds exactly what was given)."""
+    try:
+        return json.loads(_to_json(value))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"{name} must be JSON-serializable (finite numbers, str, lists, dicts): {exc}"
+        ) from None
+
+
+def _check_seed(seed: Any, what: str) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"{what} must be a non-negative integer or None, got {seed!r}")
+    return int(seed)
+
+
+# ------------------------------------------------------------------- parsing
+def _parse_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"non-finite value {text!r} (NaN and infinities are not allowed)")
+    if "_" in text or text != text.strip():
+        raise ValueError(f"not a plain number: {text!r}")
+    return value
+
+
+def _parse_int(text: str) -> int:
+    if not _INT_RE.fullmatch(text):
+        raise ValueError(f"not an integer: {text!r}")
+    return int(text)
+
+
+def _parse_bool(text: str) -> bool:
+    low = text.lower()
+    if low == "true":
+        return True
+    if low == "false":
+        return False
+    raise ValueError(f"not a bool: {text!r} (expected true or false)")
+
+
+def _parser(column: str):  # noqa: ANN202
+    if column in _INT_COLUMNS:
+        return _parse_int
+    if column in _BOOL_COLUMNS:
+        return _parse_bool
+    return _parse_float
+
+
+def _check_header(names: list[str], source: Path | str) -> None:
+    seen: set[str] = set()
+    dup = [n for n in names if n in seen or seen.add(n)]
+    unknown = [n for n in names if n not in RECORDING_COLUMNS]
+    missing = [c for c in RECORDING_COLUMNS if c not in seen]
+    problems = []
+    if dup:
+        problems.append("duplicated column(s) " + ", ".join(repr(n) for n in dict.fromkeys(dup)))
+    if unknown:
+        problems.append("unknown column(s) " + ", ".join(repr(n) for n in unknown))
+    if missing:
+        problems.append("missing column(s) " + ", ".join(repr(n) for n in missing))
+    if problems:
+        column = (dup or unknown or missing)[0]
+        raise RecordingError(
+            "bad header: " + "; ".join(problems) + f" (expected: {','.join(RECORDING_COLUMNS)})",
+            source,
+            1,
+            column,
+        )
+
+
+def _parse_lines(lines: list[str], source: Path | str) -> dict[str, list[Any]]:
+    """Parse header + data lines (without newlines) into columns; line 1 is the header."""
+    if not lines:
+        raise RecordingError("empty file: no header", source, 1)
+    names = lines[0].split(",")
+    _check_header(names, source)
+    parsers = [_parser(n) for n in names]
+    columns: list[list[Any]] = [[] for _ in names]
+    ncols = len(names)
+    for lineno, line in enumerate(lines[1:], start=2):
+        if not line:
+            raise RecordingError(f"empty line (expected {ncols} fields)", source, lineno, names[0])
+        fields = line.split(",")
+        if len(fields) != ncols:
+            if len(fields) < ncols:
+                msg = f"{len(fields)} fields, expected {ncols}: the line ends before this column"
+                raise RecordingError(msg, source, lineno, names[len(fields)])
+            msg = f"{len(fields)} fields, expected {ncols}: extra field(s) after this column"
+            raise RecordingError(msg, source, lineno, names[-1])
+        for j, (text, parse) in enumerate(zip(fields, parsers, strict=True)):
+            try:
+                columns[j].append(parse(text))
+            except ValueError as exc:
+                raise RecordingError(str(exc), source, lineno, names[j]) from None
+    if len(lines) < 2:
+        raise RecordingError("no data rows (row 0, the reset state, is required)", source, 2)
+    return dict(zip(names, columns, strict=True))
+
+
+def _frame(columns: Mapping[str, Sequence[Any]]) -> pd.DataFrame:
+    data = {}
+    for c in RECORDING_COLUMNS:
+        if c in _INT_COLUMNS:
+            data[c] = np.asarray(columns[c], dtype=np.int64)
+        elif c in _BOOL_COLUMNS:
+            data[c] = np.asarray(columns[c], dtype=bool)
+        else:
+            data[c] = np.asarray(columns[c], dtype=np.float64)
+    return pd.DataFrame(data)
+
+
+def _check_table(
+    frame: pd.DataFrame, config: Mapping[str, Any], source: Path | str, first_line: int
+) -> None:
+    """Consistency checks on parsed rows; row i is on line ``first_line + i``."""
+    step = frame["step"].to_numpy()
+    bad = np.flatnonzero(step != np.arange(len(step)))
+    if bad.size:
+        i = int(bad[0])
+        raise RecordingError(
+            f"step = {int(step[i])}, expected {i} (steps must count 0, 1, 2, ... from row 0)",
+            source,
+            first_line + i,
+            "step",
+        )
+    dt_step = config["action_repeat"] * (1.0 / config["sim_frequency"])
+    expected = (step * config["action_repeat"]) * (1.0 / config["sim_frequency"])
+    time = frame["time"].to_numpy()
+    bad = np.flatnonzero(np.abs(time - expected) > 1e-9 * np.maximum(1.0, np.abs(expected)))
+    if bad.size:
+        i = int(bad[0])
+        raise RecordingError(
+            f"time = {time[i]!r} s does not match step {i}: expected {expected[i]!r} s "
+            f"(step x {dt_step!r} s per env step, from the config's sim_frequency and "
+            "action_repeat)",
+            source,
+            first_line + i,
+            "time",
+        )
+
+
+def _validate_meta(meta: Any, source: Path) -> dict[str, Any]:
+    if not isinstance(meta, dict):
+        raise RecordingError(f"sidecar must hold a JSON object, got {type(meta).__name__}", source)
+    if "schema_version" not in meta:
+        raise RecordingError("sidecar has no 'schema_version'", source, column="schema_version")
+    version = meta["schema_version"]
+    if version != SCHEMA_VERSION or isinstance(version, bool):
+        raise RecordingError(
+            f"unknown schema_version {version!r}: this hasa_env reads version {SCHEMA_VERSION}",
+            source,
+            column="schema_version",
+        )
+    for key in ("config", "complete", "columns"):
+        if key not in meta:
+            raise RecordingError(f"sidecar has no {key!r}", source, column=key)
+    if not isinstance(meta["complete"], bool):
+        raise RecordingError(
+            f"'complete' must be true or false, got {meta['complete']!r}", source, column="complete"
+        )
+    if not isinstance(meta["config"], dict):
+        raise RecordingError("'config' must be a JSON object", source, column="config")
+    try:
+        meta["config"] = make_config(meta["config"])
+    except ConfigError as exc:
+        raise RecordingError(f"invalid config: {exc}", source, column="config") from None
+    seed = meta.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise RecordingError(
+            f"'seed' must be a non-negative integer or null, got {seed!r}", source, column="seed"
+        )
+    if meta["columns"] != list(RECORDING_COLUMNS):
+        raise RecordingError(
+            f"'columns' = {meta['columns']!r} differs from the schema's columns "
+            f"{list(RECORDING_COLUMNS)!r}",
+            source,
+            column="columns",
+        )
+    return meta
+
+
+def _read_sidecar(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RecordingError("missing sidecar (the JSON file next to the CSV)", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordingError(f"unreadable sidecar: {exc}", path) from None
+    try:
+        meta = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RecordingError(
+            f"sidecar is not valid JSON: {exc.msg} (column {exc.colno})", path, exc.lineno
+        ) from None
+    return _validate_meta(meta, path)
+
+
+def _paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
+    p = Path(path)
+    if p.suffix == ".json":
+        return p.with_suffix(".csv"), p
+    if p.suffix != ".csv":
+        p = p.with_name(p.name + ".csv")
+    return p, p.with_suffix(".json")

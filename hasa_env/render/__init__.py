@@ -1,0 +1,66 @@
+"""Rendering with pygame: the top-down view and the driver's-eye view.
+
+Two views exist, chosen with ``config["render"]["view"]`` (see
+:func:`make_renderer`):
+
+- ``"top_down"`` (:class:`~hasa_env.render.top_down.TopDownRenderer`): the
+  map view following the car;
+- ``"driver"`` (:class:`~hasa_env.render.driver_view.DriverViewRenderer`):
+  the first-person perspective of the road ahead.
+
+Both draw the HUD of :mod:`hasa_env.render.common`. Importing this package
+does not import pygame; the renderers do when they are created.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hasa_env.render.common import (
+    GHOST_COLOUR,
+    HYPOTHESIS_COLOURS,
+    Hud,
+    HumanWindow,
+    WeightSource,
+    resolve_weights,
+    surface_to_array,
+)
+from hasa_env.render.driver_view import DriverViewRenderer
+from hasa_env.render.top_down import TopDownRenderer
+
+__all__ = [
+    "DriverViewRenderer",
+    "GHOST_COLOUR",
+    "HYPOTHESIS_COLOURS",
+    "Hud",
+    "HumanWindow",
+    "TopDownRenderer",
+    "WeightSource",
+    "make_renderer",
+    "resolve_weights",
+    "surface_to_array",
+]
+
+
+def make_renderer(
+    setup: Any,
+    render_mode: str,
+    *,
+    view: str | None = None,
+    weights: WeightSource = None,
+    steering_ratio: float | None = None,
+) -> Any:
+    """The renderer of ``view`` (default ``setup.config["render"]["view"]``) for an env set-up.
+
+    Returns a :class:`TopDownRenderer` or a :class:`DriverViewRenderer`;
+    both have ``draw(info, weights, message, target)``, ``render(info, weights)``
+    and ``close()``.
+    """
+    view = setup.config["render"]["view"] if view is None else view
+    if view == "top_down":
+        return TopDownRenderer(setup, render_mode, weights=weights, steering_ratio=steering_ratio)
+    if view == "driver":
+        return DriverViewRenderer(
+            setup, render_mode, weights=weights, steering_ratio=steering_ratio
+        )
+    raise ValueError(f"unknown view {view!r}; allowed: 'top_down', 'driver'")

@@ -1,0 +1,190 @@
+"""The top-down view: the map of the road around the car, following it.
+
+The view follows the car with the road tangent pointing up: grey road,
+white lane markings (true), faded yellow "ghost" markings where a wrong
+lane-centre hypothesis would put the lane, the car, and the shared HUD
+(:class:`hasa_env.render.common.Hud`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from hasa_env.render.common import (
+    CAR_COLOUR,
+    GHOST_COLOUR,
+    GRASS_COLOUR,
+    MARKING_COLOUR,
+    ROAD_COLOUR,
+    Hud,
+    HumanWindow,
+    WeightSource,
+    resolve_weights,
+    surface_to_array,
+)
+
+__all__ = ["TopDownRenderer"]
+
+
+class TopDownRenderer:
+    """Draws an env's info dict from above; one instance per env.
+
+    Args:
+        setup: the env's :class:`hasa_env.sim.setup.EnvSetup`.
+        render_mode: ``"rgb_array"`` or ``"human"``.
+        weights: where the HUD takes hypothesis weights from (see :data:`WeightSource`).
+        steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
+    """
+
+    def __init__(
+        self,
+        setup: Any,
+        render_mode: str,
+        *,
+        weights: WeightSource = None,
+        steering_ratio: float | None = None,
+    ) -> None:
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+        import pygame
+
+        self._pg = pygame
+        self.setup = setup
+        self.render_mode = render_mode
+        rc = setup.config["render"]
+        self.width, self.height = int(rc["width"]), int(rc["height"])
+        self.ppm = float(rc["pixels_per_metre"])
+        self.fps = int(rc["fps"])
+        self.weights = weights
+        pygame.font.init()
+        self.surface = pygame.Surface((self.width, self.height))
+        self.hud = Hud(pygame, self.height, setup.config["time_limit"], steering_ratio)
+        self._window = HumanWindow(
+            pygame, (self.width, self.height), self.fps, "hasa-env lane keeping"
+        )
+
+    # -------------------------------------------------------------- drawing
+    def _to_screen(
+        self, gx: np.ndarray, gy: np.ndarray, origin: tuple[float, float, float]
+    ) -> np.ndarray:
+        ox, oy, psi = origin
+        dx, dy = gx - ox, gy - oy
+        forward = dx * np.cos(psi) + dy * np.sin(psi)
+        left = -dx * np.sin(psi) + dy * np.cos(psi)
+        sx = self.width / 2 - left * self.ppm
+        sy = self.height * 0.7 - forward * self.ppm
+        return np.stack([sx, sy], axis=-1)
+
+    def _line_points(
+        self, stations: np.ndarray, offset: float, origin: tuple
+    ) -> list[tuple[float, float]]:
+        road = self.setup.road
+        X, Y, psi = road.pose_at(stations)
+        gx = X - np.sin(psi) * offset
+        gy = Y + np.cos(psi) * offset
+        return [tuple(p) for p in self._to_screen(gx, gy, origin).tolist()]
+
+    def draw(
+        self,
+        info: Mapping[str, Any],
+        weights: WeightSource = None,
+        message: str | None = None,
+        target: Any = None,
+    ) -> Any:
+        """Draw the scene described by an env ``info`` dict.
+
+        Args:
+            info: the env's info (keys of :data:`hasa_env.sim.setup.INFO_KEYS`).
+            weights: hypothesis weights for the HUD (default: the constructor's).
+            message: text centred over the scene (e.g. a countdown), or None.
+            target: surface to draw on (same size); default the off-screen surface.
+
+        Returns:
+            The surface drawn on.
+        """
+        pg = self._pg
+        setup = self.setup
+        road = setup.road
+        width = road.lane_width
+        surf = self.surface if target is None else target
+        self._target = surf
+        surf.fill(GRASS_COLOUR)
+        s0 = float(info["station"])
+        behind = self.height * 0.3 / self.ppm + 5.0
+        ahead = self.height * 0.7 / self.ppm + 5.0
+        stations = np.arange(s0 - behind, s0 + ahead, 1.0)
+        X0, Y0, psi0 = road.pose_at(s0)
+        origin = (float(X0), float(Y0), float(psi0))
+        cfg = setup.config["road"]
+        right_edge = -width / 2 - cfg["lanes_right"] * width
+        left_edge = width / 2 + cfg["lanes_left"] * width
+        left_pts = self._line_points(stations, left_edge, origin)
+        right_pts = self._line_points(stations, right_edge, origin)
+        pg.draw.polygon(surf, ROAD_COLOUR, left_pts + right_pts[::-1])
+        line_w = max(1, int(round(0.15 * self.ppm)))
+        # true markings: solid edges, dashed lane dividers
+        n_lines = cfg["lanes_left"] + cfg["lanes_right"] + 1
+        for i in range(n_lines + 1):
+            offset = right_edge + i * width
+            pts = self._line_points(stations, offset, origin)
+            if i in (0, n_lines):
+                pg.draw.lines(surf, MARKING_COLOUR, False, pts, line_w)
+            else:
+                self._dashed(pts, stations, MARKING_COLOUR, line_w)
+        # ghost markings where each non-zero hypothesis puts the lane (camera reads y + b)
+        for b in setup.hypotheses:
+            if b == 0.0:
+                continue
+            for side in (-0.5, 0.5):
+                pts = self._line_points(stations, -b + side * width, origin)
+                self._dashed(pts, stations, GHOST_COLOUR, max(1, line_w // 2), period=6.0)
+        self._draw_car(info, origin)
+        shown = resolve_weights(
+            self.weights if weights is None else weights, info, setup.hypotheses
+        )
+        self.hud.draw(surf, info, shown, message, setup.hypotheses)
+        return surf
+
+    def _dashed(
+        self, pts: list, stations: np.ndarray, colour: tuple, line_w: int, period: float = 12.0
+    ) -> None:
+        pg = self._pg
+        on = (np.floor(stations / (period / 2.0)) % 2) == 0
+        for i in range(len(pts) - 1):
+            if on[i]:
+                pg.draw.line(self._target, colour, pts[i], pts[i + 1], line_w)
+
+    def _draw_car(self, info: Mapping[str, Any], origin: tuple) -> None:
+        road = self.setup.road
+        gx, gy, yaw = road.to_global(
+            float(info["station"]), float(info["lateral_offset"]), float(info["heading"])
+        )
+        rear_overhang, length, half_w = 1.0, 4.6, 0.9
+        corners = np.array(
+            [
+                [-rear_overhang, -half_w],
+                [length - rear_overhang, -half_w],
+                [length - rear_overhang, half_w],
+                [-rear_overhang, half_w],
+            ]
+        )
+        c, s = np.cos(yaw), np.sin(yaw)
+        px = gx + corners[:, 0] * c - corners[:, 1] * s
+        py = gy + corners[:, 0] * s + corners[:, 1] * c
+        pts = [tuple(p) for p in self._to_screen(px, py, origin).tolist()]
+        self._pg.draw.polygon(self._target, CAR_COLOUR, pts)
+
+    # ----------------------------------------------------------- output
+    def render(self, info: Mapping[str, Any], weights: WeightSource = None) -> np.ndarray | None:
+        """``rgb_array``: the (H, W, 3) uint8 frame; ``human``: show it, paced by sim time."""
+        if self.render_mode == "rgb_array":
+            return surface_to_array(self.draw(info, weights))
+        if self._window.frame_due(float(info["time"])):
+            self._window.show(self.draw(info, weights))
+        return None
+
+    def close(self) -> None:
+        self._window.close()

@@ -1,0 +1,426 @@
+"""The drive loop: people drive the lane-keeping env with a wheel, a joystick or the keyboard.
+
+:class:`DriveSession` follows the paper's protocol: every run lasts 30 s,
+starts at 15 m/s and y = -0.5 m in the right lane; a countdown precedes it.
+Each run is recorded with :class:`hasa_env.recording.RecordingWrapper`
+under ``<output>/<participant>/run_NNN.csv`` (+ ``.json`` sidecar), every
+step flushed at once (crash-safe: a killed process keeps every completed
+step). Next to each run, ``run_NNN.inputs.tsv`` holds the raw input per step
+(:mod:`hasa_env.recording.raw_inputs`).
+
+The simulation clock drives the physics: each frame the loop runs as many
+100 Hz steps as the wall clock is due (never more than a quarter second's
+worth: after a stall it re-anchors instead of sprinting), then draws one
+frame, capped at ``fps`` (60). A pause (P, or the wheel unplugged) freezes
+the simulation clock; nothing is recorded while paused. Without
+``realtime`` the same loop runs headless and as fast as possible, with a
+scripted driver turning a virtual wheel (:class:`hasa_env.session.scripted.VirtualWheelDriver`).
+The command line is ``hasa-drive`` (:mod:`hasa_cli.drive`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hasa_env.devices.sources import InputManager, Notice
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.recording.raw_inputs import (
+    RAW_INPUT_HEADER,
+    RAW_INPUT_UNITS,
+    RAW_INPUTS_SUFFIX,
+    RawInputWriter,
+    raw_inputs_path,
+)
+from hasa_env.recording.writer import RecordingWrapper
+from hasa_env.render import make_renderer
+from hasa_env.session.settings import DriveSettings
+from hasa_env.sim.config import deep_merge, make_config
+
+__all__ = ["DriveSession", "RunResult", "MAX_CATCH_UP"]
+
+MAX_CATCH_UP = 0.25
+"""Seconds of simulation the real-time loop runs at most to catch up after a stall."""
+
+
+@dataclass
+class RunResult:
+    """What one run produced."""
+
+    path: Path
+    steps: int
+    end_reason: str
+
+
+class DriveSession:
+    """The drive loop: countdown, real-time simulation, input, recording, pauses, hot-plug.
+
+    Args:
+        settings: the session (participant, track, runs, ...).
+        inputs: the input layer (keyboard + joysticks).
+        display: a pygame display surface to draw on, or None (no window).
+        realtime: True: the wall clock paces the simulation (a human drives);
+            False: one step per loop iteration, as fast as possible (scripted
+            drives, tests), no countdown and no waiting between runs.
+        hook: called with the session before every simulation step and on
+            every idle iteration (paused, between runs); a scripted driver
+            turns a virtual wheel here.
+        view: ``"driver"`` or ``"top_down"`` (when ``display`` is given).
+        fps: frame-rate cap of the window (Hz).
+        frame_every: without ``realtime``, draw every this many steps.
+        show_points: draw the near and far points in the driver's view.
+        metadata: extra JSON-serializable fields for every recording's sidecar metadata.
+        weights: hypothesis weights for the HUD (:data:`hasa_env.render.WeightSource`).
+        env_wrapper: wraps each run's env before recording (e.g. an estimator
+            that adds weights to ``info``); None: no wrapper.
+        log: where messages go (default ``print``).
+        max_idle_iterations: without ``realtime``, give up (RuntimeError) after
+            this many iterations without a step (a scripted drive stuck in a pause).
+    """
+
+    def __init__(
+        self,
+        settings: DriveSettings,
+        inputs: InputManager,
+        *,
+        display: Any = None,
+        realtime: bool = True,
+        hook: Callable[[DriveSession], None] | None = None,
+        view: str = "driver",
+        fps: int = 60,
+        frame_every: int = 1,
+        show_points: bool = False,
+        metadata: Mapping[str, Any] | None = None,
+        weights: Any = None,
+        env_wrapper: Callable[[Any], Any] | None = None,
+        log: Callable[[str], None] = print,
+        max_idle_iterations: int = 100_000,
+    ) -> None:
+        self.settings = settings
+        self.inputs = inputs
+        self.display = display
+        self.realtime = realtime
+        self.hook = hook
+        self.fps = int(fps)
+        self.frame_every = max(1, int(frame_every))
+        self.metadata = dict(metadata or {})
+        self.weights = weights
+        self.env_wrapper = env_wrapper
+        self.log = log
+        self.max_idle_iterations = max_idle_iterations
+        self.config = settings.env_config()
+        self._preview_env = LaneKeepingEnv(config=self.config)
+        self.setup = self._preview_env.setup
+        self.road = self.setup.road
+        self.dt = self.setup.dt * self.setup.action_repeat
+        self.renderer = None
+        if display is not None:
+            size = display.get_size()
+            self.config = deep_merge(
+                self.config,
+                {"render": {"width": size[0], "height": size[1], "show_points": show_points}},
+            )
+            self.config = make_config(self.config)
+            self._preview_env = LaneKeepingEnv(config=self.config)
+            self.setup = self._preview_env.setup
+            self.renderer = make_renderer(self.setup, "rgb_array", view=view)
+        self.state = "idle"
+        """One of ``idle``, ``countdown``, ``driving``, ``paused``, ``between_runs``, ``quit``."""
+        self.message: str | None = None
+        self.info: dict[str, Any] | None = None
+        self.run_index = -1
+        """0-based index of the current run."""
+        self.run_seed: int | None = None
+        self.steps = 0
+        """Env steps taken in the current run."""
+        self.results: list[RunResult] = []
+        self._frame_clock = None
+        self._root_seed = (
+            settings.seed
+            if settings.seed is not None
+            else int(np.random.SeedSequence().entropy % 2**63)
+        )
+
+    # ---------------------------------------------------------- helpers
+    def run_seeds(self) -> list[int]:
+        """The env seed of every run, derived from the root seed (recorded in the metadata)."""
+        state = np.random.SeedSequence(self._root_seed).generate_state(
+            2 * self.settings.runs, np.uint32
+        )
+        return [int(state[2 * i]) << 21 ^ int(state[2 * i + 1]) for i in range(self.settings.runs)]
+
+    def _call_hook(self) -> None:
+        if self.hook is not None:
+            self.hook(self)
+
+    def _draw(self, info: Mapping[str, Any] | None, message: str | None = None) -> None:
+        if self.display is None or self.renderer is None or info is None:
+            return
+        self.renderer.hud.steering_ratio = self.inputs.steering_ratio
+        self.renderer.draw(info, self.weights, message, target=self.display)
+        self._pg().display.flip()
+
+    def _pg(self) -> Any:
+        return self.inputs.pygame
+
+    def _tick(self) -> None:
+        if not self.realtime:
+            return
+        if self._frame_clock is None:
+            self._frame_clock = self._pg().time.Clock()
+        self._frame_clock.tick(self.fps)
+
+    def _handle(self, notices: Sequence[Notice]) -> None:
+        for n in notices:
+            if n.kind == "quit":
+                self.state = "quit"
+                self.log(f"hasa-drive: stopping ({n.message})")
+            elif n.kind == "disconnected":
+                if self.state in ("driving", "countdown"):
+                    self.state = "paused"
+                self.message = n.message
+                self.log(f"hasa-drive: {n.message}")
+            elif n.kind == "connected":
+                self.log(f"hasa-drive: {n.message}")
+                if self.state in ("idle", "between_runs"):
+                    self.message = f"{n.message}\nPress a wheel button or SPACE to start."
+                elif self.state == "driving" and self.steps > 0:
+                    self.state = "paused"
+                    self.message = f"{n.message}\nPress a wheel button or SPACE to drive on."
+                elif self.state == "paused":
+                    self.message = f"{n.message}\nPress a wheel button or SPACE to drive on."
+            elif n.kind == "ignored_device":
+                self.log(f"hasa-drive: {n.message}")
+            elif n.kind == "pause":
+                if self.state == "driving":
+                    self.state = "paused"
+                    self.message = "PAUSED\nPress P, SPACE or a wheel button to drive on."
+                elif self.state == "paused":
+                    self._resume()
+            elif n.kind == "confirm":
+                if self.state == "paused":
+                    self._resume()
+                elif self.state in ("idle", "between_runs"):
+                    self.state = "confirmed"
+
+    def _resume(self) -> None:
+        self.state = "driving"
+        self.message = None
+        self._anchor = time.perf_counter() - self.steps * self.dt
+        self.log(f"hasa-drive: driving on with {self.inputs.source_name}")
+
+    def _idle(self) -> None:
+        self._call_hook()
+        self._handle(self.inputs.poll())
+
+    def _wait_for_confirm(self, info: Mapping[str, Any], message: str, state: str) -> bool:
+        """Show ``message`` until the driver confirms (True) or quits (False)."""
+        if not self.realtime:
+            return self.state != "quit"
+        self.state, self.message = state, message
+        while self.state == state:
+            self._idle()
+            self._draw(info, self.message)
+            self._tick()
+        return self.state != "quit"
+
+    def _countdown(self, info: Mapping[str, Any]) -> bool:
+        if not self.realtime or self.settings.countdown <= 0:
+            return True
+        self.state = "countdown"
+        end = time.perf_counter() + self.settings.countdown
+        while self.state == "countdown":
+            left = end - time.perf_counter()
+            if left <= 0:
+                break
+            self._idle()
+            self._draw(
+                info, f"{math.ceil(left):d}\nrun {self.run_index + 1} of {self.settings.runs}"
+            )
+            self._tick()
+        if self.state == "paused":  # the wheel went away during the countdown
+            ok = self._wait_for_confirm(info, self.message or "paused", "paused")
+            return ok and self._countdown(info)
+        return self.state != "quit"
+
+    # -------------------------------------------------------------- runs
+    def _run_metadata(self, run_index: int, seed: int) -> dict[str, Any]:
+        s = self.settings
+        inputs = self.inputs
+        meta: dict[str, Any] = {
+            "tool": "hasa-drive",
+            "participant": s.participant,
+            "run": run_index + 1,
+            "runs": s.runs,
+            "root_seed": self._root_seed,
+            "protocol": {
+                "track": s.track,
+                "seconds": s.seconds,
+                "speed": s.speed,
+                "lateral_offset": s.lateral_offset,
+                "bias": "random" if s.bias is None else s.bias,
+            },
+            "input": {
+                "source_at_start": inputs.source_name,
+                "joystick_profiles": [p.to_dict() | {"source": p.source} for p in inputs.profiles],
+                "keyboard": inputs.keyboard.calibration.to_dict()
+                | {"source": inputs.keyboard.calibration.source},
+                "raw_inputs": {
+                    "file": f"<recording stem>{RAW_INPUTS_SUFFIX}",
+                    "columns": list(RAW_INPUT_HEADER),
+                    "units": RAW_INPUT_UNITS,
+                },
+            },
+            "realtime": self.realtime,
+            "synthetic": False,
+        }
+        return deep_merge(meta, self.metadata)
+
+    def run(self) -> list[RunResult]:
+        """Drive every run (or until the driver quits); return what was recorded."""
+        seeds = self.run_seeds()
+        _, preview = self._preview_env.reset(seed=seeds[0], options=self.settings.reset_options())
+        self.info = preview
+        self._handle(self.inputs.poll())  # devices already plugged in
+        s = self.settings
+        intro = (
+            f"Participant {s.participant}: {s.runs} run(s) of {s.seconds:g} s "
+            f"on the {s.track} track.\n"
+            f"Driving with {self.inputs.source_name}.\n"
+            "Press a wheel button or SPACE to start, Escape to stop."
+        )
+        if not self._wait_for_confirm(preview, intro, "idle"):
+            return self.results
+        for r in range(s.runs):
+            self.run_index = r
+            self.run_seed = seeds[r]
+            _, preview = self._preview_env.reset(seed=seeds[r], options=s.reset_options())
+            self.info = preview
+            if not self._countdown(preview):
+                break
+            result = self._drive_run(r, seeds[r])
+            if result is not None:
+                self.results.append(result)
+                self.log(
+                    f"hasa-drive: run {r + 1}/{s.runs}: {result.steps} steps, "
+                    f"{result.end_reason} -> {result.path}"
+                )
+            if self.state == "quit":
+                break
+            if r + 1 < s.runs:
+                reason = (
+                    "left the road"
+                    if result is not None and result.end_reason == "terminated"
+                    else "done"
+                )
+                msg = (
+                    f"Run {r + 1} {reason}.\n"
+                    f"Press a wheel button or SPACE for run {r + 2} of {s.runs}."
+                )
+                if not self._wait_for_confirm(self.info, msg, "between_runs"):
+                    break
+        return self.results
+
+    def _drive_run(self, run_index: int, seed: int) -> RunResult | None:
+        s = self.settings
+        env: Any = LaneKeepingEnv(config=self.config)
+        if self.env_wrapper is not None:
+            env = self.env_wrapper(env)
+        env_id = (
+            "hasa_env/LaneKeepingCurved-v0" if s.track == "curved" else "hasa_env/LaneKeeping-v0"
+        )
+        recorder = RecordingWrapper(
+            env,
+            s.directory,
+            prefix="run",
+            metadata=self._run_metadata(run_index, seed),
+            env_id=env_id,
+            fsync=s.fsync,
+        )
+        raw: RawInputWriter | None = None
+        end_reason = "stopped"
+        self.steps = 0
+        try:
+            _, info = recorder.reset(seed=seed, options=s.reset_options())
+            self.info = info
+            assert recorder.path is not None
+            raw = RawInputWriter(raw_inputs_path(recorder.path), fsync=s.fsync)
+            self.state, self.message = "driving", None
+            wall0 = time.perf_counter()
+            self._anchor = wall0
+            idle = 0
+            last_frame_step = -1
+            while True:
+                if self.state == "quit":
+                    break
+                due = 0
+                if self.state == "driving":
+                    if self.realtime:
+                        now = time.perf_counter()
+                        due = int((now - self._anchor) / self.dt) - self.steps
+                        if due * self.dt > MAX_CATCH_UP:
+                            self.log(
+                                f"hasa-drive: fell {due * self.dt:.2f} s behind real time; "
+                                "re-anchoring"
+                            )
+                            self._anchor = now - (self.steps + 1) * self.dt
+                            due = 1
+                    else:
+                        due = 1
+                if due <= 0:
+                    self._idle()
+                    idle += 1
+                    if not self.realtime and idle > self.max_idle_iterations:
+                        raise RuntimeError(
+                            f"scripted drive stuck in state {self.state!r} for {idle} iterations "
+                            f"(message: {self.message!r})"
+                        )
+                done = False
+                for _ in range(max(due, 0)):
+                    self._call_hook()
+                    self._handle(self.inputs.poll())
+                    if self.state != "driving":
+                        break
+                    reading = self.inputs.read(self.dt)
+                    _, _, terminated, truncated, info = recorder.step(reading.action())
+                    self.steps += 1
+                    self.info = info
+                    raw.write(self.steps, info["time"], time.perf_counter() - wall0, reading)
+                    idle = 0
+                    if terminated or truncated:
+                        end_reason = "terminated" if terminated else "truncated"
+                        done = True
+                        break
+                if done:
+                    break
+                if self.display is not None:
+                    if (
+                        self.realtime
+                        or self.state != "driving"
+                        or self.steps - last_frame_step >= self.frame_every
+                    ):
+                        self._draw(self.info, self.message if self.state != "driving" else None)
+                        last_frame_step = self.steps
+                self._tick()
+        finally:
+            try:
+                recorder.close()
+            finally:
+                if raw is not None:
+                    raw.close()
+        if recorder.path is None:
+            return None
+        if self.state != "quit":
+            self.state = "between_runs"
+        return RunResult(recorder.path, self.steps, end_reason)
+
+    def close(self) -> None:
+        self._preview_env.close()
+        if self.renderer is not None:
+            self.renderer.close()
