@@ -104,9 +104,9 @@ def _rate(work: Callable[[int], None], frames: int, repeats: int) -> dict[str, A
 def _drive_loop(seconds: float) -> dict[str, Any]:
     """Run hasa-drive's real-time loop (keyboard, dummy window) and count frames."""
     import pygame
-    from hasa_env.session import DriveSession, DriveSettings
 
     from hasa_env.devices import InputManager, init_pygame_input
+    from hasa_env.session import DriveSession, DriveSettings
 
     pg = init_pygame_input()
     display = pg.display.set_mode(SIZE)

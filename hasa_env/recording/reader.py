@@ -153,7 +153,9 @@ def load_paths(paths: Sequence[str | os.PathLike[str]]) -> RecordingList:
                 {p.parent for p in path.rglob("*.csv")} | {p.parent for p in path.rglob("*.json")}
             )
             if not dirs:
-                problems.append(RecordingError("no recordings (no *.csv files) here or below", path))
+                problems.append(
+                    RecordingError("no recordings (no *.csv files) here or below", path)
+                )
             for d in dirs:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RecordingWarning)

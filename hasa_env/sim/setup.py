@@ -316,9 +316,7 @@ def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:
     return rng.standard_normal((setup.noise_block, len(setup.noise_std)))
 
 
-def physical_action(
-    setup: EnvSetup, action: Any, num_envs: int | None = None
-) -> tuple[Any, Any]:
+def physical_action(setup: EnvSetup, action: Any, num_envs: int | None = None) -> tuple[Any, Any]:
     """Validate an action and map it to (steering rad, acceleration m/s^2), clipped to the limits.
 
     ``num_envs`` None: one car, ``action`` of shape (2,), returns two floats;
@@ -357,7 +355,11 @@ def _action_array(action: Any, expected: tuple[int, ...]) -> np.ndarray:
     arrays and other objects are refused rather than converted.
     """
     what = "action" if len(expected) == 1 else "actions"
-    layout = "[steering, acceleration]" if len(expected) == 1 else "one [steering, acceleration] row per env"
+    layout = (
+        "[steering, acceleration]"
+        if len(expected) == 1
+        else "one [steering, acceleration] row per env"
+    )
     if isinstance(action, np.ma.MaskedArray):
         raise ValueError(f"{what} must be a plain array of numbers, got a masked array")
     raw = np.asarray(action)

@@ -403,7 +403,6 @@ class SteeringModel(ABC):
         """
         return model_from_dict(document, source, None if cls is SteeringModel else cls)
 
-
     @classmethod
     def from_json(
         cls, text: str | bytes | Mapping[str, Any], source: str = "<json>"

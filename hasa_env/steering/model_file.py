@@ -54,7 +54,7 @@ def _finite_positive(value: Any, field: str, source: str) -> float:
 
 
 def model_from_dict(
-document: Mapping[str, Any], source: str = "<model>", expected: type | None = None
+    document: Mapping[str, Any], source: str = "<model>", expected: type | None = None
 ) -> Any:
     """Build a model from :meth:`to_dict`'s form, validating every field.
 
@@ -77,16 +77,14 @@ document: Mapping[str, Any], source: str = "<model>", expected: type | None = No
     unknown = sorted(set(document) - known)
     if unknown:
         raise ModelFileError(
-            f"{source}: unknown field '{unknown[0]}'; "
-            f"allowed fields: {', '.join(sorted(known))}"
+            f"{source}: unknown field '{unknown[0]}'; allowed fields: {', '.join(sorted(known))}"
         )
     for field in ("format", "type", "dt", "features", "parameters"):
         if field not in document:
             raise ModelFileError(f"{source}: missing field '{field}'")
     if document["format"] != MODEL_FILE_FORMAT:
         raise ModelFileError(
-            f"{source}: field 'format' is {document['format']!r}; "
-            f"allowed: {MODEL_FILE_FORMAT!r}"
+            f"{source}: field 'format' is {document['format']!r}; allowed: {MODEL_FILE_FORMAT!r}"
         )
     version = document.get("format_version", MODEL_FILE_VERSION)
     if version != MODEL_FILE_VERSION:
@@ -126,17 +124,14 @@ document: Mapping[str, Any], source: str = "<model>", expected: type | None = No
     lag = features.get("decision_lag", 1)
     if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
         raise ModelFileError(
-            f"{source}: field 'features.decision_lag' must be a non-negative integer, "
-            f"got {lag!r}"
+            f"{source}: field 'features.decision_lag' must be a non-negative integer, got {lag!r}"
         )
     name = document.get("name", model_type)
     if not isinstance(name, str):
         raise ModelFileError(f"{source}: field 'name' must be a string, got {name!r}")
     structure = document.get("structure", {})
     if not isinstance(structure, Mapping):
-        raise ModelFileError(
-            f"{source}: field 'structure' must be an object, got {structure!r}"
-        )
+        raise ModelFileError(f"{source}: field 'structure' must be an object, got {structure!r}")
     try:
         skeleton = target(
             **structure,
@@ -159,8 +154,7 @@ document: Mapping[str, Any], source: str = "<model>", expected: type | None = No
             continue
         if not isinstance(raw, Mapping):
             raise ModelFileError(
-                f"{source}: field '{field}' must be an object name -> number or null, "
-                f"got {raw!r}"
+                f"{source}: field '{field}' must be an object name -> number or null, got {raw!r}"
             )
         missing = [n for n in names if n not in raw]
         extra = [k for k in raw if k not in names]
@@ -183,9 +177,7 @@ document: Mapping[str, Any], source: str = "<model>", expected: type | None = No
                     f"{source}: field '{field}.{key}' must be a finite number, got {item!r}"
                 )
             if field == "standard_errors" and item < 0:
-                raise ModelFileError(
-                    f"{source}: field '{field}.{key}' must be >= 0, got {item!r}"
-                )
+                raise ModelFileError(f"{source}: field '{field}.{key}' must be >= 0, got {item!r}")
         values[field] = {n: float(raw[n]) for n in names}
     if values["parameters"] is None and values["standard_errors"] is not None:
         raise ModelFileError(f"{source}: field 'standard_errors' given without 'parameters'")

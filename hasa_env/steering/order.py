@@ -139,5 +139,3 @@ def select_order(
     best = {k: int(table.loc[0, k]) for k in ("na", "nb", "nc", "nd")}
     model = GeneralizedModel(**best, **model_kwargs).fit(frames, road=road)
     return OrderSelection(best, criterion, table, n, model)
-
-

@@ -1,0 +1,249 @@
+"""The steering models a benchmark scores: user-model loading, fitting on the training run."""
+
+from __future__ import annotations
+
+import importlib
+import math
+import pickle
+import traceback
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, BenchmarkError
+from estimators.tuning import steering_residual_std
+from hasa_env.steering import GeneralizedModel, IdentifiabilityWarning, SteeringModel, TwoPointModel
+from hasa_env.steering.features import steering_features
+
+__all__ = ["FittedModel", "ModelError", "describe", "fit_models", "load_user_model"]
+
+
+class ModelError(Exception):
+    """A user model failed; the message names the model and what went wrong.
+
+    Attributes:
+        model: the model's name (or its import path if it never loaded).
+        stage: "import", "interface", "fit", "predict" or "estimate".
+        detail: what went wrong.
+    """
+
+    def __init__(self, model: str, stage: str, detail: str) -> None:
+        self.model = model
+        self.stage = stage
+        self.detail = detail
+        super().__init__(f"model {model!r} failed ({stage}): {detail}")
+
+    def __reduce__(self) -> tuple[Any, tuple[str, str, str]]:
+        # picklable, so it can come back from a worker process
+        return (type(self), (self.model, self.stage, self.detail))
+
+    def to_dict(self) -> dict[str, str]:
+        return {"model": self.model, "stage": self.stage, "message": str(self)}
+
+
+def load_user_model(spec: str) -> Any:
+    """Import ``"package.module:Name"`` and return an unfitted steering model.
+
+    ``Name`` may be a :class:`hasa_env.steering.SteeringModel` subclass
+    (instantiated without arguments), an instance of one, or a function
+    returning one.
+
+    Raises:
+        ModelError: naming ``spec``, with stage "import" (module or attribute
+            not found, or the module raised) or "interface" (not a steering model).
+    """
+
+    if not isinstance(spec, str) or spec.count(":") != 1 or not all(spec.split(":")):
+        raise ModelError(
+            str(spec),
+            "import",
+            "expected 'package.module:ClassName' (a module path, a colon, a name in the module)",
+        )
+    module_name, attribute = spec.split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # noqa: BLE001 - any error in the user's module
+        raise ModelError(
+            spec, "import", f"cannot import module {module_name!r}: {describe(exc)}"
+        ) from None
+    obj: Any = module
+    for part in attribute.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ModelError(
+                spec, "import", f"module {module_name!r} has no attribute {attribute!r}"
+            ) from None
+    hint = (
+        "a steering model must subclass hasa_env.steering.SteeringModel "
+        "(see its docstring and examples/custom_steering_model.py)"
+    )
+    if isinstance(obj, SteeringModel):
+        model = obj
+    elif isinstance(obj, type):
+        if not issubclass(obj, SteeringModel):
+            raise ModelError(
+                spec, "interface", f"{obj.__qualname__} is not a SteeringModel; {hint}"
+            )
+        try:
+            model = obj()
+        except TypeError as exc:
+            raise ModelError(
+                spec, "interface", f"cannot create {obj.__qualname__}(): {describe(exc)}"
+            ) from None
+        except Exception as exc:  # noqa: BLE001
+            raise ModelError(
+                spec, "interface", f"{obj.__qualname__}() raised {describe(exc)}"
+            ) from None
+    elif callable(obj):
+        try:
+            model = obj()
+        except Exception as exc:  # noqa: BLE001
+            raise ModelError(spec, "interface", f"{attribute}() raised {describe(exc)}") from None
+        if not isinstance(model, SteeringModel):
+            raise ModelError(
+                spec, "interface", f"{attribute}() returned {type(model).__name__}; {hint}"
+            )
+    else:
+        raise ModelError(spec, "interface", f"{attribute} is a {type(obj).__name__}; {hint}")
+    return model
+
+
+def describe(exc: BaseException) -> str:
+    """``Type: message (file:line)`` of an exception, the line being its innermost frame."""
+    text = f"{type(exc).__name__}: {exc}"
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<")]
+    if frames:
+        last = frames[-1]
+        text += f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
+    return text
+
+
+@dataclass(frozen=True)
+class FittedModel:
+    """A fitted model as the tasks receive it.
+
+    Attributes:
+        name: the name in the results; kind: "builtin" or "user";
+        model: the fitted :class:`SteeringModel`; residual_std: its one-step
+        residual level on the training run for the filter (rad; None: no
+        ARX form, no estimation).
+    """
+
+    name: str
+    kind: str
+    model: Any
+    residual_std: float | None
+
+
+def fit_models(
+    train: pd.DataFrame, user_specs: Sequence[str], errors: list[ModelError]
+) -> tuple[list[FittedModel], list[dict[str, Any]]]:
+
+    dt = steering_features(train).attrs.get("dt", 0.01)
+    candidates: list[tuple[str, str, str | None, Any]] = [
+        ("two_point", "builtin", None, TwoPointModel(dt=dt)),
+        ("generalized", "builtin", None, GeneralizedModel(dt=dt)),
+    ]
+    infos: list[dict[str, Any]] = []
+    used = set(BUILTIN_MODELS) | set(BASELINES)
+    for spec in user_specs:
+        try:
+            model = load_user_model(spec)
+        except ModelError as exc:
+            errors.append(exc)
+            infos.append({"name": spec, "kind": "user", "spec": spec, "error": str(exc)})
+            continue
+        name = str(getattr(model, "name", "") or spec)
+        if name in used:
+            name = spec if spec not in used else f"{spec}#{len(used)}"
+        used.add(name)
+        candidates.append((name, "user", spec, model))
+    fitted: list[FittedModel] = []
+    for name, kind, spec, model in candidates:
+        info: dict[str, Any] = {"name": name, "kind": kind, "spec": spec}
+        try:
+            model_fitted, info_fit = _fit_one(name, model, train)
+        except ModelError as exc:
+            if kind == "builtin":
+                raise BenchmarkError(f"the built-in {exc}") from None
+            errors.append(exc)
+            info["error"] = str(exc)
+            infos.append(info)
+            continue
+        info.update(info_fit)
+        info["error"] = None
+        fitted.append(FittedModel(name, kind, model_fitted, info_fit["filter_residual_std"]))
+        infos.append(info)
+    return fitted, infos
+
+
+def _fit_one(name: str, model: Any, train: pd.DataFrame) -> tuple[Any, dict[str, Any]]:
+    """Fit one model on the training run; its description; ModelError if it fails."""
+    from hasa_env.steering import SteeringModel
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", IdentifiabilityWarning)
+        try:
+            fitted = model.fit(train)
+        except Exception as exc:  # noqa: BLE001 - a user model may raise anything
+            raise ModelError(name, "fit", f"fit() raised {describe(exc)}") from None
+    if not isinstance(fitted, SteeringModel):
+        raise ModelError(
+            name, "fit", f"fit() returned {type(fitted).__name__}, expected a fitted SteeringModel"
+        )
+    if not fitted.is_fitted:
+        raise ModelError(name, "fit", "fit() returned a model without parameters")
+    try:
+        pickle.dumps(fitted)
+    except Exception as exc:  # noqa: BLE001
+        raise ModelError(
+            name, "fit", f"the fitted model cannot be pickled for the workers: {describe(exc)}"
+        ) from None
+    fitted.name = name
+    result = fitted.fit_result
+    info: dict[str, Any] = {
+        "model_type": getattr(fitted, "model_type", ""),
+        "parameters": fitted.parameters,
+        "standard_errors": fitted.standard_errors,
+        "training": None,
+        "identifiability": None,
+        "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
+    }
+    if result is not None:
+        info["training"] = {
+            "n_obs": result.n_obs,
+            "residual_std": result.residual_std,
+            "r2": result.r2,
+            "r2_increments": result.r2_increments,
+            "bic": result.bic,
+        }
+        if result.identifiability is not None:
+            info["identifiability"] = {
+                "static_lane_gain": result.identifiability.static_lane_gain,
+                "identifiable": result.identifiability.ok,
+                "message": result.identifiability.message,
+            }
+    try:
+        arx = fitted.arx()
+    except Exception as exc:  # noqa: BLE001
+        raise ModelError(name, "fit", f"arx() raised {describe(exc)}") from None
+    residual = None
+    if arx is not None:
+        try:
+            residual = steering_residual_std(arx, train, decision_lag=fitted.decision_lag)
+        except Exception as exc:  # noqa: BLE001
+            raise ModelError(
+                name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
+            ) from None
+        if not (math.isfinite(residual) and residual >= 0):
+            raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
+    info["arx"] = arx is not None
+    info["filter_residual_std"] = residual
+    if arx is None:
+        info["note"] = "not an ARX model: scored on steering only (the estimator needs arx())"
+    return fitted, info

@@ -1,0 +1,148 @@
+"""The result of a benchmark run and its JSON document."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import platform
+import subprocess
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks import paper_values
+
+__all__ = ["BenchmarkResult", "versions"]
+
+
+_TABLE_1_KEYS = (
+    "two_point_rmse", "two_point_r2_acc", "generalized_rmse", "generalized_r2_acc", "rmse_decrease"
+)  # fmt: skip
+_TABLE_2_KEYS = ("two_point_mean", "two_point_std", "generalized_mean", "generalized_std")
+
+
+@dataclass
+class BenchmarkResult:
+    """Everything :func:`run_protocol` measured (see :meth:`to_json_dict`).
+
+    Attributes:
+        config: the protocol configuration (dict).
+        models: per model: name, kind, spec, parameters, fit statistics, notes.
+        steering: rows per (driver, model), main track (paper table 1).
+        curved: rows per (driver, model) on the curved track.
+        estimation: rows per (driver, model) incl. the baselines (paper table 2).
+        summary: per model, means over drivers (and the rank for ``score``).
+        runs_steering, runs_estimation: per-run rows.
+        errors: failed user models (:meth:`ModelError.to_dict`).
+        drivers: the drivers (synthetic parameters or recording files).
+        plots: data of the figures (not written to results.json).
+        timing: wall-clock seconds per phase; executor: how tasks ran.
+    """
+
+    config: dict[str, Any]
+    models: list[dict[str, Any]]
+    steering: list[dict[str, Any]]
+    curved: list[dict[str, Any]]
+    estimation: list[dict[str, Any]]
+    summary: list[dict[str, Any]]
+    runs_steering: list[dict[str, Any]]
+    runs_estimation: list[dict[str, Any]]
+    errors: list[dict[str, str]]
+    drivers: list[dict[str, Any]]
+    plots: dict[str, Any]
+    timing: dict[str, float]
+    executor: dict[str, Any]
+    versions: dict[str, str]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def model_names(self) -> list[str]:
+        """Steering models that were scored, built-ins first."""
+        return [m["name"] for m in self.models if m.get("error") is None]
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The JSON document of ``results.json`` (NaN and infinities become null)."""
+        doc = {
+            "format": "hasa_bench.results",
+            "format_version": 1,
+            "config": self.config,
+            "versions": self.versions,
+            "executor": self.executor,
+            "timing_seconds": self.timing,
+            "drivers": self.drivers,
+            "models": self.models,
+            "steering": self.steering,
+            "curved": self.curved,
+            "estimation": self.estimation,
+            "summary": self.summary,
+            "runs_steering": self.runs_steering,
+            "runs_estimation": self.runs_estimation,
+            "errors": self.errors,
+            "notes": self.notes,
+            "paper": {
+                "table_1": {
+                    d: dict(zip(_TABLE_1_KEYS, v, strict=True))
+                    for d, v in paper_values.TABLE_1.items()
+                },
+                "table_2": {
+                    d: dict(zip(_TABLE_2_KEYS, v, strict=True))
+                    for d, v in paper_values.TABLE_2.items()
+                },
+                "curved": {k: {"r2": v[0], "rmse": v[1]} for k, v in paper_values.CURVED.items()},
+                "no_steering_lateral_rmse": paper_values.NO_STEERING_LATERAL_RMSE,
+            },
+        }
+        return _json_clean(doc)
+
+
+def _json_clean(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _json_clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_clean(value.tolist())
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in (
+        "hasa-env",
+        "numpy",
+        "scipy",
+        "pandas",
+        "gymnasium",
+        "statsmodels",
+        "matplotlib",
+        "distributed",
+    ):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        root = Path(__file__).resolve().parent.parent
+        commit = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        ).stdout.strip()
+        if commit:
+            out["git_commit"] = commit
+    out["cpus"] = str(os.cpu_count())
+    return out

@@ -1,0 +1,258 @@
+"""The paper's benchmark protocol (DESIGN.md section 6; Mai et al. sections 4.3 and 5.3).
+
+:func:`run_protocol` does, end to end:
+
+1. **Runs.** Synthetic: a seeded population (:func:`hasa_env.drivers.population`,
+   drivers "Ill", "1", ..., "8" by default); every driver drives ``runs``
+   runs of ``duration`` s on the main track ("Ill" drives ``ill_runs``, 14 by
+   default), plus ``curved_runs`` runs of "Ill" on the curved track; start at
+   15 m/s, y = -0.5 m, two equally likely lane centres 1.8 m apart, the true
+   one drawn per run by the env. Each run has its own seeds
+   (:func:`hasa_env.drivers.run_seeds`, key "<driver>/<track>"), so a run
+   is the same whichever task, process or machine produces it. Or: recorded
+   drives (``recordings``), one recording per run.
+2. **Fit** the two-point and the generalized model (the paper's orders), and
+   any user model, on ONE run: run ``training_run`` of the illustrative
+   driver on the main track (least squares, :meth:`SteeringModel.fit`).
+3. **Score steering** (paper table 1) on every other run: one-step-ahead
+   prediction with the measured past steering; per run RMSE (rad), R^2 on
+   delta, R^2 on the increments delta(k) - delta(k-1), Ljung-Box p-value of
+   the residuals (:func:`hasa_env.steering.score_runs`); per driver the mean
+   over runs. The curved-track runs of "Ill" get their own rows.
+4. **Estimate** (paper table 2) on the same main-track runs: the
+   Gaussian-mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`)
+   with each ARX model, batched over runs, its steering-residual level set
+   from the training run (:func:`estimators.tuning.steering_residual_std`)
+   and its sensor noise from the run's env config; baselines
+   ``no_steering`` (speed + camera + IMU: the lanes cannot be told apart) and
+   ``oracle`` (the same filter told the true bias). Per run: RMSE of the
+   mixture's lateral-offset estimate (m) over the whole run, and the steps
+   until the weight of the true lane exceeds 0.95 for good.
+
+Runs are grouped into tasks of ``batch_size`` consecutive runs (the
+vectorized driver runner and the estimator batched over the task's runs;
+measured on a 2-core machine, 48 runs in one vector env take 1.1-1.7 s
+against about 1 s per run one after another, and one filter over 48 runs
+1.0-1.5 s against about 0.5 s per run) and mapped
+over local processes or a Dask cluster
+(:func:`benchmarks.executor.map_tasks`). Every run is seeded on its own and
+the tasks depend only on the protocol (never on the executor or the number
+of workers), so results are identical on any executor and worker count. A
+different ``batch_size`` can change per-run numbers by floating-point
+rounding (batched arithmetic; in practice in their last digits).
+
+A user model that cannot be imported, does not implement
+:class:`hasa_env.steering.SteeringModel`, raises while fitting, predicting
+or filtering, or predicts NaN is reported in ``errors`` (naming the model
+and what went wrong) and left out of the tables; every other model is still
+scored.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from benchmarks.executor import default_workers, map_tasks
+from benchmarks.protocol.aggregate import aggregate_estimation, aggregate_steering, summarize
+from benchmarks.protocol.config import BASELINES, BenchmarkError, ProtocolConfig
+from benchmarks.protocol.models import ModelError, describe, fit_models
+from benchmarks.protocol.plan import RunRef, chunks, load_frames, recording_plan, synthetic_plan
+from benchmarks.protocol.plots import plot_data
+from benchmarks.protocol.results import BenchmarkResult, versions
+from benchmarks.protocol.tasks import ChunkResult, ChunkTask, run_chunk
+
+__all__ = ["run_protocol"]
+
+
+def run_protocol(
+    config: ProtocolConfig | None = None,
+    user_models: Sequence[str] = (),
+    *,
+    workers: int | None = None,
+    scheduler: Any = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> BenchmarkResult:
+    """Run the benchmark protocol (see the module docstring).
+
+    Args:
+        config: the protocol (default: the paper's).
+        user_models: import paths ``"package.module:Name"`` of user steering
+            models to score next to the built-in ones.
+        workers: local worker processes (None: one per CPU; 1: in this process).
+        scheduler: a Dask scheduler address (``"tcp://host:8786"``) or an
+            object with ``scheduler_address``; tasks then run on that cluster
+            (its workers must be able to import the user models).
+        progress: called as ``progress(phase, done, total)``; phases
+            "runs" (done/total runs) and messages with total 0.
+
+    Returns:
+        A :class:`BenchmarkResult`; failed user models are in ``errors``.
+
+    Raises:
+        BenchmarkError: the configuration or the data do not allow the
+            protocol (nothing measured).
+    """
+    config = config or ProtocolConfig()
+    say = progress or (lambda phase, done, total: None)
+    timing: dict[str, float] = {}
+    start = time.perf_counter()
+    errors: list[ModelError] = []
+    notes: list[str] = []
+
+    # 1. the runs
+    if config.recordings is not None:
+        plan = recording_plan(config)
+    else:
+        plan = synthetic_plan(config)
+    illustrative = plan["illustrative"]
+    main_runs: list[RunRef] = plan["main"]
+    curved_runs: list[RunRef] = plan["curved"]
+    training = next(
+        (r for r in main_runs if r.driver == illustrative and r.index == config.training_run), None
+    )
+    if training is None:
+        raise BenchmarkError(
+            f"no run {config.training_run} of the illustrative driver {illustrative!r} on the "
+            f"{config.track} track to train on"
+        )
+    validation = [r for r in main_runs if r is not training]
+    if not validation:
+        raise BenchmarkError(
+            f"no validation runs: found only the training run ({len(main_runs)} run(s) on the "
+            f"{config.track} track); the protocol scores the models on the other runs"
+        )
+    notes.extend(plan.get("notes", []))
+
+    # 2. fit on the training run
+    say("generating the training run and fitting the models", 0, 0)
+    train_frame = load_frames([training], config.track, plan["env_config"], plan["params"])[0]
+    timing["training_run"] = time.perf_counter() - start
+    t_fit = time.perf_counter()
+    fitted, model_info = fit_models(train_frame, user_models, errors)
+    timing["fit"] = time.perf_counter() - t_fit
+
+    # 3. tasks
+    trace_runs = set()
+    plot_run = next((r for r in validation if r.driver == illustrative), validation[0])
+    trace_runs.add(plot_run.key)
+    if curved_runs:
+        trace_runs.add(curved_runs[0].key)
+    common = {
+        "env_config": plan["env_config"],
+        "driver_params": plan["params"],
+        "models": tuple(fitted),
+        "ljung_box_lags": config.ljung_box_lags,
+        "acf_lags": config.acf_lags,
+        "weight_threshold": config.weight_threshold,
+        "error_window": config.error_window,
+        "trace_runs": frozenset(trace_runs),
+        "detail_driver": illustrative,
+    }
+
+    n_workers = default_workers() if workers is None else max(1, int(workers))
+    batch = config.batch_size
+    tasks = [
+        ChunkTask(runs=tuple(chunk), track="curved", estimate=False, **common)
+        for chunk in chunks(curved_runs, batch)
+    ]
+    tasks += [
+        ChunkTask(runs=tuple(chunk), track=config.track, estimate=True, **common)
+        for chunk in chunks(validation, batch)
+    ]
+    total_runs = sum(len(t.runs) for t in tasks)
+    done_runs = np.cumsum([len(t.runs) for t in tasks])
+    say("runs", 0, total_runs)
+
+    def on_task(done: int) -> None:
+        say("runs", int(done_runs[done - 1]), total_runs)
+
+    t_tasks = time.perf_counter()
+    try:
+        chunk_results: list[ChunkResult] = map_tasks(
+            run_chunk, tasks, workers=workers, scheduler=scheduler, progress=on_task
+        )
+    except (OSError, TimeoutError) as exc:
+        if scheduler is None:
+            raise
+        raise BenchmarkError(
+            f"cannot run the tasks on the Dask scheduler {scheduler!r}: {describe(exc)}"
+        ) from None
+    timing["tasks"] = time.perf_counter() - t_tasks
+    timing["task_cpu_seconds"] = float(sum(c.seconds for c in chunk_results))
+
+    # 4. aggregate
+    say("aggregating", 0, 0)
+    failed: dict[str, ModelError] = {}
+    for chunk in chunk_results:
+        for failure in chunk.failures:
+            failed.setdefault(failure.model, failure)
+    errors.extend(failed.values())
+    for info in model_info:
+        if info["name"] in failed:
+            info["error"] = str(failed[info["name"]])
+    ok_models = [m.name for m in fitted if m.name not in failed]
+    runs_steering = sorted(
+        (row for c in chunk_results for row in c.steering if row["model"] not in failed),
+        key=_row_order(plan["driver_order"], ok_models),
+    )
+    estimator_names = [
+        m.name for m in fitted if m.residual_std is not None and m.name not in failed
+    ] + list(BASELINES)
+    runs_estimation = sorted(
+        (row for c in chunk_results for row in c.estimation if row["model"] not in failed),
+        key=_row_order(plan["driver_order"], estimator_names),
+    )
+    steering_rows = aggregate_steering(
+        [r for r in runs_steering if r["track"] == config.track], ok_models
+    )
+    curved_rows = (
+        aggregate_steering([r for r in runs_steering if r["track"] == "curved"], ok_models)
+        if config.track != "curved"
+        else []
+    )
+    estimation_rows = aggregate_estimation(runs_estimation)
+    summary = summarize(steering_rows, estimation_rows, ok_models)
+    plots = plot_data(chunk_results, fitted, failed, plot_run, curved_runs, train_frame, config)
+    timing["total"] = time.perf_counter() - start
+    executor = {
+        "kind": "dask" if scheduler is not None else "processes",
+        "workers": None if scheduler is not None else n_workers,
+        "scheduler": None
+        if scheduler is None
+        else str(getattr(scheduler, "scheduler_address", scheduler)),
+        "tasks": len(tasks),
+        "batch_size": batch,
+    }
+    return BenchmarkResult(
+        config=config.to_dict() | {"illustrative": illustrative, "user_models": list(user_models)},
+        models=model_info,
+        steering=steering_rows,
+        curved=curved_rows,
+        estimation=estimation_rows,
+        summary=summary,
+        runs_steering=runs_steering,
+        runs_estimation=runs_estimation,
+        errors=[e.to_dict() for e in errors],
+        drivers=plan["drivers"],
+        plots=plots,
+        timing=timing,
+        executor=executor,
+        versions=versions(),
+        notes=notes,
+    )
+
+
+def _row_order(drivers: Sequence[str], models: Sequence[str]) -> Callable[[dict], tuple]:
+    d_rank = {d: i for i, d in enumerate(drivers)}
+    m_rank = {m: i for i, m in enumerate(models)}
+    return lambda row: (
+        d_rank.get(row["driver"], len(d_rank)),
+        row["driver"],
+        row.get("track", ""),
+        m_rank.get(row["model"], len(m_rank)),
+        row["run"],
+    )

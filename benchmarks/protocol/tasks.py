@@ -1,0 +1,277 @@
+"""The protocol's tasks: score every model and estimator on a batch of runs, in any process."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import defaultdict
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.protocol.models import FittedModel, ModelError, describe
+from benchmarks.protocol.plan import RunRef, load_frames
+from estimators.baselines import NoSteeringEKF, OracleEKF
+from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.offline import run_estimator
+from hasa_env.steering import residual_diagnostics, score_runs
+
+__all__ = ["ChunkResult", "ChunkTask", "run_chunk"]
+
+
+@dataclass(frozen=True)
+class ChunkTask:
+    """The work of one task: a batch of runs of one track."""
+
+    runs: tuple[RunRef, ...]
+    track: str
+    env_config: Mapping[str, Any]
+    driver_params: Mapping[str, Any]
+    models: tuple[FittedModel, ...]
+    estimate: bool
+    ljung_box_lags: int
+    acf_lags: int
+    weight_threshold: float
+    error_window: float
+    trace_runs: frozenset[tuple[str, str, int]]
+    detail_driver: str
+
+
+@dataclass
+class ChunkResult:
+    """What a task returns: per-run rows, model failures, plot data."""
+
+    steering: list[dict[str, Any]] = field(default_factory=list)
+    estimation: list[dict[str, Any]] = field(default_factory=list)
+    failures: list[ModelError] = field(default_factory=list)
+    traces: dict[tuple[str, str, int], dict[str, Any]] = field(default_factory=dict)
+    early_errors: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    acf: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def run_chunk(task: ChunkTask) -> ChunkResult:
+    """Score every model on a batch of runs (one task; runs in any process).
+
+    Per run and model: steering scores (and, for the illustrative driver,
+    residual autocorrelations); per run and estimator (main track only):
+    lateral RMSE, steps to decide the lane, and the first seconds of lateral
+    error. A user model that fails is reported in ``failures``.
+    """
+    start = time.process_time()
+    frames = load_frames(task.runs, task.track, task.env_config, task.driver_params)
+    out = ChunkResult()
+    failed: set[str] = set()
+    predictions: dict[str, list[np.ndarray]] = {}
+    for fm in task.models:
+        try:
+            predictions[fm.name] = _score_model(fm, task, frames, out)
+        except ModelError as exc:
+            if fm.kind == "builtin":
+                raise RuntimeError(str(exc)) from None
+            out.failures.append(exc)
+            failed.add(fm.name)
+            out.steering = [r for r in out.steering if r["model"] != fm.name]
+    for ref, frame in zip(task.runs, frames, strict=True):
+        if ref.key in task.trace_runs:
+            trace = out.traces.setdefault(ref.key, {})
+            trace["time"] = frame["time"].to_numpy()
+            trace["steering"] = frame["steering"].to_numpy()
+            trace["predictions"] = {
+                name: preds[task.runs.index(ref)]
+                for name, preds in predictions.items()
+                if name not in failed
+            }
+    if task.estimate:
+        _estimate(task, frames, failed, out)
+    out.seconds = time.process_time() - start
+    return out
+
+
+def _warm_mask(features: pd.DataFrame, model: Any) -> np.ndarray:
+    """Rows where every feature the model uses is finite at lags 0..max_lag."""
+    try:
+        used = sorted({r.feature for r in model.regressors} | {"delta"})
+        lag = int(model.max_lag)
+    except Exception:  # noqa: BLE001 - a broken regressors property
+        used, lag = list(features.columns), 0
+    used = [c for c in used if c in features.columns]
+    finite = np.all(np.isfinite(features[used].to_numpy(dtype=np.float64)), axis=1)
+    if lag > 0:
+        window = np.lib.stride_tricks.sliding_window_view(
+            np.concatenate([np.zeros(lag, bool), finite]), lag + 1
+        )
+        finite = window.all(axis=1)
+    return finite
+
+
+def _score_model(
+    fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame], out: ChunkResult
+) -> list[np.ndarray]:
+
+    model = fm.model
+    preds = []
+    for ref, frame in zip(task.runs, frames, strict=True):
+        where = f"driver {ref.driver!r} run {ref.index} ({ref.track})"
+        try:
+            features = model.features(frame)
+            prediction = np.asarray(model.predict_features(features), dtype=np.float64)
+        except Exception as exc:  # noqa: BLE001
+            raise ModelError(fm.name, "predict", f"on {where}: {describe(exc)}") from None
+        if prediction.shape != (len(features),):
+            raise ModelError(
+                fm.name,
+                "predict",
+                f"on {where}: predict_features returned shape {prediction.shape}, "
+                f"expected ({len(features)},)",
+            )
+        warm = _warm_mask(features, model)
+        bad = warm & ~np.isfinite(prediction)
+        if bad.any():
+            raise ModelError(
+                fm.name,
+                "predict",
+                f"predicted NaN or inf at {int(bad.sum())} of {int(warm.sum())} samples of "
+                f"{where} (first at t = {float(frame['time'].iloc[int(np.argmax(bad))]):.2f} s)",
+            )
+        try:
+            scores = score_runs(model, [features], lags=task.ljung_box_lags, free_run=False)
+        except Exception as exc:  # noqa: BLE001
+            raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
+        row = scores.iloc[0]
+        out.steering.append(
+            {
+                "driver": ref.driver,
+                "track": ref.track,
+                "run": ref.index,
+                "model": fm.name,
+                "rmse": float(row["rmse"]),
+                "r2": float(row["r2"]),
+                "r2_increments": float(row["r2_increments"]),
+                "ljung_box_p": float(row["ljung_box_p"]),
+                "n": int(row["n"]),
+            }
+        )
+        if task.estimate and ref.driver == task.detail_driver:
+            residual = features["delta"].to_numpy(dtype=np.float64) - prediction
+            diag = residual_diagnostics(residual[np.isfinite(residual)], lags=task.acf_lags)
+            out.acf.setdefault(fm.name, []).append(diag.autocorrelation)
+        preds.append(prediction)
+    return preds
+
+
+def _filter_key(frame: pd.DataFrame) -> str:
+    config = frame.attrs.get("config") or {}
+    keep = {
+        "noise": config.get("noise"),
+        "hypotheses": (config.get("markings") or {}).get("hypotheses"),
+        "rate": (config.get("sim_frequency"), config.get("action_repeat")),
+    }
+    return json.dumps(keep, sort_keys=True, default=str)
+
+
+def _settle_steps(true_weight: np.ndarray, valid: np.ndarray, threshold: float) -> np.ndarray:
+    """(R,) first step from which the true-lane weight stays above ``threshold`` (NaN: never)."""
+    above = (true_weight > threshold) | ~valid
+    # last step that is below the threshold; settled from the next one on
+    below = ~above
+    any_below = below.any(axis=1)
+    last_below = np.where(any_below, below.shape[1] - 1 - np.argmax(below[:, ::-1], axis=1), -1)
+    steps = (last_below + 1).astype(np.float64)
+    lengths = valid.sum(axis=1)
+    steps[steps >= lengths] = np.nan
+    return steps
+
+
+def _estimate(
+    task: ChunkTask, frames: Sequence[pd.DataFrame], failed: set[str], out: ChunkResult
+) -> None:
+
+    groups: dict[str, list[int]] = defaultdict(list)
+    for i, frame in enumerate(frames):
+        groups[_filter_key(frame)].append(i)
+    estimators: list[tuple[str, str, Callable[[Any], Any]]] = []
+    for fm in task.models:
+        if fm.residual_std is None or fm.name in failed:
+            continue
+
+        def make(settings: Any, fm: FittedModel = fm) -> Any:
+            return GaussianMixtureEKF(
+                fm.model.arx(),
+                replace(settings, steering_residual_std=max(fm.residual_std, 1e-9)),
+                decision_lag=fm.model.decision_lag,
+            )
+
+        estimators.append((fm.name, fm.kind, make))
+    estimators.append(("no_steering", "baseline", lambda s: NoSteeringEKF(s)))
+    estimators.append(("oracle", "baseline", lambda s: OracleEKF(None, s)))
+    for name, kind, make in estimators:
+        rows: list[dict[str, Any]] = []
+        try:
+            for indices in groups.values():
+                group = [frames[i] for i in indices]
+                settings = FilterSettings.from_env_config(group[0].attrs["config"])
+                result = run_estimator(make(settings), group)
+                rows += _estimation_rows(task, indices, result, name, out)
+        except ModelError:
+            raise
+        except Exception as exc:  # noqa: BLE001
+            if kind != "user":
+                raise
+            out.failures.append(ModelError(name, "estimate", f"the filter raised {describe(exc)}"))
+            continue
+        bad = [r for r in rows if not math.isfinite(r["lateral_rmse"])]
+        if bad and kind == "user":
+            out.failures.append(
+                ModelError(
+                    name,
+                    "estimate",
+                    f"the filter's lateral estimate became NaN or inf on {len(bad)} run(s), "
+                    f"e.g. driver {bad[0]['driver']!r} run {bad[0]['run']}",
+                )
+            )
+            continue
+        out.estimation += rows
+
+
+def _estimation_rows(
+    task: ChunkTask, indices: Sequence[int], result: Any, name: str, out: ChunkResult
+) -> list[dict[str, Any]]:
+    refs = [task.runs[i] for i in indices]
+    error = result.lateral_error()
+    rmse = np.sqrt(np.nanmean(error * error, axis=1))
+    bias0 = result.truth["bias"][:, 0]
+    true_weight = result.true_lane_weight()  # (R, T): weight of the hypotheses equal to the bias
+    steps = _settle_steps(true_weight, result.valid, task.weight_threshold)
+    final_true = result.picked_true_lane()
+    n_window = int(round(task.error_window / float(np.nanmedian(np.diff(result.time[0]))))) + 1
+    rows = []
+    for j, ref in enumerate(refs):
+        rows.append(
+            {
+                "driver": ref.driver,
+                "run": ref.index,
+                "model": name,
+                "lateral_rmse": float(rmse[j]),
+                "steps_to_decide": None if not np.isfinite(steps[j]) else int(steps[j]),
+                "true_lane_final": bool(final_true[j]),
+                "bias": float(bias0[j]),
+            }
+        )
+        if ref.driver == task.detail_driver:
+            out.early_errors.setdefault(name, []).append(error[j, :n_window].copy())
+        if ref.key in task.trace_runs:
+            trace = out.traces.setdefault(ref.key, {})
+            est = trace.setdefault("estimates", {})
+            est[name] = {
+                "lateral": result.mean[j, : result.lengths[j], 1].copy(),
+                "true_weight": true_weight[j, : result.lengths[j]].copy(),
+                "hypotheses": result.hypotheses[j].copy(),
+            }
+            trace["truth_lateral"] = result.truth["lateral_offset"][j, : result.lengths[j]].copy()
+            trace["bias"] = float(bias0[j])
+    return rows
