@@ -70,7 +70,7 @@ def map_tasks(
 
 def _map_dask(func: Callable[[Any], T], tasks: list[Any], scheduler: Any, progress: Any) -> list[T]:
     try:
-        from distributed import Client
+        from distributed import Client  # optional extra 'dask'
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise RuntimeError(
             "--scheduler needs Dask's distributed package: pip install 'hasa-env[dask]'"

@@ -46,6 +46,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+import hasa_env  # noqa: F401 - registers the ids
+
 __all__ = ["run", "main", "format_table", "TARGETS", "ENV_ID"]
 
 ENV_ID = "hasa_env/LaneKeeping-v0"
@@ -163,7 +165,7 @@ def _make_highway() -> gym.Env | None:
     with warnings.catch_warnings(), contextlib.redirect_stdout(sink):
         warnings.simplefilter("ignore")
         try:
-            import highway_env  # noqa: F401
+            import highway_env  # noqa: F401 - optional (the 'compare' extra)
         except ImportError:
             return None
         return gym.make(HIGHWAY_ID)
@@ -203,8 +205,6 @@ def run(quick: bool = False, seed: int = 0, progress: Callable[[str], None] | No
         highway-env); ``targets`` maps each key of :data:`TARGETS` to its
         ``value``, ``minimum`` and ``passed`` (None if not measured).
     """
-    import hasa_env  # noqa: F401 - registers the ids
-
     plan = _PLAN_QUICK if quick else _PLAN_FULL
     say = progress or (lambda msg: None)
     envs: dict[str, dict[str, Any]] = {}

@@ -42,6 +42,12 @@ from typing import Any
 
 import numpy as np
 
+from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS
+from estimators.filterpy_ekf import FilterpyGMEKF
+from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from hasa_env.drivers import SyntheticDriver, population, run_driver
+from hasa_env.steering import GeneralizedModel
+
 __all__ = ["run", "main", "format_table", "TARGETS", "FILTERS"]
 
 FILTERS = ("ours_2", "ours_8", "filterpy_2", "filterpy_8", "batched_1000x2")
@@ -72,9 +78,6 @@ _PLAN_QUICK = {
 
 def _workload() -> tuple[np.ndarray, np.ndarray, Any]:
     """Measurements (T, 3), IMU (T, 2) of one synthetic run and the steering model."""
-    from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS
-    from hasa_env.drivers import SyntheticDriver, population, run_driver
-    from hasa_env.steering import GeneralizedModel
 
     driver = SyntheticDriver(population("paper", seed=0)[0])
     frame = run_driver(driver, "hasa_env/LaneKeeping-v0", runs=1, seed=0)[0]
@@ -111,8 +114,6 @@ def run(quick: bool = False) -> dict[str, Any]:
         (median), its ``min``/``max``, ``steps``, ``repeats``, ``runs``,
         ``hypotheses`` and, for the batch, ``seconds_per_run_step``.
     """
-    from estimators.filterpy_ekf import FilterpyGMEKF
-    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 
     plan = _PLAN_QUICK if quick else _PLAN_FULL
     z, acc, arx = _workload()

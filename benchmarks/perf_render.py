@@ -48,6 +48,11 @@ from typing import Any
 
 import numpy as np
 
+from hasa_env.devices import InputManager, init_pygame_input
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.render import TopDownRenderer, make_renderer
+from hasa_env.session import DriveSession, DriveSettings
+
 __all__ = ["run", "main", "format_table", "TARGETS", "SIZE"]
 
 SIZE = (1280, 720)
@@ -62,7 +67,6 @@ TARGETS: dict[str, tuple[str, float]] = {
 
 def _trajectory(steps: int) -> tuple[Any, list[dict[str, Any]]]:
     """Infos of a drive along the curved track (varied frames), and the env's set-up."""
-    from hasa_env.envs.lane_keeping import LaneKeepingEnv
 
     env = LaneKeepingEnv(
         config={
@@ -103,10 +107,7 @@ def _rate(work: Callable[[int], None], frames: int, repeats: int) -> dict[str, A
 
 def _drive_loop(seconds: float) -> dict[str, Any]:
     """Run hasa-drive's real-time loop (keyboard, dummy window) and count frames."""
-    import pygame
-
-    from hasa_env.devices import InputManager, init_pygame_input
-    from hasa_env.session import DriveSession, DriveSettings
+    import pygame  # pygame: after the SDL drivers are chosen above
 
     pg = init_pygame_input()
     display = pg.display.set_mode(SIZE)
@@ -162,9 +163,7 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-    import pygame
-
-    from hasa_env.render import TopDownRenderer, make_renderer
+    import pygame  # pygame: after the SDL drivers are chosen above
 
     say = progress or (lambda message: None)
     frames = 60 if quick else 300

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from benchmarks.protocol import BASELINES, BenchmarkResult
 
@@ -420,13 +421,15 @@ def _color(name: str, users: list[str]) -> str:
     return _USER_COLORS[users.index(name) % len(_USER_COLORS)]
 
 
+def _subplots(*args: Any, figsize: tuple[float, float], **kwargs: Any) -> tuple[Figure, Any]:
+    """``pyplot.subplots`` without pyplot: a stand-alone :class:`~matplotlib.figure.Figure`
+    (no GUI backend, nothing global to close)."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*args, **kwargs)
+
+
 def write_figures(result: BenchmarkResult, out: Path) -> dict[str, str]:
     """Write the PNG figures; returns {key: file name} of those written."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     plots = result.plots
     users: list[str] = []
     written: dict[str, str] = {}
@@ -437,30 +440,29 @@ def write_figures(result: BenchmarkResult, out: Path) -> dict[str, str]:
     def save(fig: Any, key: str) -> None:
         fig.tight_layout()
         fig.savefig(out / FIGURES[key], dpi=110)
-        plt.close(fig)
         written[key] = FIGURES[key]
 
     if trace.get("predictions"):
-        save(_steering_figure(plt, trace, run_label, users), "steering_prediction")
+        save(_steering_figure(trace, run_label, users), "steering_prediction")
     if plots.get("training_acf") or plots.get("validation_acf"):
-        fig = _acf_figure(plt, plots, users)
+        fig = _acf_figure(plots, users)
         if fig is not None:
             save(fig, "residual_acf")
     if trace.get("estimates"):
-        save(_estimate_figure(plt, trace, run_label, users, plots), "lateral_estimate")
+        save(_estimate_figure(trace, run_label, users, plots), "lateral_estimate")
     if plots.get("early_error"):
-        save(_error_figure(plt, plots, result, users), "lateral_error")
+        save(_error_figure(plots, result, users), "lateral_error")
     curved = plots.get("curved_trace") or {}
     if curved.get("predictions"):
         c = plots.get("curved_run") or {}
         label = f"driver {c.get('driver')}, curved run {c.get('run')}"
-        save(_steering_figure(plt, curved, label, users), "curved_steering")
+        save(_steering_figure(curved, label, users), "curved_steering")
     return written
 
 
-def _steering_figure(plt: Any, trace: dict, label: str, users: list[str]) -> Any:
+def _steering_figure(trace: dict, label: str, users: list[str]) -> Any:
     t = trace["time"]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    fig, (top, bottom) = _subplots(2, 1, figsize=(9, 6), sharex=True)
     top.plot(t, trace["steering"], color="black", lw=2.2, label="measured")
     for name, pred in trace["predictions"].items():
         top.plot(t, pred, lw=1.0, ls="--", color=_color(name, users), label=f"{name} (one step)")
@@ -475,11 +477,11 @@ def _steering_figure(plt: Any, trace: dict, label: str, users: list[str]) -> Any
     return fig
 
 
-def _acf_figure(plt: Any, plots: dict, users: list[str]) -> Any:
+def _acf_figure(plots: dict, users: list[str]) -> Any:
     names = list(dict.fromkeys([*plots.get("training_acf", {}), *plots.get("validation_acf", {})]))
     if not names:
         return None
-    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
+    fig, axes = _subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
         training = plots.get("training_acf", {}).get(name)
         validation = plots.get("validation_acf", {}).get(name)
@@ -502,11 +504,11 @@ def _acf_figure(plt: Any, plots: dict, users: list[str]) -> Any:
     return fig
 
 
-def _estimate_figure(plt: Any, trace: dict, label: str, users: list[str], plots: dict) -> Any:
+def _estimate_figure(trace: dict, label: str, users: list[str], plots: dict) -> Any:
     truth = trace["truth_lateral"]
     dt = plots.get("dt", 0.01)
     t = np.arange(truth.size) * dt
-    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), sharex="col",
+    fig, axes = _subplots(2, 2, figsize=(11, 6.5), sharex="col",
                              gridspec_kw={"width_ratios": [2, 1]})  # fmt: skip
     zoom = min(float(t[-1]), 2.0)
     for col, limit in enumerate((float(t[-1]), zoom)):
@@ -531,9 +533,9 @@ def _estimate_figure(plt: Any, trace: dict, label: str, users: list[str], plots:
     return fig
 
 
-def _error_figure(plt: Any, plots: dict, result: BenchmarkResult, users: list[str]) -> Any:
+def _error_figure(plots: dict, result: BenchmarkResult, users: list[str]) -> Any:
     dt = plots.get("dt", 0.01)
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = _subplots(figsize=(8, 4.5))
     order = [m for m in result.model_names if m in plots["early_error"]]
     order += [b for b in BASELINES if b in plots["early_error"]]
     runs = 0

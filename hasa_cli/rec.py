@@ -20,7 +20,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from hasa_env.recording import RecordingError, RecordingWarning, load_recording, load_recordings
-from hasa_env.recording.export import export_minari, require_pyarrow, summarize, to_parquet
+from hasa_env.recording.export import export_minari
+from hasa_env.recording.parquet import require_pyarrow, to_parquet
+from hasa_env.recording.summary import summarize
 
 __all__ = ["main"]
 

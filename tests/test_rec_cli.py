@@ -11,7 +11,8 @@ import pytest
 import hasa_env  # noqa: F401 - registers the ids
 from hasa_cli.rec import main
 from hasa_env.recording import RecordingError, RecordingWrapper, load_recording
-from hasa_env.recording.export import read_parquet, summarize, to_parquet
+from hasa_env.recording.parquet import read_parquet, to_parquet
+from hasa_env.recording.summary import summarize
 
 ENV_ID = "hasa_env/LaneKeeping-v0"
 

@@ -184,8 +184,6 @@ def fit_models(
 
 def _fit_one(name: str, model: Any, train: pd.DataFrame) -> tuple[Any, dict[str, Any]]:
     """Fit one model on the training run; its description; ModelError if it fails."""
-    from hasa_env.steering import SteeringModel
-
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", IdentifiabilityWarning)
         try:

@@ -13,6 +13,7 @@ import pandas as pd
 
 from benchmarks.protocol.config import _ENV_IDS, ILLUSTRATIVE, BenchmarkError, ProtocolConfig
 from hasa_env.drivers import SyntheticDriver, population, run_drivers, run_seeds
+from hasa_env.recording import load_recording
 
 __all__ = ["RunRef", "chunks", "load_frames", "recording_plan", "synthetic_plan"]
 
@@ -152,8 +153,6 @@ def load_frames(
     if not runs:
         return []
     if runs[0].path is not None:
-        from hasa_env.recording import load_recording
-
         frames = []
         for ref in runs:
             rec = load_recording(ref.path)

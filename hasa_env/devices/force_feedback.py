@@ -42,7 +42,7 @@ class Autocentre:
                 f"force feedback via evdev needs Linux, this is {sys.platform}"
             )
         try:
-            import evdev
+            import evdev  # optional (Linux force feedback): pip install evdev
         except ImportError:
             raise ForceFeedbackUnavailable(
                 "force feedback needs the 'evdev' package (pip install evdev); driving without it"

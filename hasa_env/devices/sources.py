@@ -74,7 +74,7 @@ def init_pygame_input(video: bool = True) -> Any:
     """
     os.environ.setdefault("SDL_JOYSTICK_ALLOW_BACKGROUND_EVENTS", "1")
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-    import pygame
+    import pygame  # pygame: only when input devices are opened
 
     if video and not pygame.display.get_init():
         pygame.display.init()

@@ -94,7 +94,7 @@ def _candidates() -> list[str]:
                             paths.append(part)
         except OSError:
             pass
-    import pygame
+    import pygame  # pygame: only when a virtual device is used
 
     pkg = Path(pygame.__file__).resolve().parent
     site = pkg.parent
@@ -124,7 +124,7 @@ def find_sdl_library() -> str:
     Raises:
         VirtualJoystickUnavailable: none found, or none with pygame's SDL version.
     """
-    import pygame
+    import pygame  # pygame: only when a virtual device is used
 
     wanted = tuple(pygame.get_sdl_version())
     tried = []
@@ -228,7 +228,7 @@ class VirtualJoystick:
         product_id: int = 0,
         joystick_type: int = JOYSTICK_TYPE_WHEEL,
     ) -> None:
-        import pygame
+        import pygame  # pygame: only when a virtual device is used
 
         if not pygame.joystick.get_init():
             raise VirtualJoystickUnavailable(

@@ -37,6 +37,7 @@ default) that anyone can regenerate by name and seed.
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -494,6 +495,4 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[Driver
 
 def _stable_hash(text: str) -> int:
     """A hash of a string that is the same in every Python process (unlike hash())."""
-    import zlib
-
     return zlib.crc32(text.encode("utf-8"))

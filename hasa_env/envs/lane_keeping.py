@@ -8,6 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from hasa_env.render import make_renderer
 from hasa_env.sim.dynamics import (
     SCALAR_OPS,
     VehicleState,
@@ -175,8 +176,6 @@ class LaneKeepingEnv(gym.Env):
         if self._state is None:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
-            from hasa_env.render import make_renderer  # pygame: only when rendering
-
             self._renderer = make_renderer(self.setup, self.render_mode)
         return self._renderer.render(self._info())
 

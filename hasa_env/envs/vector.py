@@ -21,6 +21,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from hasa_env.render import make_renderer
 from hasa_env.sim.dynamics import (
     ARRAY_OPS,
     VehicleState,
@@ -184,8 +185,6 @@ class LaneKeepingVectorEnv(VectorEnv):
             gym.logger.warn("render() called without render_mode='rgb_array'")
             return None
         if self._renderers is None:
-            from hasa_env.render import make_renderer  # pygame: only when rendering
-
             self._renderers = [make_renderer(self.setup, "rgb_array") for _ in range(self.num_envs)]
         info = self._info()
         frames = []

@@ -7,7 +7,8 @@ files and name the file, line and column of every problem; re-simulate them
 with :func:`replay` and compare with :func:`compare_recordings`. The format
 is :mod:`hasa_env.recording.format` (and ``recordings/README.md``); raw wheel
 inputs next to a recording: :mod:`hasa_env.recording.raw_inputs`; Minari and
-Parquet export: :mod:`hasa_env.recording.export`.
+Parquet: :mod:`hasa_env.recording.export`, :mod:`hasa_env.recording.parquet`;
+summaries: :mod:`hasa_env.recording.summary`.
 """
 
 from hasa_env.recording.format import (

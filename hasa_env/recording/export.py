@@ -1,14 +1,10 @@
-"""Recordings as offline-RL datasets: Minari export, Parquet conversion, summaries.
+"""Recordings as offline-RL datasets: the Minari export.
 
-- :func:`export_minari` turns recordings (a folder of them, human or
-  synthetic) into a `Minari <https://minari.farama.org>`_ dataset that
-  ``minari.load_dataset`` loads and ``recover_environment()`` rebuilds.
-- :func:`to_parquet` / :func:`read_parquet` convert a recording to one
-  self-contained Parquet file (the sidecar travels in the file's metadata).
-- :func:`summarize` describes and validates one recording (``hasa-rec info``).
-
-Both Minari and pyarrow are optional extras, imported when used; a clear
-``ImportError`` says how to install them.
+:func:`export_minari` turns recordings (a folder of them, human or
+synthetic) into a `Minari <https://minari.farama.org>`_ dataset that
+``minari.load_dataset`` loads and ``recover_environment()`` rebuilds. Minari
+is an optional extra, imported when used; a clear ``ImportError`` says how to
+install it. Parquet conversion: :mod:`hasa_env.recording.parquet`.
 
 **Actions.** A recording stores the *physical* action (road-wheel angle rad,
 acceleration m/s^2, after clipping). The dataset's env is the recording's
@@ -30,8 +26,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
-import math
 import os
 import re
 import warnings
@@ -48,31 +42,24 @@ from hasa_env.recording.format import (
     Recording,
     RecordingError,
     RecordingWarning,
-    _validate_meta,
 )
 from hasa_env.recording.reader import load_recording, load_recordings
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.dynamics import SENSOR_NAMES
-from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS, STATE_NAMES, EnvSetup, build_setup
+from hasa_env.sim.setup import INFO_KEYS, STATE_NAMES, EnvSetup, build_setup
 
 __all__ = [
     "ExportResult",
-    "RecordingSummary",
     "action_columns",
     "episode_arrays",
     "export_minari",
     "observations",
-    "read_parquet",
     "require_minari",
-    "require_pyarrow",
-    "summarize",
-    "to_parquet",
 ]
+
 
 ACTION_TYPES = ("physical", "normalized")
 OBSERVATION_TYPES = ("sensors", "state", "both")
-PARQUET_METADATA_KEY = b"hasa_env.recording"
-"""Key of the sidecar JSON in a converted Parquet file's schema metadata."""
 _SENSOR_COLUMNS = tuple(f"sensor_{name}" for name in SENSOR_NAMES)
 _ID_FOR_TRACK = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
 
@@ -80,7 +67,7 @@ _ID_FOR_TRACK = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/Lane
 def require_minari() -> Any:
     """Import and return ``minari``, or raise ImportError saying how to install it."""
     try:
-        import minari
+        import minari  # optional extra 'minari'
     except ImportError as exc:
         raise ImportError(
             "Minari is not installed; install the datasets extra: pip install 'hasa-env[minari]'"
@@ -93,17 +80,6 @@ def require_minari() -> Any:
             "pip install 'hasa-env[minari]'"
         ) from exc
     return minari
-
-
-def require_pyarrow() -> Any:
-    """Import and return ``pyarrow.parquet``, or raise ImportError saying how to install it."""
-    try:
-        import pyarrow.parquet as pq
-    except ImportError as exc:
-        raise ImportError(
-            "pyarrow is not installed; install the Parquet extra: pip install 'hasa-env[parquet]'"
-        ) from exc
-    return pq
 
 
 # ----------------------------------------------------------- conversions
@@ -352,8 +328,8 @@ def export_minari(
     """
     minari = require_minari()
     # minari is the optional 'minari' extra: imported only when exporting
-    from minari.data_collector.episode_buffer import EpisodeBuffer
-    from minari.dataset.minari_dataset import parse_dataset_id
+    from minari.data_collector.episode_buffer import EpisodeBuffer  # optional extra
+    from minari.dataset.minari_dataset import parse_dataset_id  # optional extra
 
     try:
         if not re.fullmatch(r"[^/]+(/[^/]+)?-v[0-9]+", dataset_id):
@@ -453,217 +429,4 @@ def export_minari(
         cut=[rec.path for rec, arrays in chosen if arrays["cut"]],
         env_id=env_id,
         config=config,
-    )
-
-
-# ----------------------------------------------------------------- Parquet
-def to_parquet(
-    recording: Recording | str | os.PathLike[str], path: str | os.PathLike[str] | None = None
-) -> Path:
-    """Write one recording as a Parquet file; returns its path.
-
-    Columns and dtypes are the recording's (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`:
-    int64 ``step``/``bias_index``, bool flags, float64 values, bit-exact);
-    the sidecar JSON is stored in the schema metadata under
-    ``hasa_env.recording`` (read it back with :func:`read_parquet`). ``path``
-    defaults to the CSV's path with ``.parquet``; an existing file is replaced.
-
-    Raises:
-        ImportError: pyarrow is not installed.
-        RecordingError: the recording is corrupt (file, line, column).
-    """
-    pq = require_pyarrow()
-    import pyarrow as pa
-
-    if not isinstance(recording, Recording):
-        recording = load_recording(recording)
-    if path is None:
-        if recording.path is None:
-            raise ValueError("give a path for a recording that has no file")
-        path = recording.path.with_suffix(".parquet")
-    path = Path(path)
-    table = pa.Table.from_pandas(recording.data[list(RECORDING_COLUMNS)], preserve_index=False)
-    meta = dict(table.schema.metadata or {})
-    meta[PARQUET_METADATA_KEY] = json.dumps(recording.meta, allow_nan=False).encode("utf-8")
-    table = table.replace_schema_metadata(meta)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
-    return path
-
-
-def read_parquet(path: str | os.PathLike[str]) -> Recording:
-    """Read a recording written by :func:`to_parquet` (validated like a CSV recording).
-
-    Raises:
-        ImportError: pyarrow is not installed.
-        RecordingError: not a hasa_env recording, or invalid columns or values.
-    """
-    pq = require_pyarrow()
-    path = Path(path)
-    try:
-        table = pq.read_table(path)
-    except FileNotFoundError:
-        raise RecordingError("no such Parquet file", path) from None
-    except OSError as exc:  # pyarrow raises ArrowInvalid (an OSError subclass) on bad files
-        raise RecordingError(f"unreadable Parquet file: {exc}", path) from None
-    raw = (table.schema.metadata or {}).get(PARQUET_METADATA_KEY)
-    if raw is None:
-        raise RecordingError(
-            "not a hasa_env recording: no 'hasa_env.recording' sidecar in the Parquet metadata",
-            path,
-        )
-    try:
-        meta = _validate_meta(json.loads(raw.decode("utf-8")), path)
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"sidecar metadata is not valid JSON: {exc.msg}", path) from None
-    names = list(table.column_names)
-    if names != list(RECORDING_COLUMNS):
-        missing = [c for c in RECORDING_COLUMNS if c not in names]
-        extra = [c for c in names if c not in RECORDING_COLUMNS]
-        raise RecordingError(
-            f"columns differ from the schema (missing {missing}, unknown {extra})",
-            path,
-            column=(missing or extra or [None])[0],
-        )
-    frame = table.to_pandas()
-    for column in RECORDING_COLUMNS:
-        expected = (
-            np.int64
-            if column in ("step", "bias_index")
-            else (np.bool_ if column in ("terminated", "truncated") else np.float64)
-        )
-        if frame[column].dtype != expected:
-            raise RecordingError(
-                f"dtype {frame[column].dtype} instead of {np.dtype(expected)}", path, column=column
-            )
-        if expected is np.float64:
-            bad = np.flatnonzero(~np.isfinite(frame[column].to_numpy()))
-            if bad.size:
-                raise RecordingError(f"row {int(bad[0])}: non-finite value", path, column=column)
-    step = frame["step"].to_numpy()
-    bad = np.flatnonzero(step != np.arange(len(step)))
-    if bad.size:
-        i = int(bad[0])
-        raise RecordingError(f"row {i}: step = {int(step[i])}, expected {i}", path, column="step")
-    config = meta["config"]
-    expected = step * config["action_repeat"] * (1.0 / config["sim_frequency"])
-    time = frame["time"].to_numpy()
-    bad = np.flatnonzero(np.abs(time - expected) > 1e-9 * np.maximum(1.0, np.abs(expected)))
-    if bad.size:
-        i = int(bad[0])
-        raise RecordingError(
-            f"row {i}: time = {time[i]!r} s, expected {expected[i]!r} s", path, column="time"
-        )
-    return Recording(frame, meta, path)
-
-
-# ----------------------------------------------------------------- summary
-@dataclass(frozen=True)
-class RecordingSummary:
-    """What ``hasa-rec info`` prints about one valid recording (SI units, radians)."""
-
-    path: Path | None
-    steps: int
-    duration: float
-    env_step: float
-    complete: bool
-    end_reason: str | None
-    seed: int | None
-    env_id: str | None
-    track: str
-    sim_frequency: float
-    action_repeat: int
-    action_type: str
-    observation_type: str
-    hypotheses: tuple[float, ...]
-    camera_noise: float
-    bias: float
-    bias_index: int
-    lateral_rmse: float
-    max_abs_lateral: float
-    total_reward: float
-    terminated: bool
-    truncated: bool
-    metadata: dict[str, Any]
-    warnings: tuple[str, ...]
-
-    def lines(self) -> list[str]:
-        """Human-readable lines."""
-        policy_rate = self.sim_frequency / self.action_repeat
-        end = self.end_reason or ("terminated" if self.terminated else "running / unknown")
-        out = [
-            f"file           {self.path}",
-            f"valid          yes ({'complete' if self.complete else 'INCOMPLETE: not finalized'})",
-            f"steps          {self.steps} env steps, {self.duration:.2f} s "
-            f"(env step {self.env_step:g} s)",
-            f"end            {end}",
-            f"env            {self.env_id or 'unknown id'}, track {self.track}, "
-            f"{self.sim_frequency:g} Hz simulation, action_repeat {self.action_repeat} "
-            f"({policy_rate:g} Hz policy)",
-            f"spaces         {self.action_type} actions, {self.observation_type} observations",
-            f"markings       hypotheses {list(self.hypotheses)} m, camera noise "
-            f"{self.camera_noise:g} m",
-            f"bias           b = {self.bias:+g} m (hypothesis {self.bias_index})",
-            f"lateral        RMSE {self.lateral_rmse:.3f} m, max |y| {self.max_abs_lateral:.3f} m",
-            f"return         {self.total_reward:.3f}",
-            f"seed           {self.seed}",
-        ]
-        if self.metadata:
-            out.append(f"metadata       {json.dumps(self.metadata, sort_keys=True)}")
-        out.extend(f"warning        {w}" for w in self.warnings)
-        return out
-
-
-def _load_any(path: str | os.PathLike[str]) -> Recording:
-    p = Path(path)
-    if p.suffix == ".parquet":
-        return read_parquet(p)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RecordingWarning)
-        return load_recording(p)
-
-
-def summarize(path: str | os.PathLike[str] | Recording) -> RecordingSummary:
-    """Load, validate and summarise a recording (CSV + sidecar, or a converted Parquet file).
-
-    The lateral RMSE and max |y| are of the true lateral offset over rows
-    1..n (the reset row excluded; row 0 alone if there are no steps).
-
-    Raises:
-        RecordingError: the recording is corrupt (file, line and column named).
-    """
-    rec = path if isinstance(path, Recording) else _load_any(path)
-    data = rec.data
-    config = rec.config
-    env_step = config["action_repeat"] / config["sim_frequency"]
-    y = data["lateral_offset"].to_numpy()
-    y = y[1:] if len(y) > 1 else y
-    last = data.iloc[-1]
-    return RecordingSummary(
-        path=rec.path,
-        steps=rec.steps,
-        duration=float(data["time"].iloc[-1]),
-        env_step=env_step,
-        complete=rec.complete,
-        end_reason=rec.meta.get("end_reason"),
-        seed=rec.seed,
-        env_id=rec.meta.get("env_id"),
-        track=config["track"],
-        sim_frequency=float(config["sim_frequency"]),
-        action_repeat=int(config["action_repeat"]),
-        action_type=config["action"]["type"],
-        observation_type=config["observation"]["type"],
-        hypotheses=tuple(config["markings"]["hypotheses"]),
-        camera_noise=float(config["noise"]["camera"]),
-        bias=float(data["bias"].iloc[0]),
-        bias_index=int(data["bias_index"].iloc[0]),
-        lateral_rmse=float(math.sqrt(np.mean(y * y))),
-        max_abs_lateral=float(np.max(np.abs(y))),
-        total_reward=float(data["reward"].sum()),
-        terminated=bool(last["terminated"]),
-        truncated=bool(last["truncated"]),
-        metadata=dict(rec.meta.get("metadata") or {}),
-        warnings=tuple(rec.warnings),
     )

@@ -67,7 +67,7 @@ INFO_WEIGHT_KEYS = ("estimate_weights", "estimator_weights", "hypothesis_weights
 
 def surface_to_array(surface: Any) -> np.ndarray:
     """An ``(H, W, 3)`` uint8 RGB copy of a pygame surface (fast path via ``image.tobytes``)."""
-    import pygame
+    import pygame  # pygame: loaded only when drawing, never on headless paths
 
     width, height = surface.get_size()
     tobytes = getattr(pygame.image, "tobytes", None) or pygame.image.tostring

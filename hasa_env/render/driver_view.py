@@ -112,7 +112,7 @@ class DriverViewRenderer:
         if render_mode not in ("rgb_array", "human"):
             raise ValueError(f"render_mode must be 'rgb_array' or 'human', got {render_mode!r}")
         os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-        import pygame
+        import pygame  # pygame: loaded only when drawing, never on headless paths
 
         self._pg = pygame
         self.setup = setup

@@ -49,7 +49,7 @@ class TopDownRenderer:
         steering_ratio: float | None = None,
     ) -> None:
         os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-        import pygame
+        import pygame  # pygame: loaded only when drawing, never on headless paths
 
         self._pg = pygame
         self.setup = setup

@@ -36,7 +36,7 @@ _SB3_HINT = (
 def require_sb3() -> Any:
     """Import and return ``stable_baselines3``, or raise ImportError saying how to install it."""
     try:
-        import stable_baselines3
+        import stable_baselines3  # optional extra 'rl' (torch)
     except ImportError as exc:  # pragma: no cover - exercised only without the extra
         raise ImportError(_SB3_HINT) from exc
     return stable_baselines3
