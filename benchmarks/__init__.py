@@ -1,7 +1,7 @@
 """Benchmarks of hasa-env: the paper's protocol, its report, the performance benchmarks.
 
 - :mod:`benchmarks.protocol`: the human-as-advisor benchmark (Mai et al.
-  sections 4.3 and 5.3; docs/design.md §9): runs, fits, steering and
+  sections 3.3 and 4.3; docs/design.md §9): runs, fits, steering and
   estimation scores, for the built-in and any user steering model.
 - :mod:`benchmarks.report`: tables, CSV files, the Markdown report, figures.
 - :mod:`benchmarks.executor`: independent tasks on local processes or Dask.

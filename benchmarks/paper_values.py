@@ -1,4 +1,5 @@
-"""The paper's published numbers (Mai et al., tables 1 and 2, section 4.3.2),
+"""The paper's published numbers (Mai et al., table 1 in section 3.3.1, table 2 in 4.3.2,
+curved track in 3.3.2),
 printed beside ours for comparison. Ours are what the code measures; nothing
 is tuned toward these.
 """
@@ -23,7 +24,7 @@ TABLE_1 = {
 
 # Table 2: lateral estimation RMSE (m) of the mixture estimate, mean and std over
 # runs: (two-point mean, two-point std, generalized mean, generalized std).
-# The paper labels the std column "m^2"; it is in metres (DESIGN.md section 7).
+# The paper labels the std column "m^2"; it is in metres (docs/design.md §10).
 TABLE_2 = {
     "Ill": (1.0, 0.06, 0.22, 0.11),
     "1": (1.0, 0.11, 0.18, 0.04),
@@ -39,5 +40,5 @@ TABLE_2 = {
 # Section 4.3.2: curved track, illustrative participant: (R^2, RMSE rad).
 CURVED = {"generalized": (0.665, 0.089), "two_point": (-0.141, 0.546)}
 
-# No-steering baseline (section 5.3): "the mean error is 0.9 m".
+# No-steering baseline (section 4.3.2): "the mean error is 0.9 m".
 NO_STEERING_LATERAL_RMSE = 0.9

@@ -207,7 +207,7 @@ def _sections(result: BenchmarkResult) -> list[tuple[str, str, list[dict], list[
         sections.append(
             (
                 "curved",
-                f"Curved track, driver {cfg.get('illustrative', 'Ill')} (paper section 4.3.2; "
+                f"Curved track, driver {cfg.get('illustrative', 'Ill')} (paper section 3.3.2; "
                 "the paper gives R^2 on delta and RMSE)",
                 result.curved,
                 _CURVED_COLUMNS,
@@ -301,7 +301,7 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     cfg = result.config
     lines = ["# hasa-bench: the human-as-advisor benchmark", ""]
     lines.append(
-        "Protocol of Mai et al. (sections 4.3 and 5.3; DESIGN.md section 6). Our numbers are "
+        "Protocol of Mai et al. (sections 3.3 and 4.3; docs/design.md §9). Our numbers are "
         "what the code measured; the paper's published values are printed beside them for "
         "comparison, nothing is tuned toward them."
     )

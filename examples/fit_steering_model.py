@@ -5,8 +5,8 @@ What it does (the paper's section 3.3 protocol on synthetic humans):
 1. draws the default population ("Ill", "1", ..., "8"; hasa_env.drivers.population)
    and lets each drive 10 runs of 30 s on the straight track ("Ill" 14) plus
    "Ill" one run on the curved track, all in the native vector env;
-2. fits the two-point model (eq. 12 form) and the generalized model (paper
-   order, eq. 13) by least squares on "Ill"'s first straight run;
+2. fits the two-point model (eq. (9) form) and the generalized model (paper
+   order, eq. (10)) by least squares on "Ill"'s first straight run;
 3. prints a table like the paper's table 1: per driver, the mean over its
    validation runs of the one-step RMSE, R^2 and R^2 on the increments
    delta(k) - delta(k-1) of each model, and the RMSE decrease of the

@@ -1,4 +1,4 @@
-"""Closed loop: the synthetic population keeps its lane; DESIGN.md's model-driver facts."""
+"""Closed loop: the synthetic population keeps its lane; docs/design.md's model-driver facts (§7.6)."""
 
 import dataclasses
 
@@ -76,7 +76,7 @@ def peak_lateral_acceleration(frame):
 
 @pytest.mark.slow
 def test_design_facts_of_the_paper_generalized_model_as_a_driver():
-    """DESIGN.md section 4: at Ts = 0.01 s from y = -0.5 m the paper's generalized preset
+    """docs/design.md §5.8: at Ts = 0.01 s from y = -0.5 m the paper's generalized preset
     centres the car at 15 and 30 m/s with ratio 1 (peak lateral acceleration 6.6 and
     18.9 m/s^2) and diverges at 45 m/s; with ratio 15 it centres at 15, 30 and 45 m/s
     (0.8, 2.8, 5.6 m/s^2); with the paper's unconverted d signs it diverges at ratio 1."""

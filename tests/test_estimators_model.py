@@ -1,4 +1,4 @@
-"""The augmented ARX state-space model: structure, DESIGN.md's corrected
+"""The augmented ARX state-space model: structure, docs/design.md's corrected
 recursion, exact Jacobians (finite differences over random orders and
 coefficients), and the fast filter's tables."""
 
@@ -67,7 +67,7 @@ def test_paper_order_has_seven_states_and_the_recordings_lag_eight():
 
 
 def test_paper_order_matches_design_corrected_recursion():
-    """DESIGN.md section 5: g1, g2, g3 and h3 for the paper's order, written out."""
+    """docs/design.md §8.3: g1, g2, g3 and h3 for the paper's order, written out."""
     model = ARXStateSpace(PAPER)
     a1, a2 = PAPER.a
     b0, b1, b2, b3 = PAPER.b

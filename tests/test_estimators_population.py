@@ -2,7 +2,7 @@
 
 The generalized model with the paper's coefficients (GeneralizedModel.paper())
 drives the mixture filter on runs of the default synthetic population
-("Ill", "1".."8"; DESIGN.md section 6 protocol: 30 s on the straight track
+("Ill", "1".."8"; docs/design.md §9.1 protocol: 30 s on the straight track
 from v = 15 m/s, y = -0.5 m, two lanes 1.8 m apart), once with each
 hypothesis true. Four runs per driver keep the test short; the benchmark runs
 the full protocol.

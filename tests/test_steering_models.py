@@ -31,7 +31,7 @@ def test_generalized_paper_preset_reproduces_eq_13_on_a_hand_computed_example():
         omega=[0.0, 0.0, 0.0, 0.005],
         lateral_velocity=[0.0, 0.0, 0.12, 0.1],
     )
-    # by hand (DESIGN.md section 3 coefficients):
+    # by hand (docs/design.md §5.4 coefficients):
     #   a:  1.47 * 0.01 - 0.51 * 0.008                                   =  0.01062
     #   b: -5.73 * 0.02 + 17.32 * 0.018 - 17.65 * 0.015 + 6.12 * 0.011 = -0.00027
     #   c:  0.11 * 0.005                                                 =  0.00055

@@ -1,4 +1,4 @@
-"""The paper's benchmark protocol (docs/design.md §9; Mai et al. sections 4.3 and 5.3).
+"""The paper's benchmark protocol (docs/design.md §9; Mai et al. sections 3.3 and 4.3).
 
 :func:`run_protocol` (:mod:`~benchmarks.protocol.run`) runs it end to end;
 the package's modules are its jobs: :mod:`~benchmarks.protocol.config`

@@ -33,7 +33,7 @@ class LaneKeepingEnv(gym.Env):
     """A kinematic bicycle keeping its lane while the camera sees a biased lane.
 
     ## Description
-    The car (paper eq. 1, docs/design.md §4) starts off-centre in its lane
+    The car (paper eq. (1), docs/design.md §4.1; markings §3.5) starts off-centre in its lane
     (y = -0.5 m, v = 15 m/s by default) on a straight or curved road. Lane
     markings are ambiguous: the camera reports the lateral offset relative to
     one of several lane-centre hypotheses, ``y + b``, where the true bias ``b``
@@ -68,7 +68,7 @@ class LaneKeepingEnv(gym.Env):
 
     The IMU reports the road-frame acceleration averaged over the time since
     the previous observation (``action_repeat`` samples; the input of the
-    paper's discrete model, eq. 4). ``"state"`` (oracle), ``Box(5,)``:
+    paper's discrete model, eq. (4); docs/design.md §3.6). ``"state"`` (oracle), ``Box(5,)``:
 
     | index | state            | unit | bounds             |
     |-------|------------------|------|--------------------|

@@ -7,8 +7,8 @@ backend, :data:`SCALAR_OPS` or :data:`ARRAY_OPS`, and uses only arithmetic,
 bit-identical results in both backends (numpy's and libm's sin/cos/sqrt agree
 to the last bit on float64; tan and atan2 do not, so they are avoided).
 
-Kinematic bicycle about the rear axle (paper eq. 1) in Frenet coordinates on
-a road of curvature kappa(s) (DESIGN.md section 2)::
+Kinematic bicycle about the rear axle (paper eq. (1)) in Frenet coordinates on
+a road of curvature kappa(s) (docs/design.md §4.1-4.2)::
 
     s'     = v cos(theta) / (1 - kappa(s) y)
     y'     = v sin(theta)
@@ -173,7 +173,7 @@ def mean_road_frame_acceleration(
     What the IMU reports at each observation: the change of the road-frame
     velocity (v_x, v_y) (see :func:`road_frame_velocity`) since the previous
     observation divided by the time between them, i.e. exactly the input of
-    the paper's discrete model (eq. 4) at the observation rate.
+    the paper's discrete model (eq. (4), docs/design.md §4.4) at the observation rate.
     """
     return (
         (end_velocity[0] - start_velocity[0]) / interval,
@@ -188,7 +188,7 @@ def road_frame_acceleration(
     params: VehicleParams,
     ops: SimpleNamespace,
 ) -> tuple:
-    """Instantaneous road-frame acceleration (d v_x/dt, d v_y/dt) (m/s^2), paper eq. 2.
+    """Instantaneous road-frame acceleration (d v_x/dt, d v_y/dt) (m/s^2), paper eq. (2) (docs/design.md §4.4).
 
     With theta' = v tan(delta)/L - kappa s': x'' = a cos(theta) - v sin(theta) theta',
     y'' = a sin(theta) + v cos(theta) theta'.

@@ -1,7 +1,7 @@
 """The ARX description of a steering model: what the estimator builds on.
 
 A steering model that is linear in its regressors is an ARX model (paper
-eq. 11, DESIGN.md section 3)::
+eq. (8), fitted form eq. (10); docs/design.md §5.4-5.6)::
 
     delta(k) = sum_{i=1}^{na} a_i delta(k-i)
              + sum_{i=0}^{nb-1} b_i phi(k-i)
@@ -29,9 +29,9 @@ import numpy as np
 __all__ = ["ARXForm", "NEAR_POINT_DISTANCE", "FAR_POINT_DISTANCE"]
 
 NEAR_POINT_DISTANCE = 6.2
-"""Default near-point look-ahead (m), Salvucci & Gray (DESIGN.md section 3)."""
+"""Default near-point look-ahead (m), Salvucci & Gray (docs/design.md §5.1)."""
 FAR_POINT_DISTANCE = 20.0
-"""Default far-point look-ahead (m) (DESIGN.md section 3)."""
+"""Default far-point look-ahead (m) (docs/design.md §5.1)."""
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ class ARXForm:
 
         With phi ~ -y/near and Omega ~ -y/far at small angles, a steady offset y
         gives (1 - sum a) delta = -(sum(b)/near + sum(c)/far) y. The estimator can
-        tell lanes apart only if this is clearly non-zero (DESIGN.md section 3).
+        tell lanes apart only if this is clearly non-zero (docs/design.md §5.7).
         """
         return sum(self.b) / self.near_distance + sum(self.c) / self.far_distance
 

@@ -364,7 +364,7 @@ class SteeringModel(ABC):
         Each run is a recording (or a features frame); lags never cross from
         one run into the next. Standard errors come with the fit
         (``standard_errors``, ``fit_result``); a fit that loses the
-        identifiability of the lane offset warns (DESIGN.md section 3). See
+        identifiability of the lane offset warns (docs/design.md §5.7, §6.1). See
         :func:`hasa_env.steering.fitting.fit_model`.
         """
         return fit_model(self, runs, road=road)

@@ -1,4 +1,4 @@
-"""Visual features of the two-point steering models (paper eq. 8-9, DESIGN.md section 3).
+"""Visual features of the two-point steering models (paper eqs. (5)-(6); docs/design.md §5.1-5.2).
 
 The two-point model sees the lane centre at two points ahead of the car:
 
@@ -9,7 +9,7 @@ The two-point model sees the lane centre at two points ahead of the car:
 Both bearings are in radians, measured from the car's heading, positive when
 the point lies to the left (ISO 8855). On a straight road they are
 ``phi = -(theta + atan(y / near))`` and ``omega = -(theta + atan(y / far))``
-(the paper's eq. 8-9 with its xi_1/xi_2 typo fixed); on a curved road the
+(the paper's eqs. (5)-(6) with their xi_1/xi_2 typo fixed, docs/design.md §10); on a curved road the
 exact bearing of the lane-centre point at that arc length ahead is used
 (:func:`hasa_env.sim.road.lane_centre_bearing`). The generalized model also uses
 the lateral velocity ``v_y = v sin(theta)`` (m/s, the paper's xi_3).
@@ -75,7 +75,7 @@ def near_far_bearings(
             of arc length ahead (:func:`hasa_env.sim.road.lane_centre_bearing`);
             False: the paper's straight-road formula
             ``phi = -(theta + atan(y / near))``, ``omega = -(theta + atan(y / far))``
-            (eq. 8-9), whatever the road. Both agree on a straight road.
+            (eqs. (5)-(6)), whatever the road. Both agree on a straight road.
 
     Returns:
         ``(phi, omega)`` as float64 arrays of the broadcast input shape.

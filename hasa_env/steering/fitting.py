@@ -1,4 +1,4 @@
-"""Fitting and scoring steering models (paper section 3.3, DESIGN.md section 3).
+"""Fitting and scoring steering models (paper section 3.3; docs/design.md §6).
 
 - :func:`fit_model` (what ``model.fit(runs)`` calls): ordinary least squares
   on one or many runs, with standard errors and the identifiability check.
@@ -131,7 +131,7 @@ def least_squares(
 # ----------------------------------------------------------- identifiability
 @dataclass(frozen=True)
 class IdentifiabilityReport:
-    """The static lane-offset gain of a model (DESIGN.md section 3).
+    """The static lane-offset gain of a model (docs/design.md §5.7).
 
     Attributes:
         static_lane_gain: G = sum(b)/near + sum(c)/far (rad/m). With
@@ -202,7 +202,7 @@ def check_identifiability(
     residual_std: float | None = None,
     lane_separation: float = 1.8,
 ) -> IdentifiabilityReport | None:
-    """Is the lane offset identifiable through this model? (DESIGN.md section 3)
+    """Is the lane offset identifiable through this model? (docs/design.md §5.7)
 
     The paper's "observable if any b_i or c_0 is non-zero" is not enough:
     b = (0.3, -0.3) is non-zero but carries no information on a constant

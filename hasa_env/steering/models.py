@@ -1,9 +1,9 @@
 """The paper's steering models: the two-point model and the generalized ARX model.
 
-Both are linear in their parameters and ARX models (paper eq. 11), so they
+Both are linear in their parameters and ARX models (paper eq. (8)), so they
 fit by least squares, score, save, and serve the estimator through
 :meth:`~hasa_env.steering.base.SteeringModel.arx`. Sample alignment and sign
-conventions: :mod:`hasa_env.steering.features` and DESIGN.md section 3.
+conventions: :mod:`hasa_env.steering.features` and docs/design.md §5.3-5.6.
 """
 
 from __future__ import annotations
@@ -21,19 +21,19 @@ from hasa_env.steering.design import Design, Regressor, lagged
 __all__ = ["TwoPointModel", "GeneralizedModel", "PAPER_ORDERS"]
 
 PAPER_ORDERS = {"na": 2, "nb": 4, "nc": 1, "nd": 2}
-"""Orders of the paper's generalized model (eq. 13): 2 past steering values,
+"""Orders of the paper's generalized model (eq. (10)): 2 past steering values,
 phi(k..k-3), Omega(k), v_y(k..k-1)."""
 
 _MAX_ORDER = 50
 
 
 class TwoPointModel(SteeringModel):
-    """Salvucci & Gray's two-point model in corrected backward-Euler form (paper eq. 10/12).
+    """Salvucci & Gray's two-point model in corrected backward-Euler form (paper eqs. (7)/(9)).
 
     ``delta(k) = delta(k-1) + k_n [phi(k) - phi(k-1)]
     + k_f [Omega(k) - Omega(k-1)] + k_I Ts phi(k)``
 
-    (DESIGN.md section 3: the paper's sums without alternating signs are a
+    (docs/design.md §5.3: the paper's sums without alternating signs are a
     typo). Parameters: ``near_gain`` k_n (rad/rad), ``far_gain`` k_f (rad/rad),
     ``integral_gain`` k_I (1/s). As an ARX model:
     a = (1,), b = (k_n + k_I Ts, -k_n), c = (k_f, -k_f).
@@ -68,7 +68,7 @@ class TwoPointModel(SteeringModel):
 
     @classmethod
     def paper(cls, dt: float = 0.01) -> TwoPointModel:
-        """The paper's fit on the illustrative driver (eq. 12): k_n=-0.2, k_f=0.7, k_I=0.087."""
+        """The paper's fit on the illustrative driver (eq. (9)): k_n=-0.2, k_f=0.7, k_I=0.087."""
         return cls(-0.2, 0.7, 0.087, dt=dt, name="two-point (paper)")
 
     @property
@@ -108,7 +108,7 @@ class TwoPointModel(SteeringModel):
 
 
 class GeneralizedModel(SteeringModel):
-    """The generalized two-point model: an ARX model of any orders (paper eq. 11/13).
+    """The generalized two-point model: an ARX model of any orders (paper eqs. (8)/(10)).
 
     ``delta(k) = sum_{i=1}^{na} a_i delta(k-i) + sum_{i=0}^{nb-1} b_i phi(k-i)
     + sum_{i=0}^{nc-1} c_i Omega(k-i) + sum_{i=0}^{nd-1} d_i v_y(k-i)``
@@ -169,7 +169,7 @@ class GeneralizedModel(SteeringModel):
 
     @classmethod
     def paper(cls) -> GeneralizedModel:
-        """The paper's fit on the illustrative driver (eq. 13) in OUR convention (DESIGN.md 3).
+        """The paper's fit on the illustrative driver (eq. (10)) in OUR convention (docs/design.md §5.4).
 
         a = (1.47, -0.51), b = (-5.73, 17.32, -17.65, 6.12), c0 = 0.11,
         d = (-0.02, 0.02), Ts = 0.01 s: the paper prints "a_1 = 0.51" (unstable;
