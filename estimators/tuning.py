@@ -29,12 +29,19 @@ def steering_residuals(
 ) -> np.ndarray:
     """One-step-ahead residuals ``ratio * delta(k) - delta_hat(k)`` (rad, model units) of one run.
 
-    Uses the recorded (true) steering and the straight-road bearings of the
-    true state, as the filter's model does (:mod:`estimators.arx_state_space`);
-    rows without a full history are dropped.
+    Uses the recorded applied steering (the filter's model: the equation
+    error e(k) is on the applied steering, and the steering sensor's noise is
+    a separate term of R_33) and the straight-road bearings of the true state,
+    as the filter's model does (:mod:`estimators.arx_state_space`); rows
+    without a full history are dropped.
     """
     features = steering_features(
-        frame, near=arx.near_distance, far=arx.far_distance, decision_lag=decision_lag, exact=False
+        frame,
+        near=arx.near_distance,
+        far=arx.far_distance,
+        decision_lag=decision_lag,
+        exact=False,
+        steering="applied",
     )
     delta = features["delta"].to_numpy() * steering_ratio
     predicted = arx.predict(

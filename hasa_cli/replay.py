@@ -86,6 +86,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--fit", action="store_true", help="fit --model on the first recording, score on all"
     )
     p.add_argument(
+        "--steering",
+        choices=("measured", "applied"),
+        default=None,
+        help="which steering --model is fitted and scored on: the steering sensor's reading "
+        "(measured, what the estimator sees; the default of fitted models) or the applied "
+        "road-wheel angle",
+    )
+    p.add_argument(
         "--steering-ratio",
         type=float,
         default=None,
@@ -143,6 +151,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"hasa-replay: {exc}", file=sys.stderr)
             return 2
         road = recordings[0].road
+        if args.steering is not None:
+            model.steering_signal = args.steering
         if args.fit:
             model = model.fit(recordings[0].data, road)
             print(f"model {spec}: fitted on {recordings[0].path}")

@@ -151,14 +151,14 @@ class SpeedScheduledGain(SteeringModel):
 
 
 @pytest.mark.parametrize(("model", "env_id", "ratio"), [
-    (GeneralizedModel.paper(), "hasa_env/LaneKeeping-v0", 1.0),
-    (TwoPointModel.paper(), "hasa_env/LaneKeeping-v0", 1.0),
-    (GeneralizedModel.paper(), "hasa_env/LaneKeepingCurved-v0", 15.0),
-    (SpeedScheduledGain([0.98, 0.05]), "hasa_env/LaneKeeping-v0", 1.0),
+    (GeneralizedModel.paper(steering_signal="applied"), "hasa_env/LaneKeeping-v0", 1.0),
+    (TwoPointModel.paper(steering_signal="applied"), "hasa_env/LaneKeeping-v0", 1.0),
+    (GeneralizedModel.paper(steering_signal="applied"), "hasa_env/LaneKeepingCurved-v0", 15.0),
+    (SpeedScheduledGain([0.98, 0.05], steering_signal="applied"), "hasa_env/LaneKeeping-v0", 1.0),
 ])  # fmt: skip
 def test_a_model_driver_is_what_its_model_predicts(model, env_id, ratio):
-    """Noise-free, a model driver's recording is exactly the model's one-step prediction:
-    the sample alignment of the features matches how drivers act."""
+    """Noise-free, a model driver's recording is exactly the model's one-step prediction
+    of the applied steering: the sample alignment of the features matches how drivers act."""
     options = {"lateral_offset": -0.5, "speed": 20.0}
     config = {"time_limit": 12.0} if "Curved" in env_id else SHORT  # 240 m: into the first bend
     driver = ModelDriver(model, steering_ratio=ratio)

@@ -126,18 +126,25 @@ def test_hasa_replay_video_is_optional(tmp_path, capsys):
 
 
 def test_hasa_replay_scores_a_fitted_steering_model(capsys):
-    assert main([str(SAMPLE), "--model", "two-point", "--fit"]) == 0
-    out = capsys.readouterr().out
-    line = next(ln for ln in out.splitlines() if "model two-point:" in ln and "rmse" in ln)
-    rmse = float(line.split("rmse ")[1].split(",")[0])
-    r2 = float(line.split("r2 ")[1].split(",")[0])
+    def scores(*extra):
+        assert main([str(SAMPLE), "--model", "two-point", "--fit", *extra]) == 0
+        out = capsys.readouterr().out
+        line = next(ln for ln in out.splitlines() if "model two-point:" in ln and "rmse" in ln)
+        return float(line.split("rmse ")[1].split(",")[0]), float(
+            line.split("r2 ")[1].split(",")[0]
+        )
+
+    rmse, r2 = scores("--steering", "applied")
     assert 0 < rmse < 1e-3 and r2 > 0.9
+    measured_rmse, _ = scores()  # the default: the steering sensor's reading, noisier
+    assert measured_rmse > rmse
 
 
 @pytest.mark.slow
 def test_hasa_replay_runs_the_estimator_and_it_finds_the_true_lane(capsys):
     pytest.importorskip("estimators.gm_ekf")
-    assert main([str(SAMPLE), "--model", "two-point", "--fit", "--estimator"]) == 0
+    argv = [str(SAMPLE), "--model", "two-point", "--fit", "--steering", "applied", "--estimator"]
+    assert main(argv) == 0
     out = capsys.readouterr().out
     line = next(ln for ln in out.splitlines() if "estimator:" in ln)
     assert "lateral RMSE" in line

@@ -73,6 +73,7 @@ def _frame(n=6, curvature=0.0):
     data["heading"] = rng.uniform(-0.05, 0.05, n)
     data["speed"] = np.full(n, 15.0)
     data["steering"] = rng.uniform(-0.01, 0.01, n)
+    data["sensor_steering"] = data["steering"] + 1e-4 * rng.standard_normal(n)
     data["lateral_velocity"] = 15.0 * np.sin(data["heading"])
     data["road_curvature"] = np.full(n, curvature)
     return pd.DataFrame(data)
@@ -80,9 +81,16 @@ def _frame(n=6, curvature=0.0):
 
 def test_features_pair_each_steering_with_the_bearings_seen_one_row_earlier():
     frame = _frame()
-    features = steering_features(frame)
+    features = steering_features(frame, steering="applied")
     assert list(features.columns) == ["delta", "phi", "omega", "lateral_velocity", "speed"]
     np.testing.assert_array_equal(features["delta"], frame["steering"])
+    assert features.attrs["steering"] == "steering"
+    measured = steering_features(frame)  # the default: what the steering sensor read
+    np.testing.assert_array_equal(measured["delta"], frame["sensor_steering"])
+    assert measured.attrs["steering"] == "sensor_steering"
+    assert not np.array_equal(measured["delta"], features["delta"])
+    with pytest.raises(ValueError, match="steering must be one of"):
+        steering_features(frame, steering="true")
     y, th = frame["lateral_offset"].to_numpy(), frame["heading"].to_numpy()
     assert np.isnan(features.loc[0, ["phi", "omega", "lateral_velocity", "speed"]]).all()
     np.testing.assert_allclose(features["phi"][1:], -(th + np.arctan(y / 6.2))[:-1], atol=1e-15)

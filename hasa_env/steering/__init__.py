@@ -8,8 +8,11 @@
   model implements (how to write your own is in its docstring).
 - :mod:`~hasa_env.steering.models`: :class:`TwoPointModel` and
   :class:`GeneralizedModel` with the paper's presets.
-- :mod:`~hasa_env.steering.fitting`: fitting with standard errors, residual
-  diagnostics, the identifiability check, scores.
+- :mod:`~hasa_env.steering.fitting`: ridge fitting with cross-validated
+  penalty, standard errors and the fit's checks;
+- :mod:`~hasa_env.steering.identifiability`: can the model tell lanes apart,
+  is it stable;
+- :mod:`~hasa_env.steering.scoring`: scores and residual diagnostics.
 - :mod:`~hasa_env.steering.order`: BIC order selection.
 - :mod:`~hasa_env.steering.model_file`: the JSON model files.
 - :mod:`~hasa_env.steering.arx`: :class:`ARXForm`, what the estimator builds on.
@@ -21,6 +24,7 @@ from hasa_env.steering.arx import ARXForm
 __all__ = [
     "ARXForm",
     "Design",
+    "FitChecks",
     "FitResult",
     "GeneralizedModel",
     "IdentifiabilityReport",
@@ -29,9 +33,13 @@ __all__ = [
     "OrderSelection",
     "Regressor",
     "ResidualDiagnostics",
+    "StabilityWarning",
+    "SteeringFitWarning",
     "SteeringModel",
     "TwoPointModel",
+    "ar_poles",
     "check_identifiability",
+    "fit_model",
     "lagged",
     "near_far_bearings",
     "residual_diagnostics",
@@ -49,16 +57,18 @@ _SUBMODULES = {
     "model_file": ("ModelFileError",),
     "base": ("SteeringModel",),
     "features": ("near_far_bearings", "steering_features"),
-    "fitting": (
-        "FitResult",
+    "fitting": ("FitChecks", "FitResult", "fit_model"),
+    "identifiability": (
         "IdentifiabilityReport",
         "IdentifiabilityWarning",
-        "ResidualDiagnostics",
+        "StabilityWarning",
+        "SteeringFitWarning",
+        "ar_poles",
+        "ar_poles",
         "check_identifiability",
-        "residual_diagnostics",
-        "score",
-        "score_runs",
+        "fit_model",
     ),
+    "scoring": ("ResidualDiagnostics", "residual_diagnostics", "score", "score_runs"),
     "order": ("OrderSelection", "select_order"),
     "models": ("GeneralizedModel", "TwoPointModel"),
 }

@@ -74,8 +74,8 @@ import pandas as pd
 from hasa_env.sim.road import Road
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 from hasa_env.steering.design import FEATURE_NAMES, Design, Regressor, lagged
-from hasa_env.steering.features import is_feature_frame, steering_features
-from hasa_env.steering.fitting import FitResult, fit_model, simulate_arx
+from hasa_env.steering.features import STEERING_SIGNALS, is_feature_frame, steering_features
+from hasa_env.steering.fitting import FitResult, fit_model
 from hasa_env.steering.model_file import (
     MODEL_FILE_FORMAT,
     MODEL_FILE_VERSION,
@@ -83,6 +83,7 @@ from hasa_env.steering.model_file import (
     ModelFileError,
     model_from_dict,
 )
+from hasa_env.steering.scoring import simulate_arx
 
 __all__ = [
     "FEATURE_NAMES",
@@ -107,6 +108,9 @@ class SteeringModel(ABC):
         dt: sample time Ts (s) the parameters belong to.
         decision_lag: samples between the bearings seen and the steering
             recorded (see :mod:`hasa_env.steering.features`).
+        steering_signal: which steering a recording's features take:
+            ``"measured"`` (default: ``sensor_steering``, the signal the
+            estimator sees) or ``"applied"`` (the true ``steering`` column).
         name: a label (default: ``model_type``).
         standard_errors: standard errors of the parameters (same form), if known.
     """
@@ -137,6 +141,7 @@ class SteeringModel(ABC):
         far_distance: float = FAR_POINT_DISTANCE,
         dt: float = 0.01,
         decision_lag: int = 1,
+        steering_signal: str = "measured",
         name: str | None = None,
         standard_errors: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
     ) -> None:
@@ -153,6 +158,12 @@ class SteeringModel(ABC):
             or decision_lag < 0
         ):
             raise ValueError(f"decision_lag must be a non-negative integer, got {decision_lag!r}")
+        if steering_signal not in STEERING_SIGNALS:
+            raise ValueError(
+                f"steering_signal must be one of {', '.join(map(repr, STEERING_SIGNALS))}, "
+                f"got {steering_signal!r}"
+            )
+        self.steering_signal = steering_signal
         self.near_distance = float(near_distance)
         self.far_distance = float(far_distance)
         self.dt = float(dt)
@@ -249,6 +260,7 @@ class SteeringModel(ABC):
             "far_distance": self.far_distance,
             "dt": self.dt,
             "decision_lag": self.decision_lag,
+            "steering_signal": self.steering_signal,
             "name": self.name,
         }
 
@@ -290,7 +302,12 @@ class SteeringModel(ABC):
             features = data
         else:
             features = steering_features(
-                data, road, self.near_distance, self.far_distance, decision_lag=self.decision_lag
+                data,
+                road,
+                self.near_distance,
+                self.far_distance,
+                decision_lag=self.decision_lag,
+                steering=self.steering_signal,
             )
         data_dt = features.attrs.get("dt")
         if data_dt is not None and abs(float(data_dt) - self.dt) > 1e-9 * max(1.0, self.dt):
@@ -358,16 +375,24 @@ class SteeringModel(ABC):
         return out
 
     # --------------------------------------------------------------- fitting
-    def fit(self, runs: pd.DataFrame | Sequence[pd.DataFrame], road: Road | None = None) -> Self:
-        """Least-squares fit on one or many runs; returns a new, fitted model.
+    def fit(
+        self,
+        runs: pd.DataFrame | Sequence[pd.DataFrame],
+        road: Road | None = None,
+        **options: Any,
+    ) -> Self:
+        """Fit on one or many runs; returns a new, fitted model.
 
         Each run is a recording (or a features frame); lags never cross from
-        one run into the next. Standard errors come with the fit
-        (``standard_errors``, ``fit_result``); a fit that loses the
-        identifiability of the lane offset warns (docs/design.md §5.7, §6.1). See
-        :func:`hasa_env.steering.fitting.fit_model`.
+        one run into the next. By default ridge regression with the penalty
+        from blocked cross-validation on these runs; standard errors and the
+        fit's checks (condition number, AR poles, stability, identifiability)
+        come with the fit (``standard_errors``, ``fit_result``); an unstable or
+        unidentifiable fit warns (docs/design.md §6.5). ``options``: those of
+        :func:`hasa_env.steering.fitting.fit_model` (``ridge``, ``folds``,
+        ``sensor_std``, ...).
         """
-        return fit_model(self, runs, road=road)
+        return fit_model(self, runs, road=road, **options)  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:
@@ -382,6 +407,7 @@ class SteeringModel(ABC):
                 "near_distance": self.near_distance,
                 "far_distance": self.far_distance,
                 "decision_lag": self.decision_lag,
+                "steering_signal": self.steering_signal,
                 "regressors": [str(r) for r in self.regressors],
             },
             "structure": self.structure(),

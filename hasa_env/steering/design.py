@@ -19,7 +19,15 @@ import pandas as pd
 from hasa_env.sim.road import Road
 from hasa_env.steering.arx import ARXForm
 
-__all__ = ["FEATURE_NAMES", "Design", "Regressor", "SteeringModelLike", "lagged"]
+__all__ = [
+    "FEATURE_NAMES",
+    "Design",
+    "Regressor",
+    "SteeringModelLike",
+    "as_runs",
+    "lagged",
+    "r_squared",
+]
 
 FEATURE_NAMES = ("delta", "phi", "omega", "lateral_velocity", "speed")
 """Features a regressor may refer to (the columns of
@@ -102,6 +110,25 @@ def lagged(values: np.ndarray, lag: int) -> np.ndarray:
     if lag < values.shape[0]:
         out[lag:] = values[:-lag]
     return out
+
+
+def as_runs(runs: pd.DataFrame | Sequence[pd.DataFrame]) -> list[pd.DataFrame]:
+    """One run or a sequence of runs as a non-empty list of DataFrames (clear errors otherwise)."""
+    if isinstance(runs, pd.DataFrame):
+        return [runs]
+    out = list(runs)
+    if not out:
+        raise ValueError("no runs given")
+    for i, run in enumerate(out):
+        if not isinstance(run, pd.DataFrame):
+            raise TypeError(f"run {i} is a {type(run).__name__}, expected a pandas DataFrame")
+    return out
+
+
+def r_squared(residual_ss: float, values: np.ndarray) -> float:
+    """``1 - residual_ss / sum((values - mean)^2)`` (NaN when the values do not vary)."""
+    total = float(np.sum((values - values.mean()) ** 2)) if values.size else 0.0
+    return 1.0 - residual_ss / total if total > 0 else float("nan")
 
 
 class SteeringModelLike(Protocol):

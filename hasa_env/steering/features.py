@@ -43,11 +43,17 @@ from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 
 __all__ = [
     "FEATURE_COLUMNS",
+    "STEERING_SIGNALS",
     "near_far_bearings",
     "steering_features",
     "road_of_frame",
     "is_feature_frame",
 ]
+
+STEERING_SIGNALS = ("measured", "applied")
+"""Which steering a run's features take: ``"measured"``, the recording's
+``sensor_steering`` (what the estimator sees; ``steering`` when a frame has no
+sensor columns), or ``"applied"``, the true road-wheel angle ``steering``."""
 
 FEATURE_COLUMNS = ("delta", "phi", "omega", "lateral_velocity", "speed")
 """Columns of :func:`steering_features` (rad, rad, rad, m/s, m/s)."""
@@ -125,6 +131,7 @@ def steering_features(
     *,
     decision_lag: int = 1,
     exact: bool = True,
+    steering: str = "measured",
 ) -> pd.DataFrame:
     """Steering features of one recorded run (see the module docstring for the alignment).
 
@@ -140,10 +147,14 @@ def steering_features(
         decision_lag: samples between what the driver saw and the steering
             recorded (1 for the env's recordings; 0 pairs each row with itself).
         exact: use the exact bearings on curved roads (see :func:`near_far_bearings`).
+        steering: ``"measured"`` (default): delta is the recording's
+            ``sensor_steering`` (the steering sensor's reading, what the
+            estimator sees), or ``steering`` if the frame has no sensor
+            columns; ``"applied"``: the true applied road-wheel angle ``steering``.
 
     Returns:
         A DataFrame with the frame's index and columns ``delta`` (rad, the
-        recorded road-wheel angle of row k), ``phi``, ``omega`` (rad) and
+        recorded road-wheel angle of row k, measured or applied), ``phi``, ``omega`` (rad) and
         ``lateral_velocity`` (m/s, v sin theta) seen at row k - decision_lag,
         and ``speed`` (m/s) at that row. ``attrs`` records ``near_distance``,
         ``far_distance``, ``decision_lag`` and ``dt`` (s, when the frame has a
@@ -195,7 +206,14 @@ def steering_features(
         "speed": speed,
     }
     lag = int(decision_lag)
-    out = {"delta": frame["steering"].to_numpy(dtype=np.float64)}
+    if steering not in STEERING_SIGNALS:
+        raise ValueError(
+            f"steering must be one of {', '.join(map(repr, STEERING_SIGNALS))}, got {steering!r}"
+        )
+    column = (
+        "sensor_steering" if steering == "measured" and "sensor_steering" in frame else "steering"
+    )
+    out = {"delta": frame[column].to_numpy(dtype=np.float64)}
     for key, values in seen.items():
         shifted = np.full(values.size, np.nan)
         if lag < values.size:
@@ -206,6 +224,7 @@ def steering_features(
         "near_distance": float(near),
         "far_distance": float(far),
         "decision_lag": lag,
+        "steering": column,
     }
     if "time" in frame.columns and len(frame) > 1:
         steps = np.diff(frame["time"].to_numpy(dtype=np.float64))

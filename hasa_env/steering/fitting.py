@@ -1,73 +1,118 @@
-"""Fitting and scoring steering models (paper section 3.3; docs/design.md §6).
+"""Fitting steering models that are linear in their parameters (docs/design.md §6).
 
-- :func:`fit_model` (what ``model.fit(runs)`` calls): ordinary least squares
-  on one or many runs, with standard errors and the identifiability check.
-- :func:`residual_diagnostics`: autocorrelation and Ljung-Box whiteness
-  (statsmodels) of residuals.
-- :func:`check_identifiability`: the static lane-offset gain
-  ``sum(b)/near + sum(c)/far`` must be clearly non-zero (with the sign of
-  ``1 - sum(a)``) for the estimator to tell lanes apart; the paper's "any
-  b_i or c_0 non-zero" is not enough. Fits that lose it warn
-  (:class:`IdentifiabilityWarning`).
-- :func:`score` / :func:`score_runs`: RMSE, R^2 on delta, R^2 on the
-  increments delta(k) - delta(k-1) and Ljung-Box p-value, for one-step
-  prediction (measured past steering) and free-run simulation.
+:func:`fit_model` (what ``model.fit(runs)`` calls) estimates the parameters
+from one or many runs (lags never cross from one run into the next) and
+checks what it found.
 
-Runs are recordings (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`) or features
-frames (:func:`hasa_env.steering.features.steering_features`), one
-``pandas.DataFrame`` per run; lags never cross from one run into another.
+Closed-loop data make regressors collinear (docs/design.md §6.5): at
+constant speed ``v_y(k) - v_y(k-1)`` equals ``(Ts v^2 / L) tan delta(k-1)``
+almost exactly and ``v_y`` lies in the span of ``(phi, Omega)``, so plain
+least squares returns huge, cancelling, speed-specific coefficients. The
+default fit is therefore ridge regression on standardized columns::
+
+    s_j          = sqrt(mean_k X(k, j)^2)            column scale (no centring: the
+                                                      models have no intercept)
+    Z            = X diag(1/s)
+    beta_z       = argmin |y - Z beta_z|^2 + n lambda |beta_z|^2
+                 = V diag(sigma_i / (sigma_i^2 + n lambda)) U^T y    (Z = U diag(sigma) V^T)
+    theta        = beta_z / s
+    df(lambda)   = sum_i sigma_i^2 / (sigma_i^2 + n lambda)          effective parameters
+    sigma_e^2    = RSS / (n - df)
+    Cov(theta)   = sigma_e^2 diag(1/s) V diag(sigma_i^2 / (sigma_i^2 + n lambda)^2) V^T diag(1/s)
+
+with ``lambda`` chosen on the training data only, by blocked cross-validation
+in time (:func:`choose_ridge_lambda`): each run is cut into ``folds``
+contiguous blocks; fold j holds out block j of every run and drops
+``max_lag`` samples on either side of it from the training part (a
+closed-loop run's samples are not independent); the ``lambda`` with the
+smallest mean held-out one-step error wins (``rule="min"``; ``rule="1se"``,
+the one-standard-error rule, takes the largest ``lambda`` within one standard
+error of it instead: it shrinks further, at the price of a bias that, on
+synthetic closed-loop runs, removed the lane-informative bearing terms). ``ridge=0`` gives ordinary least
+squares through statsmodels (its standard errors and condition number);
+a number gives that ``lambda``.
+
+Closed-loop data barely constrain how a model splits its memory between the
+AR terms and the lagged bearings: very different AR parts predict the next
+sample equally well, and the cross-validated choice can have an AR pole
+outside the unit circle (measured: the paper's generalized model driving the
+car, refitted, has poles of magnitude 5.1 by least squares and 1.13 at the
+cross-validated penalty, with one-step residuals within 0.1 % of the true
+model's). With ``stable=True`` (default) the fit then moves up the penalty
+grid to the smallest penalty whose AR part is stable (here 3.2e-5, residuals
++2.3 %); :class:`FitChecks` records both penalties, and a fit that no penalty
+makes stable stays flagged.
+
+Every fit reports :class:`FitChecks`: the condition number of the
+standardized design, the ridge ``lambda``, the AR part's poles and whether
+they lie inside the unit circle, the identifiability of the lane offset
+(:mod:`hasa_env.steering.identifiability`, with the steering-sensor noise
+included), and flags; a fit that is unstable or unidentifiable warns
+(:class:`~hasa_env.steering.identifiability.StabilityWarning`,
+:class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`).
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import signal
-from statsmodels.stats.diagnostic import acorr_ljungbox
-from statsmodels.tsa.stattools import acf
+import statsmodels.api as sm
 
 from hasa_env.sim.road import Road
-from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.design import SteeringModelLike as SteeringModel
-from hasa_env.steering.design import lagged
+from hasa_env.steering.design import as_runs, lagged, r_squared
+from hasa_env.steering.identifiability import (
+    STABILITY_TOLERANCE,
+    IdentifiabilityReport,
+    IdentifiabilityWarning,
+    StabilityWarning,
+    ar_poles,
+    check_identifiability,
+)
 
 __all__ = [
+    "DEFAULT_LAMBDAS",
+    "CrossValidation",
+    "FitChecks",
     "FitResult",
-    "IdentifiabilityReport",
-    "IdentifiabilityWarning",
-    "ResidualDiagnostics",
-    "check_identifiability",
+    "LinearSolution",
+    "choose_ridge_lambda",
     "fit_model",
     "least_squares",
-    "residual_diagnostics",
-    "score",
-    "score_runs",
-    "simulate_arx",
+    "ridge_regression",
 ]
 
+DEFAULT_LAMBDAS = tuple(float(v) for v in np.logspace(-9.0, 1.0, 21))
+"""The ridge penalties cross-validation chooses from (relative: columns have unit RMS).
+The smallest, 1e-9, is already far above the squared singular values of an exactly
+collinear pair, so every candidate resolves such a pair the minimum-norm way."""
 
-class IdentifiabilityWarning(UserWarning):
-    """A fitted model's static lane-offset gain is not clearly non-zero (or has the wrong sign)."""
+ILL_CONDITIONED = 1e6
+"""Condition number of the standardized design above which the regressors are
+close to linearly dependent (the fit is flagged ``ill_conditioned``)."""
 
 
-# --------------------------------------------------------------------------- OLS
+# ----------------------------------------------------------------- solvers
 @dataclass(frozen=True)
-class LeastSquares:
-    """Result of :func:`least_squares`.
+class LinearSolution:
+    """Parameters of ``target ~ matrix @ parameters`` and their statistics.
 
     Attributes:
         parameters: estimates, shape (p,).
-        covariance: their covariance sigma^2 (X'X)^-1, shape (p, p).
+        covariance: their covariance, shape (p, p).
         standard_errors: sqrt of its diagonal.
-        residuals: y - X parameters, shape (n,).
+        residuals: target - matrix @ parameters, shape (n,).
         rss: residual sum of squares.
-        sigma2: residual variance rss / (n - p).
+        sigma2: residual variance rss / (n - effective_parameters).
+        effective_parameters: trace of the hat matrix (p for least squares).
+        ridge_lambda: the penalty (relative to unit-RMS columns; 0: least squares).
+        condition_number: largest / smallest singular value of the standardized matrix.
     """
 
     parameters: np.ndarray
@@ -76,230 +121,339 @@ class LeastSquares:
     residuals: np.ndarray
     rss: float
     sigma2: float
+    effective_parameters: float
+    ridge_lambda: float
+    condition_number: float
 
 
-def least_squares(
-    matrix: np.ndarray, target: np.ndarray, names: Sequence[str] = ()
-) -> LeastSquares:
-    """Ordinary least squares ``target ~ matrix @ parameters`` with standard errors.
-
-    Columns are scaled to unit norm and solved by QR (robust to the strong
-    collinearity of 100 Hz lags). Raises ``ValueError`` if there are not more
-    rows than columns or the columns are linearly dependent (naming them).
-    """
-    X = np.asarray(matrix, dtype=np.float64)
-    y = np.asarray(target, dtype=np.float64)
-    n, p = X.shape
-    if n <= p:
-        raise ValueError(
-            f"least squares needs more samples than parameters, got {n} samples for {p}"
-        )
-    if p == 0:
-        residuals = y.copy()
-        rss = float(residuals @ residuals)
-        empty = np.zeros(0)
-        return LeastSquares(empty, np.zeros((0, 0)), empty, residuals, rss, rss / n)
-    norms = np.linalg.norm(X, axis=0)
-    dead = np.flatnonzero(norms == 0)
+def _standardize(matrix: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(matrix with unit-RMS columns, the column scales); an all-zero column is an error."""
+    scale = np.sqrt(np.mean(matrix * matrix, axis=0))
+    dead = np.flatnonzero(scale == 0)
     if dead.size:
         label = [names[i] if i < len(names) else f"column {i}" for i in dead]
         raise ValueError(
             f"regressors {label} are identically zero in the data; they cannot be fitted"
         )
-    Xs = X / norms
-    q, r = np.linalg.qr(Xs)
-    diag = np.abs(np.diag(r))
-    if diag.min() < 1e-12 * diag.max():
-        worst = int(np.argmin(diag))
+    return matrix / scale, scale
+
+
+def _check_shape(matrix: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    X = np.asarray(matrix, dtype=np.float64)
+    y = np.asarray(target, dtype=np.float64)
+    if X.ndim != 2 or y.shape != (X.shape[0],):
+        raise ValueError(f"need matrix (n, p) and target (n,), got {X.shape} and {y.shape}")
+    if X.shape[0] <= X.shape[1]:
+        raise ValueError(
+            f"fitting needs more samples than parameters, got {X.shape[0]} samples for {X.shape[1]}"
+        )
+    return X, y
+
+
+def least_squares(
+    matrix: np.ndarray, target: np.ndarray, names: Sequence[str] = ()
+) -> LinearSolution:
+    """Ordinary least squares with standard errors (statsmodels ``OLS``).
+
+    Raises ``ValueError`` if there are not more rows than columns, a column is
+    all zeros, or the columns are linearly dependent in the data (naming the
+    regressor).
+    """
+    X, y = _check_shape(matrix, target)
+    n, p = X.shape
+    if p == 0:
+        rss = float(y @ y)
+        return LinearSolution(
+            np.zeros(0), np.zeros((0, 0)), np.zeros(0), y.copy(), rss, rss / n, 0.0, 0.0, 1.0
+        )
+    Z, scale = _standardize(X, names)
+    singular = np.linalg.svd(Z, compute_uv=False)
+    if singular[-1] < 1e-12 * singular[0]:
+        _, r = np.linalg.qr(Z)
+        worst = int(np.argmin(np.abs(np.diag(r))))
         label = names[worst] if worst < len(names) else f"column {worst}"
         raise ValueError(
-            f"regressors are linearly dependent in the data (at {label!r}); use a lower order "
-            "or more varied data"
+            f"regressors are linearly dependent in the data (at {label!r}); use a lower order, "
+            "more varied data or a ridge penalty"
         )
-    scaled = np.linalg.solve(r, q.T @ y)
-    theta = scaled / norms
-    residuals = y - X @ theta
+    ols = sm.OLS(y, Z).fit()
+    parameters = np.asarray(ols.params) / scale
+    covariance = np.asarray(ols.cov_params()) / np.outer(scale, scale)
+    return LinearSolution(
+        parameters,
+        covariance,
+        np.sqrt(np.maximum(np.diag(covariance), 0.0)),
+        np.asarray(ols.resid),
+        float(ols.ssr),
+        float(ols.scale),
+        float(p),
+        0.0,
+        float(singular[0] / singular[-1]),
+    )
+
+
+def ridge_regression(
+    matrix: np.ndarray, target: np.ndarray, ridge_lambda: float, names: Sequence[str] = ()
+) -> LinearSolution:
+    """Ridge regression on standardized columns (the module docstring's equations).
+
+    ``ridge_lambda`` is relative to unit-RMS columns (the penalty is
+    ``n * ridge_lambda * |beta_z|^2``); 0 gives least squares (:func:`least_squares`).
+    """
+    if not (math.isfinite(ridge_lambda) and ridge_lambda >= 0):
+        raise ValueError(f"ridge_lambda must be a finite number >= 0, got {ridge_lambda!r}")
+    if ridge_lambda == 0:
+        return least_squares(matrix, target, names)
+    X, y = _check_shape(matrix, target)
+    n, p = X.shape
+    Z, scale = _standardize(X, names)
+    u, sigma, vt = np.linalg.svd(Z, full_matrices=False)
+    penalty = n * ridge_lambda
+    shrink = sigma / (sigma * sigma + penalty)
+    beta_z = vt.T @ (shrink * (u.T @ y))
+    residuals = y - Z @ beta_z
     rss = float(residuals @ residuals)
-    sigma2 = rss / (n - p)
-    r_inv = np.linalg.solve(r, np.eye(p))
-    cov_scaled = sigma2 * (r_inv @ r_inv.T)
-    covariance = cov_scaled / np.outer(norms, norms)
-    se = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-    return LeastSquares(theta, covariance, se, residuals, rss, sigma2)
+    hat = sigma * sigma / (sigma * sigma + penalty)
+    df = float(hat.sum())
+    sigma2 = rss / max(n - df, 1.0)
+    cov_z = sigma2 * (vt.T * (hat / (sigma * sigma + penalty))) @ vt
+    covariance = cov_z / np.outer(scale, scale)
+    return LinearSolution(
+        beta_z / scale,
+        covariance,
+        np.sqrt(np.maximum(np.diag(covariance), 0.0)),
+        residuals,
+        rss,
+        sigma2,
+        df,
+        float(ridge_lambda),
+        float(sigma[0] / sigma[-1]) if sigma[-1] > 0 else math.inf,
+    )
 
 
-# ----------------------------------------------------------- identifiability
+# -------------------------------------------------------- cross-validation
 @dataclass(frozen=True)
-class IdentifiabilityReport:
-    """The static lane-offset gain of a model (docs/design.md §5.7).
+class CrossValidation:
+    """Blocked cross-validation of the ridge penalty (see :func:`choose_ridge_lambda`).
 
     Attributes:
-        static_lane_gain: G = sum(b)/near + sum(c)/far (rad/m). With
-            phi ~ -y/near, omega ~ -y/far, a lane-centre error of e metres
-            held over the model's memory moves its one-step prediction by
-            -G e; at steady state (1 - sum a) delta = -G y.
-        standard_error: SE of G from the fit's covariance (NaN if unknown).
-        memory_gain: 1 - sum(a) (0 for an integrating model such as the two-point).
-        memory_standard_error: its SE (NaN if unknown).
-        integrating: 1 - sum(a) is zero or within z SE of zero.
-        steady_state_gain: delta/y at steady state = -G / (1 - sum a) (rad/m;
-            +-inf for an integrating model).
-        lane_snr: |G| * lane_separation / residual std: how many residual
-            standard deviations one prediction moves between two lane
-            hypotheses ``lane_separation`` m apart (NaN without a fit).
-        identifiable: G is clearly non-zero: |G| > z SE when the SE is
-            known, else |G| > min_gain.
-        sign_consistent: at steady state the model steers towards the lane
-            centre: G has the sign of 1 - sum(a), or G > 0 if it integrates.
-        message: a sentence saying what was found.
+        lambdas: the candidates (relative penalties).
+        mean_error: mean over folds of the held-out mean squared one-step error (rad^2).
+        standard_error: its standard error over folds.
+        best: index of the smallest mean error.
+        chosen: index picked by the rule (``best`` for ``"min"``).
+        folds: number of folds.
     """
 
-    static_lane_gain: float
-    standard_error: float
-    memory_gain: float
-    memory_standard_error: float
-    integrating: bool
-    steady_state_gain: float
+    lambdas: tuple[float, ...]
+    mean_error: np.ndarray
+    standard_error: np.ndarray
+    best: int
+    chosen: int
+    folds: int
+
+    @property
+    def ridge_lambda(self) -> float:
+        """The chosen penalty."""
+        return self.lambdas[self.chosen]
+
+    def table(self) -> pd.DataFrame:
+        """One row per candidate: lambda, mean held-out MSE, its SE."""
+        return pd.DataFrame(
+            {
+                "ridge_lambda": self.lambdas,
+                "cv_mse": self.mean_error,
+                "cv_mse_se": self.standard_error,
+            }
+        )
+
+
+def choose_ridge_lambda(
+    blocks: Sequence[tuple[np.ndarray, np.ndarray]],
+    lambdas: Sequence[float] = DEFAULT_LAMBDAS,
+    folds: int = 5,
+    gap: int = 0,
+    rule: str = "min",
+) -> CrossValidation:
+    """The ridge penalty by blocked cross-validation in time, on training data only.
+
+    Args:
+        blocks: per run, its design matrix (n_r, p) and target (n_r,) in time order.
+        lambdas: candidate penalties (relative to unit-RMS columns, > 0).
+        folds: contiguous blocks per run (>= 2).
+        gap: samples dropped from training on each side of a held-out block
+            (the model's largest lag, so no training row shares a lagged sample
+            with a held-out one).
+        rule: ``"min"``: the penalty of the smallest mean held-out error;
+            ``"1se"``: the largest penalty whose mean held-out error is within
+            one standard error (over folds) of the smallest.
+
+    Returns:
+        The :class:`CrossValidation` (its ``ridge_lambda`` is the choice).
+    """
+    if rule not in ("min", "1se"):
+        raise ValueError(f"rule must be 'min' or '1se', got {rule!r}")
+    if isinstance(folds, bool) or not isinstance(folds, int) or folds < 2:
+        raise ValueError(f"folds must be an integer >= 2, got {folds!r}")
+    grid = np.asarray(lambdas, dtype=np.float64)
+    if grid.ndim != 1 or grid.size == 0 or not np.all(np.isfinite(grid) & (grid > 0)):
+        raise ValueError(f"lambdas must be finite positive numbers, got {list(lambdas)}")
+    fold_of = [
+        np.minimum((np.arange(m.shape[0]) * folds) // max(m.shape[0], 1), folds - 1)
+        for m, _ in blocks
+    ]
+    X = np.vstack([m for m, _ in blocks])
+    y = np.concatenate([t for _, t in blocks])
+    scale = np.sqrt(np.mean(X * X, axis=0))
+    scale[scale == 0] = 1.0
+    Z = X / scale
+    errors = np.full((folds, grid.size), np.nan)
+    for j in range(folds):
+        test = np.concatenate([f == j for f in fold_of])
+        train = np.concatenate([_training_rows(f, j, gap) for f in fold_of])
+        if test.sum() == 0 or train.sum() <= Z.shape[1]:
+            continue
+        u, sigma, vt = np.linalg.svd(Z[train], full_matrices=False)
+        uty = u.T @ y[train]
+        n_train = int(train.sum())
+        # beta(lambda) for every candidate at once: V diag(sigma / (sigma^2 + n lambda)) U^T y
+        shrink = sigma[None, :] / (sigma[None, :] ** 2 + n_train * grid[:, None])
+        betas = (shrink * uty[None, :]) @ vt  # (n_lambdas, p)
+        residual = y[test][:, None] - Z[test] @ betas.T
+        errors[j] = np.mean(residual * residual, axis=0)
+    ok = np.all(np.isfinite(errors), axis=1)
+    if ok.sum() < 2:
+        raise ValueError(
+            f"cross-validation needs at least 2 usable folds; the training data have only "
+            f"{sum(m.shape[0] for m, _ in blocks)} samples"
+        )
+    errors = errors[ok]
+    mean = errors.mean(axis=0)
+    se = errors.std(axis=0, ddof=1) / math.sqrt(errors.shape[0])
+    best = int(np.argmin(mean))
+    chosen = best
+    if rule == "1se":
+        chosen = int(np.flatnonzero(mean <= mean[best] + se[best]).max())
+    return CrossValidation(tuple(grid.tolist()), mean, se, best, chosen, int(ok.sum()))
+
+
+def _training_rows(fold: np.ndarray, held_out: int, gap: int) -> np.ndarray:
+    """Rows of one run that train fold ``held_out``: the other blocks, minus ``gap``
+    rows on either side of the held-out block."""
+    keep = fold != held_out
+    held = np.flatnonzero(~keep)
+    if gap > 0 and held.size:
+        rows = np.arange(fold.size)
+        keep &= (rows < held[0] - gap) | (rows > held[-1] + gap)
+    return keep
+
+
+# ------------------------------------------------------------------ checks
+@dataclass(frozen=True)
+class FitChecks:
+    """What a fit is fit for (docs/design.md §6.5); ``flags`` lists what failed.
+
+    Attributes:
+        condition_number: of the standardized design matrix (unit-RMS columns).
+        ridge_lambda: the penalty of the fit (0: least squares).
+        cross_validated_lambda: the penalty cross-validation chose (larger
+            ``ridge_lambda``: raised until the AR part was stable; equal when
+            the penalty was given).
+        effective_parameters: trace of the fit's hat matrix.
+        ar_poles: poles of the AR part (empty without one, or for a model without an ARX form).
+        ar_poles_max_abs: largest |pole| (NaN without an AR part).
+        stable: every pole inside the unit circle (an integrating pole on it counts
+            as stable); None for a model without an ARX form.
+        identifiable: the lane offset is identifiable through the model
+            (:class:`~hasa_env.steering.identifiability.IdentifiabilityReport.ok`);
+            None for a model without an ARX form.
+        lane_snr: the report's lane SNR (steering-sensor noise included).
+        flags: ``"unstable"``, ``"unidentifiable"``, ``"ill_conditioned"`` (condition
+            number above :data:`ILL_CONDITIONED` and no ridge penalty).
+    """
+
+    condition_number: float
+    ridge_lambda: float
+    cross_validated_lambda: float
+    effective_parameters: float
+    ar_poles: tuple[complex, ...]
+    ar_poles_max_abs: float
+    stable: bool | None
+    identifiable: bool | None
     lane_snr: float
-    identifiable: bool
-    sign_consistent: bool
-    message: str
+    flags: tuple[str, ...]
 
     @property
     def ok(self) -> bool:
-        """Identifiable and sign-consistent."""
-        return self.identifiable and self.sign_consistent
+        """No flag raised."""
+        return not self.flags
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able dict (poles as [real, imaginary] pairs)."""
+        return {
+            "condition_number": self.condition_number,
+            "ridge_lambda": self.ridge_lambda,
+            "cross_validated_lambda": self.cross_validated_lambda,
+            "effective_parameters": self.effective_parameters,
+            "ar_poles": [[p.real, p.imag] for p in self.ar_poles],
+            "ar_poles_max_abs": self.ar_poles_max_abs,
+            "stable": self.stable,
+            "identifiable": self.identifiable,
+            "lane_snr": self.lane_snr,
+            "flags": list(self.flags),
+        }
 
 
-def _arx_gradient(model: SteeringModel, quantity: Callable[[ARXForm], float]) -> np.ndarray | None:
-    """d quantity(arx) / d parameters (exact when the ARX form is affine in the parameters)."""
-    theta = model.parameter_vector
-    grad = np.zeros(theta.size)
-    for j in range(theta.size):
-        step = max(1.0, abs(theta[j]))
-        up, down = theta.copy(), theta.copy()
-        up[j] += step
-        down[j] -= step
-        arx_up = model.with_parameters(up).arx()
-        arx_down = model.with_parameters(down).arx()
-        if arx_up is None or arx_down is None:
-            return None
-        grad[j] = (quantity(arx_up) - quantity(arx_down)) / (2.0 * step)
-    return grad
+def _stable(model: SteeringModel, solution: LinearSolution) -> bool:
+    """Whether the model with these parameters has a stable AR part (True without one)."""
+    arx = model.with_parameters(solution.parameters).arx()
+    if arx is None:
+        return True
+    poles = ar_poles(arx)
+    return bool(poles.size == 0 or np.max(np.abs(poles)) <= 1.0 + STABILITY_TOLERANCE)
 
 
-def _standard_error(grad: np.ndarray | None, covariance: np.ndarray | None) -> float:
-    if grad is None or covariance is None:
-        return float("nan")
-    return float(math.sqrt(max(float(grad @ covariance @ grad), 0.0)))
-
-
-def check_identifiability(
-    model: SteeringModel | ARXForm,
-    covariance: np.ndarray | None = None,
-    z: float = 3.0,
-    min_gain: float = 1e-6,
-    residual_std: float | None = None,
-    lane_separation: float = 1.8,
-) -> IdentifiabilityReport | None:
-    """Is the lane offset identifiable through this model? (docs/design.md §5.7)
-
-    The paper's "observable if any b_i or c_0 is non-zero" is not enough:
-    b = (0.3, -0.3) is non-zero but carries no information on a constant
-    lane-centre error. What matters is the static lane-offset gain
-    G = sum(b)/near + sum(c)/far.
-
-    Args:
-        model: a steering model (its :meth:`arx` form is used) or an :class:`ARXForm`.
-        covariance: covariance of the model's parameters; default: that of the
-            model's fit, if any. With it, "clearly non-zero" means ``z``
-            standard errors away from zero.
-        z: how many standard errors "clearly non-zero" means.
-        min_gain: smallest |G| (rad/m) accepted when no standard error is known.
-        residual_std: the one-step residual std (rad) for ``lane_snr``;
-            default: the model's fit's.
-        lane_separation: distance (m) between the lane hypotheses for ``lane_snr``.
-
-    Returns:
-        An :class:`IdentifiabilityReport`, or None if the model is not an ARX model.
-    """
-    grad_gain = grad_memory = None
-    if isinstance(model, ARXForm):
-        arx = model
-    else:
-        arx = model.arx()
-        if arx is None:
-            return None
-        if model.fit_result is not None:
-            if covariance is None:
-                covariance = model.fit_result.covariance
-            if residual_std is None:
-                residual_std = model.fit_result.residual_std
-        if covariance is not None:
-            grad_gain = _arx_gradient(model, lambda f: f.static_lane_gain)
-            grad_memory = _arx_gradient(model, lambda f: 1.0 - sum(f.a))
-    gain = arx.static_lane_gain
-    se = _standard_error(grad_gain, covariance)
-    memory = 1.0 - sum(arx.a)
-    memory_se = _standard_error(grad_memory, covariance)
-    integrating = abs(memory) < 1e-9 or (math.isfinite(memory_se) and abs(memory) <= z * memory_se)
-    if integrating:
-        steady = math.copysign(math.inf, -gain) if gain != 0 else float("nan")
-    else:
-        steady = -gain / memory
-    snr = (
-        abs(gain) * lane_separation / residual_std
-        if residual_std is not None and residual_std > 0
-        else float("nan")
-    )
-    identifiable = abs(gain) > z * se if math.isfinite(se) else abs(gain) > min_gain
-    sign_consistent = gain > 0 if integrating else gain * memory > 0
-    if not identifiable:
-        detail = (
-            f" (SE {se:.3g}, needs > {z:g} SE)"
-            if math.isfinite(se)
-            else f" (needs |G| > {min_gain:g})"
-        )
-        message = (
-            f"static lane-offset gain sum(b)/near + sum(c)/far = {gain:.3g} rad/m is not clearly "
-            f"non-zero{detail}: the steering carries no information on the lane offset"
-        )
-    elif not sign_consistent:
-        message = (
-            f"static lane-offset gain {gain:.3g} rad/m has the wrong sign for 1 - sum(a) = "
-            f"{memory:.3g}: at steady state the model steers away from the lane centre"
-        )
-    else:
-        parts = [f"identifiable: static lane-offset gain {gain:.3g} rad/m"]
-        if math.isfinite(se) and se > 0:
-            parts.append(f" ({abs(gain) / se:.1f} SE)")
-        if integrating:
-            parts.append(", integrating (1 - sum(a) ~ 0)")
-        else:
-            parts.append(f", steady-state steering {steady:.3g} rad/m")
-        if math.isfinite(snr):
-            parts.append(
-                f"; lanes {lane_separation:g} m apart move a prediction by {snr:.2g} residual SDs"
-            )
-        message = "".join(parts)
-    return IdentifiabilityReport(
-        gain,
-        se,
-        memory,
-        memory_se,
-        integrating,
-        steady,
-        snr,
-        identifiable,
-        sign_consistent,
-        message,
+def _checks(
+    fitted: SteeringModel,
+    solution: LinearSolution,
+    report: IdentifiabilityReport | None,
+    condition_number: float,
+    cv_lambda: float,
+) -> FitChecks:
+    arx = fitted.arx()
+    poles: tuple[complex, ...] = ()
+    max_abs = float("nan")
+    stable: bool | None = None
+    if arx is not None:
+        roots = ar_poles(arx)
+        poles = tuple(complex(p) for p in roots)
+        max_abs = float(np.max(np.abs(roots))) if roots.size else 0.0
+        stable = bool(max_abs <= 1.0 + STABILITY_TOLERANCE)
+    flags = []
+    if stable is False:
+        flags.append("unstable")
+    if report is not None and not report.ok:
+        flags.append("unidentifiable")
+    if condition_number > ILL_CONDITIONED and solution.ridge_lambda == 0:
+        flags.append("ill_conditioned")
+    return FitChecks(
+        condition_number=condition_number,
+        ridge_lambda=solution.ridge_lambda,
+        cross_validated_lambda=cv_lambda,
+        effective_parameters=solution.effective_parameters,
+        ar_poles=poles,
+        ar_poles_max_abs=max_abs,
+        stable=stable,
+        identifiable=None if report is None else report.ok,
+        lane_snr=float("nan") if report is None else report.lane_snr,
+        flags=tuple(flags),
     )
 
 
-# ------------------------------------------------------------------- fitting
+# ----------------------------------------------------------------- fitting
 @dataclass(frozen=True)
 class FitResult:
-    """A least-squares fit of a steering model.
+    """A fit of a steering model.
 
     Attributes:
         parameter_names: names, in order.
@@ -309,11 +463,15 @@ class FitResult:
         residuals: one-step residuals delta(k) - delta_hat(k) of every run (rad), concatenated.
         run_lengths: number of residuals from each run.
         n_obs: samples used; n_params: parameters fitted.
-        rss: residual sum of squares (rad^2); residual_std: sqrt(rss / (n - p)) (rad).
+        rss: residual sum of squares (rad^2); residual_std: sqrt(rss / (n - df)) (rad).
         r2: R^2 on delta; r2_increments: R^2 on delta(k) - delta(k-1).
         log_likelihood: Gaussian log-likelihood at the ML variance rss/n.
-        aic, bic: n log(rss/n) + 2p, n log(rss/n) + p log(n).
+        aic, bic: n log(rss/n) + 2 df, n log(rss/n) + df log(n), with df the
+            effective number of parameters.
         identifiability: the check of :func:`check_identifiability` (None if not ARX).
+        checks: :class:`FitChecks`.
+        cross_validation: how the ridge penalty was chosen (None if it was given).
+        steering_signal: which steering column was fitted ("measured" or "applied").
     """
 
     parameter_names: tuple[str, ...]
@@ -332,6 +490,9 @@ class FitResult:
     aic: float
     bic: float
     identifiability: IdentifiabilityReport | None = None
+    checks: FitChecks | None = None
+    cross_validation: CrossValidation | None = field(default=None, repr=False)
+    steering_signal: str = "measured"
 
     def summary(self) -> pd.DataFrame:
         """Estimates, standard errors and t-values, one row per parameter."""
@@ -343,20 +504,8 @@ class FitResult:
         )
 
 
-def _as_runs(runs: pd.DataFrame | Sequence[pd.DataFrame]) -> list[pd.DataFrame]:
-    if isinstance(runs, pd.DataFrame):
-        return [runs]
-    out = list(runs)
-    if not out:
-        raise ValueError("no runs given")
-    for i, run in enumerate(out):
-        if not isinstance(run, pd.DataFrame):
-            raise TypeError(f"run {i} is a {type(run).__name__}, expected a pandas DataFrame")
-    return out
-
-
-def _criteria(rss: float, n: int, p: int) -> tuple[float, float, float]:
-    """(log-likelihood, AIC, BIC) of a Gaussian least-squares fit."""
+def criteria(rss: float, n: int, p: float) -> tuple[float, float, float]:
+    """(log-likelihood, AIC, BIC) of a Gaussian fit with ``p`` (effective) parameters."""
     if rss <= 0:
         return math.inf, -math.inf, -math.inf
     log_likelihood = -0.5 * n * (math.log(2.0 * math.pi * rss / n) + 1.0)
@@ -364,9 +513,30 @@ def _criteria(rss: float, n: int, p: int) -> tuple[float, float, float]:
     return log_likelihood, base + 2.0 * p, base + p * math.log(n)
 
 
-def _r2(residual_ss: float, values: np.ndarray) -> float:
-    total = float(np.sum((values - values.mean()) ** 2)) if values.size else 0.0
-    return 1.0 - residual_ss / total if total > 0 else float("nan")
+def design_blocks(
+    model: SteeringModel, runs: Sequence[pd.DataFrame], road: Road | None
+) -> list[dict[str, np.ndarray]]:
+    """Per run: the model's design rows with every entry finite, in time order.
+
+    Each item has ``matrix`` (n_r, p), ``target`` (n_r,) (delta minus the
+    model's fixed offset), ``delta`` (n_r,) and ``increment`` (n_r,), the
+    measured delta(k) - delta(k-1) (NaN where there is no previous sample).
+    """
+    out = []
+    for run in runs:
+        features = model.features(run, road)
+        design = model.design(features)
+        previous = lagged(features["delta"].to_numpy(dtype=np.float64), 1)
+        valid = design.valid
+        out.append(
+            {
+                "matrix": design.matrix[valid],
+                "target": design.target[valid] - design.offset[valid],
+                "delta": design.target[valid],
+                "increment": (design.target - previous)[valid],
+            }
+        )
+    return out
 
 
 def fit_model(
@@ -374,43 +544,79 @@ def fit_model(
     runs: pd.DataFrame | Sequence[pd.DataFrame],
     road: Road | None = None,
     warn: bool = True,
+    *,
+    ridge: str | float = "cv",
+    folds: int = 5,
+    lambdas: Sequence[float] = DEFAULT_LAMBDAS,
+    rule: str = "min",
+    stable: bool = True,
+    sensor_std: float = 0.0,
 ) -> SteeringModel:
-    """Least-squares fit of a model that is linear in its parameters (``model.fit`` calls this).
+    """Fit a model that is linear in its parameters (``model.fit`` calls this).
 
     Args:
         model: the model (its structure; its current parameters are ignored).
         runs: one run or a list of runs (recordings or features frames).
         road: the road of the runs (None: from their metadata, else straight).
-        warn: emit an :class:`IdentifiabilityWarning` when the fit loses the
-            identifiability of the lane offset.
+        warn: warn when the fit is unstable or loses the identifiability of the
+            lane offset (categories in :mod:`hasa_env.steering.identifiability`).
+        ridge: ``"cv"`` (default): ridge with the penalty from blocked
+            cross-validation on these runs (:func:`choose_ridge_lambda`); a
+            number: ridge with that relative penalty; 0: least squares.
+        folds: cross-validation folds (blocks per run).
+        lambdas: the penalties cross-validation chooses from.
+        rule: how cross-validation chooses (see :func:`choose_ridge_lambda`).
+        stable: with ``ridge="cv"``, if the chosen penalty leaves the AR part
+            unstable, take the smallest larger penalty of ``lambdas`` that
+            makes it stable (see the module docstring).
+        sensor_std: steering-sensor noise std (rad, model units) the
+            identifiability check adds to the residual (see
+            :func:`check_identifiability`).
 
     Returns:
         A new model of the same class with the estimates, their standard
-        errors and ``fit_result`` (:class:`FitResult`).
+        errors and ``fit_result`` (:class:`FitResult`, with its :class:`FitChecks`).
     """
-    frames = _as_runs(runs)
-    matrices, targets, deltas, increments, lengths = [], [], [], [], []
-    for run in frames:
-        features = model.features(run, road)
-        design = model.design(features)
-        previous = lagged(features["delta"].to_numpy(dtype=np.float64), 1)
-        valid = design.valid
-        matrices.append(design.matrix[valid])
-        targets.append(design.target[valid] - design.offset[valid])
-        deltas.append(design.target[valid])
-        increments.append((design.target - previous)[valid])
-        lengths.append(int(valid.sum()))
-    X = np.vstack(matrices)
-    y = np.concatenate(targets)
+    frames = as_runs(runs)
     names = model.parameter_names
+    blocks = design_blocks(model, frames, road)
+    X = np.vstack([b["matrix"] for b in blocks])
+    y = np.concatenate([b["target"] for b in blocks])
     if X.shape[1] != len(names):
         raise ValueError(
             f"{model.name}: design has {X.shape[1]} columns for {len(names)} parameters"
         )
-    solution = least_squares(X, y, names)
+    _check_shape(X, y)
+    cross_validation = None
+    if isinstance(ridge, str):
+        if ridge != "cv":
+            raise ValueError(f"ridge must be 'cv', a number >= 0 or 0, got {ridge!r}")
+        if X.shape[1] == 0:
+            ridge_lambda = 0.0
+        else:
+            gap = int(getattr(model, "max_lag", 0))
+            cross_validation = choose_ridge_lambda(
+                [(b["matrix"], b["target"]) for b in blocks], lambdas, folds, gap, rule
+            )
+            ridge_lambda = cross_validation.ridge_lambda
+    else:
+        ridge_lambda = float(ridge)
+    solution = ridge_regression(X, y, ridge_lambda, names)
+    cv_lambda = ridge_lambda
+    if cross_validation is not None and stable and not _stable(model, solution):
+        for candidate in sorted(v for v in lambdas if v > ridge_lambda):
+            trial = ridge_regression(X, y, candidate, names)
+            if _stable(model, trial):
+                solution = trial
+                break
+    condition = solution.condition_number
+    if solution.ridge_lambda > 0 and X.shape[1]:
+        Z, _ = _standardize(X, names)
+        singular = np.linalg.svd(Z, compute_uv=False)
+        condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
     n, p = X.shape
-    log_likelihood, aic, bic = _criteria(solution.rss, n, p)
-    increments_all = np.concatenate(increments)
+    log_likelihood, aic, bic = criteria(solution.rss, n, solution.effective_parameters)
+    increments_all = np.concatenate([b["increment"] for b in blocks])
     has_previous = np.isfinite(increments_all)
     residuals_with_previous = solution.residuals[has_previous]
     result = FitResult(
@@ -419,221 +625,43 @@ def fit_model(
         standard_errors=solution.standard_errors,
         covariance=solution.covariance,
         residuals=solution.residuals,
-        run_lengths=tuple(lengths),
+        run_lengths=tuple(int(b["target"].size) for b in blocks),
         n_obs=n,
         n_params=p,
         rss=solution.rss,
         residual_std=math.sqrt(solution.sigma2),
-        r2=_r2(solution.rss, np.concatenate(deltas)),
-        r2_increments=_r2(
+        r2=r_squared(solution.rss, np.concatenate([b["delta"] for b in blocks])),
+        r2_increments=r_squared(
             float(residuals_with_previous @ residuals_with_previous), increments_all[has_previous]
         ),
         log_likelihood=log_likelihood,
         aic=aic,
         bic=bic,
+        cross_validation=cross_validation,
+        steering_signal=getattr(model, "steering_signal", "measured"),
     )
     fitted = model.with_parameters(solution.parameters, solution.standard_errors, fit_result=result)
     report = check_identifiability(
-        fitted, solution.covariance, residual_std=math.sqrt(solution.sigma2)
+        fitted,
+        solution.covariance,
+        residual_std=math.sqrt(solution.sigma2),
+        sensor_std=sensor_std,
     )
-    result = _replace(result, identifiability=report)
+    checks = _checks(fitted, solution, report, condition, cv_lambda)
+    result = replace(result, identifiability=report, checks=checks)
     fitted.fit_result = result
-    if warn and report is not None and not report.ok:
-        warnings.warn(f"{model.name} fit: {report.message}", IdentifiabilityWarning, stacklevel=3)
+    if warn:
+        if report is not None and not report.ok:
+            warnings.warn(
+                f"{model.name} fit: {report.message}", IdentifiabilityWarning, stacklevel=3
+            )
+        if checks.stable is False:
+            warnings.warn(
+                f"{model.name} fit: its AR part has a pole of magnitude "
+                f"{checks.ar_poles_max_abs:.3g} outside the unit circle (ridge lambda "
+                f"{checks.ridge_lambda:.3g}, condition number {checks.condition_number:.3g}): "
+                "its own steering diverges in free run",
+                StabilityWarning,
+                stacklevel=3,
+            )
     return fitted
-
-
-def _replace(result: FitResult, **changes: Any) -> FitResult:
-    return replace(result, **changes)
-
-
-# --------------------------------------------------------------- diagnostics
-@dataclass(frozen=True)
-class ResidualDiagnostics:
-    """Whiteness of residuals.
-
-    Attributes:
-        autocorrelation: sample autocorrelation at lags 0..lags.
-        confidence_band: 1.96 / sqrt(n), the 95 % band of white noise.
-        fraction_outside: share of lags 1..lags outside the band (about 0.05 if white).
-        ljung_box_statistic, ljung_box_p: Ljung-Box Q over lags 1..lags and its p-value
-            (statsmodels ``acorr_ljungbox``); small p: not white.
-        n: number of residuals.
-    """
-
-    autocorrelation: np.ndarray
-    confidence_band: float
-    fraction_outside: float
-    ljung_box_statistic: float
-    ljung_box_p: float
-    n: int
-
-    @property
-    def white(self) -> bool:
-        """Ljung-Box does not reject whiteness at the 5 % level."""
-        return bool(self.ljung_box_p > 0.05)
-
-
-def residual_diagnostics(
-    residuals: np.ndarray | Sequence[np.ndarray], lags: int = 20
-) -> ResidualDiagnostics:
-    """Autocorrelation and Ljung-Box test of residuals (one array, or one per run).
-
-    Several runs are concatenated (NaNs dropped); the few lag products that
-    straddle two runs do not matter at thousands of samples per run.
-    """
-    if isinstance(residuals, np.ndarray) and residuals.ndim == 1:
-        parts = [residuals]
-    else:
-        parts = [np.asarray(r, dtype=np.float64).reshape(-1) for r in residuals]
-    e = np.concatenate([p[np.isfinite(p)] for p in parts]) if parts else np.zeros(0)
-    n = e.size
-    lags = int(min(lags, max(n // 5, 1)))
-    if n < 10 or not np.any(e != e[0] if n else False):
-        nan = float("nan")
-        return ResidualDiagnostics(np.full(lags + 1, np.nan), nan, nan, nan, nan, n)
-    r = acf(e, nlags=lags, fft=True)
-    band = 1.96 / math.sqrt(n)
-    outside = float(np.mean(np.abs(r[1:]) > band))
-    lb = acorr_ljungbox(e, lags=[lags], return_df=True)
-    return ResidualDiagnostics(
-        np.asarray(r),
-        band,
-        outside,
-        float(lb["lb_stat"].iloc[0]),
-        float(lb["lb_pvalue"].iloc[0]),
-        n,
-    )
-
-
-# ------------------------------------------------------------------ scoring
-def simulate_arx(arx: ARXForm, features: pd.DataFrame, start: int) -> np.ndarray:
-    """Free run of an ARX model over a features frame, from sample ``start`` on.
-
-    ``delta_sim(k) = sum a_i delta_sim(k-i) + sum b_i phi(k-i) + ...`` with
-    the measured bearings and lateral velocity and the measured steering before
-    ``start``. Returns NaN before ``start``.
-    """
-    n = len(features)
-    out = np.full(n, np.nan)
-    if start >= n:
-        return out
-    zero_a = ARXForm(a=(), b=arx.b, c=arx.c, d=arx.d, near_distance=arx.near_distance,
-                     far_distance=arx.far_distance, dt=arx.dt)  # fmt: skip
-    exogenous = zero_a.predict(
-        np.zeros(n),
-        features["phi"].to_numpy(dtype=np.float64),
-        features["omega"].to_numpy(dtype=np.float64),
-        features["lateral_velocity"].to_numpy(dtype=np.float64),
-    )
-    delta = features["delta"].to_numpy(dtype=np.float64)
-    u = exogenous[start:]
-    if not np.all(np.isfinite(u)):
-        bad = start + int(np.flatnonzero(~np.isfinite(u))[0])
-        u = u[: bad - start]
-    denominator = np.concatenate([[1.0], -np.asarray(arx.a, dtype=np.float64)])
-    if len(arx.a):
-        past = delta[max(0, start - len(arx.a)) : start][::-1]
-        if past.size < len(arx.a):
-            past = np.concatenate([past, np.zeros(len(arx.a) - past.size)])
-        zi = signal.lfiltic([1.0], denominator, past)
-        with np.errstate(over="ignore", invalid="ignore"):
-            sim, _ = signal.lfilter([1.0], denominator, u, zi=zi)
-    else:
-        sim = u
-    out[start : start + sim.size] = sim
-    return out
-
-
-def _metrics(
-    delta: np.ndarray, estimate: np.ndarray, lags: int, free_run: bool
-) -> dict[str, float]:
-    """Scores of ``estimate`` against the measured ``delta``.
-
-    Increments: a one-step prediction's is delta_hat(k) - delta(k-1) (so its
-    increment error equals its error); a free run's is its own change
-    delta_sim(k) - delta_sim(k-1), scored where it has a previous value.
-    """
-    previous = lagged(delta, 1)
-    valid = np.isfinite(delta) & np.isfinite(estimate) & np.isfinite(previous)
-    if free_run:
-        valid &= np.isfinite(lagged(estimate, 1))
-    n = int(valid.sum())
-    if n < 3:
-        nan = float("nan")
-        return {"rmse": nan, "r2": nan, "r2_increments": nan, "ljung_box_p": nan, "n": n}
-    if free_run and np.any(np.abs(estimate[valid]) > 1e6):
-        # a free run of an unstable model: it diverged (road-wheel angles beyond any car)
-        return {
-            "rmse": math.inf,
-            "r2": -math.inf,
-            "r2_increments": -math.inf,
-            "ljung_box_p": float("nan"),
-            "n": n,
-        }
-    error = (delta - estimate)[valid]
-    sse = float(error @ error)
-    increments = (delta - previous)[valid]
-    # increments of the estimate: one-step prediction minus the measured previous
-    # steering, free run minus its own previous value (where it has one)
-    reference = lagged(estimate, 1) if free_run else previous
-    inc_error = increments - (estimate - reference)[valid]
-    diag = residual_diagnostics(error, lags)
-    return {
-        "rmse": math.sqrt(sse / n),
-        "r2": _r2(sse, delta[valid]),
-        "r2_increments": _r2(float(inc_error @ inc_error), increments),
-        "ljung_box_p": diag.ljung_box_p,
-        "n": n,
-    }
-
-
-def score_runs(
-    model: SteeringModel,
-    runs: pd.DataFrame | Sequence[pd.DataFrame],
-    road: Road | None = None,
-    lags: int = 20,
-    free_run: bool = True,
-) -> pd.DataFrame:
-    """Scores of a model on each run (one row per run), see :func:`score` for the columns."""
-    rows = []
-    for run in _as_runs(runs):
-        features = model.features(run, road)
-        delta = features["delta"].to_numpy(dtype=np.float64)
-        one_step = model.predict_features(features)
-        row = _metrics(delta, one_step, lags, free_run=False)
-        if free_run:
-            simulated = model.simulate(features)
-            for key, value in _metrics(delta, simulated, lags, free_run=True).items():
-                row[f"free_run_{key}"] = value
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def score(
-    model: SteeringModel,
-    runs: pd.DataFrame | Sequence[pd.DataFrame],
-    road: Road | None = None,
-    lags: int = 20,
-    free_run: bool = True,
-) -> dict[str, float]:
-    """Steering-prediction scores of a model, averaged over runs (paper table 1).
-
-    One-step prediction (with the measured past steering):
-
-    - ``rmse`` (rad);
-    - ``r2``: R^2 on delta (about 0.99 for any sensible model);
-    - ``r2_increments``: R^2 on delta(k) - delta(k-1), the skill over
-      "steer as before" (where the paper's "R^2 Acc" pattern shows);
-    - ``ljung_box_p``: Ljung-Box p-value of the residuals over ``lags`` lags.
-
-    Free-run simulation (:meth:`~hasa_env.steering.base.SteeringModel.simulate`,
-    driven by the measured bearings): the same four as ``free_run_*``.
-    Also ``n_runs`` and ``n`` (samples scored in all). Each metric is the mean
-    over runs of its per-run value (:func:`score_runs`).
-    """
-    table = score_runs(model, runs, road, lags, free_run)
-    out = {key: float(table[key].mean()) for key in table.columns if key not in ("n", "free_run_n")}
-    out["n_runs"] = len(table)
-    out["n"] = int(table["n"].sum())
-    return out

@@ -61,7 +61,8 @@ def model_from_dict(
     Fields: ``format`` (= "hasa_env.steering_model"), ``format_version``
     (1), ``type`` (a registered model type), ``name``, ``dt`` (s, > 0),
     ``features`` {``near_distance``, ``far_distance`` (m, > 0),
-    ``decision_lag`` (int >= 0), ``regressors`` (optional; checked)},
+    ``decision_lag`` (int >= 0), ``steering_signal`` ("measured" or "applied"),
+    ``regressors`` (optional; checked)},
     ``structure`` (the model's keyword arguments), ``parameters`` (name ->
     number, or null) and ``standard_errors`` (same, or null).
 
@@ -108,7 +109,13 @@ def model_from_dict(
     features = document["features"]
     if not isinstance(features, Mapping):
         raise ModelFileError(f"{source}: field 'features' must be an object, got {features!r}")
-    allowed_features = {"near_distance", "far_distance", "decision_lag", "regressors"}
+    allowed_features = {
+        "near_distance",
+        "far_distance",
+        "decision_lag",
+        "steering_signal",
+        "regressors",
+    }
     bad = sorted(set(features) - allowed_features)
     if bad:
         raise ModelFileError(
@@ -121,6 +128,12 @@ def model_from_dict(
     far = _finite_positive(
         features.get("far_distance", FAR_POINT_DISTANCE), "features.far_distance", source
     )
+    signal = features.get("steering_signal", "measured")
+    if signal not in ("measured", "applied"):
+        raise ModelFileError(
+            f"{source}: field 'features.steering_signal' must be 'measured' or 'applied', "
+            f"got {signal!r}"
+        )
     lag = features.get("decision_lag", 1)
     if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
         raise ModelFileError(
@@ -139,6 +152,7 @@ def model_from_dict(
             far_distance=far,
             dt=dt,
             decision_lag=lag,
+            steering_signal=signal,
             name=name,
         )
     except (TypeError, ValueError) as exc:
@@ -197,5 +211,6 @@ def model_from_dict(
         far_distance=far,
         dt=dt,
         decision_lag=lag,
+        steering_signal=signal,
         name=name,
     )

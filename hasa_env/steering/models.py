@@ -67,9 +67,14 @@ class TwoPointModel(SteeringModel):
         super().__init__(**kwargs)
 
     @classmethod
-    def paper(cls, dt: float = 0.01) -> TwoPointModel:
-        """The paper's fit on the illustrative driver (eq. (9)): k_n=-0.2, k_f=0.7, k_I=0.087."""
-        return cls(-0.2, 0.7, 0.087, dt=dt, name="two-point (paper)")
+    def paper(cls, dt: float = 0.01, **kwargs: Any) -> TwoPointModel:
+        """The paper's fit on the illustrative driver (eq. (9)): k_n=-0.2, k_f=0.7, k_I=0.087.
+
+        ``kwargs``: other :class:`~hasa_env.steering.base.SteeringModel` options
+        (e.g. ``steering_signal``).
+        """
+        kwargs.setdefault("name", "two-point (paper)")
+        return cls(-0.2, 0.7, 0.087, dt=dt, **kwargs)
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -168,21 +173,23 @@ class GeneralizedModel(SteeringModel):
         return cls(len(a), len(b), len(c), len(d), parameters=[*a, *b, *c, *d], **kwargs)
 
     @classmethod
-    def paper(cls) -> GeneralizedModel:
+    def paper(cls, **kwargs: Any) -> GeneralizedModel:
         """The paper's fit on the illustrative driver (eq. (10)) in OUR convention (docs/design.md §5.4).
 
         a = (1.47, -0.51), b = (-5.73, 17.32, -17.65, 6.12), c0 = 0.11,
         d = (-0.02, 0.02), Ts = 0.01 s: the paper prints "a_1 = 0.51" (unstable;
         -0.51 is meant) and its d has the opposite sign (its delta and
-        bearings are not ISO 8855).
+        bearings are not ISO 8855). ``kwargs``: other
+        :class:`~hasa_env.steering.base.SteeringModel` options (e.g. ``steering_signal``).
         """
+        kwargs.setdefault("name", "generalized (paper)")
         return cls.from_coefficients(
             (1.47, -0.51),
             (-5.73, 17.32, -17.65, 6.12),
             (0.11,),
             (-0.02, 0.02),
             dt=0.01,
-            name="generalized (paper)",
+            **kwargs,
         )
 
     def structure(self) -> dict[str, Any]:

@@ -1,0 +1,254 @@
+"""Scoring steering models (paper table 1; docs/design.md §6.3-6.4).
+
+- :func:`score` / :func:`score_runs`: RMSE, R^2 on delta, R^2 on the
+  increments delta(k) - delta(k-1) and the Ljung-Box p-value of the
+  residuals, for one-step prediction (measured past steering) and free-run
+  simulation; a free run that diverges is reported as such
+  (``free_run_diverged``), never as an infinite RMSE.
+- :func:`residual_diagnostics`: autocorrelation and Ljung-Box whiteness
+  (statsmodels) of residuals.
+- :func:`simulate_arx`: free run of an ARX model over a run's bearings.
+
+Runs are recordings (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`) or features
+frames (:func:`hasa_env.steering.features.steering_features`), one
+``pandas.DataFrame`` per run; lags never cross from one run into another.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import signal
+from statsmodels.stats.diagnostic import acorr_ljungbox
+from statsmodels.tsa.stattools import acf
+
+from hasa_env.sim.road import Road
+from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.design import SteeringModelLike as SteeringModel
+from hasa_env.steering.design import as_runs, lagged, r_squared
+
+__all__ = [
+    "DIVERGENCE_LIMIT",
+    "ResidualDiagnostics",
+    "residual_diagnostics",
+    "score",
+    "score_runs",
+    "simulate_arx",
+]
+
+DIVERGENCE_LIMIT = 1e3
+"""A free run whose steering exceeds this (rad, model units: far beyond any wheel)
+has diverged."""
+
+
+@dataclass(frozen=True)
+class ResidualDiagnostics:
+    """Whiteness of residuals.
+
+    Attributes:
+        autocorrelation: sample autocorrelation at lags 0..lags.
+        confidence_band: 1.96 / sqrt(n), the 95 % band of white noise.
+        fraction_outside: share of lags 1..lags outside the band (about 0.05 if white).
+        ljung_box_statistic, ljung_box_p: Ljung-Box Q over lags 1..lags and its p-value
+            (statsmodels ``acorr_ljungbox``); small p: not white.
+        n: number of residuals.
+    """
+
+    autocorrelation: np.ndarray
+    confidence_band: float
+    fraction_outside: float
+    ljung_box_statistic: float
+    ljung_box_p: float
+    n: int
+
+    @property
+    def white(self) -> bool:
+        """Ljung-Box does not reject whiteness at the 5 % level."""
+        return bool(self.ljung_box_p > 0.05)
+
+
+def residual_diagnostics(
+    residuals: np.ndarray | Sequence[np.ndarray], lags: int = 20
+) -> ResidualDiagnostics:
+    """Autocorrelation and Ljung-Box test of residuals (one array, or one per run).
+
+    Several runs are concatenated (NaNs dropped); the few lag products that
+    straddle two runs do not matter at thousands of samples per run.
+    """
+    if isinstance(residuals, np.ndarray) and residuals.ndim == 1:
+        parts = [residuals]
+    else:
+        parts = [np.asarray(r, dtype=np.float64).reshape(-1) for r in residuals]
+    e = np.concatenate([p[np.isfinite(p)] for p in parts]) if parts else np.zeros(0)
+    n = e.size
+    lags = int(min(lags, max(n // 5, 1)))
+    if n < 10 or not np.any(e != e[0] if n else False):
+        nan = float("nan")
+        return ResidualDiagnostics(np.full(lags + 1, np.nan), nan, nan, nan, nan, n)
+    r = acf(e, nlags=lags, fft=True)
+    band = 1.96 / math.sqrt(n)
+    outside = float(np.mean(np.abs(r[1:]) > band))
+    lb = acorr_ljungbox(e, lags=[lags], return_df=True)
+    return ResidualDiagnostics(
+        np.asarray(r),
+        band,
+        outside,
+        float(lb["lb_stat"].iloc[0]),
+        float(lb["lb_pvalue"].iloc[0]),
+        n,
+    )
+
+
+# ------------------------------------------------------------------ scoring
+def simulate_arx(arx: ARXForm, features: pd.DataFrame, start: int) -> np.ndarray:
+    """Free run of an ARX model over a features frame, from sample ``start`` on.
+
+    ``delta_sim(k) = sum a_i delta_sim(k-i) + sum b_i phi(k-i) + ...`` with
+    the measured bearings and lateral velocity and the measured steering before
+    ``start``. Returns NaN before ``start``.
+    """
+    n = len(features)
+    out = np.full(n, np.nan)
+    if start >= n:
+        return out
+    zero_a = ARXForm(a=(), b=arx.b, c=arx.c, d=arx.d, near_distance=arx.near_distance,
+                     far_distance=arx.far_distance, dt=arx.dt)  # fmt: skip
+    exogenous = zero_a.predict(
+        np.zeros(n),
+        features["phi"].to_numpy(dtype=np.float64),
+        features["omega"].to_numpy(dtype=np.float64),
+        features["lateral_velocity"].to_numpy(dtype=np.float64),
+    )
+    delta = features["delta"].to_numpy(dtype=np.float64)
+    u = exogenous[start:]
+    if not np.all(np.isfinite(u)):
+        bad = start + int(np.flatnonzero(~np.isfinite(u))[0])
+        u = u[: bad - start]
+    denominator = np.concatenate([[1.0], -np.asarray(arx.a, dtype=np.float64)])
+    if len(arx.a):
+        past = delta[max(0, start - len(arx.a)) : start][::-1]
+        if past.size < len(arx.a):
+            past = np.concatenate([past, np.zeros(len(arx.a) - past.size)])
+        zi = signal.lfiltic([1.0], denominator, past)
+        with np.errstate(over="ignore", invalid="ignore"):
+            sim, _ = signal.lfilter([1.0], denominator, u, zi=zi)
+    else:
+        sim = u
+    out[start : start + sim.size] = sim
+    return out
+
+
+def _metrics(
+    delta: np.ndarray, estimate: np.ndarray, lags: int, free_run: bool
+) -> dict[str, float]:
+    """Scores of ``estimate`` against the measured ``delta``.
+
+    Increments: a one-step prediction's is delta_hat(k) - delta(k-1) (so its
+    increment error equals its error); a free run's is its own change
+    delta_sim(k) - delta_sim(k-1), scored where it has a previous value. A
+    free run that leaves [-DIVERGENCE_LIMIT, DIVERGENCE_LIMIT] (or overflows)
+    has ``diverged`` = 1 and NaN scores: a finding, not a number to average.
+    """
+    nan = float("nan")
+    previous = lagged(delta, 1)
+    if free_run:
+        finite = np.isfinite(estimate)
+        first = int(np.argmax(finite)) if finite.any() else estimate.size
+        running = estimate[first:]
+        with np.errstate(invalid="ignore"):
+            blown = ~np.isfinite(running) | (np.abs(running) > DIVERGENCE_LIMIT)
+        if blown.any():
+            return {"rmse": nan, "r2": nan, "r2_increments": nan, "ljung_box_p": nan,
+                    "n": int(running.size), "diverged": 1.0}  # fmt: skip
+    valid = np.isfinite(delta) & np.isfinite(estimate) & np.isfinite(previous)
+    if free_run:
+        valid &= np.isfinite(lagged(estimate, 1))
+    n = int(valid.sum())
+    if n < 3:
+        return {"rmse": nan, "r2": nan, "r2_increments": nan, "ljung_box_p": nan, "n": n,
+                "diverged": 0.0}  # fmt: skip
+    error = (delta - estimate)[valid]
+    sse = float(error @ error)
+    increments = (delta - previous)[valid]
+    # increments of the estimate: one-step prediction minus the measured previous
+    # steering, free run minus its own previous value (where it has one)
+    reference = lagged(estimate, 1) if free_run else previous
+    inc_error = increments - (estimate - reference)[valid]
+    diag = residual_diagnostics(error, lags)
+    return {
+        "rmse": math.sqrt(sse / n),
+        "r2": r_squared(sse, delta[valid]),
+        "r2_increments": r_squared(float(inc_error @ inc_error), increments),
+        "ljung_box_p": diag.ljung_box_p,
+        "n": n,
+        "diverged": 0.0,
+    }
+
+
+def score_runs(
+    model: SteeringModel,
+    runs: pd.DataFrame | Sequence[pd.DataFrame],
+    road: Road | None = None,
+    lags: int = 20,
+    free_run: bool = True,
+) -> pd.DataFrame:
+    """Scores of a model on each run (one row per run), see :func:`score` for the columns."""
+    rows = []
+    for run in as_runs(runs):
+        features = model.features(run, road)
+        delta = features["delta"].to_numpy(dtype=np.float64)
+        one_step = model.predict_features(features)
+        row = _metrics(delta, one_step, lags, free_run=False)
+        del row["diverged"]
+        if free_run:
+            simulated = model.simulate(features)
+            for key, value in _metrics(delta, simulated, lags, free_run=True).items():
+                row[f"free_run_{key}"] = value
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def score(
+    model: SteeringModel,
+    runs: pd.DataFrame | Sequence[pd.DataFrame],
+    road: Road | None = None,
+    lags: int = 20,
+    free_run: bool = True,
+) -> dict[str, float]:
+    """Steering-prediction scores of a model, averaged over runs (paper table 1).
+
+    One-step prediction (with the measured past steering):
+
+    - ``rmse`` (rad);
+    - ``r2``: R^2 on delta (about 0.99 for any sensible model);
+    - ``r2_increments``: R^2 on delta(k) - delta(k-1), the skill over
+      "steer as before" (where the paper's "R^2 Acc" pattern shows);
+    - ``ljung_box_p``: Ljung-Box p-value of the residuals over ``lags`` lags.
+
+    Free-run simulation (:meth:`~hasa_env.steering.base.SteeringModel.simulate`,
+    driven by the measured bearings): the same four as ``free_run_*``, means
+    over the runs whose free run stayed bounded, and ``free_run_diverged``: how
+    many runs' free runs diverged. Also ``n_runs`` and ``n`` (samples scored in
+    all). Each metric is the mean over runs of its per-run value (:func:`score_runs`).
+    """
+    table = score_runs(model, runs, road, lags, free_run)
+    out: dict[str, float] = {}
+    bounded = table["free_run_diverged"] == 0 if free_run else None
+    for key in table.columns:
+        if key in ("n", "free_run_n", "free_run_diverged"):
+            continue
+        column = (
+            table[key]
+            if bounded is None or not key.startswith("free_run_")
+            else table.loc[bounded, key]
+        )
+        out[key] = float(column.mean()) if len(column) else float("nan")
+    if free_run:
+        out["free_run_diverged"] = int(table["free_run_diverged"].sum())
+    out["n_runs"] = len(table)
+    out["n"] = int(table["n"].sum())
+    return out
