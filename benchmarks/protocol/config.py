@@ -9,7 +9,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BASELINES", "BUILTIN_MODELS", "ILLUSTRATIVE", "BenchmarkError", "ProtocolConfig"]
+__all__ = [
+    "BASELINES",
+    "BUILTIN_MODELS",
+    "DEFAULT_SEEDS",
+    "ILLUSTRATIVE",
+    "BenchmarkError",
+    "ProtocolConfig",
+]
 
 
 BUILTIN_MODELS = ("two_point", "generalized")
@@ -19,6 +26,8 @@ BASELINES = ("no_steering", "oracle")
 """Names of the estimation baselines in the results."""
 
 ILLUSTRATIVE = "Ill"
+DEFAULT_SEEDS = (0, 1, 2, 3, 4)
+"""Population seeds of the default protocol."""
 _ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
 _NOISE_KEYS = ("speed", "camera", "camera_heading", "imu", "steering")
 
@@ -33,9 +42,11 @@ class ProtocolConfig:
 
     Attributes:
         population: name of the synthetic population (:data:`hasa_env.drivers.POPULATIONS`).
-        population_seed: seed of the population's driver parameters (None: ``seed``).
-        seed: base seed of the runs (each run's seeds derive from it, the
-            driver's name, the track and the run index).
+        seeds: the population seeds: the whole protocol runs once per seed S,
+            with the drivers of ``population(population, S)`` and runs whose
+            seeds derive from S, the driver's name, the track and the run
+            index (:func:`hasa_env.drivers.run_seeds`). Five by default: a
+            verdict that holds on one seed only is an anecdote.
         drivers: number of drivers ("Ill", "1", ..., str(drivers - 1)).
         runs: runs per driver on the main track.
         ill_runs: runs of the illustrative driver on the main track, the
@@ -64,8 +75,7 @@ class ProtocolConfig:
     """
 
     population: str = "paper"
-    population_seed: int | None = None
-    seed: int = 0
+    seeds: tuple[int, ...] = DEFAULT_SEEDS
     drivers: int = 9
     runs: int = 10
     ill_runs: int | None = None
@@ -89,14 +99,21 @@ class ProtocolConfig:
 
         positive_int("drivers", self.drivers)
         positive_int("runs", self.runs)
-        positive_int("seed", self.seed, 0)
+        seeds = tuple(self.seeds) if not isinstance(self.seeds, str | bytes) else ()
+        if not seeds:
+            raise BenchmarkError(
+                f"seeds must be a non-empty list of integers >= 0, got {self.seeds!r}"
+            )
+        for seed in seeds:
+            positive_int("seeds[i]", seed, 0)
+        if len(set(seeds)) != len(seeds):
+            raise BenchmarkError(f"seeds must not repeat, got {list(seeds)}")
+        object.__setattr__(self, "seeds", tuple(int(s) for s in seeds))
         positive_int("curved_runs", self.curved_runs, 0)
         positive_int("training_run", self.training_run, 0)
         positive_int("batch_size", self.batch_size)
         positive_int("ljung_box_lags", self.ljung_box_lags)
         positive_int("acf_lags", self.acf_lags)
-        if self.population_seed is not None:
-            positive_int("population_seed", self.population_seed, 0)
         if self.ill_runs is not None:
             positive_int("ill_runs", self.ill_runs)
         if self.recordings is None and self.training_run >= self.illustrative_runs:
@@ -128,8 +145,9 @@ class ProtocolConfig:
         return self.runs + 4 if self.ill_runs is None else self.ill_runs
 
     @property
-    def effective_population_seed(self) -> int:
-        return self.seed if self.population_seed is None else self.population_seed
+    def run_seeds(self) -> tuple[int | None, ...]:
+        """The seeds the protocol runs (recordings: one pass, seed None)."""
+        return (None,) if self.recordings is not None else self.seeds
 
     def env_config(self) -> dict[str, Any]:
         """The env configuration of the synthetic runs (deep-merged onto the defaults)."""
@@ -142,5 +160,5 @@ class ProtocolConfig:
         out = asdict(self)
         out["noise"] = dict(self.noise)
         out["ill_runs"] = self.illustrative_runs if self.recordings is None else None
-        out["population_seed"] = self.effective_population_seed
+        out["seeds"] = list(self.seeds) if self.recordings is None else None
         return out
