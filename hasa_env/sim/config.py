@@ -142,6 +142,28 @@ _SCHEMA: dict[str, Any] = {
             high=1_000_000,
         ),
     },
+    "disturbance": {
+        "crosswind": _Spec(
+            0.0,
+            "Crosswind gusts: std of their lateral acceleration (m/s^2); 0: none "
+            "(see hasa_env.sim.disturbance).",
+            low=0.0,
+            high=10.0,
+        ),
+        "crosswind_bandwidth": _Spec(
+            1.0, "Highest gust frequency (Hz); the lowest is 0.05 Hz.", low=0.05, high=20.0
+        ),
+        "camber": _Spec(
+            0.0,
+            "Road camber: std of its lateral acceleration along the road (m/s^2); 0: none.",
+            low=0.0,
+            high=10.0,
+        ),
+        "camber_wavelength": _Spec(
+            40.0, "Shortest camber wavelength (m); the longest is 20 times it.", low=1.0, high=1e4
+        ),
+        "components": _Spec(8, "Sines in each of the two sums.", kind="int", low=1, high=64),
+    },
     "action": {
         "type": _Spec(
             "normalized",
@@ -224,6 +246,9 @@ def default_config() -> dict[str, Any]:
     markings.probabilities      prior of each (uniform)
     noise.*                     sensor noise std: speed, camera, camera_heading,
                                 imu, steering; block_size
+    disturbance.*               crosswind / camber std (m/s^2, 0 = off),
+                                crosswind_bandwidth (Hz), camber_wavelength (m),
+                                components
     action.type                 'normalized' | 'physical'
     action.max_steering         rad (0.5); min/max_acceleration m/s^2 (-6 / 6)
     observation.type            'sensors' | 'state' | 'both'
