@@ -48,12 +48,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from hasa_env.drivers.base import SpeedProfile
 from hasa_env.drivers.human import (
     MIN_SPEED,
     OWN_STREAM,
@@ -62,12 +61,10 @@ from hasa_env.drivers.human import (
     HumanDriver,
     car_streams,
     check_range,
-    params_from_dict,
-    params_to_dict,
 )
-from hasa_env.drivers.lqr import PreviewCost, PreviewFeedback
-from hasa_env.drivers.motor import MotorParams, NoiseBlocks
-from hasa_env.drivers.preview import check_design
+from hasa_env.drivers.lqr import PreviewFeedback
+from hasa_env.drivers.motor import NoiseBlocks
+from hasa_env.drivers.preview import LqrDriverParams
 from hasa_env.road import Road
 
 __all__ = ["ARCHETYPE", "IntermittentParams", "IntermittentDriver", "IntermittentBatch"]
@@ -77,40 +74,27 @@ ARCHETYPE = "intermittent"
 
 
 @dataclass(frozen=True)
-class IntermittentParams:
+class IntermittentParams(LqrDriverParams):
     """Parameters of one intermittent-control driver (SI units, radians).
 
+    The fields of :class:`~hasa_env.drivers.preview.LqrDriverParams` (``cost``:
+    the underlying LQR law) and:
+
     Attributes:
-        name: label ("Ill", "1", ...).
-        cost: cost weights and preview of the underlying LQR law.
         accumulator_gain: k_A (1/(m/s^2 s)), in [0, 1e4].
         accumulator_leak: lambda (1/s), in [0, 100].
         accumulator_noise: sigma_A (1/sqrt(s)), in [0, 10].
         correction_duration: D (s) of a correction, in [0.05, 2].
         refractory_period: s after a correction before the next can start, in [0, 2].
-        wheelbase: L (m) of the driver's internal model, in [0.5, 10].
-        delay: sensorimotor delay (s), in [0, 1].
-        neuromuscular_frequency: omega_n (rad/s) of the lag.
-        neuromuscular_damping: zeta of the lag.
-        speed: the speed behaviour.
-        max_steering: command saturation and wheel limit (rad).
-        motor: remnant and wheel of the output stage.
     """
 
-    name: str = "driver"
-    cost: PreviewCost = field(default_factory=PreviewCost)
+    archetype: ClassVar[str] = ARCHETYPE
+
     accumulator_gain: float = 30.0
     accumulator_leak: float = 1.0
     accumulator_noise: float = 0.3
     correction_duration: float = 0.4
     refractory_period: float = 0.2
-    wheelbase: float = 2.8
-    delay: float = 0.2
-    neuromuscular_frequency: float = 10.0
-    neuromuscular_damping: float = 0.7
-    speed: SpeedProfile = field(default_factory=SpeedProfile)
-    max_steering: float = 0.5
-    motor: MotorParams = field(default_factory=MotorParams)
 
     def __post_init__(self) -> None:
         owner = "IntermittentParams"
@@ -119,20 +103,7 @@ class IntermittentParams:
         check_range(owner, "accumulator_noise", self.accumulator_noise, 0.0, 10.0)
         check_range(owner, "correction_duration", self.correction_duration, 0.05, 2.0)
         check_range(owner, "refractory_period", self.refractory_period, 0.0, 2.0)
-        check_design(owner, self)
-
-    def with_speed(self, speed: SpeedProfile) -> IntermittentParams:
-        """The same driver with another speed behaviour."""
-        return replace(self, speed=speed)
-
-    def to_dict(self) -> dict[str, Any]:
-        """A JSON-able dict of the parameters, with ``"archetype": "intermittent"``."""
-        return params_to_dict(self, ARCHETYPE)
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> IntermittentParams:
-        """Inverse of :meth:`to_dict`."""
-        return params_from_dict(cls, data, ARCHETYPE, cost=PreviewCost.from_dict)
+        super().__post_init__()
 
 
 def minimum_jerk(tau: np.ndarray) -> np.ndarray:

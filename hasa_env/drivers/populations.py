@@ -350,21 +350,24 @@ def _draw_speed(
     )
 
 
-def _draw_two_point(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> DriverParams:
-    r = spec.two_point
+def _two_point_traits(r: TwoPointRanges, rng: np.random.Generator) -> dict:
+    """Noise kind and loop design of a two-point driver, drawn in the original order."""
     white = bool(rng.random() < r.white_noise_probability)
     tau = r.noise_time_constant.draw(rng)
-    return DriverParams.from_loop(
-        bandwidth=r.bandwidth.draw(rng),
-        damping=r.damping.draw(rng),
-        integral_share=r.integral_share.draw(rng),
-        near_time=r.near_time.draw(rng),
-        far_time=r.far_time.draw(rng),
-        speed_exponent=r.speed_exponent.draw(rng),
-        noise_std=r.noise_std.draw(rng),
-        noise_time_constant=0.0 if white else tau,
-        **common,
-    )
+    return {
+        "noise_time_constant": 0.0 if white else tau,
+        "bandwidth": r.bandwidth.draw(rng),
+        "damping": r.damping.draw(rng),
+        "integral_share": r.integral_share.draw(rng),
+        "near_time": r.near_time.draw(rng),
+        "far_time": r.far_time.draw(rng),
+        "speed_exponent": r.speed_exponent.draw(rng),
+    }
+
+
+def _draw_two_point(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> DriverParams:
+    traits = _two_point_traits(spec.two_point, rng)
+    return DriverParams.from_loop(**traits, noise_std=spec.two_point.noise_std.draw(rng), **common)
 
 
 def _draw_preview(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> PreviewParams:
@@ -414,21 +417,14 @@ def _legacy_population(spec: PopulationSpec, seed: int, key: int, size: int) -> 
     drivers: list[HumanParams] = []
     for index, driver_name in enumerate(_driver_names(size)):
         speed = _draw_speed(behaviours[int(order[index])], spec, rng)
-        white = bool(rng.random() < r.white_noise_probability)
-        tau = r.noise_time_constant.draw(rng)
+        traits = _two_point_traits(r, rng)
         params = DriverParams.from_loop(
-            bandwidth=r.bandwidth.draw(rng),
-            damping=r.damping.draw(rng),
-            integral_share=r.integral_share.draw(rng),
-            near_time=r.near_time.draw(rng),
-            far_time=r.far_time.draw(rng),
+            **traits,
             name=driver_name,
-            speed_exponent=r.speed_exponent.draw(rng),
             delay=spec.delay.draw(rng),
             neuromuscular_frequency=spec.neuromuscular_frequency.draw(rng),
             neuromuscular_damping=spec.neuromuscular_damping.draw(rng),
             noise_std=r.noise_std.draw(rng),
-            noise_time_constant=0.0 if white else tau,
             speed=speed,
         )
         if spec.motor is not None:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -41,27 +41,33 @@ from hasa_env.drivers.lqr import PreviewCost, PreviewFeedback
 from hasa_env.drivers.motor import MotorParams
 from hasa_env.road import Road
 
-__all__ = ["ARCHETYPE", "PreviewParams", "PreviewDriver", "PreviewBatch", "check_design"]
+__all__ = ["ARCHETYPE", "LqrDriverParams", "PreviewParams", "PreviewDriver", "PreviewBatch"]
 
 ARCHETYPE = "preview"
 """The archetype name of :class:`PreviewParams` in dicts."""
 
 
 @dataclass(frozen=True)
-class PreviewParams:
-    """Parameters of one preview-optimal-control driver (SI units, radians).
+class LqrDriverParams:
+    """Fields of a driver that steers with the preview LQR design (SI units, radians).
+
+    The base of :class:`PreviewParams` and
+    :class:`~hasa_env.drivers.intermittent.IntermittentParams`; each subclass
+    names its archetype in ``archetype``.
 
     Attributes:
         name: label ("Ill", "1", ...).
         cost: cost weights and preview of the LQR design.
         wheelbase: L (m) of the driver's internal model, in [0.5, 10].
         delay: sensorimotor delay (s), in [0, 1].
-        neuromuscular_frequency: omega_n (rad/s) of the lag.
-        neuromuscular_damping: zeta of the lag.
+        neuromuscular_frequency: omega_n (rad/s) of the lag, in (0, 200].
+        neuromuscular_damping: zeta of the lag, in (0, 5].
         speed: the speed behaviour.
-        max_steering: command saturation and wheel limit (rad).
+        max_steering: command saturation and wheel limit (rad), in (0, 1.5].
         motor: remnant and wheel of the output stage.
     """
+
+    archetype: ClassVar[str]
 
     name: str = "driver"
     cost: PreviewCost = field(default_factory=PreviewCost)
@@ -74,28 +80,31 @@ class PreviewParams:
     motor: MotorParams = field(default_factory=MotorParams)
 
     def __post_init__(self) -> None:
-        check_design("PreviewParams", self)
+        owner = type(self).__name__
+        if not isinstance(self.cost, PreviewCost):
+            raise TypeError(f"{owner}.cost must be a PreviewCost, got {type(self.cost).__name__}")
+        check_range(owner, "wheelbase", self.wheelbase, 0.5, 10.0)
+        check_common(owner, self)
 
-    def with_speed(self, speed: SpeedProfile) -> PreviewParams:
+    def with_speed(self, speed: SpeedProfile) -> Self:
         """The same driver with another speed behaviour."""
         return replace(self, speed=speed)
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-able dict of the parameters, with ``"archetype": "preview"``."""
-        return params_to_dict(self, ARCHETYPE)
+        """A JSON-able dict of the parameters, with the ``"archetype"``."""
+        return params_to_dict(self, self.archetype)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> PreviewParams:
+    def from_dict(cls, data: Mapping[str, Any]) -> Self:
         """Inverse of :meth:`to_dict`."""
-        return params_from_dict(cls, data, ARCHETYPE, cost=PreviewCost.from_dict)
+        return params_from_dict(cls, data, cls.archetype, cost=PreviewCost.from_dict)
 
 
-def check_design(owner: str, params: Any) -> None:
-    """Checks of the preview design's fields (``cost``, ``wheelbase``) and the common ones."""
-    if not isinstance(params.cost, PreviewCost):
-        raise TypeError(f"{owner}.cost must be a PreviewCost, got {type(params.cost).__name__}")
-    check_range(owner, "wheelbase", params.wheelbase, 0.5, 10.0)
-    check_common(owner, params)
+@dataclass(frozen=True)
+class PreviewParams(LqrDriverParams):
+    """Parameters of one preview-optimal-control driver: the fields of :class:`LqrDriverParams`."""
+
+    archetype: ClassVar[str] = ARCHETYPE
 
 
 class PreviewDriver(HumanDriver):
