@@ -20,6 +20,7 @@ around a batch of one.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import fields
 from typing import Any, ClassVar
@@ -121,7 +122,7 @@ def car_streams(seed: int | None, key: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
 
 
-class HumanBatch:
+class HumanBatch(ABC):
     """Base of the archetypes' batches: N drivers of one archetype acting on N cars' arrays.
 
     Subclasses set ``params_type`` and implement :meth:`_reset` (per-run set-up),
@@ -188,14 +189,17 @@ class HumanBatch:
         return steering, acceleration
 
     # ------------------------------------------------------------ archetype hooks
+    @abstractmethod
     def _reset(self, seeds: Sequence[int | None], dt: float) -> None:
-        raise NotImplementedError
+        """Per-run set-up (``self.delay_steps`` is known; the output stage is reset)."""
 
+    @abstractmethod
     def _start(self, info: Mapping[str, np.ndarray], road: Road, steering: np.ndarray) -> None:
-        raise NotImplementedError
+        """The control law's state at the first step, from the true ``info`` and steering (rad)."""
 
+    @abstractmethod
     def _command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
-        raise NotImplementedError
+        """The command u(k) (rad, road wheel) of each car at this step."""
 
 
 class HumanDriver:
