@@ -4,7 +4,8 @@
 recording columns, :data:`hasa_env.core.RECORDING_COLUMNS`) to an
 estimator as one batch: row 0 resets it, row k steps it with row k's
 measurements and IMU. Runs of different lengths are padded (their padded
-steps are marked invalid).
+steps are marked invalid). Each recording's row spacing must be the
+estimator's sample time (:func:`estimators.timing.check_sample_time`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import pandas as pd
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
+from estimators.timing import check_sample_time, recording_sample_time
 
 __all__ = ["EstimationResult", "run_estimator", "hypotheses_of", "TRUTH_COLUMNS"]
 
@@ -145,6 +147,10 @@ def run_estimator(
 
     Returns:
         An :class:`EstimationResult` (a single recording gives R = 1).
+
+    Raises:
+        ValueError: a recording lacks sensor columns, is empty, or is sampled at
+            another rate than the estimator's (naming both rates).
     """
     if isinstance(frames, pd.DataFrame):
         frames = [frames]
@@ -158,6 +164,13 @@ def run_estimator(
             raise ValueError(f"recording {i} lacks the columns {missing}")
         if len(frame) < 1:
             raise ValueError(f"recording {i} is empty")
+        timing = recording_sample_time(frame)
+        if timing is not None:
+            step, frequency, repeat = timing
+            source = "the recording" if len(frames) == 1 else f"recording {i}"
+            check_sample_time(
+                estimator, step, source=source, sim_frequency=frequency, action_repeat=repeat
+            )
     lengths = np.array([len(f) for f in frames])
     n_steps = int(lengths.max())
     z = np.full((n_runs, n_steps, 3), np.nan)

@@ -46,6 +46,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
+from estimators.timing import check_sample_time, config_sample_time
 
 __all__ = [
     "EstimatorInfoWrapper",
@@ -160,20 +161,10 @@ def _markings(config: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray 
 def _check_timing(config: Mapping[str, Any] | None, estimator: LaneEstimator) -> None:
     if config is None:
         return
-    repeat = int(config.get("action_repeat", 1))
-    if repeat != 1:
-        raise ValueError(
-            f"the env has action_repeat={repeat}: its sensors and IMU are sampled once per "
-            "env step but the IMU averages only the last simulation sample, so the estimator "
-            "cannot predict across a step; use action_repeat=1"
-        )
-    env_dt = 1.0 / float(config["sim_frequency"])
-    est_dt = getattr(estimator, "dt", env_dt)
-    if abs(env_dt - est_dt) > 1e-12 * max(env_dt, 1.0):
-        raise ValueError(
-            f"the estimator's sample time {est_dt:g} s differs from the env's {env_dt:g} s "
-            "(1 / sim_frequency)"
-        )
+    step, frequency, repeat = config_sample_time(config)
+    check_sample_time(
+        estimator, step, source="the env", sim_frequency=frequency, action_repeat=repeat
+    )
 
 
 def _single_config(env: gym.Env) -> Mapping[str, Any] | None:
@@ -200,8 +191,9 @@ class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     Given a vector env this constructs a :class:`VectorEstimatorInfoWrapper`.
 
     Args:
-        env: a hasa env (``action_repeat`` 1; the estimator's dt must equal
-            the env's 1 / sim_frequency).
+        env: a hasa env whose step (``action_repeat / sim_frequency``) equals
+            the estimator's dt and its steering model's Ts
+            (:func:`estimators.timing.check_sample_time`).
         estimator: any :class:`~estimators.base.LaneEstimator`.
         hypotheses: lane hypotheses b_i (m); default the env's config.
         prior: their probabilities; default the env's config (uniform if unset).
