@@ -514,10 +514,7 @@ class FilterMatrices:
         z: np.ndarray,
         n_comp: int,
         all_observed: bool,
-        *,
-        road_points: np.ndarray | None = None,
-        gate: float = math.inf,
-        log_weights: np.ndarray | None = None,
+        **options: Any,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Joseph-form EKF update of every hypothesis and its log-likelihood.
 
@@ -526,23 +523,13 @@ class FilterMatrices:
             z: (R, 3) measurements (steering in model units); NaN = missing.
             n_comp: C.
             all_observed: True when z has no NaN.
-            road_points: (R, 4) road points at this sample (None: straight road).
-            gate, log_weights: the outlier gate and the (R, C) log weights
-                before the update (see :meth:`gated_update_batch`); default no gate.
+            **options: ``road_points``, ``gate`` and ``log_weights`` of
+                :meth:`gated_update_batch` (default: straight road, no gate).
 
         Returns:
             x(k|k) (B, n), P(k|k) (B, n, n), log N(nu; 0, S) (B,).
         """
-        return self.gated_update_batch(
-            x,
-            cov,
-            z,
-            n_comp,
-            all_observed,
-            road_points=road_points,
-            gate=gate,
-            log_weights=log_weights,
-        )[:3]
+        return self.gated_update_batch(x, cov, z, n_comp, all_observed, **options)[:3]
 
     def gated_update_batch(
         self,
@@ -557,6 +544,8 @@ class FilterMatrices:
         log_weights: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`update_batch` with the outlier gate g of :class:`FilterSettings`.
+
+        ``road_points``: (R, 4) road points at this sample (None: straight road).
 
         Channel c of run r is dropped for every hypothesis of that run when
         no hypothesis explains it, each weighed by its log-odds against the
