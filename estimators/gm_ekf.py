@@ -378,6 +378,7 @@ class FilterMatrices:
         self._h_maps = h_maps.reshape(4, 3 * n).copy()
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
         self._h_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
         self._measurement_var_column = self.measurement_var[:, None].copy()
         self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
         self._theta_sign = np.array([-1.0, 1.0])
@@ -560,17 +561,19 @@ class FilterMatrices:
             (R, 3) mask of gated channels.
         """
         points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
-        x_post, cov_post, log_lik, innovation, s_diag = self._update(
+        x_post, cov_post, log_lik, innovation, s_diag, distance_sq = self._update(
             x, cov, z, n_comp, all_observed, points_b
         )
         n_runs = z.shape[0]
-        no_gate = np.zeros((n_runs, 3), dtype=bool)
         if log_weights is None or math.isinf(gate):
-            return x_post, cov_post, log_lik, no_gate
-        # quick exit: the most likely hypothesis explains every channel (its score has no odds)
-        favourite = np.arange(0, n_runs * n_comp, n_comp) + log_weights.argmax(axis=1)
-        if not (np.abs(innovation[favourite]) > gate * np.sqrt(s_diag[favourite])).any():
-            return x_post, cov_post, log_lik, no_gate
+            return x_post, cov_post, log_lik, np.zeros((n_runs, 3), dtype=bool)
+        # quick exit: the most likely hypothesis explains every channel, its score having no
+        # odds; nu_c^2 / S_cc <= nu^T S^-1 nu (Cauchy-Schwarz), so its distance bounds them all
+        favourite = log_weights.argmax(axis=1)
+        if n_comp > 1:
+            favourite += self._run_offsets(n_runs, n_comp)
+        if distance_sq[favourite].max() <= gate * gate:
+            return x_post, cov_post, log_lik, np.zeros((n_runs, 3), dtype=bool)
         odds = log_weights.max(axis=1, keepdims=True) - log_weights  # (R, C), >= 0 (inf: pruned)
         with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
             score = (innovation * innovation / s_diag).reshape(n_runs, n_comp, 3)
@@ -578,7 +581,7 @@ class FilterMatrices:
         gated = score.min(axis=1) > gate * gate
         if gated.any():
             z = np.where(gated, np.nan, z)
-            x_post, cov_post, log_lik, _, _ = self._update(x, cov, z, n_comp, False, points_b)
+            x_post, cov_post, log_lik, *_ = self._update(x, cov, z, n_comp, False, points_b)
         return x_post, cov_post, log_lik, gated
 
     def _update(
@@ -590,7 +593,8 @@ class FilterMatrices:
         all_observed: bool,
         points: np.ndarray | None,
     ) -> tuple[np.ndarray, ...]:
-        """The update, plus the innovations (B, 3) (0 where missing) and diag(S) (B, 3)."""
+        """The update, plus the innovations (B, 3) (0 where missing), diag(S) (B, 3) and
+        the squared Mahalanobis distances ``nu^T S^-1 nu`` (B,)."""
         n = x.shape[1]
         n_b = x.shape[0]
         speed = np.hypot(x[:, VX], x[:, VY])
@@ -630,7 +634,7 @@ class FilterMatrices:
         s = hp @ jac_t
         s = s.reshape(n_b, 9)
         s[:, ::4] += r
-        s_diag = s[:, ::4].copy()
+        s_diag = s[:, ::4]  # (s is not written to below)
         s_inv, det = _inverse_3x3(s)
         gain_t = s_inv @ hp  # K^T (B, 3, n)
         gain = gain_t.transpose(0, 2, 1)
@@ -648,10 +652,19 @@ class FilterMatrices:
         cov_post += joseph.transpose(0, 2, 1)
         cov_post *= 0.5
         mahalanobis_sq = np.einsum("bi,bij,bj->b", innovation, s_inv, innovation)
-        mahalanobis_sq += np.log(det)
-        mahalanobis_sq += n_obs * _LOG_2PI
-        mahalanobis_sq *= -0.5
-        return x_post, cov_post, mahalanobis_sq, innovation, s_diag
+        log_lik = mahalanobis_sq + np.log(det)
+        log_lik += n_obs * _LOG_2PI
+        log_lik *= -0.5
+        return x_post, cov_post, log_lik, innovation, s_diag, mahalanobis_sq
+
+    def _run_offsets(self, n_runs: int, n_comp: int) -> np.ndarray:
+        """``[0, C, 2C, ...]`` (R,): the flat index of each run's first hypothesis (cached)."""
+        cached = self._offsets_cache.get((n_runs, n_comp))
+        if cached is None:
+            cached = np.arange(0, n_runs * n_comp, n_comp)
+            cached.setflags(write=False)
+            self._offsets_cache = {(n_runs, n_comp): cached}
+        return cached
 
     def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
         """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
@@ -985,7 +998,8 @@ class GaussianMixtureEKF:
             for name, value in new.items():
                 setattr(self, name, value)
             self._points = points
-            self._gated_count = self._gated_count + self._gated
+            if self._gated.any():
+                self._gated_count = self._gated_count + self._gated
         else:
             idx = self._check_runs(runs, z.shape[0], None)
             if acc.shape != (idx.size, 2) or z.shape != (idx.size, 3):
@@ -1220,7 +1234,7 @@ def _plausible_acceleration(acc: np.ndarray, limit: float) -> np.ndarray:
         if math.isfinite(acc.sum()):
             return acc
         return np.where(np.isfinite(acc), acc, np.nan)
-    if acc.max() <= limit and acc.min() >= -limit:  # False with a NaN
+    if np.abs(acc).max() <= limit:  # False with a NaN
         return acc
     return np.where(np.abs(acc) <= limit, acc, np.nan)
 
