@@ -92,11 +92,13 @@ class FilterSettings:
             ``1 / |v|`` degenerate as v -> 0). When the estimate rises above it
             again the memory states restart from the measured steering and
             each hypothesis' own bearings, as at reset. Default 3 m/s (11
-            km/h): at 3 m/s a lateral-velocity error of 0.03 m/s already
-            tilts theta by 10 mrad, the size of the near-point bearing of a
-            6 cm offset, so the bearings stop carrying lane information; and
-            the steering models describe lane keeping at road speeds (the
-            paper fits 15-45 m/s), not manoeuvring. 0 turns it off.
+            km/h): the filter's lateral-velocity error is about 0.03 m/s rms
+            on the synthetic population (0.005 m/s with a matched model),
+            which at 3 m/s tilts theta by 10 mrad, the near-point bearing of
+            a 6 cm offset (at 15 m/s: 2 mrad), so the bearings stop carrying
+            lane information; and the steering models describe lane keeping
+            at road speeds (the paper fits 15-45 m/s), not manoeuvring. 0
+            turns it off.
         max_acceleration: IMU readings with |a| above this (m/s^2) are
             implausible and treated as missing, like NaN (input 0 with
             ``missing_acceleration_std``). Default 50 m/s^2 (about 5 g):
