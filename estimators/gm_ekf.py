@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import KW_ONLY, dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -121,6 +121,7 @@ class FilterSettings:
     memory_process_std: float = 0.0
     missing_acceleration_std: float = 3.0
     prune_threshold: float = 1e-10
+    _: KW_ONLY  # the fields below are keyword-only
     innovation_gate: float = 6.0
     min_speed: float = 3.0
     max_acceleration: float = 50.0
