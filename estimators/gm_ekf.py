@@ -30,8 +30,8 @@ __all__ = ["FilterSettings", "GaussianMixtureEKF", "FilterMatrices"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 _VARIANTS = ("full", "decorrelated", "held")  # transition tables, by code 0, 1, 2
-_STEPPED = ("_log_w", "_active", "_steering", "_slow")
-"""Per-run arrays of :class:`GaussianMixtureEKF` that a step reads and replaces."""
+_STEPPED = ("_log_w", "_active", "_steering", "_slow", "_gated_count")
+"""Per-run arrays of :class:`GaussianMixtureEKF` that a step reads (and may replace)."""
 
 
 @dataclass(frozen=True)
@@ -1001,8 +1001,6 @@ class GaussianMixtureEKF:
             for name, value in new.items():
                 setattr(self, name, value)
             self._points = points
-            if self._gated.any():
-                self._gated_count = self._gated_count + self._gated
         else:
             idx = self._check_runs(runs, z.shape[0], None)
             if acc.shape != (idx.size, 2) or z.shape != (idx.size, 3):
@@ -1020,8 +1018,6 @@ class GaussianMixtureEKF:
                 array = getattr(self, name).copy()
                 array[idx] = value
                 setattr(self, name, array)
-            self._gated_count = self._gated_count.copy()
-            self._gated_count[idx] += self._gated[idx]
             self._store_points(idx, points)
         return self.estimate()
 
@@ -1107,13 +1103,14 @@ class GaussianMixtureEKF:
         points: np.ndarray | None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """One step of runs whose per-run state ``run`` holds the :data:`_STEPPED` arrays;
-        returns x(k|k), P(k|k) and their new values (plus ``_gated``)."""
+        returns x(k|k), P(k|k) and the new values of those that changed (and ``_gated``)."""
         mats = self.matrices
         settings = self.settings
         log_w, active, slow = run["_log_w"], run["_active"], run["_slow"]
         n_comp = log_w.shape[1]
         z = z * self._measurement_scale  # steering in model units (NaN without a model)
-        if not math.isfinite(z.sum()):  # NaN and +-inf are missing
+        all_observed = math.isfinite(z.sum())
+        if not all_observed:  # NaN and +-inf are missing
             z = np.where(np.isfinite(z), z, np.nan)
         acc = _plausible_acceleration(acc, settings.max_acceleration)
         steering = z[:, 2]
@@ -1130,7 +1127,7 @@ class GaussianMixtureEKF:
         if any_slow:  # no steering evidence at low speed
             z = z.copy()
             z[slow, 2] = np.nan
-        all_observed = not math.isnan(z.sum())
+            all_observed = False
         x_post, cov_post, log_lik, gated = mats.gated_update_batch(
             x_pred,
             cov_pred,
@@ -1177,7 +1174,8 @@ class GaussianMixtureEKF:
                 new_slow = new_slow | (slow & np.isnan(steering))
         if restart is not None and restart.any():
             self._restart_memory(x_post, cov_post, restart, new_active, steering, points)
-        if gated[:, 2].any():  # an outlier must not enter the memory at the next prediction
+        any_gated = bool(gated.any())
+        if any_gated and gated[:, 2].any():  # an outlier must not enter the next memory update
             dropped = gated[:, 2] if restart is None else gated[:, 2] & ~restart
             steering = np.where(dropped, np.nan, steering)
         new = {
@@ -1187,6 +1185,8 @@ class GaussianMixtureEKF:
             "_slow": new_slow,
             "_gated": gated,
         }
+        if any_gated:
+            new["_gated_count"] = run["_gated_count"] + gated
         return x_post, cov_post, new
 
     def _restart_memory(
