@@ -1,7 +1,7 @@
 """The augmented state-space model: vehicle + bias + an ARX steering model's memory.
 
-Paper section 5.1 (eqs. 11-14), generalised to any ARX order and corrected
-as in DESIGN.md section 5. Equation numbers count the equations of the
+Paper section 4.1 (eqs. 11-14), generalised to any ARX order and corrected
+as in docs/design.md §8.2. Equation numbers count the equations of the
 paper's source (``paper/000_27bb222d17a6bc2b.txt``): (4) discrete vehicle
 model, (5)-(6) bearings, (8) generalized steering model, (10) its fitted
 form, (11) augmented transition, (12) sensor model, (13) A_h, (14) C_h,
@@ -17,7 +17,7 @@ lateral offset from the lane centre of this hypothesis (m), ``b`` camera bias
 canonical form. With no steering model (``arx=None``) the state is the first
 four entries (paper eq. 4).
 
-Visual features of a state (DESIGN.md section 3). With the road points
+Visual features of a state (docs/design.md §5.1 and §5.2). With the road points
 ``p = (dx_near, dy_near, dx_far, dy_far)`` (m) of the lane centre ahead in
 the road-tangent frame at the car (:mod:`estimators.road_geometry`; a known
 input per step)::
@@ -38,7 +38,7 @@ the vector (b_j, c_j, d_j) multiplying u(k-j), zero beyond each order)::
     delta(k) = sum_{j=1}^{n} a_j delta(k-j) + sum_{j=0}^{n} beta_j . u(k-j) + e(k)
 
 Observer canonical form (the corrected, non-circular g_i of paper eq. 11; for the
-paper's order it is DESIGN.md's g1, g2, g3 and h3)::
+paper's order it is the g1, g2, g3 and h3 of docs/design.md §8.3)::
 
     delta(k)   = m_n(k) + beta_0 . u(k) + e(k)                                 (h3)
     m_i(k+1)   = a_{n-i+1} delta(k) + beta_{n-i+1} . u(k) + m_{i-1}(k),  m_0 = 0
@@ -52,14 +52,14 @@ Vehicle (paper eq. 4) with the IMU's road-frame accelerations as inputs::
     v_y(k+1) = v_y + Ts a_y
     b(k+1)   = b
 
-Measurements (paper eq. 12, with DESIGN.md's erratum: the speedometer
+Measurements (paper eq. 12, with the erratum of docs/design.md §10: the speedometer
 measures the speed, so h1 is the exact speed, not v_x)::
 
     h1 = sqrt(v_x^2 + v_y^2)      speedometer (m/s)
     h2 = y + b                    camera (m)
     h3 = m_n + beta_0 . u         steering, in the model's units (rad)
 
-Jacobians (paper eqs. 13-14, exact: DESIGN.md notes the paper's A_h has
+Jacobians (paper eqs. 13-14, exact: docs/design.md §10 notes the paper's A_h has
 a_2 c_0 / 6.2 where / 20 belongs, and its entries are small-angle ones)::
 
     d theta / d v_x = -v_y / (v_x^2 + v_y^2),   d theta / d v_y = v_x / (v_x^2 + v_y^2)
@@ -396,7 +396,7 @@ class ARXStateSpace:
 
         Unrolling g_i gives ``m_i = sum_{j=n-i+1}^{n} (a_j delta + beta_j . u)``.
         Each hypothesis passes its *own* state ``x`` (its own y), so the
-        memory never encodes which lane is true (DESIGN.md section 5).
+        memory never encodes which lane is true (docs/design.md §8.1).
 
         Args:
             steering: measured steering delta (rad, model units), shape (...).

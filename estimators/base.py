@@ -12,7 +12,7 @@ Measurements (one row per run), in :data:`MEASUREMENT_KEYS` order:
 Inputs, in :data:`ACCELERATION_KEYS` order: the IMU's road-frame
 accelerations (a_x, a_y) (m/s^2) averaged over the sample that *ended* at this
 row; predicting state k from k-1 uses row k's IMU, then row k's measurements
-update it (paper eq. 4, DESIGN.md section 2). A non-finite measurement
+update it (paper eq. 4, docs/design.md §4.5). A non-finite measurement
 (NaN, +-inf) is missing (that row of the update is skipped); a non-finite
 acceleration is treated as zero with a large process noise.
 
@@ -56,7 +56,7 @@ class Estimate:
     read-only (they may be shared with the estimator's next step input).
 
     Attributes:
-        mean: (..., n) mixture mean ``sum_i w_i x_i`` (paper section 5.2).
+        mean: (..., n) mixture mean ``sum_i w_i x_i`` (paper section 4.2).
         component_means: (..., C, n) per-hypothesis state means x_i.
         component_covariances: (..., C, n, n) per-hypothesis covariances P_i.
         weights: (..., C) hypothesis probabilities w_i (sum 1; 0 once pruned).

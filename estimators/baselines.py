@@ -1,4 +1,4 @@
-"""Baselines of the human-as-advisor estimator (DESIGN.md section 5).
+"""Baselines of the human-as-advisor estimator (docs/design.md §8.10).
 
 - :class:`NoSteeringEKF`: the mixture filter without the human's steering
   (speed and camera only). The camera measures y + b, so the lanes cannot be

@@ -20,7 +20,8 @@ from scipy.special import logsumexp
 
 from estimators.arx_state_space import ARXStateSpace, check_road_points
 from estimators.base import Estimate
-from estimators.gm_ekf import FilterMatrices, FilterSettings
+from estimators.filter_matrices import FilterMatrices
+from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
 __all__ = ["FilterpyGMEKF", "ARXExtendedKalmanFilter"]
