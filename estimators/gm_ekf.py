@@ -490,8 +490,13 @@ class GaussianMixtureEKF:
             if newly.any():
                 newly[np.arange(newly.shape[0]), new_log_w.argmax(axis=1)] = False
                 new_active = active & ~newly
-                new_log_w = _normalize_log_weights(
-                    np.where(new_active, new_log_w, -np.inf), new_log_w
+                # renormalize only the runs that pruned: a run's weights never depend on
+                # what the other runs of the batch did
+                pruned = newly.any(axis=1, keepdims=True)
+                new_log_w = np.where(
+                    pruned,
+                    _normalize_log_weights(np.where(new_active, new_log_w, -np.inf), new_log_w),
+                    new_log_w,
                 )
         # ---- low speed: steering off below min_speed, memory restarted above it
         new_slow = slow

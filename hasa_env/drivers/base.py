@@ -197,8 +197,12 @@ class LoopBatch:
         self.drivers = [copy.deepcopy(d) for d in drivers]
         self.num_cars = len(self.drivers)
 
-    def reset(self, seeds: Sequence[int | None], dt: float) -> None:
-        for driver, seed in zip(self.drivers, seeds, strict=True):
+    def reset(
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | None = None
+    ) -> None:
+        """Reset every car's driver, or only those of ``cars`` (indices, one seed each)."""
+        drivers = self.drivers if cars is None else [self.drivers[int(i)] for i in cars]
+        for driver, seed in zip(drivers, seeds, strict=True):
             driver.reset(seed, dt=dt)
 
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
@@ -218,9 +222,23 @@ class CompositeBatch:
         self.parts = [(np.asarray(idx, dtype=np.int64), batch) for idx, batch in parts]
         self.num_cars = num_cars
 
-    def reset(self, seeds: Sequence[int | None], dt: float) -> None:
+    def reset(
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | None = None
+    ) -> None:
+        """Reset every car's driver, or only those of ``cars`` (indices, one seed each;
+        the parts must support partial resets, as :class:`~hasa_env.drivers.human.HumanBatch`)."""
+        if cars is None:
+            for idx, batch in self.parts:
+                batch.reset([seeds[i] for i in idx.tolist()], dt)
+            return
+        rows = np.asarray(cars, dtype=np.int64).reshape(-1)
+        if len(seeds) != rows.size:
+            raise ValueError(f"got {len(seeds)} seeds for {rows.size} cars")
+        seed_of = dict(zip(rows.tolist(), seeds, strict=True))
         for idx, batch in self.parts:
-            batch.reset([seeds[i] for i in idx.tolist()], dt)
+            local = np.flatnonzero(np.isin(idx, rows))
+            if local.size:
+                batch.reset([seed_of[int(idx[j])] for j in local.tolist()], dt, local)
 
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
         steering = np.zeros(self.num_cars)
@@ -232,6 +250,14 @@ class CompositeBatch:
             steering[idx] = s
             acceleration[idx] = a
         return steering, acceleration
+
+    def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        """The steering of :meth:`act` alone (parts with a ``steer`` method)."""
+        steering = np.zeros(self.num_cars)
+        keys = [k for k in info if not k.startswith("_")]
+        for idx, batch in self.parts:
+            steering[idx] = batch.steer({k: np.asarray(info[k])[idx] for k in keys}, road)
+        return steering
 
 
 def make_batch(drivers: Sequence[Driver]) -> BatchDriver:

@@ -93,8 +93,9 @@ def lane_bearings(
 class DelayLine:
     """A pure delay of ``steps[i]`` env steps on car i's vector of ``width`` signals.
 
-    The first call fills the line with its input (the driver has seen the
+    A car's first call fills its line with its input (the driver has seen the
     initial state for ever); each call returns the input of ``steps`` calls ago.
+    :meth:`restart` makes some cars' next call a first call again.
     """
 
     def __init__(self, steps: np.ndarray, width: int) -> None:
@@ -104,13 +105,18 @@ class DelayLine:
         self._buffer = np.zeros((self._ring, self.steps.size, self.width))
         self._rows = np.arange(self.steps.size)
         self._pos = 0
-        self._fresh = True
+        self._fresh = np.ones(self.steps.size, dtype=bool)
+
+    def restart(self, cars: np.ndarray) -> None:
+        """The next call is the first one for cars ``cars`` (indices)."""
+        self._fresh[cars] = True
 
     def __call__(self, values: np.ndarray) -> np.ndarray:
         values = np.asarray(values, dtype=np.float64)
-        if self._fresh:
-            self._buffer[:] = values[None]
-            self._fresh = False
+        if self._fresh.any():
+            fresh = self._fresh
+            self._buffer[:, fresh] = values[None, fresh]
+            self._fresh = np.zeros(self.steps.size, dtype=bool)
         self._buffer[self._pos] = values
         seen = self._buffer[(self._pos - self.steps) % self._ring, self._rows]
         self._pos = (self._pos + 1) % self._ring
@@ -130,6 +136,10 @@ class HumanBatch(ABC):
     :meth:`_command` (the command u(k), rad, of the control law). The output
     stage turns it into the applied steering; :func:`speed_command` gives the
     acceleration.
+
+    ``reset(seeds, dt, cars=...)`` restarts only some cars (a vector env's
+    autoreset): each restarted car then drives exactly as a driver reset
+    alone with its seed, while the others go on.
     """
 
     params_type: ClassVar[type]
@@ -163,7 +173,30 @@ class HumanBatch(ABC):
         """The field ``key`` of every driver, as a float64 array."""
         return np.array([getattr(p, key) for p in self.params], dtype=np.float64)
 
-    def reset(self, seeds: Sequence[int | None], dt: float) -> None:
+    def reset(
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | None = None
+    ) -> None:
+        """Start every car's run (``seeds``: one per car), or only those of ``cars``.
+
+        Args:
+            seeds: one seed per car (per entry of ``cars`` when given).
+            dt: the env step (s); a partial reset keeps the batch's.
+            cars: indices of the cars to restart (None: all); the others go on.
+        """
+        if cars is not None:
+            rows = np.asarray(cars, dtype=np.int64).reshape(-1)
+            if len(seeds) != rows.size:
+                raise ValueError(f"got {len(seeds)} seeds for {rows.size} cars")
+            if self._dt is None:
+                raise RuntimeError("reset the whole batch (cars=None) before restarting cars")
+            if rows.size and (rows.min() < 0 or rows.max() >= self.num_cars):
+                raise IndexError(f"cars must index the batch of {self.num_cars} drivers")
+            if float(dt) != self._dt:
+                raise ValueError(f"a partial reset keeps the batch's dt = {self._dt} s, got {dt}")
+            self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt, rows)
+            self._reset(seeds, self._dt, rows)
+            self._fresh[rows] = True
+            return
         if len(seeds) != self.num_cars:
             raise ValueError(f"got {len(seeds)} seeds for {self.num_cars} drivers")
         if not dt > 0:
@@ -171,31 +204,56 @@ class HumanBatch(ABC):
         self._dt = float(dt)
         self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
         self.delay_steps = np.array([round(p.delay / dt) for p in self.params], dtype=np.int64)
-        self._reset(seeds, self._dt)
-        self._fresh = True
+        self._reset(seeds, self._dt, None)
+        self._all_fresh = True
+        self._fresh = np.ones(self.num_cars, dtype=bool)
 
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
-        if self._dt is None:
-            raise RuntimeError("call reset() before act()")
-        if self._fresh:
-            start = np.asarray(info["steering"], dtype=np.float64)
-            self.motor.start(start)
-            self._initial_speed = np.asarray(info["speed"], dtype=np.float64).copy()
-            self._start(info, road, start)
-            self._fresh = False
-        command = self._command(info, road)
-        steering = self.motor.step(command, info["speed"])
+        steering = self.steer(info, road)
         acceleration = speed_command(self.profile, self._initial_speed, info, road)
         return steering, acceleration
 
+    def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        """The steering of :meth:`act` alone (rad, road wheel), without the speed command.
+
+        For callers that use only the steering (a human advising while the car
+        drives): the same steering, and the next calls stay the same.
+        """
+        if self._dt is None:
+            raise RuntimeError("call reset() before act()")
+        if self._all_fresh:
+            start = np.asarray(info["steering"], dtype=np.float64)
+            self.motor.start(start)
+            self._initial_speed = np.asarray(info["speed"], dtype=np.float64).copy()
+            self._start(info, road, start, None)
+            self._all_fresh = False
+            self._fresh = np.zeros(self.num_cars, dtype=bool)
+        elif self._fresh.any():
+            rows = np.flatnonzero(self._fresh)
+            start = np.asarray(info["steering"], dtype=np.float64)
+            self.motor.start(start, rows)
+            self._initial_speed[rows] = np.asarray(info["speed"], dtype=np.float64)[rows]
+            self._start(info, road, start, rows)
+            self._fresh = np.zeros(self.num_cars, dtype=bool)
+        command = self._command(info, road)
+        return self.motor.step(command, info["speed"])
+
     # ------------------------------------------------------------ archetype hooks
     @abstractmethod
-    def _reset(self, seeds: Sequence[int | None], dt: float) -> None:
-        """Per-run set-up (``self.delay_steps`` is known; the output stage is reset)."""
+    def _reset(self, seeds: Sequence[int | None], dt: float, cars: np.ndarray | None) -> None:
+        """Per-run set-up of every car (``cars`` None; ``self.delay_steps`` is known) or of
+        the cars ``cars`` (indices, one seed each); the output stage is reset."""
 
     @abstractmethod
-    def _start(self, info: Mapping[str, np.ndarray], road: Road, steering: np.ndarray) -> None:
-        """The control law's state at the first step, from the true ``info`` and steering (rad)."""
+    def _start(
+        self,
+        info: Mapping[str, np.ndarray],
+        road: Road,
+        steering: np.ndarray,
+        cars: np.ndarray | None,
+    ) -> None:
+        """The control law's state at the first step, from the true ``info`` and steering
+        (rad) of every car: all cars (``cars`` None) or only ``cars`` (indices)."""
 
     @abstractmethod
     def _command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:

@@ -134,8 +134,13 @@ class IntermittentBatch(HumanBatch):
         )
         self.wheelbase = self.arr("wheelbase")
 
-    def _reset(self, seeds: Sequence[int | None], dt: float) -> None:
-        self._noise = NoiseBlocks([car_streams(s, OWN_STREAM) for s in seeds], 1)
+    def _reset(self, seeds: Sequence[int | None], dt: float, cars: np.ndarray | None) -> None:
+        rngs = [car_streams(s, OWN_STREAM) for s in seeds]
+        if cars is not None:
+            self._noise.restart(cars, rngs)
+            self._delay.restart(cars)
+            return
+        self._noise = NoiseBlocks(rngs, 1)
         self._delay = DelayLine(self.delay_steps, 4)
         self.duration_steps = np.array(
             [max(1, round(p.correction_duration / dt)) for p in self.params], dtype=np.int64
@@ -147,7 +152,19 @@ class IntermittentBatch(HumanBatch):
         slots = -(-self.duration_steps // (self.refractory_steps + 1)) + 1
         self.slots = int(slots.max())
 
-    def _start(self, info: Mapping[str, np.ndarray], road: Road, steering: np.ndarray) -> None:
+    def _start(
+        self,
+        info: Mapping[str, np.ndarray],
+        road: Road,
+        steering: np.ndarray,
+        cars: np.ndarray | None,
+    ) -> None:
+        if cars is not None:
+            self._base[cars] = steering[cars]
+            for name in ("_amplitude", "_age", "_active", "_accumulator", "_refractory",
+                         "launches"):  # fmt: skip
+                getattr(self, name)[cars] = 0
+            return
         n, m = self.num_cars, self.slots
         self._base = steering.copy()
         self._amplitude = np.zeros((n, m))

@@ -206,22 +206,32 @@ class NoiseBlocks:
 
     Every :data:`NOISE_BLOCK` steps each car draws ``(channels, NOISE_BLOCK)``
     numbers from its generator, so a car's noise is the same alone or in any
-    batch. ``next()`` returns the (N, channels) draws of one step.
+    batch. ``next()`` returns the (N, channels) draws of one step;
+    :meth:`restart` gives some cars new generators (their next draw starts a
+    new block), as a car's first block after a reset.
     """
 
     def __init__(self, rngs: Sequence[np.random.Generator], channels: int) -> None:
         self.rngs = list(rngs)
         self.channels = int(channels)
         self._block = np.zeros((len(self.rngs), self.channels, NOISE_BLOCK))
-        self._pos = NOISE_BLOCK
+        self._pos = np.full(len(self.rngs), NOISE_BLOCK, dtype=np.int64)  # per car
+        self._rows = np.arange(len(self.rngs))
+
+    def restart(self, cars: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
+        """Cars ``cars`` (indices) draw from ``rngs`` (one each) from their next step on."""
+        for i, rng in zip(np.asarray(cars).tolist(), rngs, strict=True):
+            self.rngs[i] = rng
+            self._pos[i] = NOISE_BLOCK
 
     def next(self) -> np.ndarray:
-        if self._pos >= NOISE_BLOCK:
-            for i, rng in enumerate(self.rngs):
-                self._block[i] = rng.standard_normal((self.channels, NOISE_BLOCK))
-            self._pos = 0
-        out = self._block[:, :, self._pos]
-        self._pos += 1
+        pos = self._pos
+        if pos.max() >= NOISE_BLOCK:
+            for i in np.flatnonzero(pos >= NOISE_BLOCK).tolist():
+                self._block[i] = self.rngs[i].standard_normal((self.channels, NOISE_BLOCK))
+                pos[i] = 0
+        out = self._block[self._rows, :, pos]
+        pos += 1
         return out
 
 
@@ -262,8 +272,23 @@ class MotorStage:
         self.ratio, self.resolution = arr("steering_ratio"), arr("wheel_resolution")
         self._dt: float | None = None
 
-    def reset(self, rngs: Sequence[np.random.Generator], dt: float) -> None:
-        """Start a run with time step ``dt`` (s), drawing each car's remnant from ``rngs[i]``."""
+    def reset(
+        self, rngs: Sequence[np.random.Generator], dt: float, cars: np.ndarray | None = None
+    ) -> None:
+        """Start a run with time step ``dt`` (s), drawing each car's remnant from ``rngs[i]``.
+
+        With ``cars`` (indices; ``rngs`` then has one generator per entry) only
+        those cars start a new run, with the batch's ``dt``; the others go on.
+        """
+        if cars is not None:
+            if self._dt is None or float(dt) != self._dt:
+                raise ValueError(
+                    "MotorStage.reset(cars=...) restarts cars of a running batch at its dt "
+                    f"({self._dt} s); got dt = {dt} s"
+                )
+            self._noise.restart(cars, rngs)
+            self._fresh[cars] = True
+            return
         self._dt = float(dt)
         lags = [
             neuromuscular_lag(float(w), float(z), self._dt)
@@ -301,17 +326,28 @@ class MotorStage:
         self._q = np.where(self.quantized, self.resolution, 1.0)
         self._levels = np.floor(self.ratio * self.max_steering / self._q)
         self._noise = NoiseBlocks(rngs, 4 if self.commanded else 3)
-        self._fresh = True
+        self._fresh = np.ones(self.num_cars, dtype=bool)
 
-    def start(self, steering: np.ndarray) -> None:
-        """The lag at rest at the car's initial steering (rad), the remnant at its start."""
+    def start(self, steering: np.ndarray, cars: np.ndarray | None = None) -> None:
+        """The lag at rest at the car's initial steering (rad), the remnant at its start.
+
+        ``steering`` holds every car's angle; with ``cars`` (indices) only those
+        cars start, the others go on.
+        """
         start = np.asarray(steering, dtype=np.float64)
+        if cars is not None:
+            for name in ("_command_noise", "_broadband", "_dependent", "_tremor", "_tremor_prev",
+                         "_rate"):  # fmt: skip
+                getattr(self, name)[cars] = 0.0
+            self._angle[cars] = start[cars]
+            self._fresh[cars] = True
+            return
         self._angle, self._rate = start.copy(), np.zeros(self.num_cars)
         zeros = np.zeros(self.num_cars)
         self._command_noise = zeros.copy()
         self._broadband, self._dependent = zeros.copy(), zeros.copy()
         self._tremor, self._tremor_prev = zeros.copy(), zeros.copy()
-        self._fresh = True
+        self._fresh = np.ones(self.num_cars, dtype=bool)
 
     def step(self, command: np.ndarray, speed: np.ndarray | None = None) -> np.ndarray:
         """Applied steering (rad at the road wheel) for the command u(k) (rad) at ``speed``
@@ -319,32 +355,28 @@ class MotorStage:
         if self._dt is None:
             raise RuntimeError("MotorStage: call reset() before step()")
         e = self._noise.next()
+        fresh = self._fresh  # per car: the first step of its run
+        any_fresh = bool(fresh.any())
         if self.commanded:
             if speed is None:
                 raise ValueError("MotorStage.step needs the speed when there is command noise")
-            if self._fresh:  # stationary start
-                self._command_noise = self.command_std * e[:, 3]
-            else:
-                self._command_noise = self._rho_c * self._command_noise + (
-                    self._innovation_c * e[:, 3]
-                )
+            noise = self._rho_c * self._command_noise + self._innovation_c * e[:, 3]
+            if any_fresh:  # stationary start
+                noise = np.where(fresh, self.command_std * e[:, 3], noise)
+            self._command_noise = noise
             scale = (15.0 / np.maximum(np.asarray(speed, dtype=np.float64), 5.0)) ** 2
             command = command + scale * self._command_noise
         angle = self._a00 * self._angle + self._a01 * self._rate + self._b0 * command
         rate = self._a10 * self._angle + self._a11 * self._rate + self._b1 * command
         self._angle, self._rate = angle, rate
         dependent_std = self.gain * np.abs(rate)
-        if self._fresh:  # stationary start of the OU components
-            self._broadband = self.broadband_std * e[:, 0]
-            self._dependent = dependent_std * e[:, 1]
-            self._fresh = False
-        else:
-            self._broadband = self._rho * self._broadband + (
-                self.broadband_std * self._innovation * e[:, 0]
-            )
-            self._dependent = self._rho * self._dependent + (
-                self._innovation * dependent_std * e[:, 1]
-            )
+        broadband = self._rho * self._broadband + (self.broadband_std * self._innovation * e[:, 0])
+        dependent = self._rho * self._dependent + (self._innovation * dependent_std * e[:, 1])
+        if any_fresh:  # stationary start of the OU components
+            broadband = np.where(fresh, self.broadband_std * e[:, 0], broadband)
+            dependent = np.where(fresh, dependent_std * e[:, 1], dependent)
+            self._fresh = np.zeros(self.num_cars, dtype=bool)
+        self._broadband, self._dependent = broadband, dependent
         tremor = (
             self._p1 * self._tremor + self._p2 * self._tremor_prev + self._tremor_gain * e[:, 2]
         )

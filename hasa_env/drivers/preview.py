@@ -124,10 +124,22 @@ class PreviewBatch(HumanBatch):
         self.feedback = PreviewFeedback([p.cost for p in self.params])
         self.delay = self.arr("delay")
 
-    def _reset(self, seeds: Sequence[int | None], dt: float) -> None:
+    def _reset(self, seeds: Sequence[int | None], dt: float, cars: np.ndarray | None) -> None:
+        if cars is not None:
+            self._delay.restart(cars)
+            return
         self._delay = DelayLine(self.delay_steps, 4)
 
-    def _start(self, info: Mapping[str, np.ndarray], road: Road, steering: np.ndarray) -> None:
+    def _start(
+        self,
+        info: Mapping[str, np.ndarray],
+        road: Road,
+        steering: np.ndarray,
+        cars: np.ndarray | None,
+    ) -> None:
+        if cars is not None:
+            self._command_state[cars] = steering[cars]
+            return
         self._command_state = steering.copy()
 
     def _command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:

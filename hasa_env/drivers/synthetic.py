@@ -233,9 +233,14 @@ class SyntheticBatch(HumanBatch):
         self.speed_exponent = self.arr("speed_exponent")
         self.noise_std, self.noise_tau = self.arr("noise_std"), self.arr("noise_time_constant")
 
-    def _reset(self, seeds: Sequence[int | None], dt: float) -> None:
+    def _reset(self, seeds: Sequence[int | None], dt: float, cars: np.ndarray | None) -> None:
         # the command noise keeps the stream it always had: the car's default_rng(seed)
-        self._noise = NoiseBlocks([np.random.default_rng(s) for s in seeds], 1)
+        rngs = [np.random.default_rng(s) for s in seeds]
+        if cars is not None:
+            self._noise.restart(cars, rngs)
+            self._delay.restart(cars)
+            return
+        self._noise = NoiseBlocks(rngs, 1)
         self._delay = DelayLine(self.delay_steps, 2)
         with np.errstate(divide="ignore"):
             self._rho = np.where(
@@ -249,8 +254,19 @@ class SyntheticBatch(HumanBatch):
         v = np.maximum(info["speed"], MIN_SPEED)
         return lane_bearings(info, road, v * self.near_time, v * self.far_time)
 
-    def _start(self, info: Mapping[str, np.ndarray], road: Road, steering: np.ndarray) -> None:
+    def _start(
+        self,
+        info: Mapping[str, np.ndarray],
+        road: Road,
+        steering: np.ndarray,
+        cars: np.ndarray | None,
+    ) -> None:
         phi, omega = self._bearings(info, road)
+        if cars is not None:
+            self._phi_prev[cars], self._omega_prev[cars] = phi[cars], omega[cars]
+            self._command_state[cars] = steering[cars]
+            self._command_noise[cars] = 0.0
+            return
         self._phi_prev, self._omega_prev = phi.copy(), omega.copy()
         self._command_state = steering.copy()
         self._command_noise = np.zeros(self.num_cars)
