@@ -1,8 +1,9 @@
 """Steering models by name or file: what the command-line tools accept as ``--model``.
 
 :func:`load_model` takes ``"two-point"`` / ``"generalized"`` (the paper's
-presets, :meth:`TwoPointModel.paper`, :meth:`GeneralizedModel.paper`) or the
-path of a saved model file (:meth:`SteeringModel.load`). The paper's presets
+presets, :meth:`TwoPointModel.paper`, :meth:`GeneralizedModel.paper`), the
+path of a saved model file (:meth:`SteeringModel.load`) or
+``"package.module:Name"`` (a model, a model class or a function returning one). The paper's presets
 describe the steering-WHEEL angle of its G29 (docs/design.md §5): in a
 recording, which holds road-wheel angles, they apply with a steering ratio of
 15 (:func:`default_steering_ratio`, :func:`in_model_units`).
@@ -10,6 +11,7 @@ recording, which holds road-wheel angles, they apply with a steering ratio of
 
 from __future__ import annotations
 
+import importlib
 import os
 
 import pandas as pd
@@ -52,7 +54,8 @@ def in_model_units(frame: pd.DataFrame, steering_ratio: float) -> pd.DataFrame:
 
 
 def load_model(spec: str, dt: float = 0.01) -> SteeringModel:
-    """A steering model: ``two-point`` / ``generalized`` (paper presets) or a saved model file.
+    """A steering model: ``two-point`` / ``generalized`` (paper presets), a saved model file,
+    or ``package.module:Name``.
 
     ``dt`` (s) is the sample time the two-point preset is built for (its
     integral term depends on it); the generalized preset's coefficients
@@ -64,6 +67,33 @@ def load_model(spec: str, dt: float = 0.01) -> SteeringModel:
         return GeneralizedModel.paper()
     if os.path.exists(spec):
         return SteeringModel.load(spec)
+    if spec.count(":") == 1 and all(spec.split(":")):
+        return _import_model(spec)
     raise ValueError(
-        f"unknown model {spec!r}: use 'two-point', 'generalized' or the path of a saved model file"
+        f"unknown model {spec!r}: use 'two-point', 'generalized', the path of a saved model file "
+        "or 'package.module:Name'"
     )
+
+
+def _import_model(spec: str) -> SteeringModel:
+    """The model named by ``"package.module:Name"``: a :class:`SteeringModel` instance, a
+    subclass (created without arguments) or a function returning one."""
+    module_name, attribute = spec.split(":")
+    try:
+        obj = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ValueError(f"model {spec!r}: cannot import module {module_name!r} ({exc})") from None
+    for part in attribute.split("."):
+        if not hasattr(obj, part):
+            raise ValueError(f"model {spec!r}: module {module_name!r} has no {attribute!r}")
+        obj = getattr(obj, part)
+    if isinstance(obj, type) and issubclass(obj, SteeringModel):
+        obj = obj()
+    elif callable(obj) and not isinstance(obj, SteeringModel):
+        obj = obj()
+    if not isinstance(obj, SteeringModel):
+        raise ValueError(
+            f"model {spec!r} is a {type(obj).__name__}, not a hasa_env.steering.SteeringModel "
+            "(see examples/custom_steering_model.py)"
+        )
+    return obj

@@ -1,0 +1,377 @@
+"""The human-as-advisor task: a policy drives, a synthetic human advises, one car.
+
+``gym.make("hasa_env/LaneKeepingAdvisor-v0")`` (straight road) or
+``"hasa_env/LaneKeepingAdvisorCurved-v0"``; the vector twin is
+:class:`estimators.advisor_vector.LaneKeepingAdvisorVectorEnv`
+(``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from estimators.advisor_setup import (
+    AdvisorSetup,
+    WheelNoise,
+    build_advisor_setup,
+    estimate_readout,
+    observation_rows,
+)
+from hasa_env.drivers.human import human_batch
+from hasa_env.render import make_renderer
+from hasa_env.sim.dynamics import (
+    SCALAR_OPS,
+    VehicleState,
+    lane_keeping_reward,
+    road_frame_acceleration,
+    road_frame_velocity,
+    sensor_readings,
+)
+from hasa_env.sim.setup import INFO_KEYS, draw_episode, draw_noise_block, info_values
+from hasa_env.sim.transition import env_step
+
+__all__ = ["LaneKeepingAdvisorEnv", "ADVISOR_RESET_OPTIONS"]
+
+ADVISOR_RESET_OPTIONS = ("advisor_index",)
+"""Reset options of the advisor task besides the lane-keeping env's (``bias_index``, ...)."""
+
+
+class LaneKeepingAdvisorEnv(gym.Env):
+    """Lane keeping with ambiguous markings, where the estimate comes from a human's advice.
+
+    ## Description
+    The car, road, markings, sensors and dynamics are those of
+    :class:`hasa_env.LaneKeepingEnv` (docs/design.md §3-4): the camera sees ``y + b``
+    with the true bias ``b`` unknown among ``markings.hypotheses``. A synthetic human
+    of a named population (``advisor.population``; one drawn per episode, or the
+    configured ``advisor.driver``) sits at the wheel, sees the true lane and turns
+    the wheel as it would to keep it. Its measured steering feeds the human-as-advisor
+    estimator (``estimator.*``: the Gaussian-mixture EKF by default, docs/design.md
+    §8), which tells the lanes apart. With ``advisor.drives = "car"`` (default) the
+    policy's action drives the car and the human only advises (the paper's "future
+    work": does the advice still tell the true lane when the car drives itself?);
+    with ``"human"`` the human's steering and speed drive and the action is ignored.
+
+    Rates: the simulation, the human and the estimator all run at ``sim_frequency``
+    (100 Hz); the policy acts every ``action_repeat`` samples, its action held. Within
+    one env step each simulation sample is one :func:`hasa_env.sim.transition.env_step`
+    of one sample: the human decides on the true state, the car moves, the sensors
+    read (one noise row per sample), and the estimator takes that sample's
+    measurements. So a 10 Hz policy (``action_repeat`` 10) gets an estimate made from
+    every 100 Hz sample. Timing of the advice as in recordings (docs/design.md §5.6):
+    the wheel reading of sample k is the human's command decided from sample k-1
+    (at reset: the car's initial steering), plus the steering-sensor noise
+    (``noise.steering``; 0 under the "paper" population's study conditions).
+
+    ## Action space
+    ``action.steering_only`` (default true): ``Box(-1, 1, (1,), float32)``, the
+    road-wheel angle (normalized onto ``-max_steering .. max_steering``, or rad with
+    ``action.type = "physical"``); the acceleration is 0 m/s^2, so the car keeps its
+    speed. False: the lane-keeping env's ``[steering, acceleration]``. Out-of-range
+    values are clipped; NaN or inf raises ``ValueError``. Ignored (but checked) when
+    the human drives.
+
+    ## Observation space
+    ``Box(11 + H,)`` float32, H = number of lane hypotheses (default 2: 13 entries),
+    :func:`estimators.advisor_setup.observation_names`; values saturate at the bounds:
+
+    | index      | entry                        | unit  | what                                          | bounds          |
+    |------------|------------------------------|-------|-----------------------------------------------|-----------------|
+    | 0          | estimate_lateral_offset      | m     | mixture mean of y                             | [-60, 60]       |
+    | 1          | estimate_lateral_offset_std  | m     | mixture std of y                              | [0, 100]        |
+    | 2          | estimate_heading             | rad   | atan2(v_y, v_x) of the mixture mean           | [-pi, pi]       |
+    | 3          | estimate_speed               | m/s   | sqrt(v_x^2 + v_y^2) of the mixture mean       | [0, 200]        |
+    | 4 .. 3+H   | estimate_weight_i            | -     | probability of hypothesis i (lane weights)    | [0, 1]          |
+    | 4+H .. 9+H | sensor_<channel>             | SI    | the six raw sensors of LaneKeepingEnv, at the last sample (IMU: mean over that sample) | as LaneKeepingEnv |
+    | 10+H       | sensor_advisor_steering      | rad   | the human's wheel (road-wheel angle) as the estimator read it | [-(d_max+1), d_max+1] |
+
+    The estimator's decision state is not in the observation yet: its lane weights
+    are (the decision state joins when the estimator reports one).
+
+    ## Reward
+    The lane-keeping env's, per env step: ``1 - w_y (y / 1.8)^2 - w_d (d_delta /
+    d_max)^2``, ``d_delta`` the change of the applied steering over the step, minus
+    ``offroad_penalty`` (10) on the step that leaves the road.
+
+    ## Episode end
+    | flag       | when                                                                |
+    |------------|---------------------------------------------------------------------|
+    | terminated | at any simulation sample of the step the car is past a road edge by more than offroad_margin, or faces backwards |
+    | truncated  | simulated time reaches ``time_limit`` (30 s)                        |
+
+    ## Info
+    The same keys at ``reset`` and every ``step``
+    (:data:`estimators.advisor_setup.ADVISOR_INFO_KEYS`):
+
+    | key                          | unit  | what                                                   |
+    |------------------------------|-------|--------------------------------------------------------|
+    | LaneKeepingEnv's keys        | SI    | time, true state, bias, raw sensors (``sensor_*``)     |
+    | estimate_* (as estimators.wrappers.estimate_info_keys) | SI | lateral offset and std, lateral and longitudinal velocity, bias, lane_index, weights (H,), mean and std (n,) |
+    | estimate_heading, estimate_speed | rad, m/s | as in the observation                          |
+    | advisor_index                | -     | the human's index in the population (``env.unwrapped.setup.drivers``) |
+    | advisor_steering             | rad   | the human's command over the last sample (at reset: the initial steering) |
+    | sensor_advisor_steering      | rad   | the wheel reading the estimator took at the last sample |
+    | policy_steering              | rad   | the action's road-wheel angle, clipped (at reset: the initial steering) |
+    | substep_lateral_offset       | m     | (action_repeat,) true y after each sample (at reset: the initial y) |
+
+    ## Randomness
+    All from the env's generator, seeded by ``reset(seed=...)``: the lane-keeping
+    env's draws (:func:`hasa_env.sim.setup.draw_episode`), then the advisor's index
+    (always drawn, used when ``advisor.driver`` is "random"), the human's seed and the
+    seed of the wheel sensor's noise. Reset options: the lane-keeping env's and
+    ``advisor_index`` (an index into the population).
+
+    ## Arguments
+    ``gym.make("hasa_env/LaneKeepingAdvisor-v0", config={...}, render_mode=None)``;
+    ``config`` is deep-merged onto :func:`estimators.advisor_setup.default_config` and
+    validated (:func:`estimators.advisor_setup.describe_config` lists every key).
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
+
+    def __init__(
+        self,
+        config: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+        track: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported; allowed: None, "
+                + ", ".join(repr(m) for m in self.metadata["render_modes"])
+            )
+        self.setup: AdvisorSetup = build_advisor_setup(config, track)
+        self.config = self.setup.config
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.config["render"]["fps"]}
+        self.action_space = self.setup.action_space()
+        self.observation_space = self.setup.observation_space()
+        env = self.setup.env
+        self._curvature = env.curvature_scalar()
+        self._bounds = self.setup.observation_bounds()
+        self._sensor_bounds = [b.astype(np.float64) for b in env.sensor_bounds()]
+        self._estimator = self.setup.make_estimator()
+        self._humans: dict[int, Any] = {}  # one single-car batch per advisor, reused
+        self._wheel_noise = WheelNoise(1)
+        self._steering_limit = env.steering_limit
+        self._acc_low, self._acc_high = env.acceleration_limits
+        self._wheel_std = env.noise_std[5]
+        self._renderer = None
+        self._state: VehicleState | None = None
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        setup = self.setup
+        options = dict(options or {})
+        chosen = _advisor_option(options, len(setup.drivers))
+        rng = self.np_random
+        state, index, bias, block, phases = draw_episode(rng, setup.env, options)
+        drawn = int(rng.integers(len(setup.drivers)))
+        human_seed, wheel_seed = (int(s) for s in rng.integers(0, 2**63 - 1, size=2))
+        if chosen is None:
+            chosen = drawn if setup.fixed_driver is None else setup.fixed_driver
+        self._advisor = chosen
+        self._phases = phases
+        self._state = state
+        self._bias, self._bias_index = bias, index
+        self._noise, self._noise_pos = block.tolist(), 0
+        self._sim_step = 0
+        self._acceleration = 0.0
+        self._velocity = road_frame_velocity(state, SCALAR_OPS)
+        kappa = self._curvature(state.station)
+        imu = road_frame_acceleration(state, 0.0, kappa, setup.env.params, SCALAR_OPS)
+        self._sample_sensors(imu, kappa)
+        human = self._humans.get(chosen)
+        if human is None:
+            human = self._humans[chosen] = human_batch([setup.drivers[chosen]])
+        human.reset([human_seed], setup.dt)
+        self._human = human
+        self._wheel_noise.restart(np.array([0]), [wheel_seed])
+        self._command = state.steering
+        self._policy_steering = state.steering
+        self._wheel = self._wheel_reading(state.steering)
+        self._substeps = [state.lateral_offset] * setup.env.action_repeat
+        estimate = self._estimator.reset(
+            self._measurement(),
+            setup.hypotheses,
+            prior=setup.prior,
+            true_bias=float(bias),
+            **setup.road_points(np.array([state.station])),
+        )
+        self._readout = estimate_readout(estimate, setup.hypotheses)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), self._info()
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        setup = self.setup
+        policy_steering, policy_acceleration = setup.action_to_physical(action, None)
+        self._policy_steering = float(policy_steering)
+        road = setup.env.road
+        start_steering = self._state.steering
+        off_road = False
+        substeps = []
+        estimate = None
+        for _ in range(setup.env.action_repeat):
+            state = self._state
+            info = {
+                "time": np.array([self._sim_step * setup.dt]),
+                "station": np.array([state.station]),
+                "lateral_offset": np.array([state.lateral_offset]),
+                "heading": np.array([state.heading]),
+                "speed": np.array([state.speed]),
+                "steering": np.array([state.steering]),
+            }
+            if setup.human_drives:
+                command, human_acceleration = self._human.act(info, road)
+                command = float(command[0])
+                steering = min(max(command, -self._steering_limit), self._steering_limit)
+                acceleration = min(max(float(human_acceleration[0]), self._acc_low), self._acc_high)
+            else:
+                command = float(self._human.steer(info, road)[0])
+                steering, acceleration = policy_steering, policy_acceleration
+            outcome = env_step(
+                state,
+                self._velocity,
+                steering,
+                acceleration,
+                setup.sample,
+                self._curvature,
+                SCALAR_OPS,
+                self._sim_step,
+                self._phases,
+            )
+            self._sim_step += 1
+            self._state, self._velocity = outcome.state, outcome.velocity
+            self._acceleration = acceleration
+            off_road = off_road or bool(outcome.off_road)
+            self._sample_sensors(outcome.imu, self._curvature(outcome.state.station))
+            self._command = command
+            self._wheel = self._wheel_reading(command)
+            estimate = self._estimator.step(
+                self._measurement(),
+                np.array([[self._sensors[3], self._sensors[4]]]),
+                **setup.road_points(np.array([outcome.state.station])),
+            )
+            substeps.append(outcome.state.lateral_offset)
+        self._substeps = substeps
+        self._readout = estimate_readout(estimate, setup.hypotheses)
+        lateral_weight, rate_weight, penalty = setup.env.reward_weights
+        reward = lane_keeping_reward(
+            self._state.lateral_offset,
+            self._state.steering - start_steering,
+            off_road,
+            0.5 * setup.env.road.lane_width,
+            self._steering_limit,
+            lateral_weight,
+            rate_weight,
+            penalty,
+        )
+        truncated = self._sim_step >= setup.env.max_sim_steps
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), float(reward), off_road, truncated, self._info()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
+                "to gym.make"
+            )
+            return None
+        if self._state is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            self._renderer = make_renderer(self.setup.env, self.render_mode)
+        return self._renderer.render(self._info())
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    @property
+    def state(self) -> VehicleState | None:
+        """The true Frenet state (None before the first reset)."""
+        return self._state
+
+    @property
+    def estimator(self) -> Any:
+        """The estimator (stepping at the simulation rate)."""
+        return self._estimator
+
+    # ------------------------------------------------------------- helpers
+    def _sample_sensors(self, imu: tuple[float, float], kappa: float) -> None:
+        """This sample's sensor readings (one noise row of the car's block)."""
+        if self._noise_pos >= len(self._noise):
+            self._noise = draw_noise_block(self.np_random, self.setup.env).tolist()
+            self._noise_pos = 0
+        noise = self._noise[self._noise_pos]
+        self._noise_pos += 1
+        self._kappa = kappa
+        self._sensors = sensor_readings(
+            self._state, imu, self._bias, noise, self.setup.env.noise_std
+        )
+
+    def _wheel_reading(self, command: float) -> float:
+        """The steering sensor's reading of the human's wheel (rad)."""
+        if self.setup.human_drives:  # the car's own steering sensor reads the human's wheel
+            return self._sensors[5]
+        return command + self._wheel_std * float(self._wheel_noise.draw()[0])
+
+    def _measurement(self) -> np.ndarray:
+        return np.array([[self._sensors[0], self._sensors[1], self._wheel]])
+
+    def _observation(self) -> np.ndarray:
+        sensors = np.array([self._sensors], dtype=np.float64)
+        return observation_rows(self._readout, sensors, np.array([self._wheel]), self._bounds)[0]
+
+    def _info(self) -> dict[str, Any]:
+        values = info_values(
+            self._sim_step,
+            self._state,
+            self._velocity,
+            self._acceleration,
+            self._kappa,
+            self._bias,
+            self._bias_index,
+            self._sensors,
+            self.setup.env,
+        )
+        info: dict[str, Any] = dict(zip(INFO_KEYS, values, strict=True))
+        for key, value in self._readout.items():
+            row = value[0]
+            if row.ndim:
+                info[key] = row.copy()
+            elif row.dtype.kind == "i":
+                info[key] = int(row)
+            else:
+                info[key] = float(row)
+        info["advisor_index"] = self._advisor
+        info["advisor_steering"] = float(self._command)
+        info["sensor_advisor_steering"] = float(self._wheel)
+        info["policy_steering"] = float(self._policy_steering)
+        info["substep_lateral_offset"] = np.array(self._substeps, dtype=np.float64)
+        return info
+
+
+def _advisor_option(options: dict[str, Any], count: int) -> int | None:
+    """Pop and check the ``advisor_index`` reset option (None when absent)."""
+    if "advisor_index" not in options:
+        return None
+    value = options.pop("advisor_index")
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 0 <= value < count:
+        raise ValueError(
+            f"reset option 'advisor_index' = {value!r} is out of range: allowed integers "
+            f"0..{count - 1} (one per driver of the population)"
+        )
+    return int(value)
