@@ -487,6 +487,7 @@ class AdvisorSetup:
         hypotheses: the lane hypotheses b_i (m), (H,).
         prior: their probabilities, or None (uniform).
         near, far: the estimator's look-ahead distances (m), for the road points.
+        straight: the road is straight.
     """
 
     config: dict[str, Any]
@@ -501,6 +502,8 @@ class AdvisorSetup:
     prior: np.ndarray | None
     near: float
     far: float
+    straight: bool
+    """The road is straight (no road points for the estimator)."""
 
     @property
     def dt(self) -> float:
@@ -528,12 +531,24 @@ class AdvisorSetup:
     def road_points(self, station: np.ndarray) -> dict[str, np.ndarray]:
         """The estimator's ``road_points`` keyword for cars at ``station`` (m): none on a
         straight road."""
-        if self.env.road.is_straight:
+        if self.straight:
             return {}
         return {"road_points": lane_points_ahead(self.env.road, station, self.near, self.far)}
 
+    @property
+    def _neutral_action(self) -> float:
+        """The action value meaning 0 m/s^2."""
+        if not self.env.normalized_actions:
+            return 0.0
+        lo, hi = self.env.acceleration_limits
+        return 2.0 * (0.0 - lo) / (hi - lo) - 1.0
+
     def action_to_physical(self, action: Any, num_envs: int | None) -> tuple[Any, Any]:
         """The policy's (steering rad, acceleration m/s^2), validated and clipped."""
+        if self.steering_only and num_envs is None and isinstance(action, np.ndarray):
+            if action.shape == (1,) and action.dtype.kind in "fi":
+                action = np.array([action[0], self._neutral_action], dtype=np.float64)
+                return physical_action(self.env, action, None)
         if self.steering_only:
             steer = np.asarray(action)
             shape = (1,) if num_envs is None else (num_envs, 1)
@@ -543,15 +558,9 @@ class AdvisorSetup:
                 raise ValueError(
                     f"action must have shape {shape} (the steering), got {steer.shape}"
                 )
-            zero = 0.0 if not self.env.normalized_actions else _neutral(self.env)
-            pad = np.full(shape, zero, dtype=np.float64)
+            pad = np.full(shape, self._neutral_action, dtype=np.float64)
             action = np.concatenate([steer.astype(np.float64, copy=False), pad], axis=-1)
         return physical_action(self.env, action, num_envs)
-
-
-def _neutral(env: EnvSetup) -> float:
-    lo, hi = env.acceleration_limits
-    return 2.0 * (0.0 - lo) / (hi - lo) - 1.0
 
 
 def build_advisor_setup(config: Mapping[str, Any] | None, track: str | None = None) -> AdvisorSetup:
@@ -587,6 +596,7 @@ def build_advisor_setup(config: Mapping[str, Any] | None, track: str | None = No
         prior=None if prior is None else np.asarray(prior, dtype=np.float64),
         near=near,
         far=far,
+        straight=env.road.is_straight,
     )
 
 
@@ -595,27 +605,24 @@ def estimate_readout(est: Estimate, hypotheses: np.ndarray) -> dict[str, np.ndar
     """The estimate's info values (:func:`estimators.wrappers.estimate_info_keys` plus
     ``estimate_heading`` and ``estimate_speed``) for a batch of R runs, leading axis R.
 
-    Computed element by element over the C components (no reductions whose rounding
-    could depend on the batch), so a run's values are the same in any batch:
-    mixture mean ``sum_c w_c x_c`` and variance ``sum_c w_c (P_c,ii + (x_c,i - mean_i)^2)``;
-    the weight of each of the env's H hypotheses sums the components whose bias is
-    that hypothesis' (the oracle's and single-hypothesis filters' one component too).
+    Mixture mean ``sum_c w_c x_c`` and variance ``sum_c w_c (P_c,ii + (x_c,i - mean_i)^2)``
+    over the C components, by elementwise products and sums over the component axis
+    only, so a run's values do not depend on the other runs of the batch. The weight of
+    each of the env's H hypotheses sums the components whose bias is that hypothesis'
+    (the oracle's and the single-hypothesis filter's one component too).
     """
-    x, cov, w = est.component_means, est.component_covariances, est.weights
+    x, w = est.component_means, est.weights
+    weighted = w[:, :, None]
+    mean = (weighted * x).sum(axis=1)
+    spread = x - mean[:, None, :]
+    diagonal = np.diagonal(est.component_covariances, axis1=-2, axis2=-1)
+    std = np.sqrt((weighted * (diagonal + spread * spread)).sum(axis=1))
     own = est.hypotheses
-    n_comp = w.shape[1]
-    mean = w[:, 0, None] * x[:, 0]
-    for c in range(1, n_comp):
-        mean = mean + w[:, c, None] * x[:, c]
-    var = np.zeros_like(mean)
-    for c in range(n_comp):
-        spread = x[:, c] - mean
-        var = var + w[:, c, None] * (np.diagonal(cov[:, c], axis1=-2, axis2=-1) + spread * spread)
-    std = np.sqrt(np.maximum(var, 0.0))
-    lanes = np.zeros((w.shape[0], hypotheses.size))
-    for c in range(n_comp):
-        match = np.abs(own[:, c, None] - hypotheses[None, :]) <= 1e-9
-        lanes = lanes + np.where(match, w[:, c, None], 0.0)
+    if own.shape[1] == hypotheses.size and bool((own == hypotheses).all()):
+        lanes = w
+    else:
+        match = np.abs(own[:, :, None] - hypotheses[None, None, :]) <= 1e-9
+        lanes = np.where(match, weighted, 0.0).sum(axis=1)
     vx, vy = mean[:, 0], mean[:, 2]
     keys = estimate_info_keys()
     values = (mean[:, 1], std[:, 1], vy, vx, mean[:, 3], np.argmax(lanes, axis=1), lanes, mean, std)

@@ -185,6 +185,7 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         policy_steering, policy_acceleration = setup.action_to_physical(actions, self.num_envs)
         self._policy_steering = np.array(policy_steering, dtype=np.float64)
         resetting = self._autoreset.copy()
+        any_resetting = bool(resetting.any())
         road = env.road
         limit = env.steering_limit
         low, high = env.acceleration_limits
@@ -226,11 +227,12 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
             self._sample_all(outcome.imu, skip=resetting)
             self._command = command
             self._wheel = self._wheel_reading(command, None)
-            self._estimator.step(
-                np.column_stack([self._sensors[0], self._sensors[1], self._wheel]),
-                self._sensors[3:5].T,
-                **setup.road_points(self._state.station),
-            )
+            measurement = np.column_stack([self._sensors[0], self._sensors[1], self._wheel])
+            imu = self._sensors[3:5].T
+            if any_resetting:  # placeholders: missing, so they neither update nor gate
+                measurement[resetting] = np.nan
+                imu = np.where(resetting[:, None], 0.0, imu)
+            self._estimator.step(measurement, imu, **setup.road_points(self._state.station))
             self._substeps[:, j] = self._state.lateral_offset
         lateral_weight, rate_weight, penalty = env.reward_weights
         rewards = np.asarray(

@@ -214,9 +214,11 @@ class NoiseBlocks:
     def __init__(self, rngs: Sequence[np.random.Generator], channels: int) -> None:
         self.rngs = list(rngs)
         self.channels = int(channels)
-        self._block = np.zeros((len(self.rngs), self.channels, NOISE_BLOCK))
+        # car i's block is rows i * NOISE_BLOCK ... of (N * NOISE_BLOCK, channels): one
+        # step of every car is then a gather of N contiguous rows
+        self._block = np.zeros((len(self.rngs) * NOISE_BLOCK, self.channels))
         self._pos = np.full(len(self.rngs), NOISE_BLOCK, dtype=np.int64)  # per car
-        self._rows = np.arange(len(self.rngs))
+        self._base = np.arange(len(self.rngs)) * NOISE_BLOCK
 
     def restart(self, cars: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
         """Cars ``cars`` (indices) draw from ``rngs`` (one each) from their next step on."""
@@ -228,9 +230,10 @@ class NoiseBlocks:
         pos = self._pos
         if pos.max() >= NOISE_BLOCK:
             for i in np.flatnonzero(pos >= NOISE_BLOCK).tolist():
-                self._block[i] = self.rngs[i].standard_normal((self.channels, NOISE_BLOCK))
+                draws = self.rngs[i].standard_normal((self.channels, NOISE_BLOCK))
+                self._block[i * NOISE_BLOCK : (i + 1) * NOISE_BLOCK] = draws.T
                 pos[i] = 0
-        out = self._block[self._rows, :, pos]
+        out = self._block.take(self._base + pos, axis=0)
         pos += 1
         return out
 
