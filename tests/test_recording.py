@@ -78,7 +78,7 @@ configs = st.fixed_dictionaries(
             }
         ),
         "markings": st.fixed_dictionaries(
-            {"hypotheses": st.lists(st.floats(-3.0, 3.0), min_size=1, max_size=3)}
+            {"hypotheses": st.lists(st.floats(-3.0, 3.0), min_size=1, max_size=3, unique=True)}
         ),
         "noise": st.fixed_dictionaries(
             {"camera": st.floats(0.0, 0.5), "block_size": st.sampled_from([1, 7, 1000])}
