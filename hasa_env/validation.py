@@ -154,7 +154,7 @@ class Field:
         pattern_doc: what ``pattern`` allows, in words (for messages).
         fields: a ``mapping``'s keys and their specs.
         each: the spec of every value of a ``mapping`` with free string keys.
-        hint: advice added to every message about this field.
+        hint: advice added to every message about this field's value.
     """
 
     kind: str
@@ -517,7 +517,7 @@ class _Walk:
                 found += 1
                 out[key] = self.check(value[key], sub, here)
             elif sub.default is REQUIRED:
-                raise self.fail(here, sub, "is missing")
+                raise self.fail(here, None, "is missing")
             elif sub.default is ABSENT:
                 continue
             elif sub.fields is not None:

@@ -275,12 +275,12 @@ def test_allowed_texts():
     assert [p for p, _ in SPEC.leaves()] == ["a", "b", "c", "d", "g.x", "g.y"]
 
 
-def test_hints_follow_every_message_of_their_field():
+def test_hints_follow_every_message_about_the_value():
     spec = schema({"v": version(1)})
     assert message({"v": 2}, spec, "") == (
         "key 'v' = 2 is not allowed: only 1 (the version this hasa_env reads)"
     )
-    assert message({}, spec, "") == "key 'v' is missing (the version this hasa_env reads)"
+    assert message({}, spec, "") == "key 'v' is missing"
 
 
 @pytest.mark.parametrize(
@@ -432,3 +432,97 @@ def test_fuzzed_configs_are_accepted_and_stable_or_refused_naming_a_key(document
 
 def test_default_config_passes_its_own_schema():
     assert make_config(default_config()) == default_config()
+
+
+# ------------------------------------------------------ recording sidecars
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    from hasa_env.recording import RecordingWrapper
+
+    directory = tmp_path_factory.mktemp("rec")
+    env = RecordingWrapper(gym.make("hasa_env/LaneKeeping-v0"), directory, metadata={"p": "P07"})
+    env.reset(seed=1, options={"speed": 14.0})
+    for _ in range(3):
+        env.step(np.zeros(2, dtype=np.float32))
+    env.close()
+    return env.path
+
+
+def _deep(levels: int, leaf: object = 0) -> object:
+    for _ in range(levels):
+        leaf = [leaf]
+    return leaf
+
+
+@pytest.mark.parametrize(
+    ("edit", "column", "text"),
+    [
+        ({"metadata": "P07"}, "metadata", "must be a mapping (JSON object), got 'P07'"),
+        ({"metadata": None}, "metadata", "must be a mapping (JSON object), got None"),
+        (
+            {"metadata": {"a": _deep(500)}},
+            "metadata.a" + "[0]" * 16,
+            "is nested more than 16 levels deep",
+        ),
+        ({"reset_options": [1, 2]}, "reset_options", "must be a mapping (JSON object)"),
+        ({"seed": "7"}, "seed", "must be a non-negative integer or null, got '7'"),
+        ({"seed": -1}, "seed", "must be a non-negative integer or null, got -1"),
+        ({"steps": 2.5}, "steps", "must be a non-negative integer or null, got 2.5"),
+        ({"end_reason": "crashed"}, "end_reason", "= 'crashed' is not allowed: one of"),
+        ({"env_id": 3}, "env_id", "must be a string or null, got 3"),
+        ({"versions": {"numpy": 2}}, "versions.numpy", "must be a string, got 2"),
+        ({"columns": "step,time"}, "columns", "must be a list of non-empty strings"),
+        ({"config": "default"}, "config", "must be a mapping (JSON object), got 'default'"),
+        ({"driver": "x"}, "driver", "unknown sidecar field 'driver' (allowed keys here: columns"),
+        ({"complete": 1}, "complete", "must be true or false, got 1"),
+    ],
+)
+def test_wrong_typed_sidecar_fields_are_recording_errors_naming_the_field(
+    recorded, tmp_path, edit, column, text
+):
+    from hasa_env.recording import RecordingError, load_recording
+
+    meta = json.loads(recorded.with_suffix(".json").read_text())
+    meta.update(edit)
+    csv = tmp_path / recorded.name
+    csv.write_text(recorded.read_text())
+    csv.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(RecordingError) as info:
+        load_recording(csv)
+    assert info.value.column == column and text in str(info.value)
+    assert str(csv.with_suffix(".json")) in str(info.value)
+
+
+def test_unreadable_sidecar_json_is_a_recording_error(recorded, tmp_path):
+    from hasa_env.recording import RecordingError, load_recording
+
+    csv = tmp_path / recorded.name
+    csv.write_text(recorded.read_text())
+    side = csv.with_suffix(".json")
+    for text in ("[" * 100_000 + "]" * 100_000, '{"seed": ' + "9" * 5000 + "}"):
+        side.write_text(text)
+        with pytest.raises(RecordingError, match="sidecar cannot be read as JSON"):
+            load_recording(csv)
+
+
+def test_a_loaded_sidecar_keeps_its_fields_and_converts_nothing_it_does_not_know(recorded):
+    from hasa_env.recording import load_recording
+
+    raw = json.loads(recorded.with_suffix(".json").read_text())
+    meta = load_recording(recorded).meta
+    assert set(meta) == set(raw) and meta["metadata"] == {"p": "P07"}
+    assert meta["reset_options"] == {"speed": 14.0} and meta["config"] == raw["config"]
+    assert "seed_sequence_entropy" in meta and meta["seed"] == 1
+
+
+def test_writer_checks_run_on_the_validator():
+    from hasa_env.recording.format import _check_json_able, _check_seed
+
+    assert _check_json_able("metadata", {"a": (np.float32(0.5), np.int64(2))}) == {"a": [0.5, 2]}
+    with pytest.raises(ValueError, match=r"^metadata.a\[0\] must be JSON data"):
+        _check_json_able("metadata", {"a": [float("nan")]})
+    with pytest.raises(ValueError, match="nested more than 16 levels"):
+        _check_json_able("metadata", {"a": _deep(5000)})
+    assert _check_seed(np.int64(3), "seed") == 3
+    with pytest.raises(ValueError, match=r"^seed must be a non-negative integer, got True"):
+        _check_seed(True, "seed")
