@@ -218,6 +218,8 @@ class Field:
 
     def _number_noun(self, plural: bool) -> str:
         integer = self.kind == "integer"
+        if integer and self.low == 1 and not self.low_open and self.high is None:
+            return "positive integers" if plural else "a positive integer"
         if self.low == 0 and self.high is None:
             sign = "positive" if self.low_open else "non-negative"
             if integer:

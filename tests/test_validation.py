@@ -104,7 +104,8 @@ def test_integers_accept_integral_floats_and_numpy_integers_and_return_ints():
         assert message(value, spec).startswith("key 'x' must be an integer in [0, 63], got ")
     assert message(64, spec) == "key 'x' = 64 is out of range: allowed integers [0, 63]"
     assert message(-1, Field("integer", low=0)) == "key 'x' must be a non-negative integer, got -1"
-    assert message(0, Field("integer", low=1)) == "key 'x' must be an integer >= 1, got 0"
+    assert message(0, Field("integer", low=1)) == "key 'x' must be a positive integer, got 0"
+    assert message(1, Field("integer", low=2)) == "key 'x' must be an integer >= 2, got 1"
     assert message(0, Field("integer", low=0, low_open=True)).startswith(
         "key 'x' must be a positive integer"
     )
@@ -526,3 +527,26 @@ def test_writer_checks_run_on_the_validator():
     assert _check_seed(np.int64(3), "seed") == 3
     with pytest.raises(ValueError, match=r"^seed must be a non-negative integer, got True"):
         _check_seed(True, "seed")
+
+
+# ------------------------------------------------------- protocol settings
+def test_protocol_settings_convert_numpy_values_and_name_the_setting(tmp_path):
+    from benchmarks.protocol import BenchmarkError, ProtocolConfig
+
+    config = ProtocolConfig(drivers=np.int64(3), noise={"camera": np.float32(0.25)})
+    assert type(config.drivers) is int and config.noise == {"camera": 0.25}
+    assert ProtocolConfig(recordings=tmp_path).recordings == str(tmp_path)
+    for kwargs, text in (
+        ({"noise": "camera"}, "protocol setting 'noise' must be a mapping (JSON object)"),
+        ({"noise": {"camera": -1.0}}, "'noise.camera' must be a finite non-negative number"),
+        ({"runs": 10**400}, "'runs' = <an integer of about 401 digits> is out of range"),
+        ({"weight_threshold": 1.0}, "'weight_threshold' = 1.0 is out of range: allowed [0.5, 1)"),
+        (
+            {"track": np.array(["curved"])},
+            "'track' = array(['curved'], dtype='<U6') is not allowed",
+        ),
+        ({"seed": 1.5}, "'seed' must be a non-negative integer, got 1.5"),
+    ):
+        with pytest.raises(BenchmarkError) as info:
+            ProtocolConfig(**kwargs)
+        assert text in str(info.value)
