@@ -550,3 +550,26 @@ def test_protocol_settings_convert_numpy_values_and_name_the_setting(tmp_path):
         with pytest.raises(BenchmarkError) as info:
             ProtocolConfig(**kwargs)
         assert text in str(info.value)
+
+
+# ---------------------------------------------------------- drive settings
+def test_drive_settings_convert_numpy_values_and_refuse_bad_ones_early(tmp_path):
+    from hasa_env.session.settings import DriveSettings
+
+    s = DriveSettings(participant="P07", runs=np.int64(2), bias=np.float32(-1.5), output=tmp_path)
+    assert type(s.runs) is int and s.bias == -1.5 and s.output == tmp_path
+    for kwargs, text in (
+        ({"bias": 25.0}, "drive setting 'bias' = 25.0 is out of range: allowed [-20, 20] m"),
+        (
+            {"seconds": float("nan")},
+            "drive setting 'seconds' must be a finite number in (0, 1e+06]",
+        ),
+        ({"seed": -1}, "drive setting 'seed' must be a non-negative integer or null, got -1"),
+        ({"fsync": "yes"}, "drive setting 'fsync' must be true or false, got 'yes'"),
+        ({"config": "curved"}, "drive setting 'config' must be a mapping (JSON object)"),
+        ({"config": {"noise": {"cam": 1}}}, "unknown config key 'noise.cam'"),
+        ({"participant": "é"}, "drive setting 'participant' must be a string of at most 64"),
+    ):
+        with pytest.raises(ValueError) as info:
+            DriveSettings(**{"participant": "P07", "output": tmp_path, **kwargs})
+        assert text in str(info.value)
