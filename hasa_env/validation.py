@@ -51,14 +51,13 @@ and imports nothing from the project.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import os
 import re
 import reprlib
 import sys
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
-from dataclasses import field as _dc_field
 from typing import Any
 
 import numpy as np
@@ -72,6 +71,7 @@ __all__ = [
     "schema",
     "show",
     "validate",
+    "validate_fields",
     "version",
 ]
 
@@ -126,7 +126,7 @@ def _number_text(x: float) -> str:
     return f"{x:g}"
 
 
-@dataclass(frozen=True, slots=True)
+@dataclasses.dataclass(frozen=True, slots=True)
 class Field:
     """What one key of a document may hold.
 
@@ -143,6 +143,8 @@ class Field:
         low, high: bounds of a number, an integer or each entry of ``numbers``
             (None: unbounded on that side).
         low_open, high_open: True: the bound itself is not allowed.
+        infinite: a ``number`` may also be an infinity its bounds allow (``inf``
+            as "no limit"); NaN never is.
         choices: the allowed values of a ``choice``.
         optional: None (JSON null) is allowed too.
         unique: the entries of a ``numbers`` or ``strings`` list must differ.
@@ -165,6 +167,7 @@ class Field:
     high: float | None = None
     low_open: bool = False
     high_open: bool = False
+    infinite: bool = False
     choices: tuple[Any, ...] = ()
     optional: bool = False
     unique: bool = False
@@ -176,7 +179,7 @@ class Field:
     fields: Mapping[str, Field] | None = None
     each: Field | None = None
     hint: str = ""
-    item: Field | None = _dc_field(default=None, init=False, repr=False, compare=False)
+    item: Field | None = dataclasses.field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -224,14 +227,17 @@ class Field:
             sign = "positive" if self.low_open else "non-negative"
             if integer:
                 return f"{sign} integers" if plural else f"a {sign} integer"
+            if self.infinite:
+                return f"{sign} numbers or inf" if plural else f"a {sign} number or inf"
             return f"finite {sign} numbers" if plural else f"a finite {sign} number"
+        finite = "" if self.infinite else "finite "
         noun = ("integers" if plural else "an integer") if integer else (
-            "finite numbers" if plural else "a finite number"
+            f"{finite}numbers" if plural else f"a {finite}number"
         )  # fmt: skip
         rng = self.range_text()
-        if not rng:
-            return noun
-        return f"{noun} in {rng}" if self._two_sided() else f"{noun} {rng}"
+        if rng:
+            noun = f"{noun} in {rng}" if self._two_sided() else f"{noun} {rng}"
+        return f"{noun} (infinities included)" if self.infinite else noun
 
     def allowed(self) -> str:
         """What this field accepts, in words (the ``<allowed>`` of the messages)."""
@@ -344,6 +350,19 @@ def validate(
     return _Walk(describe, error).check(document, field, path)
 
 
+def validate_fields(
+    instance: Any, spec: Field | Mapping[str, Any], *, describe: Describe, error: MakeError
+) -> None:
+    """Validate a dataclass instance's fields against ``spec`` and store the converted values.
+
+    For ``__post_init__``: every field of the dataclass must be in ``spec``;
+    frozen dataclasses work too. Raises what ``error`` returns.
+    """
+    given = {f.name: getattr(instance, f.name) for f in dataclasses.fields(instance)}
+    for name, value in validate(given, spec, describe=describe, error=error).items():
+        object.__setattr__(instance, name, value)
+
+
 def _join(path: str, key: Any) -> str:
     """``path.key``; a key that is empty, not a str or holds ``.[]'`` is written ``path[repr]``."""
     if isinstance(key, str) and key and not _AWKWARD.search(key):
@@ -403,7 +422,7 @@ class _Walk:
                     path, field, f"= {show(x)} is out of range: allowed {noun}{field.range_text()}"
                 )
             raise self.must(path, field, x)
-        if abs(x) > _FLOAT_MAX:  # only an int can get here
+        if type(x) is int and abs(x) > _FLOAT_MAX:
             raise self.fail(
                 path,
                 field,
@@ -413,7 +432,9 @@ class _Walk:
 
     def number(self, value: Any, field: Field, path: str) -> float:
         x = _as_number(value)
-        if x is None or (type(x) is float and not math.isfinite(x)):
+        if x is None or (
+            type(x) is float and not math.isfinite(x) and (math.isnan(x) or not field.infinite)
+        ):
             raise self.must(path, field, value)
         self._bounds(x, field, path)
         return float(x)

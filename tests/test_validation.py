@@ -573,3 +573,236 @@ def test_drive_settings_convert_numpy_values_and_refuse_bad_ones_early(tmp_path)
         with pytest.raises(ValueError) as info:
             DriveSettings(**{"participant": "P07", "output": tmp_path, **kwargs})
         assert text in str(info.value)
+
+
+# ---------------------------------------- dataclasses and infinite numbers
+def test_infinite_numbers_when_the_field_allows_them():
+    spec = Field("number", low=0.0, low_open=True, infinite=True, unit="m/s^2")
+    assert check(float("inf"), spec, "x") == float("inf")
+    assert message(float("nan"), spec) == "key 'x' must be a positive number or inf, got nan"
+    assert message(-float("inf"), spec) == "key 'x' must be a positive number or inf, got -inf"
+    capped = Field("number", low=0.0, high=10.0, infinite=True)
+    assert message(float("inf"), capped) == "key 'x' = inf is out of range: allowed [0, 10]"
+    assert capped.allowed() == "a number in [0, 10] (infinities included)"
+
+
+def test_validate_fields_stores_converted_values_also_on_frozen_dataclasses():
+    import dataclasses
+
+    from hasa_env.validation import validate_fields
+
+    @dataclasses.dataclass(frozen=True)
+    class Settings:
+        runs: int = 1
+        gain: float = 0.5
+
+        def __post_init__(self):
+            validate_fields(
+                self,
+                {"runs": Field("integer", low=1), "gain": Field("number", low=0.0, high=1.0)},
+                describe=lambda p: f"Settings.{p}",
+                error=lambda p, m: ValueError(m),
+            )
+
+    s = Settings(runs=np.int64(3), gain=np.float32(0.25))
+    assert type(s.runs) is int and s.runs == 3 and type(s.gain) is float
+    with pytest.raises(ValueError, match=r"^Settings.runs must be a positive integer, got 0$"):
+        Settings(runs=0)
+
+
+# The specs FilterSettings (estimators/gm_ekf.py) and DriverParams / SpeedProfile
+# (hasa_env/drivers) will be migrated to: they must accept what the classes accept and
+# refuse what they refuse (both checked here against the classes' own validation).
+def _positive(unit: str = "") -> Field:
+    return Field("number", unit=unit, low=0.0, low_open=True)
+
+
+def _non_negative(unit: str = "") -> Field:
+    return Field("number", unit=unit, low=0.0)
+
+
+FILTER_SETTINGS = schema(
+    {
+        "speed_noise_std": _positive("m/s"),
+        "camera_noise_std": _positive("m"),
+        "acceleration_noise_std": _non_negative("m/s^2"),
+        "steering_residual_std": _non_negative("rad"),
+        "steering_sensor_std": _non_negative("rad"),
+        "steering_ratio": _positive(),
+        "initial_speed_std": _positive("m/s"),
+        "initial_lateral_std": Field("number", unit="m", low=0.0, optional=True),
+        "initial_lateral_velocity_std": _non_negative("m/s"),
+        "bias_std": _non_negative("m"),
+        "memory_std": _non_negative("rad"),
+        "bias_drift_std": _non_negative("m"),
+        "memory_process_std": _non_negative("rad"),
+        "missing_acceleration_std": _non_negative("m/s^2"),
+        "prune_threshold": Field("number", low=0.0, high=1.0, high_open=True),
+    }
+)
+SPEED_PROFILE = schema(
+    {
+        "target_speed": Field("number", unit="m/s", low=0.0, high=150.0, optional=True),
+        "start_time": _non_negative("s"),
+        "ramp_rate": _positive("m/s^2"),
+        "gain": _positive("1/s"),
+        "max_lateral_acceleration": Field(
+            "number", unit="m/s^2", low=0.0, low_open=True, infinite=True
+        ),
+        "comfortable_deceleration": _positive("m/s^2"),
+        "max_acceleration": _positive("m/s^2"),
+    }
+)
+DRIVER_PARAMS = schema(
+    {
+        "name": Field("string"),
+        **{k: _positive("s") for k in ("near_time", "far_time")},
+        **{k: Field("number") for k in ("near_gain", "far_gain", "integral_gain")},
+        "reference_speed": _positive("m/s"),
+        "speed_exponent": Field("number"),
+        "delay": _non_negative("s"),
+        "neuromuscular_frequency": _positive("rad/s"),
+        "neuromuscular_damping": _positive(),
+        "noise_std": _non_negative("rad"),
+        "noise_time_constant": _non_negative("s"),
+        "speed": SPEED_PROFILE,
+        "max_steering": _positive("rad"),
+    }
+)
+
+
+def _accepts(spec: Field, values: dict) -> bool:
+    try:
+        check(values, spec)
+    except Bad:
+        return False
+    return True
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("speed_noise_std", 0.0),
+        ("speed_noise_std", 0.1),
+        ("camera_noise_std", float("nan")),
+        ("bias_std", -1e-3),
+        ("bias_std", 0.0),
+        ("initial_lateral_std", None),
+        ("initial_lateral_std", 0.2),
+        ("prune_threshold", 1.0),
+        ("prune_threshold", 0.5),
+        ("steering_ratio", float("inf")),
+    ],
+)
+def test_the_filter_settings_spec_agrees_with_filter_settings(name, value):
+    import dataclasses
+
+    from estimators.gm_ekf import FilterSettings
+
+    values = dataclasses.asdict(FilterSettings())
+    assert _accepts(FILTER_SETTINGS, values)
+    assert not _accepts(FILTER_SETTINGS, {**values, "memory_std": True})  # a bool is no number
+    values[name] = value
+    try:
+        FilterSettings(**{name: value})
+        accepted = True
+    except ValueError:
+        accepted = False
+    assert _accepts(FILTER_SETTINGS, values) == accepted
+
+
+@pytest.mark.parametrize(
+    ("where", "name", "value"),
+    [
+        ("driver", "near_time", 0.0),
+        ("driver", "near_gain", -0.1),
+        ("driver", "speed_exponent", float("inf")),
+        ("driver", "delay", -0.01),
+        ("driver", "noise_std", 0.0),
+        ("speed", "target_speed", 200.0),
+        ("speed", "target_speed", None),
+        ("speed", "max_lateral_acceleration", float("inf")),
+        ("speed", "max_lateral_acceleration", 0.0),
+        ("speed", "start_time", float("nan")),
+        ("speed", "ramp_rate", 2.0),
+    ],
+)
+def test_the_driver_params_spec_agrees_with_driver_params(where, name, value):
+    import dataclasses
+
+    from hasa_env.drivers.base import SpeedProfile
+    from hasa_env.drivers.synthetic import DriverParams
+
+    values = dataclasses.asdict(DriverParams())
+    assert _accepts(DRIVER_PARAMS, values)
+    try:
+        if where == "speed":
+            values["speed"][name] = value
+            DriverParams(speed=SpeedProfile(**{name: value}))
+        else:
+            values[name] = value
+            DriverParams(**{name: value})
+        accepted = True
+    except ValueError:
+        accepted = False
+    assert _accepts(DRIVER_PARAMS, values) == accepted
+
+
+# --------------------------------------------- model files and calibrations
+@pytest.mark.parametrize(
+    ("edit", "text"),
+    [
+        (lambda d: d.update(dt=10**400), "field 'dt' = <an integer of about 401 digits> is out"),
+        (lambda d: d.update(features="near"), "field 'features' must be a mapping (JSON object)"),
+        (lambda d: d.update(parameters=[0.1, 0.2]), "field 'parameters' must be a mapping"),
+        (lambda d: d.update(type=np.array(["two_point"])), "field 'type' = array(['two_point']"),
+        (lambda d: d["structure"].update(parameters={}), "field 'structure' is not valid"),
+        (lambda d: d["structure"].update(nb=_deep(500)), "'structure.nb[0]"),
+        (lambda d: d["features"].update(steering_signal="wheel"), "'features.steering_signal' ="),
+    ],
+)
+def test_hostile_model_documents_are_model_file_errors(edit, text):
+    from hasa_env.steering import GeneralizedModel, ModelFileError, SteeringModel
+
+    document = GeneralizedModel.paper().to_dict()
+    edit(document)
+    with pytest.raises(ModelFileError, match=r"^m\.json: ") as info:
+        SteeringModel.from_dict(document, "m.json")
+    assert text in str(info.value)
+
+
+def test_model_documents_accept_numpy_values():
+    from hasa_env.steering import GeneralizedModel, SteeringModel
+
+    model = GeneralizedModel.paper()
+    document = model.to_dict()
+    document["dt"] = np.float64(document["dt"])
+    document["parameters"] = {k: np.float32(v) for k, v in document["parameters"].items()}
+    document["features"]["decision_lag"] = np.int64(1)
+    again = SteeringModel.from_dict(document, "m.json")
+    assert again.dt == model.dt and type(again.decision_lag) is int
+
+
+@pytest.mark.parametrize(
+    ("edit", "field", "text"),
+    [
+        (lambda d: d.update(device=np.array(["keyboard"])), "device", "is not allowed: one of"),
+        (lambda d: d["steering"].update(axis=10**400), "steering.axis", "is out of range"),
+        (lambda d: d.update(steering=[0, 1]), "steering", "must be a mapping (JSON object)"),
+        (lambda d: d.update(notes=None), "notes", "must be a string, got None"),
+        (lambda d: d.update(match_names=["G29", 29]), "match_names[1]", "non-empty string"),
+    ],
+)
+def test_hostile_calibrations_are_calibration_errors(edit, field, text):
+    from hasa_env.devices.calibration import (
+        CalibrationError,
+        parse_calibration,
+        shipped_calibration,
+    )
+
+    data = shipped_calibration("g29").to_dict()
+    edit(data)
+    with pytest.raises(CalibrationError) as info:
+        parse_calibration(data, "w.json")
+    assert info.value.field == field and text in str(info.value)
+    assert str(info.value).startswith(f"w.json: field '{field}' ")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from hasa_env.validation import ABSENT, Field, schema, validate
+from hasa_env.validation import ABSENT, Field, schema, validate_fields
 
 __all__ = ["BASELINES", "BUILTIN_MODELS", "ILLUSTRATIVE", "BenchmarkError", "ProtocolConfig"]
 
@@ -131,15 +131,12 @@ class ProtocolConfig:
         """
         if isinstance(self.recordings, os.PathLike):
             object.__setattr__(self, "recordings", os.fspath(self.recordings))
-        given = {f.name: getattr(self, f.name) for f in fields(self)}
-        checked = validate(
-            given,
+        validate_fields(
+            self,
             _SCHEMA,
-            describe=lambda path: f"protocol setting '{path}'" if path else "ProtocolConfig",
+            describe=lambda path: f"protocol setting '{path}'",
             error=lambda path, message: BenchmarkError(message),
         )
-        for name, value in checked.items():
-            object.__setattr__(self, name, value)
         if self.recordings is None and self.training_run >= self.illustrative_runs:
             raise BenchmarkError(
                 f"protocol setting 'training_run' = {self.training_run} needs at least "

@@ -5,12 +5,12 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from hasa_env.sim.config import deep_merge, make_config
-from hasa_env.validation import ANY_JSON, Field, schema, validate
+from hasa_env.validation import ANY_JSON, Field, schema, validate_fields
 
 __all__ = ["DriveSettings"]
 
@@ -88,15 +88,12 @@ class DriveSettings:
         """
         if isinstance(self.output, os.PathLike):
             self.output = os.fspath(self.output)
-        given = {f.name: getattr(self, f.name) for f in fields(self)}
-        checked = validate(
-            given,
+        validate_fields(
+            self,
             _SCHEMA,
-            describe=lambda path: f"drive setting '{path}'" if path else "DriveSettings",
+            describe=lambda path: f"drive setting '{path}'",
             error=lambda path, message: ValueError(message),
         )
-        for name, value in checked.items():
-            setattr(self, name, value)
         self.output = Path(self.output)
         self.env_config()  # a bad config is refused now, not at the first run
 
