@@ -500,18 +500,12 @@ class _Walk:
                     "distinct",
                 )
 
-    def numbers(self, value: Any, field: Field, path: str) -> list[Any]:
+    def listing(self, value: Any, field: Field, path: str) -> list[Any]:
+        """A ``numbers`` or ``strings`` list: each entry checked as ``field.item``."""
         assert field.item is not None
+        entry = self.number if field.kind == "numbers" else self.string
         entries = self._entries(value, field, path)
-        out = [self.number(v, field.item, f"{path}[{i}]") for i, v in enumerate(entries)]
-        if field.unique:
-            self._distinct(out, field, path)
-        return out
-
-    def strings(self, value: Any, field: Field, path: str) -> list[Any]:
-        assert field.item is not None
-        entries = self._entries(value, field, path)
-        out = [self.string(v, field.item, f"{path}[{i}]") for i, v in enumerate(entries)]
+        out = [entry(v, field.item, f"{path}[{i}]") for i, v in enumerate(entries)]
         if field.unique:
             self._distinct(out, field, path)
         return out
@@ -610,8 +604,8 @@ _CHECKS: dict[str, Callable[[_Walk, Any, Field, str], Any]] = {
     "bool": _Walk.boolean,
     "choice": _Walk.choice,
     "string": _Walk.string,
-    "numbers": _Walk.numbers,
-    "strings": _Walk.strings,
+    "numbers": _Walk.listing,
+    "strings": _Walk.listing,
     "mapping": _Walk.mapping,
     "json": _Walk.json,
 }

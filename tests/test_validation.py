@@ -679,6 +679,14 @@ def _accepts(spec: Field, values: dict) -> bool:
     return True
 
 
+def _constructs(build) -> bool:
+    try:
+        build()
+    except ValueError:
+        return False
+    return True
+
+
 @pytest.mark.parametrize(
     ("name", "value"),
     [
@@ -703,12 +711,7 @@ def test_the_filter_settings_spec_agrees_with_filter_settings(name, value):
     assert _accepts(FILTER_SETTINGS, values)
     assert not _accepts(FILTER_SETTINGS, {**values, "memory_std": True})  # a bool is no number
     values[name] = value
-    try:
-        FilterSettings(**{name: value})
-        accepted = True
-    except ValueError:
-        accepted = False
-    assert _accepts(FILTER_SETTINGS, values) == accepted
+    assert _accepts(FILTER_SETTINGS, values) == _constructs(lambda: FilterSettings(**{name: value}))
 
 
 @pytest.mark.parametrize(
@@ -735,16 +738,12 @@ def test_the_driver_params_spec_agrees_with_driver_params(where, name, value):
 
     values = dataclasses.asdict(DriverParams())
     assert _accepts(DRIVER_PARAMS, values)
-    try:
-        if where == "speed":
-            values["speed"][name] = value
-            DriverParams(speed=SpeedProfile(**{name: value}))
-        else:
-            values[name] = value
-            DriverParams(**{name: value})
-        accepted = True
-    except ValueError:
-        accepted = False
+    if where == "speed":
+        values["speed"][name] = value
+        accepted = _constructs(lambda: DriverParams(speed=SpeedProfile(**{name: value})))
+    else:
+        values[name] = value
+        accepted = _constructs(lambda: DriverParams(**{name: value}))
     assert _accepts(DRIVER_PARAMS, values) == accepted
 
 
