@@ -75,12 +75,16 @@ __all__ = [
     "version",
 ]
 
-KINDS = ("number", "integer", "bool", "choice", "string", "numbers", "strings", "mapping", "json")
+KINDS = (
+    "number", "integer", "bool", "choice", "string", "numbers", "integers", "strings", "mapping",
+    "json",
+)  # fmt: skip
 """The kinds of :class:`Field`:
 
 ``number`` a finite float; ``integer`` an int; ``bool`` true or false;
 ``choice`` one of ``choices`` (same type and value); ``string`` a str;
-``numbers`` a list of finite floats; ``strings`` a list of non-empty strs;
+``numbers`` a list of finite floats; ``integers`` a list of ints;
+``strings`` a list of non-empty strs;
 ``mapping`` an object with the keys of ``fields``, or any string keys
 whose values each satisfy ``each``; ``json`` free JSON data.
 """
@@ -192,9 +196,10 @@ class Field:
             raise ValueError("a 'choice' Field needs choices=, and only a choice has them")
         if self.low is not None and self.high is not None and self.low > self.high:
             raise ValueError(f"Field bounds low = {self.low!r} > high = {self.high!r}")
-        if self.kind == "numbers":
-            entry = Field("number", low=self.low, high=self.high, unit=self.unit,
-                          low_open=self.low_open, high_open=self.high_open)  # fmt: skip
+        if self.kind in ("numbers", "integers"):
+            entry = Field("number" if self.kind == "numbers" else "integer", low=self.low,
+                          high=self.high, unit=self.unit, low_open=self.low_open,
+                          high_open=self.high_open)  # fmt: skip
             object.__setattr__(self, "item", entry)
         elif self.kind == "strings":
             object.__setattr__(self, "item", Field("string", non_empty=True))
@@ -255,12 +260,12 @@ class Field:
                 text += f" of at most {self.max_length} characters"
             if self.pattern_doc:
                 text += f" ({self.pattern_doc})"
-        elif kind in ("numbers", "strings"):
+        elif kind in ("numbers", "integers", "strings"):
             assert self.item is not None
             head = "a non-empty list of " if self.non_empty else "a list of "
             if self.unique:
                 head += "distinct "
-            if kind == "numbers":
+            if kind != "strings":
                 entries = self.item._number_noun(plural=True)
             else:
                 entries = "non-empty strings"
@@ -501,9 +506,9 @@ class _Walk:
                 )
 
     def listing(self, value: Any, field: Field, path: str) -> list[Any]:
-        """A ``numbers`` or ``strings`` list: each entry checked as ``field.item``."""
+        """A ``numbers``, ``integers`` or ``strings`` list: each entry checked as ``field.item``."""
         assert field.item is not None
-        entry = self.number if field.kind == "numbers" else self.string
+        entry = {"numbers": self.number, "integers": self.integer}.get(field.kind, self.string)
         entries = self._entries(value, field, path)
         out = [entry(v, field.item, f"{path}[{i}]") for i, v in enumerate(entries)]
         if field.unique:
@@ -605,6 +610,7 @@ _CHECKS: dict[str, Callable[[_Walk, Any, Field, str], Any]] = {
     "choice": _Walk.choice,
     "string": _Walk.string,
     "numbers": _Walk.listing,
+    "integers": _Walk.listing,
     "strings": _Walk.listing,
     "mapping": _Walk.mapping,
     "json": _Walk.json,

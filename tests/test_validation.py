@@ -169,6 +169,16 @@ def test_number_lists_convert_tuples_and_1d_arrays_and_reject_strings_and_dicts(
     assert message([1.0] * 4, Field("numbers", max_length=3), "h").endswith("a list of 4 entries")
 
 
+def test_integer_lists():
+    spec = Field("integers", low=0, non_empty=True, unique=True)
+    assert check((np.int64(3), 4.0), spec, "s") == [3, 4]
+    assert spec.allowed() == "a non-empty list of distinct non-negative integers"
+    assert message([1, 1.5], spec, "s") == "key 's[1]' must be a non-negative integer, got 1.5"
+    assert message([2, 2], spec, "s").startswith("key 's' has the entry 2 twice")
+    assert message([], spec, "s").endswith("got an empty list")
+    assert message(3, spec, "s") == f"key 's' must be {spec.allowed()}, got 3"
+
+
 def test_string_lists():
     spec = Field("strings", non_empty=True)
     assert check(("a", np.str_("b")), spec, "k") == ["a", "b"]
