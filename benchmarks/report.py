@@ -1,41 +1,55 @@
-"""Tables, CSV files, the Markdown report and the figures of a benchmark result.
+"""Tables, CSV files and the Markdown report of a benchmark result.
 
-:func:`format_tables` renders the tables for the terminal (the paper's
-published values beside ours); :func:`write_outputs` writes ``results.json``,
-the CSV tables, ``report.md`` and the PNG figures (matplotlib, Agg) into a
-directory.
+:func:`format_tables` renders the tables for the terminal and
+:func:`markdown_report` the report, both with the paper's published values
+beside ours; :func:`write_outputs` writes ``results.json``, the CSV tables
+(every per-seed row), ``report.md`` and the figures (:mod:`benchmarks.figures`).
+
+The tables, in order:
+
+1. the verdict over population seeds: per model, the mean of the per-seed
+   values with its 95 % confidence interval, ranks and how often a model
+   holds its rank (:func:`benchmarks.protocol.aggregate.verdict`);
+2. the fits' checks per seed (ridge penalty, condition number, largest AR
+   pole, stability, identifiability);
+3. per driver, means over the seeds: steering prediction (paper table 1; the
+   paper's RMSE converted from steering-wheel to road-wheel radians by the
+   steering ratio 15), the curved track, lateral estimation (paper table 2).
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 
-from benchmarks.protocol import BASELINES, BenchmarkResult
+from benchmarks.figures import write_figures
+from benchmarks.protocol import BenchmarkResult
+from benchmarks.tables import (
+    Column,
+    fixed,
+    interval,
+    missing,
+    percent,
+    render_markdown,
+    render_text,
+    scientific,
+    text,
+)
+from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
-__all__ = ["format_tables", "write_outputs", "markdown_report", "FIGURES", "CSV_TABLES"]
-
-FIGURES = {
-    "steering_prediction": "steering_prediction.png",
-    "residual_acf": "residual_acf.png",
-    "lateral_estimate": "lateral_estimate.png",
-    "lateral_error": "lateral_error.png",
-    "curved_steering": "curved_steering.png",
-}
-"""Figure key -> file name."""
+__all__ = ["format_tables", "write_outputs", "markdown_report", "CSV_TABLES", "pooled"]
 
 CSV_TABLES = {
     "steering": "steering.csv",
     "curved": "curved.csv",
     "estimation": "estimation.csv",
+    "seed_summary": "seed_summary.csv",
     "summary": "summary.csv",
     "runs_steering": "runs_steering.csv",
     "runs_estimation": "runs_estimation.csv",
@@ -43,216 +57,250 @@ CSV_TABLES = {
 """results attribute -> CSV file name."""
 
 
-# ----------------------------------------------------------------------- tables
-@dataclass(frozen=True)
-class _Column:
-    key: str | Callable[[dict[str, Any]], Any]
-    header: str
-    fmt: Callable[[Any], str]
-    left: bool = False
-
-    def cell(self, row: dict[str, Any]) -> str:
-        value = self.key(row) if callable(self.key) else row.get(self.key)
-        return self.fmt(value)
-
-
-def _missing(value: Any) -> bool:
-    return value is None or (isinstance(value, float) and not math.isfinite(value))
-
-
-def _sci(value: Any) -> str:
-    return "-" if _missing(value) else f"{value:.2e}"
-
-
-def _fixed(digits: int) -> Callable[[Any], str]:
-    return lambda v: "-" if _missing(v) else f"{v:.{digits}f}"
-
-
-def _pct(value: Any) -> str:
-    return "-" if _missing(value) else f"{100 * value:.0f}%"
-
-
-def _text(value: Any) -> str:
-    return "-" if value is None else str(value)
-
-
-def _paper_num(value: Any) -> str:
-    if _missing(value):
-        return ""
-    return f"{value:.2g}" if abs(value) < 1e-2 else f"{value:g}"
+def _paper(value: Any) -> str:
+    return "" if missing(value) else f"{value:.2g}"
 
 
 def _paper_pct(value: Any) -> str:
-    return "" if _missing(value) else f"{100 * value:.0f}%"
+    return "" if missing(value) else f"{100 * value:.0f}%"
 
 
-def _render_text(rows: Sequence[dict[str, Any]], columns: Sequence[_Column]) -> str:
-    cells = [[c.cell(r) for c in columns] for r in rows]
-    widths = [
-        max([len(c.header)] + [len(line[i]) for line in cells]) for i, c in enumerate(columns)
-    ]
-
-    def line(values: Sequence[str]) -> str:
-        parts = [
-            v.ljust(w) if c.left else v.rjust(w)
-            for v, w, c in zip(values, widths, columns, strict=True)
-        ]
-        return "  ".join(parts).rstrip()
-
-    out = [line([c.header for c in columns]), "  ".join("-" * w for w in widths)]
-    previous = None
-    for row, values in zip(rows, cells, strict=True):
-        driver = row.get("driver")
-        if previous is not None and driver != previous:
-            out.append("")
-        previous = driver
-        out.append(line(values))
-    return "\n".join(out)
+def _ratio(value: Any) -> str:
+    return "-" if missing(value) else f"{value:.2f}"
 
 
-def _render_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[_Column]) -> str:
-    head = "| " + " | ".join(c.header for c in columns) + " |"
-    rule = "|" + "|".join(":---" if c.left else "---:" for c in columns) + "|"
-    body = ["| " + " | ".join(c.cell(r) or " " for c in columns) + " |" for r in rows]
-    return "\n".join([head, rule, *body])
+def _stability(row: dict[str, Any], rank: str) -> str:
+    value, share = row.get(rank), row.get(f"{rank}_stability")
+    if value is None:
+        return "-"
+    return f"{value}" if missing(share) else f"{value} ({100 * share:.0f}%)"
 
 
-def _white(row: dict[str, Any]) -> str:
-    return f"{row['white_runs']}/{row['n_runs']}"
+def _of(numerator: str, denominator: str) -> Any:
+    def cell(row: dict[str, Any]) -> str:
+        n, d = row.get(numerator), row.get(denominator)
+        return "-" if n is None or d is None else f"{int(n)}/{int(d)}"
+
+    return cell
 
 
-def _decided(row: dict[str, Any]) -> str:
-    return f"{row['decided_runs']}/{row['n_runs']}"
-
-
-def _final(row: dict[str, Any]) -> str:
-    return f"{row['true_lane_final_runs']}/{row['n_runs']}"
-
-
-_STEERING_COLUMNS = [
-    _Column("driver", "Driver", _text, left=True),
-    _Column("model", "Model", _text, left=True),
-    _Column("rmse", "RMSE (rad)", _sci),
-    _Column("r2", "R^2", _fixed(5)),
-    _Column("r2_increments", "R^2 inc", _fixed(3)),
-    _Column("rmse_decrease_vs_two_point", "RMSE dec.", _pct),
-    _Column(_white, "white (LB)", _text),
-    _Column("ljung_box_p_median", "LB p (median)", _sci),
-    _Column("paper_rmse", "paper RMSE", _paper_num),
-    _Column("paper_r2", "paper R^2 Acc", _paper_num),
-    _Column("paper_rmse_decrease", "paper dec.", _paper_pct),
+_VERDICT_COLUMNS = [
+    Column("model", "Model", left=True),
+    Column("kind", "kind", left=True),
+    Column(interval(scientific, "rmse"), "steering RMSE (rad) [95% CI]"),
+    Column(interval(fixed(3), "r2_increments"), "R^2 inc [95% CI]"),
+    Column(interval(percent, "rmse_decrease_vs_two_point"), "RMSE dec. [95% CI]"),
+    Column(interval(fixed(2), "rmse_over_paper_median"), "ours/paper [95% CI]"),
+    Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
+    Column(_of("decided_runs", "estimated_runs"), "decided"),
+    Column(lambda r: _stability(r, "rank_lateral"), "rank lat. (kept)"),
+    Column(lambda r: _stability(r, "rank_steering"), "rank steer. (kept)"),
+    Column("free_run_diverged", "free runs diverged"),
 ]
 
-_CURVED_COLUMNS = [
-    c if c.key != "paper_r2" else _Column("paper_r2", "paper R^2", _paper_num)
-    for c in _STEERING_COLUMNS
+_SEED_COLUMNS = [
+    Column("seed", "seed"),
+    Column("model", "Model", left=True),
+    Column("rmse", "steering RMSE (rad)", scientific),
+    Column("r2_increments", "R^2 inc", fixed(3)),
+    Column("rmse_over_paper_median", "ours/paper", _ratio),
+    Column("lateral_rmse", "lat. RMSE (m)", fixed(3)),
+    Column(_of("decided_runs", "estimated_runs"), "decided"),
+    Column("rank_lateral", "rank lat."),
+    Column("rank_steering", "rank steer."),
+]
+
+_CHECK_COLUMNS = [
+    Column("name", "Model", left=True),
+    Column("seed", "seed"),
+    Column("ridge_lambda", "ridge lambda", scientific),
+    Column("condition_number", "condition no.", scientific),
+    Column("ar_poles_max_abs", "max |AR pole|", fixed(3)),
+    Column(lambda r: text(r.get("stable")), "stable"),
+    Column(lambda r: text(r.get("identifiable")), "identifiable"),
+    Column("lane_snr", "lane SNR", fixed(2)),
+    Column(lambda r: ", ".join(r.get("flags") or []) or "-", "flags", left=True),
+]
+
+_STEERING_COLUMNS = [
+    Column("driver", "Driver", left=True),
+    Column("model", "Model", left=True),
+    Column("rmse", "RMSE (rad)", scientific),
+    Column("r2", "R^2", fixed(4)),
+    Column("r2_increments", "R^2 inc", fixed(3)),
+    Column("rmse_decrease_vs_two_point", "RMSE dec.", percent),
+    Column("free_run_rmse", "free-run RMSE", scientific),
+    Column(_of("white_runs", "n_runs"), "white (LB)"),
+    Column("paper_rmse", "paper RMSE (rw)", _paper),
+    Column("rmse_over_paper", "ours/paper", _ratio),
+    Column("paper_r2", "paper R^2 Acc", _paper),
+    Column("paper_rmse_decrease", "paper dec.", _paper_pct),
 ]
 
 _ESTIMATION_COLUMNS = [
-    _Column("driver", "Driver", _text, left=True),
-    _Column("model", "Model", _text, left=True),
-    _Column("lateral_rmse_mean", "lat. RMSE mean (m)", _fixed(3)),
-    _Column("lateral_rmse_std", "std (m)", _fixed(3)),
-    _Column("lateral_rmse_max", "max (m)", _fixed(3)),
-    _Column("steps_to_decide_median", "steps to w>0.95", _fixed(0)),
-    _Column(_decided, "decided", _text),
-    _Column(_final, "true lane at end", _text),
-    _Column("paper_lateral_rmse_mean", "paper mean (m)", _paper_num),
-    _Column("paper_lateral_rmse_std", "paper std (m)", _paper_num),
+    Column("driver", "Driver", left=True),
+    Column("model", "Model", left=True),
+    Column("lateral_rmse_mean", "lat. RMSE mean (m)", fixed(3)),
+    Column("lateral_rmse_std", "std (m)", fixed(3)),
+    Column("lateral_rmse_max", "max (m)", fixed(3)),
+    Column("steps_to_decide_median", "steps to decide", fixed(0)),
+    Column(_of("decided_runs", "n_runs"), "decided"),
+    Column(_of("true_lane_final_runs", "n_runs"), "true lane at end"),
+    Column("paper_lateral_rmse_mean", "paper mean (m)", _paper),
+    Column("paper_lateral_rmse_std", "paper std (m)", _paper),
 ]
 
-_SUMMARY_COLUMNS = [
-    _Column("model", "Model", _text, left=True),
-    _Column("kind", "kind", _text, left=True),
-    _Column("rmse", "steering RMSE (rad)", _sci),
-    _Column("r2_increments", "R^2 inc", _fixed(3)),
-    _Column("rmse_decrease_vs_two_point", "RMSE dec.", _pct),
-    _Column("lateral_rmse", "lat. RMSE (m)", _fixed(3)),
-    _Column(
-        lambda r: (
-            None if r["decided_runs"] is None else f"{r['decided_runs']}/{r['estimated_runs']}"
-        ),
-        "decided",
-        _text,
-    ),
-    _Column("rank_lateral", "rank (lat.)", _text),
-    _Column("rank_steering", "rank (steer.)", _text),
-]
+_MEAN_KEYS = ("rmse", "r2", "r2_increments", "rmse_decrease_vs_two_point", "free_run_rmse",
+              "rmse_over_paper", "lateral_rmse_mean", "lateral_rmse_std", "lateral_rmse_max",
+              "steps_to_decide_median", "final_true_lane_weight_mean")  # fmt: skip
+_SUM_KEYS = ("n_runs", "white_runs", "decided_runs", "true_lane_final_runs", "free_run_diverged",
+             "degenerate_runs")  # fmt: skip
+_FIRST_KEYS = ("paper_rmse", "paper_r2", "paper_rmse_decrease", "paper_lateral_rmse_mean",
+               "paper_lateral_rmse_std")  # fmt: skip
 
 
-def _estimation_columns(threshold: float) -> list[_Column]:
-    label = f"steps to w>{threshold:g}"
+def pooled(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per (driver, model), over seeds: means of the per-seed means, sums of the counts."""
+    if not rows:
+        return []
+    frame = pd.DataFrame(list(rows))
+    keys = [k for k in ("driver", "track", "model") if k in frame]
+    agg: dict[str, tuple[str, Any]] = {}
+    for key in _MEAN_KEYS:
+        if key in frame:
+            agg[key] = (
+                key,
+                lambda v: float(np.nanmean(v.astype(float))) if v.notna().any() else None,
+            )
+    for key in _SUM_KEYS:
+        if key in frame:
+            agg[key] = (key, lambda v: int(pd.to_numeric(v, errors="coerce").fillna(0).sum()))
+    for key in _FIRST_KEYS:
+        if key in frame:
+            agg[key] = (key, "first")
+    agg["seeds"] = ("seed", "nunique")
+    table = frame.groupby(keys, sort=False, dropna=False).agg(**agg).reset_index()
     return [
-        c if c.header != "steps to w>0.95" else _Column(c.key, label, c.fmt)
-        for c in _ESTIMATION_COLUMNS
+        {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
+        for r in table.to_dict(orient="records")
     ]
 
 
-def _sections(result: BenchmarkResult) -> list[tuple[str, str, list[dict], list[_Column]]]:
-    """(key, title, rows, columns) of each table."""
+def _checks_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
+    rows = []
+    for m in result.models:
+        checks = m.get("checks")
+        if m.get("error") or not checks:
+            continue
+        rows.append({"name": m["name"], "seed": m.get("seed"), **checks})
+    return rows
+
+
+def _sections(
+    result: BenchmarkResult,
+) -> list[tuple[str, str, list[dict], list[Column], str | None]]:
+    """(key, title, rows, columns, group) of each table."""
     cfg = result.config
-    threshold = float(cfg.get("weight_threshold", 0.95))
-    sections = [
+    seeds = cfg.get("seeds")
+    over = f"over {len(seeds)} population seeds {seeds}" if seeds else "over the recordings"
+    ci = (
+        "95 % CI: Student's t over the per-seed values"
+        if seeds and len(seeds) > 1
+        else "one seed: no interval (use --seeds for a verdict)"
+    )
+    sections: list[tuple[str, str, list[dict], list[Column], str | None]] = [
+        (
+            "summary",
+            f"Verdict {over}: per model, the mean over seeds of the per-seed mean over drivers "
+            f"({ci}); ours/paper = median over drivers of our one-step steering RMSE / the "
+            f"paper's converted to road-wheel rad (paper / {PAPER_STEERING_RATIO:g}); rank "
+            "(kept) = overall rank (share of seeds holding it)",
+            result.summary,
+            _VERDICT_COLUMNS,
+            None,
+        ),
+        (
+            "seed_summary",
+            "Per seed: means over drivers",
+            result.seed_summary,
+            _SEED_COLUMNS,
+            "seed",
+        ),
+        (
+            "checks",
+            "The fits' checks per seed (docs/design.md §6.5): ridge penalty chosen by blocked "
+            "cross-validation on the training run, condition number of the standardized design, "
+            "largest AR pole, lane-offset identifiability with the steering-sensor noise",
+            _checks_rows(result),
+            _CHECK_COLUMNS,
+            "name",
+        ),
         (
             "steering",
-            "Steering prediction (paper table 1): one step ahead with the measured past "
-            "steering, mean over each driver's validation runs; R^2 inc = R^2 on "
-            "delta(k) - delta(k-1) (compare with the paper's 'R^2 Acc'); white (LB) = runs whose "
-            f"residuals pass Ljung-Box at 5 % ({cfg.get('ljung_box_lags', 20)} lags)",
-            result.steering,
+            "Steering prediction (paper table 1), per driver, means over seeds of the mean over "
+            "the driver's validation runs: one step ahead with the measured past steering, "
+            "scored on the measured steering; R^2 inc = R^2 on delta(k) - delta(k-1) (compare "
+            "with the paper's 'R^2 Acc'); free-run RMSE over the runs whose free run stayed "
+            f"bounded; white (LB) = runs whose residuals pass Ljung-Box at 5 % "
+            f"({cfg.get('ljung_box_lags', 20)} lags); paper RMSE (rw) = the paper's steering-"
+            f"wheel value / {PAPER_STEERING_RATIO:g}",
+            pooled(result.steering),
             _STEERING_COLUMNS,
-        )
+            "driver",
+        ),
     ]
     if result.curved:
         sections.append(
             (
                 "curved",
-                f"Curved track, driver {cfg.get('illustrative', 'Ill')} (paper section 3.3.2; "
-                "the paper gives R^2 on delta and RMSE)",
-                result.curved,
-                _CURVED_COLUMNS,
+                f"Curved track, driver {cfg.get('illustrative', 'Ill')} (paper section 3.3.2; the "
+                "paper gives R^2 on delta and the RMSE)",
+                pooled(result.curved),
+                [
+                    c if c.key != "paper_r2" else Column("paper_r2", "paper R^2", _paper)
+                    for c in _STEERING_COLUMNS
+                ],  # fmt: skip
+                "driver",
             )
         )
+    threshold = float(cfg.get("weight_threshold", 0.95))
     sections.append(
         (
             "estimation",
-            "Lateral estimation (paper table 2): RMSE of the mixture's lateral-offset estimate "
-            "over each run, mean and std over the driver's validation runs; steps until the "
-            f"true lane's weight stays above {threshold:g} (median over decided runs)",
-            result.estimation,
-            _estimation_columns(threshold),
-        )
-    )
-    sections.append(
-        (
-            "summary",
-            "Summary over drivers (means of the per-driver values) and ranking",
-            result.summary,
-            _SUMMARY_COLUMNS,
+            "Lateral estimation (paper table 2), per driver, means over seeds: RMSE of the "
+            "mixture's lateral-offset estimate over each run, mean/std/max over the driver's "
+            f"validation runs; steps until the true lane's weight stays above {threshold:g} "
+            "(median over decided runs)",
+            pooled(result.estimation),
+            _ESTIMATION_COLUMNS,
+            "driver",
         )
     )
     return sections
 
 
+def _source(cfg: dict[str, Any]) -> str:
+    if cfg.get("recordings"):
+        return f"recordings in {cfg['recordings']}"
+    return (
+        f"synthetic population {cfg['population']!r}, seeds {cfg['seeds']}: "
+        f"{cfg['drivers']} drivers x {cfg['runs']} runs of {cfg['duration']:g} s on the "
+        f"{cfg['track']} track ({cfg['illustrative']}: {cfg['ill_runs']}), "
+        f"{cfg['curved_runs']} curved"
+    )
+
+
 def format_tables(result: BenchmarkResult) -> str:
     """The result's tables as plain text (ours beside the paper's published values)."""
     cfg = result.config
-    if cfg.get("recordings"):
-        source = f"recordings in {cfg['recordings']}"
-    else:
-        source = (
-            f"synthetic population {cfg['population']!r} (seed {cfg['population_seed']}), "
-            f"{cfg['drivers']} drivers x {cfg['runs']} runs of {cfg['duration']:g} s on the "
-            f"{cfg['track']} track ({cfg['illustrative']}: {cfg['ill_runs']}), "
-            f"{cfg['curved_runs']} curved, run seed {cfg['seed']}"
-        )
     parts = [
-        f"hasa-bench: {source}; models fitted on run {cfg['training_run']} of {cfg['illustrative']}"
+        f"hasa-bench: {_source(cfg)}; models fitted on run {cfg['training_run']} of "
+        f"{cfg['illustrative']} (each seed's)"
     ]
-    for _, title, rows, columns in _sections(result):
+    for _, title, rows, columns, group in _sections(result):
         parts.append("")
         parts.append(title)
-        parts.append(_render_text(rows, columns) if rows else "(no rows)")
+        parts.append(render_text(rows, columns, group) if rows else "(no rows)")
     parts.extend(_findings(result, markdown=False))
     if result.errors:
         parts.append("")
@@ -262,37 +310,40 @@ def format_tables(result: BenchmarkResult) -> str:
 
 
 def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
-    """Headline numbers next to the paper's claims."""
-    lines = []
+    """Headline numbers next to the paper's claims (means over seeds, with intervals)."""
     by = {r["model"]: r for r in result.summary}
     gen, tp = by.get("generalized"), by.get("two_point")
     bullet = "- " if markdown else "  "
-    if gen and tp:
-        lines.append("")
-        lines.append("Headline (ours vs the paper):")
-        if gen["rmse_decrease_vs_two_point"] is not None:
-            lines.append(
-                f"{bullet}steering RMSE decrease of the generalized model vs two-point, mean over "
-                f"drivers: {_pct(gen['rmse_decrease_vs_two_point'])} (paper: 85 %)"
-            )
-        if gen["lateral_rmse"] is not None and tp["lateral_rmse"] is not None:
-            lines.append(
-                f"{bullet}lateral RMSE, mean over drivers: generalized "
-                f"{_fixed(3)(gen['lateral_rmse'])} m (paper: under 0.25), two-point "
-                f"{_fixed(3)(tp['lateral_rmse'])} m (paper: 0.93-1.0)"
-            )
-        base = by.get("no_steering")
-        oracle = by.get("oracle")
-        if base and oracle:
-            lines.append(
-                f"{bullet}baselines: no steering {_fixed(3)(base['lateral_rmse'])} m (paper: 0.9), "
-                f"oracle {_fixed(3)(oracle['lateral_rmse'])} m"
-            )
+    lines: list[str] = []
+    if not (gen and tp):
+        return lines
+    lines.append("")
+    lines.append("Headline (ours vs the paper):")
+    dec = interval(percent, "rmse_decrease_vs_two_point")(gen)
+    lines.append(
+        f"{bullet}steering RMSE decrease of the generalized model vs two-point: {dec} (paper: 85 %)"
+    )
+    lines.append(
+        f"{bullet}one-step steering RMSE / the paper's (median over drivers): two-point "
+        f"{interval(fixed(2), 'rmse_over_paper_median')(tp)}, generalized "
+        f"{interval(fixed(2), 'rmse_over_paper_median')(gen)}"
+    )
+    lines.append(
+        f"{bullet}lateral RMSE: generalized {interval(fixed(3), 'lateral_rmse')(gen)} m "
+        f"(paper: under 0.25), two-point {interval(fixed(3), 'lateral_rmse')(tp)} m "
+        "(paper: 0.93-1.0)"
+    )
+    base, oracle = by.get("no_steering"), by.get("oracle")
+    if base and oracle:
+        lines.append(
+            f"{bullet}baselines: no steering {interval(fixed(3), 'lateral_rmse')(base)} m "
+            f"(paper: 0.9), oracle {interval(fixed(3), 'lateral_rmse')(oracle)} m"
+        )
+    flagged = [r for r in _checks_rows(result) if r.get("flags")]
+    if flagged:
+        shown = ", ".join(f"{r['name']} seed {r['seed']}: {', '.join(r['flags'])}" for r in flagged)
+        lines.append(f"{bullet}flagged fits: {shown}")
     return lines
-
-
-def _table_frame(rows: Sequence[dict[str, Any]]) -> pd.DataFrame:
-    return pd.DataFrame(list(rows))
 
 
 # --------------------------------------------------------------------- markdown
@@ -303,8 +354,12 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     lines.append(
         "Protocol of Mai et al. (sections 3.3 and 4.3; docs/design.md §9). Our numbers are "
         "what the code measured; the paper's published values are printed beside them for "
-        "comparison, nothing is tuned toward them."
+        "comparison, nothing is tuned toward them. The paper's steering RMSEs are steering-"
+        f"wheel angles; beside ours they are divided by the steering ratio "
+        f"{PAPER_STEERING_RATIO:g} (road-wheel rad)."
     )
+    lines.append("")
+    lines.append(f"Data: {_source(cfg)}.")
     lines.append("")
     lines.append("## Configuration")
     lines.append("")
@@ -312,16 +367,18 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     lines.append(json.dumps(_clean(cfg), indent=2))
     lines.append("```")
     lines.append("")
-    for key, title, rows, columns in _sections(result):
-        lines.append(f"## {key.capitalize()}")
+    for key, title, rows, columns, _ in _sections(result):
+        lines.append(f"## {key.replace('_', ' ').capitalize()}")
         lines.append("")
         lines.append(title + ".")
         lines.append("")
-        lines.append(_render_markdown(rows, columns) if rows else "(no rows)")
+        lines.append(render_markdown(rows, columns) if rows else "(no rows)")
         lines.append("")
     findings = _findings(result, markdown=True)
     if findings:
-        lines.extend(findings[1:])
+        lines.append("## Findings")
+        lines.append("")
+        lines.extend(findings[2:])
         lines.append("")
     if result.errors:
         lines.append("## Errors")
@@ -337,7 +394,8 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
             continue
         params = m.get("parameters") or {}
         shown = ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
-        lines.append(f"- **{m['name']}** ({m['kind']}): {shown}")
+        seed = "" if m.get("seed") is None else f", seed {m['seed']}"
+        lines.append(f"- **{m['name']}** ({m['kind']}{seed}): {shown}")
         ident = m.get("identifiability")
         if ident:
             lines.append(f"  - {ident['message']}")
@@ -354,6 +412,10 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     if figures:
         lines.append("## Figures")
         lines.append("")
+        first = (cfg.get("seeds") or [None])[0]
+        if first is not None:
+            lines.append(f"The figures show population seed {first}.")
+            lines.append("")
         captions = {
             "steering_prediction": "Steering prediction vs measured on one validation run "
             "(paper Fig. 4) and the prediction error",
@@ -403,162 +465,6 @@ def _clean(value: Any) -> Any:
     return value
 
 
-# ---------------------------------------------------------------------- figures
-_COLORS = {
-    "two_point": "tab:orange",
-    "generalized": "tab:blue",
-    "no_steering": "tab:gray",
-    "oracle": "tab:green",
-}
-_USER_COLORS = ["tab:purple", "tab:red", "tab:brown", "tab:pink", "tab:olive", "tab:cyan"]
-
-
-def _color(name: str, users: list[str]) -> str:
-    if name in _COLORS:
-        return _COLORS[name]
-    if name not in users:
-        users.append(name)
-    return _USER_COLORS[users.index(name) % len(_USER_COLORS)]
-
-
-def _subplots(*args: Any, figsize: tuple[float, float], **kwargs: Any) -> tuple[Figure, Any]:
-    """``pyplot.subplots`` without pyplot: a stand-alone :class:`~matplotlib.figure.Figure`
-    (no GUI backend, nothing global to close)."""
-    fig = Figure(figsize=figsize)
-    return fig, fig.subplots(*args, **kwargs)
-
-
-def write_figures(result: BenchmarkResult, out: Path) -> dict[str, str]:
-    """Write the PNG figures; returns {key: file name} of those written."""
-    plots = result.plots
-    users: list[str] = []
-    written: dict[str, str] = {}
-    trace = plots.get("trace") or {}
-    run = plots.get("plot_run") or {}
-    run_label = f"driver {run.get('driver')}, {run.get('track')} run {run.get('run')}"
-
-    def save(fig: Any, key: str) -> None:
-        fig.tight_layout()
-        fig.savefig(out / FIGURES[key], dpi=110)
-        written[key] = FIGURES[key]
-
-    if trace.get("predictions"):
-        save(_steering_figure(trace, run_label, users), "steering_prediction")
-    if plots.get("training_acf") or plots.get("validation_acf"):
-        fig = _acf_figure(plots, users)
-        if fig is not None:
-            save(fig, "residual_acf")
-    if trace.get("estimates"):
-        save(_estimate_figure(trace, run_label, users, plots), "lateral_estimate")
-    if plots.get("early_error"):
-        save(_error_figure(plots, result, users), "lateral_error")
-    curved = plots.get("curved_trace") or {}
-    if curved.get("predictions"):
-        c = plots.get("curved_run") or {}
-        label = f"driver {c.get('driver')}, curved run {c.get('run')}"
-        save(_steering_figure(curved, label, users), "curved_steering")
-    return written
-
-
-def _steering_figure(trace: dict, label: str, users: list[str]) -> Any:
-    t = trace["time"]
-    fig, (top, bottom) = _subplots(2, 1, figsize=(9, 6), sharex=True)
-    top.plot(t, trace["steering"], color="black", lw=2.2, label="measured")
-    for name, pred in trace["predictions"].items():
-        top.plot(t, pred, lw=1.0, ls="--", color=_color(name, users), label=f"{name} (one step)")
-        bottom.plot(t, trace["steering"] - pred, lw=0.8, color=_color(name, users), label=name)
-    top.set_ylabel("steering angle delta (rad)")
-    top.set_title(f"Steering: measured vs one-step prediction ({label})")
-    top.legend(fontsize=8)
-    bottom.set_ylabel("measured - predicted (rad)")
-    bottom.set_xlabel("time (s)")
-    bottom.set_yscale("symlog", linthresh=1e-6)
-    bottom.legend(fontsize=8)
-    return fig
-
-
-def _acf_figure(plots: dict, users: list[str]) -> Any:
-    names = list(dict.fromkeys([*plots.get("training_acf", {}), *plots.get("validation_acf", {})]))
-    if not names:
-        return None
-    fig, axes = _subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
-    for ax, name in zip(axes[0], names, strict=True):
-        training = plots.get("training_acf", {}).get(name)
-        validation = plots.get("validation_acf", {}).get(name)
-        if training is not None:
-            acf = np.asarray(training["acf"])
-            ax.stem(np.arange(acf.size), acf, linefmt="C7-", markerfmt="C7o", basefmt=" ",
-                    label="training run")  # fmt: skip
-            band = training["band"]
-            if band is not None and np.isfinite(band):
-                ax.axhspan(-band, band, color="tab:blue", alpha=0.15, label="95 % band (white)")
-        if validation is not None:
-            acf = np.asarray(validation)
-            ax.plot(np.arange(acf.size), acf, color=_color(name, users), lw=1.5,
-                    label=f"validation mean ({plots.get('detail_driver')})")  # fmt: skip
-        ax.set_title(f"{name}: residual autocorrelation")
-        ax.set_xlabel("lag (samples)")
-        ax.set_ylim(-1.05, 1.05)
-        ax.legend(fontsize=7)
-    axes[0][0].set_ylabel("autocorrelation")
-    return fig
-
-
-def _estimate_figure(trace: dict, label: str, users: list[str], plots: dict) -> Any:
-    truth = trace["truth_lateral"]
-    dt = plots.get("dt", 0.01)
-    t = np.arange(truth.size) * dt
-    fig, axes = _subplots(2, 2, figsize=(11, 6.5), sharex="col",
-                             gridspec_kw={"width_ratios": [2, 1]})  # fmt: skip
-    zoom = min(float(t[-1]), 2.0)
-    for col, limit in enumerate((float(t[-1]), zoom)):
-        top, bottom = axes[0][col], axes[1][col]
-        top.plot(t, truth, color="black", lw=2.2, label="truth")
-        for name, est in trace["estimates"].items():
-            top.plot(t, est["lateral"], lw=1.1, color=_color(name, users), label=name)
-            if len(est["hypotheses"]) > 1:
-                bottom.plot(t, est["true_weight"], lw=1.1, color=_color(name, users), label=name)
-        top.set_xlim(0, limit)
-        bottom.set_xlim(0, limit)
-        bottom.set_ylim(-0.03, 1.03)
-        bottom.axhline(0.95, color="black", lw=0.6, ls=":")
-        bottom.set_xlabel("time (s)")
-    axes[0][0].set_ylabel("lateral offset y (m)")
-    axes[1][0].set_ylabel("weight of the true lane")
-    axes[0][0].set_title(
-        f"Lateral estimate vs truth ({label}; true bias {trace.get('bias', float('nan')):g} m)"
-    )
-    axes[0][1].set_title(f"first {zoom:g} s")
-    axes[0][0].legend(fontsize=8)
-    return fig
-
-
-def _error_figure(plots: dict, result: BenchmarkResult, users: list[str]) -> Any:
-    dt = plots.get("dt", 0.01)
-    fig, ax = _subplots(figsize=(8, 4.5))
-    order = [m for m in result.model_names if m in plots["early_error"]]
-    order += [b for b in BASELINES if b in plots["early_error"]]
-    runs = 0
-    for name in order:
-        stats = plots["early_error"][name]
-        mean, std = np.asarray(stats["mean"]), np.asarray(stats["std"])
-        t = np.arange(mean.size) * dt
-        color = _color(name, users)
-        ax.plot(t, mean, color=color, lw=1.5, label=name)
-        ax.fill_between(t, np.maximum(mean - std, 1e-4), mean + std, color=color, alpha=0.15)
-        runs = stats["runs"]
-    ax.set_yscale("log")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("|lateral error| (m)")
-    ax.set_title(
-        f"Lateral error, mean and std over {runs} validation runs of driver "
-        f"{plots.get('detail_driver')}"
-    )
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    return fig
-
-
 # ----------------------------------------------------------------------- output
 def write_outputs(
     result: BenchmarkResult, out_dir: str | Path, *, figures: bool = True
@@ -576,8 +482,7 @@ def write_outputs(
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     written["results.json"] = path
     for attribute, name in CSV_TABLES.items():
-        rows = doc[attribute]
-        frame = _table_frame(rows)
+        frame = pd.DataFrame(list(doc[attribute]))
         if attribute in ("steering", "curved", "estimation", "summary") or not frame.empty:
             frame.to_csv(out / name, index=False)
             written[name] = out / name

@@ -28,7 +28,9 @@ from typing import Any
 from tqdm import tqdm
 
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
+from benchmarks.protocol.config import DEFAULT_SEEDS
 from benchmarks.report import format_tables, write_outputs
+from benchmarks.tables import Column, render_text
 
 __all__ = ["main", "build_parser", "perf_rows", "format_perf_table", "PERF_MODULES"]
 
@@ -41,14 +43,18 @@ EXIT_OK, EXIT_MODEL_FAILED, EXIT_USAGE = 0, 1, 2
 def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     data = parser.add_argument_group("runs (synthetic population)")
     data.add_argument("--population", default="paper", help="population name (default: paper)")
-    data.add_argument(
-        "--population-seed",
-        type=int,
+    seeds = data.add_mutually_exclusive_group()
+    seeds.add_argument(
+        "--seeds",
+        type=_seed_list,
         default=None,
-        metavar="N",
-        help="seed of the drivers' parameters (default: --seed)",
+        metavar="S,S,...",
+        help="population seeds: the protocol runs once per seed (drivers and runs drawn from "
+        "it), the verdict comes with 95 %% intervals over them (default: 0,1,2,3,4)",
     )
-    data.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the runs (0)")
+    seeds.add_argument(
+        "--seed", type=int, default=None, metavar="S", help="one seed only (--seeds S)"
+    )
     data.add_argument("--drivers", type=int, default=9, metavar="N", help="drivers: Ill, 1.. (9)")
     data.add_argument("--runs", type=int, default=10, metavar="N", help="runs per driver (10)")
     data.add_argument(
@@ -120,6 +126,18 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _seed_list(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"seeds must be comma-separated integers >= 0, e.g. 0,1,2, got {text!r}"
+        ) from None
+    if not seeds or any(s < 0 for s in seeds):
+        raise argparse.ArgumentTypeError(f"seeds must be integers >= 0, got {text!r}")
+    return seeds
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-bench``."""
     parser = argparse.ArgumentParser(
@@ -176,8 +194,9 @@ def _config(args: argparse.Namespace) -> Any:
     }
     return ProtocolConfig(
         population=args.population,
-        population_seed=args.population_seed,
-        seed=args.seed,
+        seeds=(
+            (args.seed,) if args.seed is not None else args.seeds if args.seeds else DEFAULT_SEEDS
+        ),
         drivers=args.drivers,
         runs=args.runs,
         ill_runs=args.ill_runs,
@@ -304,40 +323,35 @@ def perf_rows(name: str, results: dict[str, Any], module: Any = None) -> list[di
     return rows
 
 
+def _number(x: Any) -> str:
+    if x is None:
+        return "-"
+    return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.2f}"
+
+
+_PERF_COLUMNS = [
+    Column("benchmark", "benchmark", left=True),
+    Column("measure", "measure", left=True),
+    Column("value", "measured", _number),
+    Column(lambda r: ">= " + _number(r["target"]) if r["target"] is not None else "-", "target"),
+    Column(
+        lambda r: "-" if r["ratio_to_target"] is None else f"{r['ratio_to_target']:.2f}x",
+        "measured/target",
+    ),
+    Column(
+        lambda r: (
+            "ERROR"
+            if r.get("error")
+            else {True: "PASS", False: "FAIL", None: ""}.get(r["passed"], str(r["passed"]))
+        ),
+        "result",
+    ),
+]
+
+
 def format_perf_table(rows: Sequence[dict[str, Any]]) -> str:
     """The rows of :func:`perf_rows` as one plain-text table."""
-
-    def num(x: Any) -> str:
-        if x is None:
-            return "-"
-        return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.2f}"
-
-    header = ("benchmark", "measure", "measured", "target", "measured/target", "result")
-    lines = [
-        (
-            r["benchmark"],
-            r["measure"],
-            num(r["value"]),
-            ">= " + num(r["target"]) if r["target"] is not None else "-",
-            "-" if r["ratio_to_target"] is None else f"{r['ratio_to_target']:.2f}x",
-            {True: "PASS", False: "FAIL", None: ""}.get(r["passed"], str(r["passed"]))
-            if not r.get("error")
-            else "ERROR",
-        )
-        for r in rows
-    ]
-    widths = [max(len(h), *(len(line[i]) for line in lines)) for i, h in enumerate(header)]
-    left = {0, 1}
-
-    def render(cells: Sequence[str]) -> str:
-        return "  ".join(
-            c.ljust(w) if i in left else c.rjust(w)
-            for i, (c, w) in enumerate(zip(cells, widths, strict=True))
-        ).rstrip()
-
-    out = [render(header), "  ".join("-" * w for w in widths)]
-    out += [render(line) for line in lines]
-    return "\n".join(out)
+    return render_text(rows, _PERF_COLUMNS)
 
 
 def _perf(args: argparse.Namespace) -> int:

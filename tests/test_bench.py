@@ -14,9 +14,11 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
+from benchmarks.figures import FIGURES
 from benchmarks.protocol import (
     BenchmarkError,
     ModelError,
@@ -24,11 +26,11 @@ from benchmarks.protocol import (
     load_user_model,
     run_protocol,
 )
-from benchmarks.report import CSV_TABLES, FIGURES, format_tables, write_outputs
+from benchmarks.report import CSV_TABLES, format_tables, write_outputs
 from hasa_cli.bench import format_perf_table, main, perf_rows
 
-SMALL = {"drivers": 3, "runs": 2, "ill_runs": 3, "duration": 4.0, "curved_runs": 1}
-SMALL_ARGS = ["--drivers", "3", "--runs", "2", "--ill-runs", "3", "--duration", "4"]
+SMALL = {"seeds": (0,), "drivers": 3, "runs": 2, "ill_runs": 3, "duration": 4.0, "curved_runs": 1}
+SMALL_ARGS = ["--seeds", "0", "--drivers", "3", "--runs", "2", "--ill-runs", "3", "--duration", "4"]
 TABLES = ("steering", "curved", "estimation", "runs_steering", "runs_estimation")
 
 USER_MODULE = '''
@@ -178,8 +180,19 @@ def test_results_json_structure(outputs) -> None:
     assert doc["errors"] == []
     # the paper's values sit beside ours
     ill = {r["model"]: r for r in steering if r["driver"] == "Ill"}
-    assert ill["generalized"]["paper_rmse"] == 7e-4
+    # in road-wheel rad: the paper's steering-wheel value over the steering ratio 15
+    assert ill["generalized"]["paper_rmse_steering_wheel"] == 7e-4
+    assert ill["generalized"]["paper_rmse"] == pytest.approx(7e-4 / 15)
+    assert ill["generalized"]["rmse_over_paper"] == pytest.approx(
+        ill["generalized"]["rmse"] / (7e-4 / 15)
+    )
     assert ill["near_far_pd"]["paper_rmse"] is None
+    assert all(r["seed"] == 0 for r in steering + doc["runs_steering"] + doc["runs_estimation"])
+    assert all(0.0 <= r["final_true_lane_weight"] <= 1.0 for r in doc["runs_estimation"])
+    for info in doc["models"]:
+        assert info["seed"] == 0
+        assert {"condition_number", "ar_poles_max_abs", "stable", "identifiable",
+                "ridge_lambda"} <= set(info["checks"])  # fmt: skip
     assert doc["paper"]["table_2"]["Ill"]["generalized_mean"] == 0.22
 
 
@@ -305,6 +318,29 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert (tmp_path / "report.md").read_text().count("fit_raises") >= 1
 
 
+def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
+    config = ProtocolConfig(**(SMALL | {"seeds": (3, 4), "curved_runs": 0}))
+    result = run_protocol(config, [f"{user_module}:NearFarPD"], workers=1)
+    doc = result.to_json_dict()
+    assert doc["config"]["seeds"] == [3, 4]
+    assert {r["seed"] for r in doc["steering"]} == {3, 4} == {r["seed"] for r in doc["estimation"]}
+    assert len(doc["models"]) == 2 * 3  # every model fitted on each seed's own training run
+    per_seed = [r for r in doc["seed_summary"] if r["model"] == "generalized"]
+    assert [r["seed"] for r in per_seed] == [3, 4]
+    summary = {r["model"]: r for r in doc["summary"]}
+    gen = summary["generalized"]
+    assert gen["seeds"] == 2
+    values = [r["lateral_rmse"] for r in per_seed]
+    assert gen["lateral_rmse"] == pytest.approx(np.mean(values))
+    half = 12.706 * np.std(values, ddof=1) / np.sqrt(2)  # Student t, 1 degree of freedom
+    assert gen["lateral_rmse_ci_high"] - gen["lateral_rmse"] == pytest.approx(half, rel=1e-3)
+    for row in summary.values():
+        if row["kind"] != "baseline":
+            assert row["rank_lateral_stability"] in (0.0, 0.5, 1.0)
+    text = format_tables(result)
+    assert "Verdict over 2 population seeds [3, 4]" in text and "95% CI" in text
+
+
 # --------------------------------------------------------------- determinism
 def test_same_results_with_one_and_two_workers(outputs) -> None:
     config = ProtocolConfig(**SMALL, batch_size=2)
@@ -360,7 +396,7 @@ def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) 
     """Saved runs (the recording format writes floats exactly) score exactly as generated."""
     from hasa_env.drivers import population, run_population, save_runs
 
-    config = ProtocolConfig(drivers=2, runs=2, ill_runs=3, duration=3.0, curved_runs=1)
+    config = ProtocolConfig(seeds=(0,), drivers=2, runs=2, ill_runs=3, duration=3.0, curved_runs=1)
     synthetic = run_protocol(config, workers=1)
     drivers = population("paper", seed=0, size=2)
     env = {"time_limit": 3.0}
@@ -373,7 +409,13 @@ def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) 
     save_runs(curved["Ill"], tmp_path / "Ill", prefix="curved")
     recorded = run_protocol(replace_recordings(config, tmp_path), workers=1)
     assert recorded.config["illustrative"] == "Ill"
-    assert _tables(recorded) == _tables(synthetic)
+
+    def unseeded(tables: dict) -> dict:  # recordings have no population seed
+        return {k: [{f: v for f, v in r.items() if f != "seed"} for r in rows]
+                for k, rows in tables.items()}  # fmt: skip
+
+    assert all(r["seed"] is None for r in recorded.runs_estimation)
+    assert unseeded(_tables(recorded)) == unseeded(_tables(synthetic))
 
 
 def replace_recordings(config: ProtocolConfig, folder: Path) -> ProtocolConfig:

@@ -543,8 +543,11 @@ def test_writer_checks_run_on_the_validator():
 def test_protocol_settings_convert_numpy_values_and_name_the_setting(tmp_path):
     from benchmarks.protocol import BenchmarkError, ProtocolConfig
 
-    config = ProtocolConfig(drivers=np.int64(3), noise={"camera": np.float32(0.25)})
+    config = ProtocolConfig(
+        drivers=np.int64(3), noise={"camera": np.float32(0.25)}, seeds=np.arange(2)
+    )
     assert type(config.drivers) is int and config.noise == {"camera": 0.25}
+    assert config.seeds == (0, 1) and type(config.seeds[0]) is int
     assert ProtocolConfig(recordings=tmp_path).recordings == str(tmp_path)
     for kwargs, text in (
         ({"noise": "camera"}, "protocol setting 'noise' must be a mapping (JSON object)"),
@@ -555,7 +558,10 @@ def test_protocol_settings_convert_numpy_values_and_name_the_setting(tmp_path):
             {"track": np.array(["curved"])},
             "'track' = array(['curved'], dtype='<U6') is not allowed",
         ),
-        ({"seed": 1.5}, "'seed' must be a non-negative integer, got 1.5"),
+        ({"seeds": (0, 1.5)}, "'seeds[1]' must be a non-negative integer, got 1.5"),
+        ({"seeds": (3, 3)}, "'seeds' has the entry 3 twice (at [0] and [1])"),
+        ({"seeds": ()}, "'seeds' must be a non-empty list of distinct non-negative integers"),
+        ({"seeds": "012"}, "'seeds' must be a non-empty list of distinct non-negative integers"),
     ):
         with pytest.raises(BenchmarkError) as info:
             ProtocolConfig(**kwargs)

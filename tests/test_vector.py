@@ -16,11 +16,15 @@ CONFIG = {
 }
 
 
+DISTURBED = {"disturbance": {"crosswind": 0.6, "camber": 0.4, "components": 5}}
+
+
 @pytest.mark.parametrize("env_id", hasa_env.ENV_IDS)
 @pytest.mark.parametrize("action_repeat", [1, 3])
-def test_vector_env_matches_sync_vector_of_single_envs(env_id, action_repeat):
+@pytest.mark.parametrize("extra", [{}, DISTURBED], ids=["calm", "disturbed"])
+def test_vector_env_matches_sync_vector_of_single_envs(env_id, action_repeat, extra):
     n = 5
-    config = {**CONFIG, "action_repeat": action_repeat}
+    config = {**CONFIG, "action_repeat": action_repeat, **extra}
     native = gym.make_vec(
         env_id, num_envs=n, vectorization_mode="vector_entry_point", config=config
     )

@@ -1,175 +1,338 @@
-"""Aggregation of per-run rows into per-driver tables and the summary."""
+"""Aggregation of the per-run rows: per-driver tables, per-seed summaries, the verdict.
+
+Three levels, all with pandas ``groupby``:
+
+1. per (seed, driver, model): means over the driver's validation runs (the
+   paper's tables 1 and 2, one set per population seed);
+2. per (seed, model): means over drivers (:func:`summarize_seeds`), the
+   ranks of the models on that seed;
+3. per model, over seeds (:func:`verdict`): the mean of the per-seed values
+   and a 95 % confidence interval from Student's t over the seeds::
+
+       mean = (1/S) sum_s x_s
+       half = t_{0.975, S-1} * sd(x_s) / sqrt(S)         (no interval with S = 1)
+
+   Each seed draws a new population of drivers and new runs, so the per-seed
+   values are independent draws of what the benchmark measures and the
+   interval says how much a verdict depends on the draw. ``rank_stability``
+   is the share of seeds on which a model holds its overall rank (the rank
+   of its mean over seeds).
+
+Degenerate runs (a non-finite score, e.g. a recording too short to score)
+are counted per row (``degenerate_runs``) and left out of the means.
+"""
 
 from __future__ import annotations
 
 import math
-from collections import defaultdict
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import pandas as pd
+from scipy import stats
 
 from benchmarks import paper_values
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
+from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
-__all__ = ["aggregate_estimation", "aggregate_steering", "summarize"]
+__all__ = [
+    "aggregate_estimation",
+    "aggregate_steering",
+    "confidence_interval",
+    "summarize_seeds",
+    "verdict",
+]
+
+_GROUP = ["seed", "driver", "track", "model"]
 
 
-def _mean(values: Sequence[float]) -> float:
-    arr = np.asarray(values, dtype=np.float64)
+def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    """Rows as dicts of plain Python values (NaN -> None, numpy scalars -> Python)."""
+    out = []
+    for row in frame.to_dict(orient="records"):
+        clean: dict[str, Any] = {}
+        for key, value in row.items():
+            if isinstance(value, np.generic):
+                value = value.item()
+            if isinstance(value, float) and not math.isfinite(value):
+                value = None
+            clean[key] = value
+        out.append(clean)
+    return out
+
+
+def _frame(rows: Sequence[dict[str, Any]]) -> pd.DataFrame:
+    frame = pd.DataFrame(list(rows))
+    if "seed" in frame:
+        frame["seed"] = frame["seed"].astype(object)
+    return frame
+
+
+def _finite_mean(values: pd.Series) -> float:
+    arr = pd.to_numeric(values, errors="coerce").to_numpy(dtype=np.float64)
     arr = arr[np.isfinite(arr)]
     return float(arr.mean()) if arr.size else float("nan")
 
 
-def _std(values: Sequence[float]) -> float:
-    arr = np.asarray(values, dtype=np.float64)
+def _finite_std(values: pd.Series) -> float:
+    arr = pd.to_numeric(values, errors="coerce").to_numpy(dtype=np.float64)
     arr = arr[np.isfinite(arr)]
     return float(arr.std(ddof=1)) if arr.size > 1 else float("nan")
 
 
+def _count_degenerate(values: pd.Series) -> int:
+    arr = pd.to_numeric(values, errors="coerce").to_numpy(dtype=np.float64)
+    return int(np.sum(~np.isfinite(arr)))
+
+
 def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[dict]:
-    """Per (driver, model): means over runs; RMSE decrease vs the two-point model; paper values."""
-    grouped: dict[tuple[str, str], list[dict]] = defaultdict(list)
-    order: list[str] = []
-    for row in rows:
-        if row["driver"] not in order:
-            order.append(row["driver"])
-        grouped[(row["driver"], row["model"])].append(row)
-    out = []
-    for driver in order:
-        base = grouped.get((driver, "two_point"))
-        base_rmse = _mean([r["rmse"] for r in base]) if base else float("nan")
-        for model in models:
-            runs = grouped.get((driver, model))
-            if not runs:
-                continue
-            rmse = _mean([r["rmse"] for r in runs])
-            p_values = np.array([r["ljung_box_p"] for r in runs], dtype=np.float64)
-            finite_p = p_values[np.isfinite(p_values)]
-            entry = {
-                "driver": driver,
-                "track": runs[0]["track"],
-                "model": model,
-                "n_runs": len(runs),
-                "n_samples": int(sum(r["n"] for r in runs)),
-                "rmse": rmse,
-                "rmse_std": _std([r["rmse"] for r in runs]),
-                "r2": _mean([r["r2"] for r in runs]),
-                "r2_increments": _mean([r["r2_increments"] for r in runs]),
-                "rmse_decrease_vs_two_point": (
-                    None if model == "two_point" else 1.0 - rmse / base_rmse
-                ),
-                "ljung_box_p_median": float(np.median(finite_p)) if finite_p.size else None,
-                "white_runs": int(np.sum(finite_p > 0.05)),
-            }
-            entry.update(_paper_steering(driver, model, runs[0]["track"]))
-            out.append(entry)
-    return out
+    """Per (seed, driver, model): means over runs, the RMSE decrease vs the two-point
+    model, whiteness, free runs, and the paper's values in road-wheel radians."""
+    if not rows:
+        return []
+    frame = _frame(rows)
+    frame = frame[frame["model"].isin(models)]
+    grouped = frame.groupby(_GROUP, sort=False, dropna=False)
+    table = grouped.agg(
+        n_runs=("rmse", "size"),
+        n_samples=("n", "sum"),
+        rmse=("rmse", _finite_mean),
+        rmse_std=("rmse", _finite_std),
+        r2=("r2", _finite_mean),
+        r2_increments=("r2_increments", _finite_mean),
+        degenerate_runs=("rmse", _count_degenerate),
+        ljung_box_p_median=(
+            "ljung_box_p",
+            lambda p: float(np.nanmedian(p)) if np.isfinite(p.astype(float)).any() else None,
+        ),
+        white_runs=("ljung_box_p", lambda p: int(np.sum(p.astype(float) > 0.05))),
+    ).reset_index()
+    free = frame[frame["free_run_diverged"].notna()] if "free_run_diverged" in frame else None
+    if free is not None and len(free):
+        free = free.assign(
+            bounded_rmse=free["free_run_rmse"].where(~free["free_run_diverged"].astype(bool))
+        )
+        free_table = (
+            free.groupby(_GROUP, sort=False, dropna=False)
+            .agg(
+                free_run_rmse=("bounded_rmse", _finite_mean),
+                free_run_diverged=("free_run_diverged", lambda d: int(d.astype(bool).sum())),
+            )
+            .reset_index()
+        )
+        table = table.merge(free_table, on=_GROUP, how="left")
+    else:
+        table["free_run_rmse"] = np.nan
+        table["free_run_diverged"] = None
+    base = table[table["model"] == "two_point"][["seed", "driver", "track", "rmse"]].rename(
+        columns={"rmse": "two_point_rmse"}
+    )
+    table = table.merge(base, on=["seed", "driver", "track"], how="left")
+    table["rmse_decrease_vs_two_point"] = np.where(
+        table["model"] == "two_point", np.nan, 1.0 - table["rmse"] / table["two_point_rmse"]
+    )
+    table = table.drop(columns="two_point_rmse")
+    paper = pd.DataFrame(
+        [
+            _paper_steering(d, m, t)
+            for d, m, t in zip(table["driver"], table["model"], table["track"], strict=True)
+        ]
+    )
+    table = pd.concat([table.reset_index(drop=True), paper], axis=1)
+    table["rmse_over_paper"] = table["rmse"] / table["paper_rmse"].astype(float)
+    return _records(table)
 
 
 def _paper_steering(driver: str, model: str, track: str) -> dict[str, Any]:
-    keys = {"paper_rmse": None, "paper_r2": None, "paper_rmse_decrease": None}
+    """The paper's values for a row: RMSE converted to road-wheel rad (/ 15) and as printed."""
+    keys: dict[str, Any] = {
+        "paper_rmse": None,
+        "paper_rmse_steering_wheel": None,
+        "paper_r2": None,
+        "paper_rmse_decrease": None,
+    }
     if track == "curved":
         if model in paper_values.CURVED and driver == ILLUSTRATIVE:
             r2, rmse = paper_values.CURVED[model]
-            keys.update(paper_rmse=rmse, paper_r2=r2)
+            keys.update(paper_rmse_steering_wheel=rmse, paper_r2=r2)
             if model == "generalized":
                 base = paper_values.CURVED["two_point"][1]
                 keys["paper_rmse_decrease"] = 1.0 - rmse / base
-        return keys
-    values = paper_values.TABLE_1.get(driver)
-    if values is None or model not in BUILTIN_MODELS:
-        return keys
-    if model == "two_point":
-        keys.update(paper_rmse=values[0], paper_r2=values[1])
     else:
-        keys.update(paper_rmse=values[2], paper_r2=values[3], paper_rmse_decrease=values[4])
+        values = paper_values.TABLE_1.get(driver)
+        if values is not None and model in BUILTIN_MODELS:
+            if model == "two_point":
+                keys.update(paper_rmse_steering_wheel=values[0], paper_r2=values[1])
+            else:
+                keys.update(
+                    paper_rmse_steering_wheel=values[2],
+                    paper_r2=values[3],
+                    paper_rmse_decrease=values[4],
+                )
+    if keys["paper_rmse_steering_wheel"] is not None:
+        keys["paper_rmse"] = keys["paper_rmse_steering_wheel"] / PAPER_STEERING_RATIO
     return keys
 
 
 def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    grouped: dict[tuple[str, str], list[dict]] = defaultdict(list)
-    order: list[tuple[str, str]] = []
-    for row in rows:
-        key = (row["driver"], row["model"])
-        if key not in grouped:
-            order.append(key)
-        grouped[key].append(row)
-    out = []
-    for driver, model in order:
-        runs = grouped[(driver, model)]
-        rmse = [r["lateral_rmse"] for r in runs]
-        steps = np.array(
-            [np.nan if r["steps_to_decide"] is None else r["steps_to_decide"] for r in runs]
+    """Per (seed, driver, model): lateral RMSE mean/std/max over runs, decisions, paper values."""
+    if not rows:
+        return []
+    frame = _frame(rows)
+    frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
+    table = (
+        frame.groupby(_GROUP, sort=False, dropna=False)
+        .agg(
+            n_runs=("lateral_rmse", "size"),
+            lateral_rmse_mean=("lateral_rmse", _finite_mean),
+            lateral_rmse_std=("lateral_rmse", _finite_std),
+            lateral_rmse_max=("lateral_rmse", lambda v: float(np.nanmax(v)) if len(v) else None),
+            degenerate_runs=("lateral_rmse", _count_degenerate),
+            steps_to_decide_median=(
+                "steps",
+                lambda v: float(v.median()) if v.notna().any() else None,
+            ),
+            steps_to_decide_max=("steps", lambda v: float(v.max()) if v.notna().any() else None),
+            decided_runs=("steps", lambda v: int(v.notna().sum())),
+            true_lane_final_runs=("true_lane_final", lambda v: int(v.astype(bool).sum())),
+            final_true_lane_weight_mean=("final_true_lane_weight", _finite_mean),
         )
-        decided = steps[np.isfinite(steps)]
-        entry = {
-            "driver": driver,
-            "model": model,
-            "n_runs": len(runs),
-            "lateral_rmse_mean": _mean(rmse),
-            "lateral_rmse_std": _std(rmse),
-            "lateral_rmse_max": float(np.nanmax(rmse)) if runs else None,
-            "steps_to_decide_median": float(np.median(decided)) if decided.size else None,
-            "steps_to_decide_max": float(np.max(decided)) if decided.size else None,
-            "decided_runs": int(decided.size),
-            "true_lane_final_runs": int(sum(r["true_lane_final"] for r in runs)),
-            "paper_lateral_rmse_mean": None,
-            "paper_lateral_rmse_std": None,
-        }
+        .reset_index()
+    )
+    paper_mean, paper_std = [], []
+    for driver, model in zip(table["driver"], table["model"], strict=True):
         paper = paper_values.TABLE_2.get(driver)
         if paper is not None and model in BUILTIN_MODELS:
             offset = 0 if model == "two_point" else 2
-            entry["paper_lateral_rmse_mean"] = paper[offset]
-            entry["paper_lateral_rmse_std"] = paper[offset + 1]
+            paper_mean.append(paper[offset])
+            paper_std.append(paper[offset + 1])
         elif model == "no_steering":
-            entry["paper_lateral_rmse_mean"] = paper_values.NO_STEERING_LATERAL_RMSE
-        out.append(entry)
-    return out
+            paper_mean.append(paper_values.NO_STEERING_LATERAL_RMSE)
+            paper_std.append(None)
+        else:
+            paper_mean.append(None)
+            paper_std.append(None)
+    table["paper_lateral_rmse_mean"] = paper_mean
+    table["paper_lateral_rmse_std"] = paper_std
+    return _records(table)
 
 
-def summarize(
+def _kind(name: str) -> str:
+    if name in BUILTIN_MODELS:
+        return "builtin"
+    return "baseline" if name in BASELINES else "user"
+
+
+def summarize_seeds(
     steering: Sequence[dict], estimation: Sequence[dict], models: Sequence[str]
 ) -> list[dict[str, Any]]:
-    """Per model: means over drivers; ranks by lateral RMSE and by steering RMSE."""
+    """Per (seed, model): means over drivers; the models' ranks on that seed."""
+    names = list(models) + [b for b in BASELINES if b not in models]
+    s = pd.DataFrame(list(steering)) if steering else pd.DataFrame(columns=["seed", "model"])
+    e = pd.DataFrame(list(estimation)) if estimation else pd.DataFrame(columns=["seed", "model"])
+    seeds = list(dict.fromkeys([*s.get("seed", []), *e.get("seed", [])]))
     rows = []
-    for name in list(models) + [b for b in BASELINES]:
-        s = [r for r in steering if r["model"] == name]
-        e = [r for r in estimation if r["model"] == name]
-        if not s and not e:
-            continue
-        rows.append(
-            {
+    for seed in seeds:
+        for name in names:
+            ss = s[(s["seed"].astype(object) == seed) & (s["model"] == name)] if len(s) else s
+            ee = e[(e["seed"].astype(object) == seed) & (e["model"] == name)] if len(e) else e
+            if not len(ss) and not len(ee):
+                continue
+            row: dict[str, Any] = {
+                "seed": seed,
                 "model": name,
-                "kind": "builtin"
-                if name in BUILTIN_MODELS
-                else ("baseline" if name in BASELINES else "user"),
-                "drivers": len({r["driver"] for r in (s or e)}),
-                "rmse": _mean([r["rmse"] for r in s]) if s else None,
-                "r2_increments": _mean([r["r2_increments"] for r in s]) if s else None,
-                "rmse_decrease_vs_two_point": _mean(
-                    [r["rmse_decrease_vs_two_point"] for r in s if r["model"] != "two_point"]
-                )
-                if s and name != "two_point"
+                "kind": _kind(name),
+                "drivers": int((ss if len(ss) else ee)["driver"].nunique()),
+                "rmse": _finite_mean(ss["rmse"]) if len(ss) else None,
+                "r2_increments": _finite_mean(ss["r2_increments"]) if len(ss) else None,
+                "rmse_decrease_vs_two_point": _finite_mean(ss["rmse_decrease_vs_two_point"])
+                if len(ss) and name != "two_point"
                 else None,
-                "white_runs": int(sum(r["white_runs"] for r in s)) if s else None,
-                "runs": int(sum(r["n_runs"] for r in s)) if s else int(sum(r["n_runs"] for r in e)),
-                "lateral_rmse": _mean([r["lateral_rmse_mean"] for r in e]) if e else None,
-                "decided_runs": int(sum(r["decided_runs"] for r in e)) if e else None,
-                "estimated_runs": int(sum(r["n_runs"] for r in e)) if e else None,
+                "rmse_over_paper_median": float(np.nanmedian(ss["rmse_over_paper"].astype(float)))
+                if len(ss) and ss["rmse_over_paper"].notna().any()
+                else None,
+                "white_runs": int(ss["white_runs"].sum()) if len(ss) else None,
+                "free_run_diverged": int(pd.to_numeric(ss["free_run_diverged"]).fillna(0).sum())
+                if len(ss) and ss["free_run_diverged"].notna().any()
+                else None,
+                "runs": int(ss["n_runs"].sum()) if len(ss) else int(ee["n_runs"].sum()),
+                "lateral_rmse": _finite_mean(ee["lateral_rmse_mean"]) if len(ee) else None,
+                "decided_runs": int(ee["decided_runs"].sum()) if len(ee) else None,
+                "estimated_runs": int(ee["n_runs"].sum()) if len(ee) else None,
             }
-        )
+            rows.append(row)
+    table = pd.DataFrame(rows)
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
-        ranked = sorted(
-            (r for r in rows if r["kind"] != "baseline" and _finite(r[key])),
-            key=lambda r, key=key: r[key],
-        )
-        for i, r in enumerate(ranked, start=1):
-            r[rank_key] = i
-        for r in rows:
-            r.setdefault(rank_key, None)
-    return rows
+        table[rank_key] = None
+        if not len(table):
+            continue
+        ranked = table[(table["kind"] != "baseline") & table[key].notna()]
+        ranks = ranked.groupby("seed")[key].rank(method="min")
+        table.loc[ranks.index, rank_key] = ranks.astype(int)
+    return _records(table)
 
 
-def _finite(value: Any) -> bool:
-    return value is not None and isinstance(value, int | float) and math.isfinite(value)
+def confidence_interval(values: Sequence[float], level: float = 0.95) -> tuple[float, float, float]:
+    """(mean, low, high) of finite ``values``: Student's t interval over them (NaN bounds
+    with fewer than two values)."""
+    arr = np.asarray([v for v in values if v is not None], dtype=np.float64)
+    arr = arr[np.isfinite(arr)]
+    if arr.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    mean = float(arr.mean())
+    if arr.size < 2:
+        return mean, float("nan"), float("nan")
+    half = float(
+        stats.t.ppf(0.5 + level / 2.0, arr.size - 1) * arr.std(ddof=1) / math.sqrt(arr.size)
+    )
+    return mean, mean - half, mean + half
+
+
+_VERDICT_KEYS = ("rmse", "r2_increments", "rmse_decrease_vs_two_point", "lateral_rmse",
+                 "rmse_over_paper_median")  # fmt: skip
+
+
+def verdict(seed_rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[dict[str, Any]]:
+    """Per model over seeds: means with 95 % intervals (see the module docstring), ranks,
+    rank stability, decisions and free-run divergences in all."""
+    frame = pd.DataFrame(list(seed_rows))
+    if not len(frame):
+        return []
+    names = list(models) + [b for b in BASELINES if b not in models]
+    rows = []
+    for name in names:
+        part = frame[frame["model"] == name]
+        if not len(part):
+            continue
+        row: dict[str, Any] = {
+            "model": name,
+            "kind": _kind(name),
+            "seeds": int(part["seed"].nunique()),
+            "drivers": int(part["drivers"].max()),
+            "runs": int(part["runs"].sum()),
+        }
+        for key in _VERDICT_KEYS:
+            mean, low, high = confidence_interval(part[key].tolist())
+            row[key] = mean
+            row[f"{key}_ci_low"] = low
+            row[f"{key}_ci_high"] = high
+        for key in ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged"):
+            values = pd.to_numeric(part[key], errors="coerce")
+            row[key] = int(values.sum()) if values.notna().any() else None
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
+        table[rank_key] = None
+        table[f"{rank_key}_stability"] = None
+        ranked = table[(table["kind"] != "baseline") & table[key].notna()]
+        if not len(ranked):
+            continue
+        overall = ranked[key].rank(method="min").astype(int)
+        table.loc[overall.index, rank_key] = overall
+        for i in overall.index:
+            per_seed = frame[frame["model"] == table.loc[i, "model"]][rank_key]
+            per_seed = pd.to_numeric(per_seed, errors="coerce").dropna()
+            if len(per_seed):
+                table.loc[i, f"{rank_key}_stability"] = float(np.mean(per_seed == overall[i]))
+    return _records(table)

@@ -9,7 +9,14 @@ from typing import Any
 
 from hasa_env.validation import ABSENT, Field, schema, validate_fields
 
-__all__ = ["BASELINES", "BUILTIN_MODELS", "ILLUSTRATIVE", "BenchmarkError", "ProtocolConfig"]
+__all__ = [
+    "BASELINES",
+    "BUILTIN_MODELS",
+    "DEFAULT_SEEDS",
+    "ILLUSTRATIVE",
+    "BenchmarkError",
+    "ProtocolConfig",
+]
 
 
 BUILTIN_MODELS = ("two_point", "generalized")
@@ -19,6 +26,8 @@ BASELINES = ("no_steering", "oracle")
 """Names of the estimation baselines in the results."""
 
 ILLUSTRATIVE = "Ill"
+DEFAULT_SEEDS = (0, 1, 2, 3, 4)
+"""Population seeds of the default protocol."""
 _ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
 _NOISE_UNITS = {"speed": "m/s", "camera": "m", "camera_heading": "rad", "imu": "m/s^2",
                 "steering": "rad"}  # fmt: skip
@@ -35,8 +44,10 @@ def _count(doc: str, low: int, optional: bool = False) -> Field:
 _SCHEMA = schema(
     {
         "population": Field("string", doc="Synthetic population name.", non_empty=True),
-        "population_seed": _count("Seed of the drivers' parameters (null: seed).", 0, True),
-        "seed": _count("Base seed of the runs.", 0),
+        "seeds": Field(
+            "integers", doc="Population seeds, one protocol pass each.", low=0, non_empty=True,
+            unique=True,
+        ),
         "drivers": _count("Number of drivers.", 1),
         "runs": _count("Runs per driver on the main track.", 1),
         "ill_runs": _count("Runs of the illustrative driver (null: runs + 4).", 1, True),
@@ -74,9 +85,11 @@ class ProtocolConfig:
 
     Attributes:
         population: name of the synthetic population (:data:`hasa_env.drivers.POPULATIONS`).
-        population_seed: seed of the population's driver parameters (None: ``seed``).
-        seed: base seed of the runs (each run's seeds derive from it, the
-            driver's name, the track and the run index).
+        seeds: the population seeds: the whole protocol runs once per seed S,
+            with the drivers of ``population(population, S)`` and runs whose
+            seeds derive from S, the driver's name, the track and the run
+            index (:func:`hasa_env.drivers.run_seeds`). Five by default: a
+            verdict that holds on one seed only is an anecdote.
         drivers: number of drivers ("Ill", "1", ..., str(drivers - 1)).
         runs: runs per driver on the main track.
         ill_runs: runs of the illustrative driver on the main track, the
@@ -105,8 +118,7 @@ class ProtocolConfig:
     """
 
     population: str = "paper"
-    population_seed: int | None = None
-    seed: int = 0
+    seeds: tuple[int, ...] = DEFAULT_SEEDS
     drivers: int = 9
     runs: int = 10
     ill_runs: int | None = None
@@ -137,6 +149,7 @@ class ProtocolConfig:
             describe=lambda path: f"protocol setting '{path}'",
             error=lambda path, message: BenchmarkError(message),
         )
+        object.__setattr__(self, "seeds", tuple(self.seeds))
         if self.recordings is None and self.training_run >= self.illustrative_runs:
             raise BenchmarkError(
                 f"protocol setting 'training_run' = {self.training_run} needs at least "
@@ -150,8 +163,9 @@ class ProtocolConfig:
         return self.runs + 4 if self.ill_runs is None else self.ill_runs
 
     @property
-    def effective_population_seed(self) -> int:
-        return self.seed if self.population_seed is None else self.population_seed
+    def run_seeds(self) -> tuple[int | None, ...]:
+        """The seeds the protocol runs (recordings: one pass, seed None)."""
+        return (None,) if self.recordings is not None else self.seeds
 
     def env_config(self) -> dict[str, Any]:
         """The env configuration of the synthetic runs (deep-merged onto the defaults)."""
@@ -164,5 +178,5 @@ class ProtocolConfig:
         out = asdict(self)
         out["noise"] = dict(self.noise)
         out["ill_runs"] = self.illustrative_runs if self.recordings is None else None
-        out["population_seed"] = self.effective_population_seed
+        out["seeds"] = list(self.seeds) if self.recordings is None else None
         return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import importlib
 import math
 import pickle
@@ -16,10 +17,18 @@ import pandas as pd
 
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, BenchmarkError
 from estimators.tuning import steering_residual_std
-from hasa_env.steering import GeneralizedModel, IdentifiabilityWarning, SteeringModel, TwoPointModel
+from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
 
-__all__ = ["FittedModel", "ModelError", "describe", "fit_models", "load_user_model"]
+__all__ = [
+    "Candidate",
+    "FittedModel",
+    "ModelError",
+    "describe",
+    "fit_models",
+    "load_models",
+    "load_user_model",
+]
 
 
 class ModelError(Exception):
@@ -140,34 +149,67 @@ class FittedModel:
     residual_std: float | None
 
 
-def fit_models(
-    train: pd.DataFrame, user_specs: Sequence[str], errors: list[ModelError]
-) -> tuple[list[FittedModel], list[dict[str, Any]]]:
+@dataclass(frozen=True)
+class Candidate:
+    """A model to fit on each seed's training run: unfitted, loaded once.
 
-    dt = steering_features(train).attrs.get("dt", 0.01)
-    candidates: list[tuple[str, str, str | None, Any]] = [
-        ("two_point", "builtin", None, TwoPointModel(dt=dt)),
-        ("generalized", "builtin", None, GeneralizedModel(dt=dt)),
+    Attributes:
+        name: the name in the results; kind: "builtin" or "user";
+        spec: the user's import path (None for built-ins); model: the unfitted model.
+    """
+
+    name: str
+    kind: str
+    spec: str | None
+    model: Any
+
+
+def load_models(user_specs: Sequence[str], errors: list[ModelError]) -> list[Candidate]:
+    """The built-in models and every user model that loads (failures go to ``errors``).
+
+    Done before any run is generated, so a model that does not import costs
+    nothing and is reported at once.
+    """
+    candidates = [
+        Candidate("two_point", "builtin", None, TwoPointModel()),
+        Candidate("generalized", "builtin", None, GeneralizedModel()),
     ]
-    infos: list[dict[str, Any]] = []
     used = set(BUILTIN_MODELS) | set(BASELINES)
     for spec in user_specs:
         try:
             model = load_user_model(spec)
         except ModelError as exc:
             errors.append(exc)
-            infos.append({"name": spec, "kind": "user", "spec": spec, "error": str(exc)})
             continue
         name = str(getattr(model, "name", "") or spec)
         if name in used:
             name = spec if spec not in used else f"{spec}#{len(used)}"
         used.add(name)
-        candidates.append((name, "user", spec, model))
+        candidates.append(Candidate(name, "user", spec, model))
+    return candidates
+
+
+def fit_models(
+    train: pd.DataFrame,
+    candidates: Sequence[Candidate],
+    errors: list[ModelError],
+    *,
+    seed: int | None = None,
+    sensor_std: float = 0.0,
+) -> tuple[list[FittedModel], list[dict[str, Any]]]:
+    """Fit every candidate on one training run (a seed's); the fitted models and their
+    descriptions (parameters, training statistics, the fit's checks)."""
+    dt = steering_features(train).attrs.get("dt", 0.01)
     fitted: list[FittedModel] = []
-    for name, kind, spec, model in candidates:
-        info: dict[str, Any] = {"name": name, "kind": kind, "spec": spec}
+    infos: list[dict[str, Any]] = []
+    for candidate in candidates:
+        name, kind = candidate.name, candidate.kind
+        info: dict[str, Any] = {"name": name, "kind": kind, "spec": candidate.spec, "seed": seed}
+        model = copy.deepcopy(candidate.model)
+        if kind == "builtin" and abs(model.dt - dt) > 1e-12:
+            model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
         try:
-            model_fitted, info_fit = _fit_one(name, model, train)
+            model_fitted, info_fit = _fit_one(name, model, train, sensor_std)
         except ModelError as exc:
             if kind == "builtin":
                 raise BenchmarkError(f"the built-in {exc}") from None
@@ -182,12 +224,17 @@ def fit_models(
     return fitted, infos
 
 
-def _fit_one(name: str, model: Any, train: pd.DataFrame) -> tuple[Any, dict[str, Any]]:
+def _fit_one(
+    name: str, model: Any, train: pd.DataFrame, sensor_std: float
+) -> tuple[Any, dict[str, Any]]:
     """Fit one model on the training run; its description; ModelError if it fails."""
     with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", IdentifiabilityWarning)
+        warnings.simplefilter("always", SteeringFitWarning)
         try:
-            fitted = model.fit(train)
+            if type(model).fit is SteeringModel.fit:  # the project's fit: ridge + checks
+                fitted = model.fit(train, sensor_std=sensor_std)
+            else:
+                fitted = model.fit(train)
         except Exception as exc:  # noqa: BLE001 - a user model may raise anything
             raise ModelError(name, "fit", f"fit() raised {describe(exc)}") from None
     if not isinstance(fitted, SteeringModel):
@@ -210,6 +257,7 @@ def _fit_one(name: str, model: Any, train: pd.DataFrame) -> tuple[Any, dict[str,
         "standard_errors": fitted.standard_errors,
         "training": None,
         "identifiability": None,
+        "checks": None,
         "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
     }
     if result is not None:
@@ -220,6 +268,9 @@ def _fit_one(name: str, model: Any, train: pd.DataFrame) -> tuple[Any, dict[str,
             "r2_increments": result.r2_increments,
             "bic": result.bic,
         }
+        checks = getattr(result, "checks", None)
+        if checks is not None:
+            info["checks"] = checks.to_dict()
         if result.identifiability is not None:
             info["identifiability"] = {
                 "static_lane_gain": result.identifiability.static_lane_gain,

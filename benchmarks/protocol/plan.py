@@ -25,7 +25,8 @@ class RunRef:
     Attributes:
         driver: driver name; track: "straight" or "curved"; index: run index
             of this driver on this track; env_seed/driver_seed: seeds of a
-            synthetic run; path: CSV of a recorded run.
+            synthetic run; path: CSV of a recorded run; seed: the population
+            seed the run belongs to (None for recordings).
     """
 
     driver: str
@@ -34,20 +35,21 @@ class RunRef:
     env_seed: int | None = None
     driver_seed: int | None = None
     path: str | None = None
+    seed: int | None = None
 
     @property
-    def key(self) -> tuple[str, str, int]:
-        return (self.driver, self.track, self.index)
+    def key(self) -> tuple[int | None, str, str, int]:
+        return (self.seed, self.driver, self.track, self.index)
 
 
 def chunks(items: Sequence[RunRef], size: int) -> list[list[RunRef]]:
     return [list(items[i : i + size]) for i in range(0, len(items), size)]
 
 
-def synthetic_plan(config: ProtocolConfig) -> dict[str, Any]:
-
+def synthetic_plan(config: ProtocolConfig, seed: int) -> dict[str, Any]:
+    """The runs of population seed ``seed``: drivers, main-track and curved runs, env config."""
     try:
-        params = population(config.population, config.effective_population_seed, config.drivers)
+        params = population(config.population, seed, config.drivers)
     except ValueError as exc:
         raise BenchmarkError(str(exc)) from None
     by_name = {p.name: p for p in params}
@@ -55,17 +57,18 @@ def synthetic_plan(config: ProtocolConfig) -> dict[str, Any]:
     for p in params:
         count = config.illustrative_runs if p.name == ILLUSTRATIVE else config.runs
         for i, (env_seed, driver_seed) in enumerate(
-            run_seeds(config.seed, count, f"{p.name}/{config.track}")
+            run_seeds(seed, count, f"{p.name}/{config.track}")
         ):
-            main.append(RunRef(p.name, config.track, i, env_seed, driver_seed))
+            main.append(RunRef(p.name, config.track, i, env_seed, driver_seed, seed=seed))
     curved: list[RunRef] = []
     if config.track != "curved":
         for i, (env_seed, driver_seed) in enumerate(
-            run_seeds(config.seed, config.curved_runs, f"{ILLUSTRATIVE}/curved")
+            run_seeds(seed, config.curved_runs, f"{ILLUSTRATIVE}/curved")
         ):
-            curved.append(RunRef(ILLUSTRATIVE, "curved", i, env_seed, driver_seed))
+            curved.append(RunRef(ILLUSTRATIVE, "curved", i, env_seed, driver_seed, seed=seed))
     drivers = [
         {
+            "seed": seed,
             "driver": p.name,
             "runs": config.illustrative_runs if p.name == ILLUSTRATIVE else config.runs,
             "curved_runs": len(curved) if p.name == ILLUSTRATIVE else 0,
@@ -85,6 +88,7 @@ def synthetic_plan(config: ProtocolConfig) -> dict[str, Any]:
 
 
 def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
+    """The runs of a folder of recordings (one recording per run)."""
     root = Path(config.recordings or "")
     if not root.is_dir():
         raise BenchmarkError(f"recordings directory {str(root)!r} does not exist")
@@ -123,6 +127,7 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
             curved += [RunRef(name, "curved", i, path=str(p)) for i, p in enumerate(curved_paths)]
         drivers.append(
             {
+                "seed": None,
                 "driver": name,
                 "runs": len(main_paths),
                 "curved_runs": len(curved_paths) if name == illustrative else 0,

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import paper_values
+from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = ["BenchmarkResult", "versions"]
 
@@ -32,12 +33,17 @@ class BenchmarkResult:
 
     Attributes:
         config: the protocol configuration (dict).
-        models: per model: name, kind, spec, parameters, fit statistics, notes.
-        steering: rows per (driver, model), main track (paper table 1).
-        curved: rows per (driver, model) on the curved track.
-        estimation: rows per (driver, model) incl. the baselines (paper table 2).
-        summary: per model, means over drivers (and the rank for ``score``).
-        runs_steering, runs_estimation: per-run rows.
+        models: per model and seed: name, kind, spec, seed, parameters, fit
+            statistics, ``checks`` (condition number, AR poles, stability,
+            identifiability, ridge penalty), notes.
+        steering: rows per (seed, driver, model), main track (paper table 1).
+        curved: rows per (seed, driver, model) on the curved track.
+        estimation: rows per (seed, driver, model) incl. the baselines (paper table 2).
+        seed_summary: per (seed, model), means over drivers and the ranks.
+        summary: per model, the verdict over seeds: means with 95 % confidence
+            intervals, ranks and their stability
+            (:func:`benchmarks.protocol.aggregate.verdict`).
+        runs_steering, runs_estimation: per-run rows (with their seed).
         errors: failed user models (:meth:`ModelError.to_dict`).
         drivers: the drivers (synthetic parameters or recording files).
         plots: data of the figures (not written to results.json).
@@ -49,6 +55,7 @@ class BenchmarkResult:
     steering: list[dict[str, Any]]
     curved: list[dict[str, Any]]
     estimation: list[dict[str, Any]]
+    seed_summary: list[dict[str, Any]]
     summary: list[dict[str, Any]]
     runs_steering: list[dict[str, Any]]
     runs_estimation: list[dict[str, Any]]
@@ -63,13 +70,13 @@ class BenchmarkResult:
     @property
     def model_names(self) -> list[str]:
         """Steering models that were scored, built-ins first."""
-        return [m["name"] for m in self.models if m.get("error") is None]
+        return list(dict.fromkeys(m["name"] for m in self.models if m.get("error") is None))
 
     def to_json_dict(self) -> dict[str, Any]:
         """The JSON document of ``results.json`` (NaN and infinities become null)."""
         doc = {
             "format": "hasa_bench.results",
-            "format_version": 1,
+            "format_version": 2,
             "config": self.config,
             "versions": self.versions,
             "executor": self.executor,
@@ -79,6 +86,7 @@ class BenchmarkResult:
             "steering": self.steering,
             "curved": self.curved,
             "estimation": self.estimation,
+            "seed_summary": self.seed_summary,
             "summary": self.summary,
             "runs_steering": self.runs_steering,
             "runs_estimation": self.runs_estimation,
@@ -89,6 +97,11 @@ class BenchmarkResult:
                     d: dict(zip(_TABLE_1_KEYS, v, strict=True))
                     for d, v in paper_values.TABLE_1.items()
                 },
+                "table_1_units": (
+                    "RMSE in rad of the steering WHEEL, as printed; the steering rows' "
+                    f"paper_rmse is it divided by the steering ratio {PAPER_STEERING_RATIO:g} "
+                    "(road-wheel rad, the unit of rmse)"
+                ),
                 "table_2": {
                     d: dict(zip(_TABLE_2_KEYS, v, strict=True))
                     for d, v in paper_values.TABLE_2.items()

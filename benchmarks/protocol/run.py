@@ -57,9 +57,14 @@ from typing import Any
 import numpy as np
 
 from benchmarks.executor import default_workers, map_tasks
-from benchmarks.protocol.aggregate import aggregate_estimation, aggregate_steering, summarize
+from benchmarks.protocol.aggregate import (
+    aggregate_estimation,
+    aggregate_steering,
+    summarize_seeds,
+    verdict,
+)
 from benchmarks.protocol.config import BASELINES, BenchmarkError, ProtocolConfig
-from benchmarks.protocol.models import ModelError, describe, fit_models
+from benchmarks.protocol.models import FittedModel, ModelError, describe, fit_models, load_models
 from benchmarks.protocol.plan import RunRef, chunks, load_frames, recording_plan, synthetic_plan
 from benchmarks.protocol.plots import plot_data
 from benchmarks.protocol.results import BenchmarkResult, versions
@@ -103,66 +108,79 @@ def run_protocol(
     errors: list[ModelError] = []
     notes: list[str] = []
 
-    # 1. the runs
-    if config.recordings is not None:
-        plan = recording_plan(config)
-    else:
-        plan = synthetic_plan(config)
-    illustrative = plan["illustrative"]
-    main_runs: list[RunRef] = plan["main"]
-    curved_runs: list[RunRef] = plan["curved"]
-    training = next(
-        (r for r in main_runs if r.driver == illustrative and r.index == config.training_run), None
-    )
-    if training is None:
-        raise BenchmarkError(
-            f"no run {config.training_run} of the illustrative driver {illustrative!r} on the "
-            f"{config.track} track to train on"
+    # 0. every model loads before any run is generated
+    candidates = load_models(user_models, errors)
+
+    # 1.-2. per seed: the runs, the training run, the fits
+    tasks: list[ChunkTask] = []
+    fitted_by_seed: dict[int | None, list[FittedModel]] = {}
+    model_info: list[dict[str, Any]] = []
+    drivers: list[dict[str, Any]] = []
+    first: dict[str, Any] = {}
+    t_fit = 0.0
+    seeds = config.run_seeds
+    for seed in seeds:
+        plan = recording_plan(config) if seed is None else synthetic_plan(config, seed)
+        illustrative = plan["illustrative"]
+        main_runs: list[RunRef] = plan["main"]
+        curved_runs: list[RunRef] = plan["curved"]
+        training = next(
+            (r for r in main_runs if r.driver == illustrative and r.index == config.training_run),
+            None,
         )
-    validation = [r for r in main_runs if r is not training]
-    if not validation:
-        raise BenchmarkError(
-            f"no validation runs: found only the training run ({len(main_runs)} run(s) on the "
-            f"{config.track} track); the protocol scores the models on the other runs"
-        )
-    notes.extend(plan.get("notes", []))
+        where = "" if seed is None else f" (seed {seed})"
+        if training is None:
+            raise BenchmarkError(
+                f"no run {config.training_run} of the illustrative driver {illustrative!r} on "
+                f"the {config.track} track to train on{where}"
+            )
+        validation = [r for r in main_runs if r is not training]
+        if not validation:
+            raise BenchmarkError(
+                f"no validation runs: found only the training run ({len(main_runs)} run(s) on "
+                f"the {config.track} track){where}; the protocol scores the models on the other runs"
+            )
+        notes.extend(plan.get("notes", []))
+        say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
+            else "loading the training run and fitting the models", 0, 0)  # fmt: skip
+        train_frame = load_frames([training], config.track, plan["env_config"], plan["params"])[0]
+        t0 = time.perf_counter()
+        sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
+        fitted, info = fit_models(train_frame, candidates, errors, seed=seed, sensor_std=sensor_std)
+        t_fit += time.perf_counter() - t0
+        fitted_by_seed[seed] = fitted
+        model_info += info
+        drivers += plan["drivers"]
+        is_first = not first
+        plot_run = next((r for r in validation if r.driver == illustrative), validation[0])
+        if is_first:
+            first = {"plan": plan, "plot_run": plot_run, "curved": curved_runs,
+                     "train": train_frame, "illustrative": illustrative}  # fmt: skip
+        trace_runs = {plot_run.key} | ({curved_runs[0].key} if curved_runs else set())
+        common = {
+            "seed": seed,
+            "env_config": plan["env_config"],
+            "driver_params": plan["params"],
+            "models": tuple(fitted),
+            "ljung_box_lags": config.ljung_box_lags,
+            "acf_lags": config.acf_lags,
+            "weight_threshold": config.weight_threshold,
+            "error_window": config.error_window,
+            "trace_runs": frozenset(trace_runs) if is_first else frozenset(),
+            "detail_driver": illustrative if is_first else "",
+        }
+        tasks += [
+            ChunkTask(runs=tuple(chunk), track="curved", estimate=False, **common)
+            for chunk in chunks(curved_runs, config.batch_size)
+        ]
+        tasks += [
+            ChunkTask(runs=tuple(chunk), track=config.track, estimate=True, **common)
+            for chunk in chunks(validation, config.batch_size)
+        ]
+    timing["fit"] = t_fit
 
-    # 2. fit on the training run
-    say("generating the training run and fitting the models", 0, 0)
-    train_frame = load_frames([training], config.track, plan["env_config"], plan["params"])[0]
-    timing["training_run"] = time.perf_counter() - start
-    t_fit = time.perf_counter()
-    fitted, model_info = fit_models(train_frame, user_models, errors)
-    timing["fit"] = time.perf_counter() - t_fit
-
-    # 3. tasks
-    trace_runs = set()
-    plot_run = next((r for r in validation if r.driver == illustrative), validation[0])
-    trace_runs.add(plot_run.key)
-    if curved_runs:
-        trace_runs.add(curved_runs[0].key)
-    common = {
-        "env_config": plan["env_config"],
-        "driver_params": plan["params"],
-        "models": tuple(fitted),
-        "ljung_box_lags": config.ljung_box_lags,
-        "acf_lags": config.acf_lags,
-        "weight_threshold": config.weight_threshold,
-        "error_window": config.error_window,
-        "trace_runs": frozenset(trace_runs),
-        "detail_driver": illustrative,
-    }
-
+    # 3. every seed's tasks at once
     n_workers = default_workers() if workers is None else max(1, int(workers))
-    batch = config.batch_size
-    tasks = [
-        ChunkTask(runs=tuple(chunk), track="curved", estimate=False, **common)
-        for chunk in chunks(curved_runs, batch)
-    ]
-    tasks += [
-        ChunkTask(runs=tuple(chunk), track=config.track, estimate=True, **common)
-        for chunk in chunks(validation, batch)
-    ]
     total_runs = sum(len(t.runs) for t in tasks)
     done_runs = np.cumsum([len(t.runs) for t in tasks])
     say("runs", 0, total_runs)
@@ -187,24 +205,24 @@ def run_protocol(
     # 4. aggregate
     say("aggregating", 0, 0)
     failed: dict[str, ModelError] = {}
+    for error in errors:  # load and fit failures (one per model, whichever seed failed first)
+        failed.setdefault(error.model, error)
     for chunk in chunk_results:
         for failure in chunk.failures:
             failed.setdefault(failure.model, failure)
-    errors.extend(failed.values())
+    errors = list(failed.values())
     for info in model_info:
-        if info["name"] in failed:
+        if info["name"] in failed and info.get("error") is None:
             info["error"] = str(failed[info["name"]])
-    ok_models = [m.name for m in fitted if m.name not in failed]
+    names = [c.name for c in candidates]
+    ok_models = [n for n in names if n not in failed]
+    order = _row_order(seeds, first["plan"]["driver_order"], ok_models + list(BASELINES))
     runs_steering = sorted(
-        (row for c in chunk_results for row in c.steering if row["model"] not in failed),
-        key=_row_order(plan["driver_order"], ok_models),
+        (row for c in chunk_results for row in c.steering if row["model"] not in failed), key=order
     )
-    estimator_names = [
-        m.name for m in fitted if m.residual_std is not None and m.name not in failed
-    ] + list(BASELINES)
     runs_estimation = sorted(
         (row for c in chunk_results for row in c.estimation if row["model"] not in failed),
-        key=_row_order(plan["driver_order"], estimator_names),
+        key=order,
     )
     steering_rows = aggregate_steering(
         [r for r in runs_steering if r["track"] == config.track], ok_models
@@ -215,8 +233,17 @@ def run_protocol(
         else []
     )
     estimation_rows = aggregate_estimation(runs_estimation)
-    summary = summarize(steering_rows, estimation_rows, ok_models)
-    plots = plot_data(chunk_results, fitted, failed, plot_run, curved_runs, train_frame, config)
+    seed_summary = summarize_seeds(steering_rows, estimation_rows, ok_models)
+    summary = verdict(seed_summary, ok_models)
+    plots = plot_data(
+        [c for c in chunk_results if c.traces or c.acf or c.early_errors],
+        fitted_by_seed[seeds[0]],
+        failed,
+        first["plot_run"],
+        first["curved"],
+        first["train"],
+        config,
+    )
     timing["total"] = time.perf_counter() - start
     executor = {
         "kind": "dask" if scheduler is not None else "processes",
@@ -225,19 +252,21 @@ def run_protocol(
         if scheduler is None
         else str(getattr(scheduler, "scheduler_address", scheduler)),
         "tasks": len(tasks),
-        "batch_size": batch,
+        "batch_size": config.batch_size,
     }
     return BenchmarkResult(
-        config=config.to_dict() | {"illustrative": illustrative, "user_models": list(user_models)},
+        config=config.to_dict()
+        | {"illustrative": first["illustrative"], "user_models": list(user_models)},
         models=model_info,
         steering=steering_rows,
         curved=curved_rows,
         estimation=estimation_rows,
+        seed_summary=seed_summary,
         summary=summary,
         runs_steering=runs_steering,
         runs_estimation=runs_estimation,
         errors=[e.to_dict() for e in errors],
-        drivers=plan["drivers"],
+        drivers=drivers,
         plots=plots,
         timing=timing,
         executor=executor,
@@ -246,10 +275,14 @@ def run_protocol(
     )
 
 
-def _row_order(drivers: Sequence[str], models: Sequence[str]) -> Callable[[dict], tuple]:
+def _row_order(
+    seeds: Sequence[int | None], drivers: Sequence[str], models: Sequence[str]
+) -> Callable[[dict], tuple]:
+    s_rank = {s: i for i, s in enumerate(seeds)}
     d_rank = {d: i for i, d in enumerate(drivers)}
     m_rank = {m: i for i, m in enumerate(models)}
     return lambda row: (
+        s_rank.get(row.get("seed"), len(s_rank)),
         d_rank.get(row["driver"], len(d_rank)),
         row["driver"],
         row.get("track", ""),

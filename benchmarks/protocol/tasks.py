@@ -25,8 +25,9 @@ __all__ = ["ChunkResult", "ChunkTask", "run_chunk"]
 
 @dataclass(frozen=True)
 class ChunkTask:
-    """The work of one task: a batch of runs of one track."""
+    """The work of one task: a batch of runs of one track and one population seed."""
 
+    seed: int | None
     runs: tuple[RunRef, ...]
     track: str
     env_config: Mapping[str, Any]
@@ -37,7 +38,7 @@ class ChunkTask:
     acf_lags: int
     weight_threshold: float
     error_window: float
-    trace_runs: frozenset[tuple[str, str, int]]
+    trace_runs: frozenset[tuple[int | None, str, str, int]]
     detail_driver: str
 
 
@@ -48,7 +49,7 @@ class ChunkResult:
     steering: list[dict[str, Any]] = field(default_factory=list)
     estimation: list[dict[str, Any]] = field(default_factory=list)
     failures: list[ModelError] = field(default_factory=list)
-    traces: dict[tuple[str, str, int], dict[str, Any]] = field(default_factory=dict)
+    traces: dict[tuple[int | None, str, str, int], dict[str, Any]] = field(default_factory=dict)
     early_errors: dict[str, list[np.ndarray]] = field(default_factory=dict)
     acf: dict[str, list[np.ndarray]] = field(default_factory=dict)
     seconds: float = 0.0
@@ -138,13 +139,17 @@ def _score_model(
                 f"predicted NaN or inf at {int(bad.sum())} of {int(warm.sum())} samples of "
                 f"{where} (first at t = {float(frame['time'].iloc[int(np.argmax(bad))]):.2f} s)",
             )
+        # free run (the model's own past steering) for ARX models; a non-ARX model's
+        # free run is sample by sample through predict_features: too slow to score here
+        free_run = fm.residual_std is not None
         try:
-            scores = score_runs(model, [features], lags=task.ljung_box_lags, free_run=False)
+            scores = score_runs(model, [features], lags=task.ljung_box_lags, free_run=free_run)
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
         row = scores.iloc[0]
         out.steering.append(
             {
+                "seed": ref.seed,
                 "driver": ref.driver,
                 "track": ref.track,
                 "run": ref.index,
@@ -154,6 +159,8 @@ def _score_model(
                 "r2_increments": float(row["r2_increments"]),
                 "ljung_box_p": float(row["ljung_box_p"]),
                 "n": int(row["n"]),
+                "free_run_rmse": float(row["free_run_rmse"]) if free_run else None,
+                "free_run_diverged": bool(row["free_run_diverged"]) if free_run else None,
             }
         )
         if task.estimate and ref.driver == task.detail_driver:
@@ -248,17 +255,22 @@ def _estimation_rows(
     true_weight = result.true_lane_weight()  # (R, T): weight of the hypotheses equal to the bias
     steps = _settle_steps(true_weight, result.valid, task.weight_threshold)
     final_true = result.picked_true_lane()
+    last = result.lengths - 1
+    final_weight = true_weight[np.arange(len(refs)), last]
     n_window = int(round(task.error_window / float(np.nanmedian(np.diff(result.time[0]))))) + 1
     rows = []
     for j, ref in enumerate(refs):
         rows.append(
             {
+                "seed": ref.seed,
                 "driver": ref.driver,
+                "track": ref.track,
                 "run": ref.index,
                 "model": name,
                 "lateral_rmse": float(rmse[j]),
                 "steps_to_decide": None if not np.isfinite(steps[j]) else int(steps[j]),
                 "true_lane_final": bool(final_true[j]),
+                "final_true_lane_weight": float(final_weight[j]),
                 "bias": float(bias0[j]),
             }
         )

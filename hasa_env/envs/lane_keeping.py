@@ -133,7 +133,8 @@ class LaneKeepingEnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
-        state, index, bias, block = draw_episode(self.np_random, self.setup, options)
+        state, index, bias, block, phases = draw_episode(self.np_random, self.setup, options)
+        self._phases = phases
         self._state = state
         self._bias, self._bias_index = bias, index
         self._noise, self._noise_pos = block.tolist(), 0
@@ -153,7 +154,15 @@ class LaneKeepingEnv(gym.Env):
         setup = self.setup
         steer, acc = physical_action(setup, action)
         outcome = env_step(
-            self._state, self._velocity, steer, acc, setup, self._curvature, SCALAR_OPS
+            self._state,
+            self._velocity,
+            steer,
+            acc,
+            setup,
+            self._curvature,
+            SCALAR_OPS,
+            self._sim_step,
+            self._phases,
         )
         self._sim_step += setup.action_repeat
         self._state, self._velocity = outcome.state, outcome.velocity

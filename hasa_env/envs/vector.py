@@ -95,6 +95,8 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._bias_index = np.zeros(n, dtype=np.int64)
         self._autoreset = np.zeros(n, dtype=bool)
         self._kappa = np.zeros(n)
+        n_phases = self.setup.disturbance.n_phases if self.setup.disturbance is not None else 0
+        self._phases = np.zeros((n, n_phases))  # disturbance phases of each car's episode
         self._velocity = (np.zeros(n), np.zeros(n))
         self._sensors = np.zeros((len(self.setup.noise_std), n))  # one row per channel
         self._state: VehicleState | None = None
@@ -160,7 +162,15 @@ class LaneKeepingVectorEnv(VectorEnv):
         steer, acc = physical_action(setup, actions, self.num_envs)
         resetting = self._autoreset.copy()
         outcome = env_step(
-            self._state, self._velocity, steer, acc, setup, self._curvature, ARRAY_OPS
+            self._state,
+            self._velocity,
+            steer,
+            acc,
+            setup,
+            self._curvature,
+            ARRAY_OPS,
+            self._sim_step,
+            self._phases,
         )
         self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in outcome.state))
         self._velocity = outcome.velocity
@@ -201,7 +211,9 @@ class LaneKeepingVectorEnv(VectorEnv):
     def _reset_envs(self, idx: np.ndarray, options: dict[str, Any] | None) -> None:
         fields = [f.copy() for f in self._state]
         for i in idx.tolist():
-            start, index, bias, block = draw_episode(self._rngs[i], self.setup, options)
+            start, index, bias, block, phases = draw_episode(self._rngs[i], self.setup, options)
+            if phases:
+                self._phases[i] = phases
             for f, value in zip(fields, start, strict=True):
                 f[i] = value
             self._bias[i], self._bias_index[i] = bias, index

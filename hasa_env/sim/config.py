@@ -131,6 +131,30 @@ _SCHEMA: Field = schema(
                 1_000_000,
             ),
         },
+        "disturbance": {
+            "crosswind": _number(
+                0.0,
+                "Crosswind gusts: std of their lateral acceleration (m/s^2); 0: none "
+                "(see hasa_env.sim.disturbance).",
+                0.0,
+                10.0,
+                "m/s^2",
+            ),
+            "crosswind_bandwidth": _number(
+                1.0, "Highest gust frequency (Hz); the lowest is 0.05 Hz.", 0.05, 20.0, "Hz"
+            ),
+            "camber": _number(
+                0.0,
+                "Road camber: std of its lateral acceleration along the road (m/s^2); 0: none.",
+                0.0,
+                10.0,
+                "m/s^2",
+            ),
+            "camber_wavelength": _number(
+                40.0, "Shortest camber wavelength (m); the longest is 20 times it.", 1.0, 1e4, "m"
+            ),
+            "components": _integer(8, "Sines in each of the two sums.", 1, 64),
+        },
         "action": {
             "type": _choice(
                 "normalized",
@@ -222,6 +246,9 @@ def default_config() -> dict[str, Any]:
     markings.probabilities      prior of each (uniform)
     noise.*                     sensor noise std: speed, camera, camera_heading,
                                 imu, steering; block_size
+    disturbance.*               crosswind / camber std (m/s^2, 0 = off),
+                                crosswind_bandwidth (Hz), camber_wavelength (m),
+                                components
     action.type                 'normalized' | 'physical'
     action.max_steering         rad (0.5); min/max_acceleration m/s^2 (-6 / 6)
     observation.type            'sensors' | 'state' | 'both'

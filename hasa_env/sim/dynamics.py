@@ -47,6 +47,7 @@ __all__ = [
 
 
 _HALF_PI = 0.5 * math.pi
+_FADE_SPEED_SQ = 25.0  # (5 m/s)^2: below 5 m/s a lateral disturbance fades out
 
 
 def _where(cond, a, b):  # noqa: ANN001 - scalar backend helper
@@ -110,6 +111,7 @@ def step_vehicle(
     params: VehicleParams,
     curvature: Callable,
     ops: SimpleNamespace,
+    lateral_disturbance: float | np.ndarray | None = None,
 ) -> VehicleState:
     """Advance the car by one sample Ts with steering delta and acceleration a held.
 
@@ -121,6 +123,12 @@ def step_vehicle(
         curvature: kappa(s) (1/m) of the road, for the backend's type; a
             function with the attribute ``is_zero = True`` marks a straight road.
         ops: :data:`SCALAR_OPS` or :data:`ARRAY_OPS`.
+        lateral_disturbance: a_d (m/s^2), a lateral acceleration the road and
+            the wind put on the car over the sample (crosswind, camber:
+            :mod:`hasa_env.sim.disturbance`), or None. A kinematic car turns
+            it into a yaw rate ``r_d = a_d v / max(v^2, v_fade^2)`` (v at the
+            sample's midpoint, v_fade = 5 m/s), so that its lateral
+            acceleration is ``a_d`` at speed and it fades to 0 at a standstill.
 
     Returns:
         The state at t + Ts (``steering`` field = the applied delta).
@@ -132,7 +140,16 @@ def step_vehicle(
     v_half = ops.minimum(ops.maximum(v0 + acceleration * (0.5 * h), 0.0), v_max)
     v1 = ops.minimum(ops.maximum(v0 + acceleration * h, 0.0), v_max)
 
-    if getattr(curvature, "is_zero", False):
+    if lateral_disturbance is not None:
+        r_d = lateral_disturbance * v_half / ops.maximum(v_half * v_half, _FADE_SPEED_SQ)
+        straight = getattr(curvature, "is_zero", False)
+
+        def deriv(s, y, th, v):  # noqa: ANN001, ANN202
+            k = 0.0 if straight else curvature(s)
+            s_dot = v * ops.cos(th) / (1.0 - k * y)
+            return s_dot, v * ops.sin(th), v * yaw_gain + r_d - k * s_dot
+
+    elif getattr(curvature, "is_zero", False):
         # straight road: the curvature terms vanish exactly (x / 1.0 and x - 0.0 * y
         # are exact), so this shortcut gives the same bits as the general form
         def deriv(s, y, th, v):  # noqa: ANN001, ANN202

@@ -19,6 +19,7 @@ import numpy as np
 from gymnasium import spaces
 
 from hasa_env.sim.config import make_config
+from hasa_env.sim.disturbance import Disturbance
 from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, SENSOR_NAMES, VehicleParams, VehicleState
 from hasa_env.sim.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
 
@@ -143,6 +144,8 @@ class EnvSetup:
     observation_type: str
     reward_weights: tuple[float, float, float]
     """(lateral_weight, steering_rate_weight, offroad_penalty) of the reward."""
+    disturbance: Disturbance | None = None
+    """Crosswind and camber (:mod:`hasa_env.sim.disturbance`); None when off."""
 
     @property
     def dt(self) -> float:
@@ -242,6 +245,7 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
             float(cfg["reward"]["steering_rate_weight"]),
             float(cfg["reward"]["offroad_penalty"]),
         ),
+        disturbance=Disturbance.from_config(cfg),
     )
 
 
@@ -260,11 +264,13 @@ def _finite_option(options: Mapping[str, Any], key: str, low: float, high: float
 
 def draw_episode(
     rng: np.random.Generator, setup: EnvSetup, options: Mapping[str, Any] | None
-) -> tuple[VehicleState, int, float, np.ndarray]:
-    """Draw one episode's start: state, true-hypothesis index, bias (m), noise block.
+) -> tuple[VehicleState, int, float, np.ndarray, list[float]]:
+    """Draw one episode's start: state, true-hypothesis index, bias (m), noise block,
+    disturbance phases (rad; empty without a disturbance).
 
     Draw order (fixed, whatever the options): one uniform for the bias, three
-    normals for the initial-state randomisation, then the first noise block.
+    normals for the initial-state randomisation, the first noise block, then
+    (only with a disturbance) one uniform phase per disturbance sine.
     """
     options = dict(options or {})
     unknown = [k for k in options if k not in RESET_OPTIONS]
@@ -308,7 +314,10 @@ def draw_episode(
         v = _finite_option(options, "speed", 0.0, setup.params.max_speed)
     if "steering" in options:
         delta = _finite_option(options, "steering", -setup.steering_limit, setup.steering_limit)
-    return VehicleState(0.0, y, th, v, delta), index, bias, block
+    phases: list[float] = []
+    if setup.disturbance is not None:
+        phases = rng.uniform(0.0, 2.0 * math.pi, setup.disturbance.n_phases).tolist()
+    return VehicleState(0.0, y, th, v, delta), index, bias, block, phases
 
 
 def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:

@@ -6,8 +6,9 @@ or N cars (float64 arrays, :data:`~hasa_env.sim.dynamics.ARRAY_OPS`) by one
 env step of ``setup.action_repeat`` simulation samples with the physical
 action held, and returns what the env reports about it::
 
-    for each of the action_repeat samples:
-        x <- step_vehicle(x, delta, a)                 RK4 over Ts (docs/design.md §4)
+    for each of the action_repeat samples, at time t_k:
+        a_d = disturbance(t_k, s)                       crosswind + camber (m/s^2), if any
+        x <- step_vehicle(x, delta, a, a_d)            RK4 over Ts (docs/design.md §4)
         off_road <- off_road or left_road(x)           checked at every sample
     (v_x, v_y) = (v cos theta, v sin theta)            road-frame velocity at the end
     imu = ((v_x, v_y) - (v_x, v_y)_start) / (action_repeat Ts)
@@ -67,6 +68,8 @@ def env_step(
     setup: EnvSetup,
     curvature: Callable[[Any], Any],
     ops: SimpleNamespace,
+    sim_step: Any = 0,
+    phases: Any = (),
 ) -> Transition:
     """Advance by one env step (see the module docstring).
 
@@ -79,13 +82,21 @@ def env_step(
         curvature: kappa(s) of the road for this backend (:meth:`EnvSetup.curvature_scalar`
             or :meth:`EnvSetup.curvature_array`).
         ops: :data:`~hasa_env.sim.dynamics.SCALAR_OPS` or :data:`~hasa_env.sim.dynamics.ARRAY_OPS`.
+        sim_step: simulation samples since the episode started (the disturbance's clock).
+        phases: the episode's disturbance phases (unused without a disturbance).
     """
     params = setup.params
     lower, upper = setup.lower_edge, setup.upper_edge
     previous_steering = state.steering
+    disturbance = setup.disturbance
     off_road = None
-    for _ in range(setup.action_repeat):
-        state = step_vehicle(state, steering, acceleration, params, curvature, ops)
+    for i in range(setup.action_repeat):
+        a_d = None
+        if disturbance is not None:
+            a_d = disturbance.lateral_acceleration(
+                (sim_step + i) * params.dt, state.station, phases, ops
+            )
+        state = step_vehicle(state, steering, acceleration, params, curvature, ops, a_d)
         left = left_road(state, lower, upper, ops)
         off_road = left if off_road is None else off_road | left
     end_velocity = road_frame_velocity(state, ops)

@@ -1,0 +1,112 @@
+"""The one table renderer of the benchmarks: plain text for the terminal, Markdown for reports.
+
+A table is a list of row dicts and a list of :class:`Column` (which key,
+which header, how to format, left or right aligned). ``hasa-bench paper``'s
+tables and ``hasa-bench perf``'s table both go through :func:`render_text` /
+:func:`render_markdown`. (pandas' ``to_string`` aligns every column the same
+way and ``to_markdown`` needs the tabulate package; the renderer is the
+twenty lines below.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "Column",
+    "fixed",
+    "interval",
+    "missing",
+    "percent",
+    "render_markdown",
+    "render_text",
+    "scientific",
+    "text",
+]
+
+
+def missing(value: Any) -> bool:
+    """None or a non-finite float: shown as "-"."""
+    return value is None or (isinstance(value, float) and not math.isfinite(value))
+
+
+def scientific(value: Any) -> str:
+    return "-" if missing(value) else f"{value:.2e}"
+
+
+def fixed(digits: int) -> Callable[[Any], str]:
+    return lambda v: "-" if missing(v) else f"{v:.{digits}f}"
+
+
+def percent(value: Any) -> str:
+    return "-" if missing(value) else f"{100 * value:.0f}%"
+
+
+def text(value: Any) -> str:
+    return "-" if value is None else str(value)
+
+
+def interval(fmt: Callable[[Any], str], key: str) -> Callable[[dict[str, Any]], str]:
+    """A cell ``mean [low, high]`` from a row's ``key``, ``key_ci_low``, ``key_ci_high``."""
+
+    def cell(row: dict[str, Any]) -> str:
+        mean, low, high = row.get(key), row.get(f"{key}_ci_low"), row.get(f"{key}_ci_high")
+        if missing(mean):
+            return "-"
+        if missing(low) or missing(high):
+            return fmt(mean)
+        return f"{fmt(mean)} [{fmt(low)}, {fmt(high)}]"
+
+    return cell
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column: ``key`` (a row key, or a function of the row), header, cell format."""
+
+    key: str | Callable[[dict[str, Any]], Any]
+    header: str
+    fmt: Callable[[Any], str] = text
+    left: bool = False
+
+    def cell(self, row: dict[str, Any]) -> str:
+        value = self.key(row) if callable(self.key) else row.get(self.key)
+        return self.fmt(value)
+
+
+def render_text(
+    rows: Sequence[dict[str, Any]], columns: Sequence[Column], group: str | None = None
+) -> str:
+    """Aligned plain text; a blank line between rows whose ``group`` key changes."""
+    cells = [[c.cell(r) for c in columns] for r in rows]
+    widths = [
+        max([len(c.header)] + [len(line[i]) for line in cells]) for i, c in enumerate(columns)
+    ]
+
+    def line(values: Sequence[str]) -> str:
+        parts = [
+            v.ljust(w) if c.left else v.rjust(w)
+            for v, w, c in zip(values, widths, columns, strict=True)
+        ]
+        return "  ".join(parts).rstrip()
+
+    out = [line([c.header for c in columns]), "  ".join("-" * w for w in widths)]
+    previous = None
+    for row, values in zip(rows, cells, strict=True):
+        if group is not None:
+            if previous is not None and row.get(group) != previous:
+                out.append("")
+            previous = row.get(group)
+        out.append(line(values))
+    return "\n".join(out)
+
+
+def render_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[Column]) -> str:
+    """A Markdown (pipe) table."""
+    head = "| " + " | ".join(c.header for c in columns) + " |"
+    rule = "|" + "|".join(":---" if c.left else "---:" for c in columns) + "|"
+    body = ["| " + " | ".join(c.cell(r) or " " for c in columns) + " |" for r in rows]
+    return "\n".join([head, rule, *body])
