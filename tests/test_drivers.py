@@ -36,10 +36,11 @@ def test_drivers_implement_the_protocol():
 
 
 def test_population_is_reproducible_by_name_and_seed():
-    first = population("paper", seed=0)
+    # the all-PI population; "paper" (mixed archetypes): tests/test_drivers_populations.py
+    first = population("paper-pi", seed=0)
     assert [p.name for p in first] == ["Ill", "1", "2", "3", "4", "5", "6", "7", "8"]
-    assert population("paper", seed=0) == first
-    other = population("paper", seed=1)
+    assert population("paper-pi", seed=0) == first
+    other = population("paper-pi", seed=1)
     assert other != first
     for trait in ("near_gain", "far_gain", "integral_gain", "delay", "noise_std"):
         values = [getattr(p, trait) for p in first]
@@ -51,9 +52,9 @@ def test_population_is_reproducible_by_name_and_seed():
     assert all(0.6 <= p.neuromuscular_damping <= 0.85 for p in first)
     assert any(p.noise_time_constant == 0 for p in first)  # white motor noise
     assert any(0.2 <= p.noise_time_constant <= 0.4 for p in first)  # OU motor noise
-    assert len(population(size=4)) == 4
+    assert len(population("paper-pi", size=4)) == 4
     assert DriverParams.from_dict(first[3].to_dict()) == first[3]
-    with pytest.raises(ValueError, match="unknown population 'nope'; allowed: paper"):
+    with pytest.raises(ValueError, match="unknown population 'nope'; allowed: paper, paper-pi"):
         population("nope")
 
 
@@ -189,7 +190,7 @@ def test_model_driver_checks_its_arguments():
 
 def test_speed_profiles_ramp_and_slow_for_bends():
     params = dataclasses.replace(
-        population()[0],
+        population("paper-pi")[0],
         noise_std=0.0,
         speed=SpeedProfile(target_speed=30.0, ramp_rate=2.0, start_time=1.0),
     )

@@ -29,7 +29,7 @@ def test_every_synthetic_driver_centres_the_car_at_constant_speed(speed):
     """The control loop itself (no motor noise): from y = -0.5 m to |y| < 0.1 m within 20 s."""
     drivers = [
         SyntheticDriver(dataclasses.replace(p, noise_std=0.0, speed=SpeedProfile.hold()))
-        for p in population()
+        for p in population("paper-pi")
     ]
     frames = run_drivers(drivers, [(0, 0)] * len(drivers), options={**START, "speed": speed})
     for driver, frame in zip(drivers, frames, strict=True):
@@ -43,7 +43,7 @@ def test_every_synthetic_driver_centres_the_car_at_constant_speed(speed):
 
 @pytest.mark.slow
 def test_every_synthetic_driver_centres_the_car_at_its_own_speeds_with_noise():
-    params = population()
+    params = population("paper-pi")
     runs = run_population(params, runs=2, seed=0, options=START)
     top_speeds = []
     for p in params:

@@ -26,7 +26,7 @@ ENV_ID = "hasa_env/LaneKeeping-v0"
 
 
 def _driver() -> SyntheticDriver:
-    params = population("paper", 0)[0]
+    params = population("paper-pi", 0)[0]
     return SyntheticDriver(dataclasses.replace(params, speed=SpeedProfile.hold()))
 
 

@@ -3,9 +3,13 @@
 - :class:`Driver`: the protocol (``reset(seed, dt=...)``, ``act(info, road)``
   -> (road-wheel angle rad, acceleration m/s^2)), acting on the env's true
   ``info``, never the biased camera.
-- :class:`SyntheticDriver` (:class:`DriverParams`): a synthetic human,
-  DESIGN.md section 4; :func:`population` draws a seeded population
-  ("Ill", "1", ..., "8").
+- Synthetic humans of three archetypes (DESIGN.md sections 4 and 9), all
+  with delay, neuromuscular lag, remnant after the lag and wheel
+  quantization (:class:`MotorParams`): two-point PI (:class:`DriverParams`),
+  preview optimal control (:class:`PreviewParams`), intermittent control
+  (:class:`IntermittentParams`). :func:`make_driver` makes the driver of
+  any of them (:class:`SyntheticDriver` drives them all);
+  :func:`population` draws a seeded population ("Ill", "1", ..., "8").
 - :class:`ModelDriver`: any steering model plus noise, with a steering ratio.
 - :class:`ReplayDriver`: plays back a recording's actions.
 - :func:`run_driver`, :func:`run_drivers`, :func:`run_population`: recordings
@@ -13,8 +17,13 @@
   :func:`save_runs` writes them in the recording format.
 """
 
+from hasa_env.drivers.archetypes import ARCHETYPES, make_driver, params_from_dict
 from hasa_env.drivers.base import BatchDriver, Driver, SpeedProfile, make_batch
+from hasa_env.drivers.intermittent import IntermittentDriver, IntermittentParams
 from hasa_env.drivers.model_driver import ModelDriver, ReplayDriver
+from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
+from hasa_env.drivers.populations import POPULATIONS, population
+from hasa_env.drivers.preview import PreviewDriver, PreviewParams
 from hasa_env.drivers.runner import (
     recording_meta,
     run_driver,
@@ -23,18 +32,27 @@ from hasa_env.drivers.runner import (
     run_seeds,
     save_runs,
 )
-from hasa_env.drivers.synthetic import POPULATIONS, DriverParams, SyntheticDriver, population
+from hasa_env.drivers.synthetic import DriverParams, SyntheticDriver
 
 __all__ = [
+    "ARCHETYPES",
     "BatchDriver",
     "Driver",
     "DriverParams",
+    "G29_RESOLUTION",
+    "IntermittentDriver",
+    "IntermittentParams",
     "ModelDriver",
+    "MotorParams",
     "POPULATIONS",
+    "PreviewDriver",
+    "PreviewParams",
     "ReplayDriver",
     "SpeedProfile",
     "SyntheticDriver",
     "make_batch",
+    "make_driver",
+    "params_from_dict",
     "population",
     "recording_meta",
     "run_driver",

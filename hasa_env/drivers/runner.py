@@ -29,8 +29,8 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams, make_driver
 from hasa_env.drivers.base import Driver, make_batch
-from hasa_env.drivers.synthetic import DriverParams, SyntheticDriver
 from hasa_env.recording.writer import save_recording
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS, recording_row
@@ -297,7 +297,7 @@ def _info_block(
 
 
 def run_population(
-    drivers: Sequence[DriverParams | Driver],
+    drivers: Sequence[HumanParams | Driver],
     runs: int = 10,
     seed: int = 0,
     env_id: str = DEFAULT_ENV_ID,
@@ -308,7 +308,8 @@ def run_population(
     """Runs of every driver of a population, all at once in one vector env.
 
     Args:
-        drivers: :class:`DriverParams` (wrapped in :class:`SyntheticDriver`) or drivers.
+        drivers: synthetic drivers' parameters of any archetype (driven by
+            :func:`~hasa_env.drivers.archetypes.make_driver`) or drivers.
         runs: runs per driver.
         seed: base seed (see :func:`run_seeds`; key "<name>/<track>").
         env_id, config, options: as in :func:`run_drivers`.
@@ -324,7 +325,8 @@ def run_population(
     objects: list[Driver] = []
     names: list[str] = []
     for item in drivers:
-        driver = SyntheticDriver(item) if isinstance(item, DriverParams) else item
+        is_params = any(type(item) is a.params for a in ARCHETYPES.values())
+        driver = make_driver(item) if is_params else item
         objects.append(driver)
         names.append(str(getattr(driver, "name", type(driver).__name__)))
     if len(set(names)) != len(names):

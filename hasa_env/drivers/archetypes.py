@@ -1,0 +1,100 @@
+"""The synthetic drivers' archetypes: parameters -> driver, batch and JSON.
+
+============  ================================================  =====================
+archetype     parameters                                        driver
+============  ================================================  =====================
+two-point     :class:`~hasa_env.drivers.synthetic.DriverParams`  :class:`~hasa_env.drivers.synthetic.SyntheticDriver`
+preview       :class:`~hasa_env.drivers.preview.PreviewParams`   :class:`~hasa_env.drivers.preview.PreviewDriver`
+intermittent  :class:`~hasa_env.drivers.intermittent.IntermittentParams`  :class:`~hasa_env.drivers.intermittent.IntermittentDriver`
+============  ================================================  =====================
+
+:func:`make_driver` turns parameters of any archetype into its driver,
+:func:`params_from_dict` reads back any ``params.to_dict()`` (the
+``"archetype"`` field says which; dicts without it are two-point, as written
+before the other archetypes existed), and :func:`~hasa_env.drivers.human.human_batch` vectorizes
+a mixed list of parameters (one batch per archetype).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from hasa_env.drivers import intermittent, preview, synthetic
+from hasa_env.drivers.base import Driver
+from hasa_env.drivers.human import human_batch
+
+__all__ = [
+    "ARCHETYPES",
+    "Archetype",
+    "HumanParams",
+    "archetype_of",
+    "human_batch",
+    "make_driver",
+    "params_from_dict",
+]
+
+HumanParams = synthetic.DriverParams | preview.PreviewParams | intermittent.IntermittentParams
+"""Parameters of any synthetic driver archetype."""
+
+
+@dataclass(frozen=True)
+class Archetype:
+    """One kind of synthetic driver: its parameters, single-car driver and batch classes."""
+
+    name: str
+    params: type
+    driver: type
+    batch: type
+
+
+ARCHETYPES: dict[str, Archetype] = {
+    a.name: a
+    for a in (
+        Archetype(
+            synthetic.ARCHETYPE,
+            synthetic.DriverParams,
+            synthetic.SyntheticDriver,
+            synthetic.SyntheticBatch,
+        ),
+        Archetype(
+            preview.ARCHETYPE, preview.PreviewParams, preview.PreviewDriver, preview.PreviewBatch
+        ),  # fmt: skip
+        Archetype(
+            intermittent.ARCHETYPE,
+            intermittent.IntermittentParams,
+            intermittent.IntermittentDriver,
+            intermittent.IntermittentBatch,
+        ),
+    )
+}
+"""The archetypes by name: "two-point", "preview", "intermittent"."""
+
+
+def archetype_of(params: Any) -> Archetype:
+    """The :class:`Archetype` of a parameter object (TypeError for anything else)."""
+    for archetype in ARCHETYPES.values():
+        if type(params) is archetype.params:
+            return archetype
+    allowed = ", ".join(a.params.__name__ for a in ARCHETYPES.values())
+    raise TypeError(
+        f"not synthetic driver parameters: {type(params).__name__} (allowed: {allowed})"
+    )
+
+
+def make_driver(params: HumanParams) -> Driver:
+    """The driver of ``params`` (any archetype): SyntheticDriver, PreviewDriver or IntermittentDriver."""
+    return archetype_of(params).driver(params)
+
+
+def params_from_dict(data: Mapping[str, Any]) -> HumanParams:
+    """Parameters of any archetype from their ``to_dict()`` (no "archetype": two-point)."""
+    name = data.get("archetype", synthetic.ARCHETYPE)
+    try:
+        archetype = ARCHETYPES[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown driver archetype {name!r}; allowed: {', '.join(ARCHETYPES)}"
+        ) from None
+    return archetype.params.from_dict(data)

@@ -1,0 +1,312 @@
+"""What every synthetic human shares: perception, delay, seeding, output stage, speed.
+
+A synthetic driver of any archetype (two-point PI, preview optimal control,
+intermittent control) is a frozen parameter dataclass plus a vectorized
+batch. The batch (:class:`HumanBatch`) gives each archetype:
+
+- seeding: car i's randomness comes from ``SeedSequence(seed_i)`` alone
+  (child 0: the output stage's remnant; child 1: the archetype's own noise),
+  drawn in blocks, so a driver's run is identical alone or in any batch;
+- perception with a sensorimotor delay (:class:`DelayLine`): the control
+  law sees the true state of ``delay`` s ago;
+- the output stage (:class:`~hasa_env.drivers.motor.MotorStage`): lag,
+  remnant, wheel quantization;
+- the speed behaviour (:class:`~hasa_env.drivers.base.SpeedProfile`).
+
+:class:`HumanDriver` is the single-car :class:`~hasa_env.drivers.base.Driver`
+around a batch of one.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import fields
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hasa_env.drivers.base import (
+    BatchDriver,
+    CompositeBatch,
+    SpeedProfile,
+    _profile_arrays,
+    info_arrays,
+    speed_command,
+)
+from hasa_env.drivers.motor import MotorParams, MotorStage
+from hasa_env.sim.road import Road, lane_centre_bearing
+
+__all__ = [
+    "DelayLine",
+    "HumanBatch",
+    "HumanDriver",
+    "car_streams",
+    "check_common",
+    "check_range",
+    "human_batch",
+    "lane_bearings",
+    "params_from_dict",
+    "params_to_dict",
+]
+
+MIN_SPEED = 1.0
+"""m/s; below it speed-scaled gains and look-ahead distances stop scaling."""
+
+INFO_NEEDED = ("time", "station", "lateral_offset", "heading", "speed", "steering")
+"""The ``info`` keys a synthetic driver reads."""
+
+MOTOR_STREAM, OWN_STREAM = 0, 1
+"""Spawn keys of a car's SeedSequence: the output stage's and the archetype's noise."""
+
+
+def check_range(
+    owner: str, name: str, value: Any, low: float, high: float, *, open_low: bool = False
+) -> None:
+    """Raise ValueError "<owner>.<name> must be in [low, high], got value" unless it is."""
+    ok = isinstance(value, int | float | np.floating | np.integer) and not isinstance(value, bool)
+    ok = ok and math.isfinite(value) and (value > low if open_low else value >= low)
+    if not (ok and value <= high):
+        bracket = "(" if open_low else "["
+        raise ValueError(f"{owner}.{name} must be in {bracket}{low:g}, {high:g}], got {value!r}")
+
+
+def lane_bearings(
+    info: Mapping[str, np.ndarray], road: Road, near: np.ndarray, far: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bearings (rad) of the true lane centre at ``near`` and ``far`` m ahead of N cars.
+
+    Straight road: phi = -(theta + atan(y / near)), omega = -(theta + atan(y / far));
+    curved road: :func:`hasa_env.sim.road.lane_centre_bearing` (exact).
+    """
+    y, theta = info["lateral_offset"], info["heading"]
+    if road.is_straight:
+        return -(theta + np.arctan(y / near)), -(theta + np.arctan(y / far))
+    s = info["station"]
+    return (
+        np.asarray(lane_centre_bearing(road, s, y, theta, near), dtype=np.float64),
+        np.asarray(lane_centre_bearing(road, s, y, theta, far), dtype=np.float64),
+    )
+
+
+class DelayLine:
+    """A pure delay of ``steps[i]`` env steps on car i's vector of ``width`` signals.
+
+    The first call fills the line with its input (the driver has seen the
+    initial state for ever); each call returns the input of ``steps`` calls ago.
+    """
+
+    def __init__(self, steps: np.ndarray, width: int) -> None:
+        self.steps = np.asarray(steps, dtype=np.int64)
+        self.width = int(width)
+        self._ring = int(self.steps.max()) + 1
+        self._buffer = np.zeros((self._ring, self.steps.size, self.width))
+        self._rows = np.arange(self.steps.size)
+        self._pos = 0
+        self._fresh = True
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        values = np.asarray(values, dtype=np.float64)
+        if self._fresh:
+            self._buffer[:] = values[None]
+            self._fresh = False
+        self._buffer[self._pos] = values
+        seen = self._buffer[(self._pos - self.steps) % self._ring, self._rows]
+        self._pos = (self._pos + 1) % self._ring
+        return seen
+
+
+def car_streams(seed: int | None, key: int) -> np.random.Generator:
+    """Car's generator number ``key`` (a child of ``SeedSequence(seed)``)."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
+
+
+class HumanBatch(ABC):
+    """Base of the archetypes' batches: N drivers of one archetype acting on N cars' arrays.
+
+    Subclasses set ``params_type`` and implement :meth:`_reset` (per-run set-up),
+    :meth:`_start` (state at the first step, from the true ``info``) and
+    :meth:`_command` (the command u(k), rad, of the control law). The output
+    stage turns it into the applied steering; :func:`speed_command` gives the
+    acceleration.
+    """
+
+    params_type: ClassVar[type]
+    registry: ClassVar[dict[type, type[HumanBatch]]] = {}
+    """params_type -> batch class, filled as the archetypes' batch classes are defined."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        HumanBatch.registry[cls.params_type] = cls
+
+    def __init__(self, params: Sequence[Any]) -> None:
+        self.params = list(params)
+        name = type(self).__name__
+        if not self.params:
+            raise ValueError(f"{name} needs at least one {self.params_type.__name__}")
+        wrong = [type(p).__name__ for p in self.params if not isinstance(p, self.params_type)]
+        if wrong:
+            raise TypeError(f"{name} needs {self.params_type.__name__}, got {wrong[0]}")
+        self.num_cars = len(self.params)
+        self.max_steering = self.arr("max_steering")
+        self.profile = _profile_arrays([p.speed for p in self.params])
+        self.motor = MotorStage(
+            self.arr("neuromuscular_frequency"),
+            self.arr("neuromuscular_damping"),
+            [p.motor for p in self.params],
+            self.max_steering,
+        )
+        self._dt: float | None = None
+
+    def arr(self, key: str) -> np.ndarray:
+        """The field ``key`` of every driver, as a float64 array."""
+        return np.array([getattr(p, key) for p in self.params], dtype=np.float64)
+
+    def reset(self, seeds: Sequence[int | None], dt: float) -> None:
+        if len(seeds) != self.num_cars:
+            raise ValueError(f"got {len(seeds)} seeds for {self.num_cars} drivers")
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0 s, got {dt}")
+        self._dt = float(dt)
+        self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
+        self.delay_steps = np.array([round(p.delay / dt) for p in self.params], dtype=np.int64)
+        self._reset(seeds, self._dt)
+        self._fresh = True
+
+    def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
+        if self._dt is None:
+            raise RuntimeError("call reset() before act()")
+        if self._fresh:
+            start = np.asarray(info["steering"], dtype=np.float64)
+            self.motor.start(start)
+            self._initial_speed = np.asarray(info["speed"], dtype=np.float64).copy()
+            self._start(info, road, start)
+            self._fresh = False
+        command = self._command(info, road)
+        steering = self.motor.step(command)
+        acceleration = speed_command(self.profile, self._initial_speed, info, road)
+        return steering, acceleration
+
+    # ------------------------------------------------------------ archetype hooks
+    @abstractmethod
+    def _reset(self, seeds: Sequence[int | None], dt: float) -> None:
+        """Per-run set-up (``self.delay_steps`` is known; the output stage is reset)."""
+
+    @abstractmethod
+    def _start(self, info: Mapping[str, np.ndarray], road: Road, steering: np.ndarray) -> None:
+        """The control law's state at the first step, from the true ``info`` and steering (rad)."""
+
+    @abstractmethod
+    def _command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        """The command u(k) (rad, road wheel) of each car at this step."""
+
+
+class HumanDriver:
+    """A synthetic human of one archetype as a :class:`~hasa_env.drivers.base.Driver`.
+
+    ``Driver(params).reset(seed, dt=0.01)`` then ``act(info, road)`` each env
+    step. Runs are identical whether the driver acts alone or vectorized with
+    others (:meth:`make_batch`). Subclasses set ``accepts`` (the parameter
+    types they drive).
+    """
+
+    accepts: ClassVar[tuple[type, ...]]
+
+    def __init__(self, params: Any) -> None:
+        if not isinstance(params, self.accepts):
+            allowed = " or ".join(t.__name__ for t in self.accepts)
+            raise TypeError(f"{type(self).__name__} needs {allowed}, got {type(params).__name__}")
+        self.params = params
+        self.name = params.name
+        self._batch: BatchDriver | None = None
+
+    @classmethod
+    def make_batch(cls, drivers: Sequence[HumanDriver]) -> BatchDriver:
+        """A vectorized batch of these drivers (one car each), one part per archetype."""
+        return human_batch([d.params for d in drivers])
+
+    def reset(self, seed: int | None = None, *, dt: float = 0.01) -> None:
+        self._batch = self.make_batch([self])
+        self._batch.reset([seed], dt)
+
+    def act(self, info: Mapping[str, Any], road: Road) -> tuple[float, float]:
+        if self._batch is None:
+            raise RuntimeError("call reset() before act()")
+        steering, acceleration = self._batch.act(info_arrays(info, INFO_NEEDED), road)
+        return float(steering[0]), float(acceleration[0])
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.params!r})"
+
+
+def human_batch(params: Sequence[Any]) -> BatchDriver:
+    """One vectorized batch for N cars, car i driven by ``params[i]`` (archetypes may mix).
+
+    Each archetype's cars form one batch of its class (:attr:`HumanBatch.registry`);
+    several archetypes make a :class:`~hasa_env.drivers.base.CompositeBatch`.
+    """
+    params = list(params)
+    if not params:
+        raise ValueError("human_batch needs at least one driver's parameters")
+    groups: dict[type, list[int]] = {}
+    for i, p in enumerate(params):
+        if type(p) not in HumanBatch.registry:
+            allowed = ", ".join(t.__name__ for t in HumanBatch.registry)
+            raise TypeError(
+                f"not synthetic driver parameters: {type(p).__name__} (allowed: {allowed})"
+            )
+        groups.setdefault(type(p), []).append(i)
+    parts: list[tuple[np.ndarray, BatchDriver]] = [
+        (np.array(idx), HumanBatch.registry[kind]([params[i] for i in idx]))
+        for kind, idx in groups.items()
+    ]
+    if len(parts) == 1:
+        return parts[0][1]
+    return CompositeBatch(parts, len(params))
+
+
+def check_common(owner: str, params: Any) -> None:
+    """Checks of the fields every archetype's parameters share (see :class:`HumanBatch`)."""
+    check_range(owner, "delay", params.delay, 0.0, 1.0)
+    check_range(owner, "neuromuscular_frequency", params.neuromuscular_frequency, 0.0, 200.0, open_low=True)  # fmt: skip
+    check_range(owner, "neuromuscular_damping", params.neuromuscular_damping, 0.0, 5.0, open_low=True)  # fmt: skip
+    check_range(owner, "max_steering", params.max_steering, 0.0, 1.5, open_low=True)
+    for name, kind in (("speed", SpeedProfile), ("motor", MotorParams)):
+        value = getattr(params, name)
+        if not isinstance(value, kind):
+            raise TypeError(f"{owner}.{name} must be a {kind.__name__}, got {type(value).__name__}")
+
+
+def params_to_dict(params: Any, archetype: str) -> dict[str, Any]:
+    """A JSON-able dict of an archetype's parameter dataclass, tagged ``"archetype"``."""
+    out: dict[str, Any] = {"archetype": archetype}
+    for f in fields(params):
+        value = getattr(params, f.name)
+        out[f.name] = value.to_dict() if hasattr(value, "to_dict") else value
+    return out
+
+
+def params_from_dict(
+    cls: type, data: Mapping[str, Any], archetype: str, **nested: Callable[[Any], Any]
+) -> Any:
+    """Inverse of :func:`params_to_dict` for ``cls`` (a missing "archetype" or "motor" is allowed).
+
+    ``nested`` maps further fields to the functions that rebuild them from their dicts.
+    """
+    values = dict(data)
+    tag = values.pop("archetype", archetype)
+    if tag != archetype:
+        raise ValueError(f"{cls.__name__}.from_dict: archetype {tag!r} is not {archetype!r}")
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{cls.__name__}.from_dict: unknown fields {unknown}")
+    if "speed" in values:
+        values["speed"] = SpeedProfile(**values["speed"])
+    if "motor" in values:
+        values["motor"] = MotorParams.from_dict(values["motor"])
+    for key, build in nested.items():
+        if key in values:
+            values[key] = build(values[key])
+    return cls(**values)

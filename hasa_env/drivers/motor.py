@@ -1,0 +1,318 @@
+"""The motor and output stage shared by every synthetic driver (DESIGN.md section 9).
+
+Every synthetic driver's control law produces a command u(k) (road-wheel
+angle, rad). Between it and the car stand, per car and env step Ts:
+
+1. A second-order neuromuscular lag, discretised exactly (zero-order hold on u)::
+
+       delta_n'' = w_n^2 (u - delta_n) - 2 zeta_n w_n delta_n'
+       [delta_n, delta_n'](k) = Ad [delta_n, delta_n'](k-1) + Bd u(k)
+
+2. Remnant added AFTER the lag (so it reaches the wheel unfiltered), all in rad
+   at the road wheel:
+
+   a. broadband noise, white (tau_b = 0) or Ornstein-Uhlenbeck::
+
+          rho_b = exp(-Ts / tau_b)                      (0 if tau_b = 0)
+          b(k) = rho_b b(k-1) + sigma_b sqrt(1 - rho_b^2) e_b(k)
+
+   b. physiological tremor: a lightly damped resonator (f_t 8-12 Hz,
+      zeta_t 0.1-0.3) driven by white noise, discretised by pole matching
+      (z = exp(s Ts)) into an AR(2) process::
+
+          w_t = 2 pi f_t,  r = exp(-zeta_t w_t Ts),  a = w_t Ts sqrt(1 - zeta_t^2)
+          x(k) = 2 r cos(a) x(k-1) - r^2 x(k-2) + c e_t(k)
+          c = sigma_t sqrt((1 + p2) ((1 - p2)^2 - p1^2) / (1 - p2)),  p1 = 2 r cos a, p2 = -r^2
+
+      (c makes sigma_t the stationary standard deviation);
+
+   c. signal-dependent noise, whose standard deviation is the gain s (in s)
+      times the lag output's rate |delta_n'(k)| (rad/s), filtered like (a)::
+
+          m(k) = rho_b m(k-1) + sqrt(1 - rho_b^2) s |delta_n'(k)| e_m(k)
+
+   e_b, e_t, e_m are independent N(0, 1) draws from the car's own generator.
+   A tremor at or above the Nyquist frequency 1 / (2 Ts) of the env step
+   (e.g. a driver acting every 0.1 s) cannot be carried by held actions and
+   is left out.
+   The OU components start from their stationary distributions, the tremor
+   at rest (it settles within 1 / (zeta_t w_t) < 0.2 s).
+
+3. The steering wheel (a Logitech G29 by default: 16 bits over 900 deg lock
+   to lock, a step q = 2 pi 2.5 / 65536 = 2.4e-4 rad at the wheel) and the
+   steering ratio R (default 15) quantize the road-wheel angle; the wheel's
+   limit clips it::
+
+       delta_raw(k) = delta_n(k) + b(k) + x(k) + m(k)
+       delta(k) = clip(round(R delta_raw(k) / q), -n_max, n_max) q / R,   n_max = floor(R limit / q)
+       delta(k) = clip(delta_raw(k), -limit, limit)                        (q = 0: no quantization)
+
+delta(k) is the applied steering: the action the car gets and the
+recording's ``steering`` column. With :class:`MotorParams` at its defaults
+(no remnant, no quantization) the stage is the lag alone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, fields, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+from scipy.linalg import expm
+
+__all__ = ["G29_RESOLUTION", "MotorParams", "MotorStage", "NoiseBlocks", "neuromuscular_lag"]
+
+G29_RESOLUTION = 2.0 * math.pi * 2.5 / 65536
+"""Logitech G29 steering-wheel step (rad at the steering wheel): 16 bits over 900 deg."""
+
+NOISE_BLOCK = 1000
+"""Standard normal draws per car and channel taken at once from each car's generator."""
+
+_LIMITS: dict[str, tuple[float, float, bool]] = {
+    # field: (low, high, low is exclusive)
+    "broadband_std": (0.0, 0.05, False),
+    "broadband_time_constant": (0.0, 10.0, False),
+    "tremor_std": (0.0, 0.05, False),
+    "tremor_frequency": (0.5, 40.0, False),
+    "tremor_damping": (0.0, 1.0, True),
+    "signal_dependent_gain": (0.0, 1.0, False),
+    "steering_ratio": (1.0, 100.0, False),
+    "wheel_resolution": (0.0, 0.1, False),
+}
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """Remnant and steering wheel of a synthetic driver (see the module docstring).
+
+    The neuromuscular lag belongs to each driver's own parameters
+    (``neuromuscular_frequency``, ``neuromuscular_damping``), as it always did
+    for :class:`~hasa_env.drivers.synthetic.DriverParams`.
+
+    Attributes:
+        broadband_std: sigma_b, rad at the road wheel, in [0, 0.05].
+        broadband_time_constant: tau_b (s) of the broadband OU process, in [0, 10]; 0 = white.
+        tremor_std: sigma_t, stationary std of the tremor, rad at the road wheel, in [0, 0.05].
+        tremor_frequency: f_t (Hz), in [0.5, 40] (left out at or above the env step's Nyquist frequency).
+        tremor_damping: zeta_t, in (0, 1].
+        signal_dependent_gain: s (s): std of the signal-dependent noise per rad/s of
+            the lag output's rate, in [0, 1].
+        steering_ratio: R, steering-wheel angle per road-wheel angle, in [1, 100].
+        wheel_resolution: q, rad at the steering wheel, in [0, 0.1]; 0 = no quantization
+            (:data:`G29_RESOLUTION` for a Logitech G29).
+    """
+
+    broadband_std: float = 0.0
+    broadband_time_constant: float = 0.0
+    tremor_std: float = 0.0
+    tremor_frequency: float = 10.0
+    tremor_damping: float = 0.2
+    signal_dependent_gain: float = 0.0
+    steering_ratio: float = 15.0
+    wheel_resolution: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, (low, high, open_low) in _LIMITS.items():
+            value = getattr(self, name)
+            ok = isinstance(value, int | float) and math.isfinite(value)
+            ok = ok and (value > low if open_low else value >= low) and value <= high
+            if not ok:
+                bracket = "(" if open_low else "["
+                raise ValueError(
+                    f"MotorParams.{name} must be in {bracket}{low:g}, {high:g}], got {value!r}"
+                )
+
+    @property
+    def has_remnant(self) -> bool:
+        """Whether any remnant component is on."""
+        return self.broadband_std > 0 or self.tremor_std > 0 or self.signal_dependent_gain > 0
+
+    def scaled(self, factor: float) -> MotorParams:
+        """The same stage with every remnant std (and the signal-dependent gain) times ``factor``."""
+        if not (math.isfinite(factor) and factor >= 0):
+            raise ValueError(f"remnant scale must be a finite number >= 0, got {factor!r}")
+        return replace(
+            self,
+            broadband_std=self.broadband_std * factor,
+            tremor_std=self.tremor_std * factor,
+            signal_dependent_gain=self.signal_dependent_gain * factor,
+        )
+
+    def to_dict(self) -> dict[str, float]:
+        """A JSON-able dict of the parameters."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> MotorParams:
+        """Inverse of :meth:`to_dict` (unknown keys are an error)."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"MotorParams: unknown fields {unknown}; allowed: {sorted(known)}")
+        return cls(**data)
+
+
+@lru_cache(maxsize=256)
+def neuromuscular_lag(frequency: float, damping: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact zero-order-hold discretisation of delta'' = w^2 (u - delta) - 2 z w delta'.
+
+    Returns (Ad, Bd): [delta, delta'](k) = Ad [delta, delta'](k-1) + Bd u(k).
+    """
+    w, z = frequency, damping
+    m = np.zeros((3, 3))
+    m[0, 1] = 1.0
+    m[1, 0] = -w * w
+    m[1, 1] = -2.0 * z * w
+    m[1, 2] = w * w
+    e = expm(m * dt)
+    ad, bd = e[:2, :2].copy(), e[:2, 2].copy()
+    ad.setflags(write=False)
+    bd.setflags(write=False)
+    return ad, bd
+
+
+class NoiseBlocks:
+    """Standard normal draws for N cars, ``channels`` per step, from each car's own generator.
+
+    Every :data:`NOISE_BLOCK` steps each car draws ``(channels, NOISE_BLOCK)``
+    numbers from its generator, so a car's noise is the same alone or in any
+    batch. ``next()`` returns the (N, channels) draws of one step.
+    """
+
+    def __init__(self, rngs: Sequence[np.random.Generator], channels: int) -> None:
+        self.rngs = list(rngs)
+        self.channels = int(channels)
+        self._block = np.zeros((len(self.rngs), self.channels, NOISE_BLOCK))
+        self._pos = NOISE_BLOCK
+
+    def next(self) -> np.ndarray:
+        if self._pos >= NOISE_BLOCK:
+            for i, rng in enumerate(self.rngs):
+                self._block[i] = rng.standard_normal((self.channels, NOISE_BLOCK))
+            self._pos = 0
+        out = self._block[:, :, self._pos]
+        self._pos += 1
+        return out
+
+
+class MotorStage:
+    """The output stage of N drivers: lag, remnant, wheel (see the module docstring).
+
+    Args:
+        frequency: neuromuscular natural frequency w_n (rad/s) of each car.
+        damping: neuromuscular damping zeta_n of each car.
+        motors: each car's :class:`MotorParams`.
+        max_steering: each car's wheel limit (rad at the road wheel).
+    """
+
+    def __init__(
+        self,
+        frequency: np.ndarray,
+        damping: np.ndarray,
+        motors: Sequence[MotorParams],
+        max_steering: np.ndarray,
+    ) -> None:
+        self.motors = list(motors)
+        self.num_cars = len(self.motors)
+        self.frequency = np.asarray(frequency, dtype=np.float64)
+        self.damping = np.asarray(damping, dtype=np.float64)
+        self.max_steering = np.asarray(max_steering, dtype=np.float64)
+
+        def arr(key: str) -> np.ndarray:
+            return np.array([getattr(m, key) for m in self.motors], dtype=np.float64)
+
+        self.broadband_std, self.broadband_tau = (
+            arr("broadband_std"),
+            arr("broadband_time_constant"),
+        )
+        self.tremor_std, self.tremor_frequency = arr("tremor_std"), arr("tremor_frequency")
+        self.tremor_damping = arr("tremor_damping")
+        self.gain = arr("signal_dependent_gain")
+        self.ratio, self.resolution = arr("steering_ratio"), arr("wheel_resolution")
+        self._dt: float | None = None
+
+    def reset(self, rngs: Sequence[np.random.Generator], dt: float) -> None:
+        """Start a run with time step ``dt`` (s), drawing each car's remnant from ``rngs[i]``."""
+        self._dt = float(dt)
+        lags = [
+            neuromuscular_lag(float(w), float(z), self._dt)
+            for w, z in zip(self.frequency, self.damping, strict=True)
+        ]
+        ad = np.array([a for a, _ in lags])
+        bd = np.array([b for _, b in lags])
+        self._a00, self._a01, self._a10, self._a11 = (
+            ad[:, 0, 0],
+            ad[:, 0, 1],
+            ad[:, 1, 0],
+            ad[:, 1, 1],
+        )
+        self._b0, self._b1 = bd[:, 0], bd[:, 1]
+        tau = self.broadband_tau
+        with np.errstate(divide="ignore"):
+            self._rho = np.where(tau > 0, np.exp(-dt / np.maximum(tau, 1e-300)), 0.0)
+        self._innovation = np.sqrt(1.0 - self._rho**2)
+        # a tremor at or above the Nyquist frequency of the env step cannot be carried by
+        # actions held over the step (e.g. a policy acting every 0.1 s): it is left out
+        self.tremor_on = self.tremor_frequency < 0.5 / dt
+        w_t = 2.0 * np.pi * np.where(self.tremor_on, self.tremor_frequency, 0.25 / dt)
+        r = np.exp(-self.tremor_damping * w_t * dt)
+        angle = w_t * dt * np.sqrt(1.0 - self.tremor_damping**2)
+        self._p1, self._p2 = 2.0 * r * np.cos(angle), -(r**2)
+        p1, p2 = self._p1, self._p2
+        self._tremor_gain = np.where(self.tremor_on, self.tremor_std, 0.0) * np.sqrt(
+            (1.0 + p2) * ((1.0 - p2) ** 2 - p1**2) / (1.0 - p2)
+        )
+        self.quantized = self.resolution > 0
+        self._q = np.where(self.quantized, self.resolution, 1.0)
+        self._levels = np.floor(self.ratio * self.max_steering / self._q)
+        self._noise = NoiseBlocks(rngs, 3)
+        self._fresh = True
+
+    def start(self, steering: np.ndarray) -> None:
+        """The lag at rest at the car's initial steering (rad), the remnant at its start."""
+        start = np.asarray(steering, dtype=np.float64)
+        self._angle, self._rate = start.copy(), np.zeros(self.num_cars)
+        zeros = np.zeros(self.num_cars)
+        self._broadband, self._dependent = zeros.copy(), zeros.copy()
+        self._tremor, self._tremor_prev = zeros.copy(), zeros.copy()
+        self._fresh = True
+
+    def step(self, command: np.ndarray) -> np.ndarray:
+        """Applied steering (rad at the road wheel) for the command u(k) (rad)."""
+        if self._dt is None:
+            raise RuntimeError("MotorStage: call reset() before step()")
+        angle = self._a00 * self._angle + self._a01 * self._rate + self._b0 * command
+        rate = self._a10 * self._angle + self._a11 * self._rate + self._b1 * command
+        self._angle, self._rate = angle, rate
+        e = self._noise.next()
+        dependent_std = self.gain * np.abs(rate)
+        if self._fresh:  # stationary start of the OU components
+            self._broadband = self.broadband_std * e[:, 0]
+            self._dependent = dependent_std * e[:, 1]
+            self._fresh = False
+        else:
+            self._broadband = self._rho * self._broadband + (
+                self.broadband_std * self._innovation * e[:, 0]
+            )
+            self._dependent = self._rho * self._dependent + (
+                self._innovation * dependent_std * e[:, 1]
+            )
+        tremor = (
+            self._p1 * self._tremor + self._p2 * self._tremor_prev + self._tremor_gain * e[:, 2]
+        )
+        self._tremor_prev, self._tremor = self._tremor, tremor
+        raw = angle + self._broadband + tremor + self._dependent
+        limit = self.max_steering
+        clipped = np.clip(raw, -limit, limit)
+        if not self.quantized.any():
+            return clipped
+        steps = np.clip(np.round(self.ratio * raw / self._q), -self._levels, self._levels)
+        return np.where(self.quantized, steps * self._q / self.ratio, clipped)
+
+    @property
+    def lag_output(self) -> np.ndarray:
+        """delta_n(k): the lag's output before remnant and wheel (rad)."""
+        return self._angle

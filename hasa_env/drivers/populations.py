@@ -1,0 +1,435 @@
+"""Seeded populations of synthetic drivers, regenerable anywhere by (name, seed, size).
+
+- "paper" (default): nine drivers like the paper's participants, "Ill" and
+  1-8, three of each archetype (two-point PI, preview optimal control,
+  intermittent control), each archetype with one driver holding 15 m/s, one
+  ramping to 25-38 m/s and one ramping to 45 m/s; which name gets which
+  archetype, speed and traits is drawn from the seed. Every driver has the
+  human-like output stage (remnant after the lag, G29 wheel quantization).
+- "paper-pi": the original all-PI population, exactly as it was drawn before
+  the archetypes existed (same drivers, same runs): no remnant after the lag,
+  no quantization. For comparison.
+- "paper-pi-human": the same PI drivers as "paper-pi" with the output stage
+  of "paper".
+
+:attr:`PopulationSpec.remnant_scale` multiplies every remnant standard
+deviation (and the signal-dependent gain) of a population; with
+``seed_key`` a recalibrated copy keeps the drivers of the population it
+copies: ``replace(POPULATIONS["paper"], remnant_scale=2.0, seed_key="paper")``.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams
+from hasa_env.drivers.base import SpeedProfile
+from hasa_env.drivers.intermittent import IntermittentParams
+from hasa_env.drivers.lqr import PreviewCost
+from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
+from hasa_env.drivers.preview import PreviewParams
+from hasa_env.drivers.synthetic import DriverParams
+
+__all__ = [
+    "IntermittentRanges",
+    "MotorRanges",
+    "POPULATIONS",
+    "PopulationSpec",
+    "PreviewRanges",
+    "TwoPointRanges",
+    "population",
+]
+
+
+@dataclass(frozen=True)
+class _Range:
+    low: float
+    high: float
+
+    def draw(self, rng: np.random.Generator) -> float:
+        return float(rng.uniform(self.low, self.high))
+
+
+@dataclass(frozen=True)
+class TwoPointRanges:
+    """Trait ranges of two-point PI drivers (see :meth:`DriverParams.from_loop`)."""
+
+    bandwidth: _Range
+    damping: _Range
+    integral_share: _Range
+    near_time: _Range
+    far_time: _Range
+    speed_exponent: _Range
+    noise_std: _Range
+    noise_time_constant: _Range
+    white_noise_probability: float
+
+
+@dataclass(frozen=True)
+class PreviewRanges:
+    """Trait ranges of preview drivers (see :meth:`PreviewCost.from_bandwidth`)."""
+
+    bandwidth: _Range
+    velocity_weight: _Range
+    preview_time: _Range
+    persistence: _Range
+
+
+@dataclass(frozen=True)
+class IntermittentRanges:
+    """Trait ranges of intermittent drivers (their underlying law: like :class:`PreviewRanges`)."""
+
+    bandwidth: _Range
+    velocity_weight: _Range
+    preview_time: _Range
+    persistence: _Range
+    accumulator_gain: _Range
+    accumulator_leak: _Range
+    accumulator_noise: _Range
+    correction_duration: _Range
+    refractory_period: _Range
+
+
+@dataclass(frozen=True)
+class MotorRanges:
+    """Ranges of the output stage's remnant (rad at the road wheel) and the wheel."""
+
+    broadband_std: _Range
+    broadband_time_constant: _Range
+    tremor_std: _Range
+    tremor_frequency: _Range
+    tremor_damping: _Range
+    signal_dependent_gain: _Range
+    steering_ratio: float = 15.0
+    wheel_resolution: float = G29_RESOLUTION
+
+    def draw(self, rng: np.random.Generator, scale: float) -> MotorParams:
+        return MotorParams(
+            broadband_std=self.broadband_std.draw(rng),
+            broadband_time_constant=self.broadband_time_constant.draw(rng),
+            tremor_std=self.tremor_std.draw(rng),
+            tremor_frequency=self.tremor_frequency.draw(rng),
+            tremor_damping=self.tremor_damping.draw(rng),
+            signal_dependent_gain=self.signal_dependent_gain.draw(rng),
+            steering_ratio=self.steering_ratio,
+            wheel_resolution=self.wheel_resolution,
+        ).scaled(scale)
+
+
+_SpeedBehaviour = tuple[_Range | None, _Range, _Range]
+
+
+@dataclass(frozen=True)
+class PopulationSpec:
+    """How a named population is drawn.
+
+    Driver slot i gets archetype ``archetypes[i % A]`` and speed behaviour
+    ``speed_behaviours[(i // A) % B]`` (all pairs once for A x B drivers); the
+    seed shuffles the slots over the names. A speed behaviour is (target
+    speed range or None for "hold 15 m/s", ramp-rate range m/s^2, start-time
+    range s).
+
+    Attributes:
+        description: one paragraph.
+        archetypes: names of :data:`~hasa_env.drivers.archetypes.ARCHETYPES`.
+        speed_behaviours: see above.
+        delay, neuromuscular_frequency, neuromuscular_damping,
+        max_lateral_acceleration: ranges of the traits every archetype has.
+        two_point, preview, intermittent: the archetypes' trait ranges.
+        motor: the output stage's ranges; None: no remnant, no quantization.
+        remnant_scale: multiplies every remnant std of the drawn drivers (>= 0).
+        seed_key: the name whose hash seeds the draws (None: the population's
+            own name); a copy with another remnant_scale and the original's
+            key has the same drivers.
+        legacy: draw two-point drivers in the original population's order
+            (the drivers of "paper" before the archetypes existed).
+    """
+
+    description: str
+    archetypes: tuple[str, ...]
+    speed_behaviours: tuple[_SpeedBehaviour, ...]
+    delay: _Range
+    neuromuscular_frequency: _Range
+    neuromuscular_damping: _Range
+    max_lateral_acceleration: _Range
+    two_point: TwoPointRanges
+    preview: PreviewRanges | None = None
+    intermittent: IntermittentRanges | None = None
+    motor: MotorRanges | None = None
+    remnant_scale: float = 1.0
+    seed_key: str | None = None
+    legacy: bool = False
+
+    def __post_init__(self) -> None:
+        unknown = [a for a in self.archetypes if a not in ARCHETYPES]
+        if unknown or not self.archetypes:
+            raise ValueError(
+                f"PopulationSpec.archetypes must name archetypes of {', '.join(ARCHETYPES)}, "
+                f"got {list(self.archetypes)}"
+            )
+        for name in ("preview", "intermittent"):
+            if name in self.archetypes and getattr(self, name) is None:
+                raise ValueError(f"PopulationSpec.{name} ranges are needed for {name} drivers")
+        if self.legacy and set(self.archetypes) != {"two-point"}:
+            raise ValueError("PopulationSpec.legacy draws two-point drivers only")
+        if not (np.isfinite(self.remnant_scale) and self.remnant_scale >= 0):
+            raise ValueError(
+                f"PopulationSpec.remnant_scale must be a finite number >= 0, got {self.remnant_scale!r}"
+            )
+
+
+_HOLD = (None, _Range(1.0, 1.0), _Range(0.0, 0.0))
+_MODERATE = (_Range(25.0, 38.0), _Range(1.0, 2.0), _Range(1.0, 6.0))
+_FAST = (_Range(45.0, 45.0), _Range(1.8, 3.0), _Range(1.0, 4.0))
+
+_TWO_POINT = TwoPointRanges(
+    bandwidth=_Range(0.9, 1.25),
+    damping=_Range(0.5, 0.75),
+    integral_share=_Range(0.2, 0.4),
+    near_time=_Range(0.35, 0.5),
+    far_time=_Range(0.9, 1.5),
+    speed_exponent=_Range(0.85, 1.15),
+    noise_std=_Range(0.0004, 0.0012),
+    noise_time_constant=_Range(0.2, 0.4),
+    white_noise_probability=1.0 / 3.0,
+)
+_SHARED = {
+    "delay": _Range(0.15, 0.25),
+    "neuromuscular_frequency": _Range(8.0, 14.0),
+    "neuromuscular_damping": _Range(0.6, 0.85),
+    "max_lateral_acceleration": _Range(2.5, 4.0),
+}
+_HUMAN_MOTOR = MotorRanges(
+    broadband_std=_Range(2e-4, 5e-4),
+    broadband_time_constant=_Range(0.1, 0.3),
+    tremor_std=_Range(8e-5, 1.5e-4),
+    tremor_frequency=_Range(8.0, 12.0),
+    tremor_damping=_Range(0.1, 0.3),
+    signal_dependent_gain=_Range(0.01, 0.04),
+)
+_PI_DESCRIPTION = (
+    "Nine two-point PI drivers: 'Ill' and 1-8, differing in gains (lateral-loop bandwidth "
+    "0.9-1.25 rad/s, damping 0.5-0.75), look-ahead times, delay 0.15-0.25 s, neuromuscular "
+    "lag, command noise (white or OU) and speed: three hold 15 m/s, three ramp to 25-38 m/s, "
+    "three ramp to 45 m/s."
+)
+
+POPULATIONS: dict[str, PopulationSpec] = {
+    "paper": PopulationSpec(
+        description=(
+            "Nine drivers like the paper's participants, 'Ill' and 1-8: three two-point PI, three "
+            "preview optimal control (LQR with 1-1.5 s of curvature preview), three intermittent "
+            "control (accumulated prediction errors against the LQR's positional law trigger "
+            "0.3-0.5 s minimum-jerk corrections); "
+            "delay 0.15-0.25 s, neuromuscular lag, remnant after the lag (broadband OU "
+            "2e-4-5e-4 rad, 8-12 Hz tremor 8e-5-1.5e-4 rad, signal-dependent), G29 wheel "
+            "quantization at steering ratio 15; per archetype one holds 15 m/s, one ramps to "
+            "25-38 m/s, one to 45 m/s."
+        ),
+        archetypes=("two-point", "preview", "intermittent"),
+        speed_behaviours=(_HOLD, _MODERATE, _FAST),
+        **_SHARED,
+        two_point=_TWO_POINT,
+        preview=PreviewRanges(
+            bandwidth=_Range(1.0, 1.4),
+            velocity_weight=_Range(0.5, 2.0),
+            preview_time=_Range(1.0, 1.5),
+            persistence=_Range(2.0, 5.0),
+        ),
+        intermittent=IntermittentRanges(
+            bandwidth=_Range(0.9, 1.1),
+            velocity_weight=_Range(1.0, 2.0),
+            preview_time=_Range(1.0, 1.5),
+            persistence=_Range(2.0, 5.0),
+            accumulator_gain=_Range(20.0, 50.0),
+            accumulator_leak=_Range(0.5, 1.5),
+            accumulator_noise=_Range(0.1, 0.4),
+            correction_duration=_Range(0.3, 0.5),
+            refractory_period=_Range(0.1, 0.25),
+        ),
+        motor=_HUMAN_MOTOR,
+    ),
+    "paper-pi": PopulationSpec(
+        description=_PI_DESCRIPTION + " No remnant after the lag, no quantization: the original "
+        "population, drawn exactly as before the archetypes existed.",
+        archetypes=("two-point",),
+        speed_behaviours=(_HOLD,) * 3 + (_MODERATE,) * 3 + (_FAST,) * 3,
+        **_SHARED,
+        two_point=_TWO_POINT,
+        seed_key="paper",
+        legacy=True,
+    ),
+    "paper-pi-human": PopulationSpec(
+        description=_PI_DESCRIPTION + " The drivers of 'paper-pi' with the output stage of "
+        "'paper' (remnant after the lag, G29 quantization).",
+        archetypes=("two-point",),
+        speed_behaviours=(_HOLD,) * 3 + (_MODERATE,) * 3 + (_FAST,) * 3,
+        **_SHARED,
+        two_point=_TWO_POINT,
+        motor=_HUMAN_MOTOR,
+        seed_key="paper",
+        legacy=True,
+    ),
+}
+"""Named population definitions (see :func:`population`)."""
+
+
+def _driver_names(size: int) -> list[str]:
+    return ["Ill", *(str(i) for i in range(1, size))]
+
+
+def _stable_hash(text: str) -> int:
+    """A hash of a string that is the same in every Python process (unlike hash())."""
+    return zlib.crc32(text.encode("utf-8"))
+
+
+def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanParams]:
+    """A seeded population of synthetic drivers, regenerable anywhere by name and seed.
+
+    Args:
+        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human").
+        seed: the seed; the same (name, seed, size) gives the same drivers.
+        size: number of drivers; they are named "Ill", "1", ..., str(size - 1).
+            Archetypes and speed behaviours cycle through the population's lists.
+
+    Returns:
+        The drivers' parameters (of their archetypes), in name order; drive
+        them with :func:`~hasa_env.drivers.archetypes.make_driver` or
+        :class:`~hasa_env.drivers.synthetic.SyntheticDriver`.
+    """
+    try:
+        spec = POPULATIONS[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown population {name!r}; allowed: {', '.join(sorted(POPULATIONS))}"
+        ) from None
+    if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+        raise ValueError(f"population size must be a positive integer, got {size!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"population seed must be a non-negative integer, got {seed!r}")
+    key = _stable_hash(spec.seed_key or name)
+    if spec.legacy:
+        return _legacy_population(spec, int(seed), key, size)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), key]))
+    arch, speeds = len(spec.archetypes), len(spec.speed_behaviours)
+    slots = [
+        (spec.archetypes[i % arch], spec.speed_behaviours[(i // arch) % speeds])
+        for i in range(size)
+    ]
+    order = rng.permutation(size)
+    drivers: list[HumanParams] = []
+    for index, driver_name in enumerate(_driver_names(size)):
+        archetype, behaviour = slots[int(order[index])]
+        own = np.random.default_rng(np.random.SeedSequence([int(seed), key, 1 + index]))
+        common = {
+            "name": driver_name,
+            "speed": _draw_speed(behaviour, spec, own),
+            "delay": spec.delay.draw(own),
+            "neuromuscular_frequency": spec.neuromuscular_frequency.draw(own),
+            "neuromuscular_damping": spec.neuromuscular_damping.draw(own),
+            "motor": MotorParams()
+            if spec.motor is None
+            else spec.motor.draw(own, spec.remnant_scale),
+        }
+        drivers.append(_DRAW[archetype](spec, own, common))
+    return drivers
+
+
+def _draw_speed(
+    behaviour: _SpeedBehaviour, spec: PopulationSpec, rng: np.random.Generator
+) -> SpeedProfile:
+    target, rate, start = behaviour
+    return SpeedProfile(
+        target_speed=None if target is None else target.draw(rng),
+        ramp_rate=rate.draw(rng),
+        start_time=start.draw(rng),
+        max_lateral_acceleration=spec.max_lateral_acceleration.draw(rng),
+    )
+
+
+def _two_point_traits(r: TwoPointRanges, rng: np.random.Generator) -> dict:
+    """Noise kind and loop design of a two-point driver, drawn in the original order."""
+    white = bool(rng.random() < r.white_noise_probability)
+    tau = r.noise_time_constant.draw(rng)
+    return {
+        "noise_time_constant": 0.0 if white else tau,
+        "bandwidth": r.bandwidth.draw(rng),
+        "damping": r.damping.draw(rng),
+        "integral_share": r.integral_share.draw(rng),
+        "near_time": r.near_time.draw(rng),
+        "far_time": r.far_time.draw(rng),
+        "speed_exponent": r.speed_exponent.draw(rng),
+    }
+
+
+def _draw_two_point(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> DriverParams:
+    traits = _two_point_traits(spec.two_point, rng)
+    return DriverParams.from_loop(**traits, noise_std=spec.two_point.noise_std.draw(rng), **common)
+
+
+def _draw_preview(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> PreviewParams:
+    r = spec.preview
+    assert r is not None  # checked by PopulationSpec
+    return PreviewParams(cost=_draw_cost(r, rng), **common)
+
+
+def _draw_cost(r: PreviewRanges | IntermittentRanges, rng: np.random.Generator) -> PreviewCost:
+    return PreviewCost.from_bandwidth(
+        bandwidth=r.bandwidth.draw(rng),
+        velocity_weight=r.velocity_weight.draw(rng),
+        preview_time=round(r.preview_time.draw(rng), 1),  # whole preview steps of 0.1 s
+        persistence=r.persistence.draw(rng),
+    )
+
+
+def _draw_intermittent(
+    spec: PopulationSpec, rng: np.random.Generator, common: dict
+) -> IntermittentParams:
+    r = spec.intermittent
+    assert r is not None  # checked by PopulationSpec
+    return IntermittentParams(
+        cost=_draw_cost(r, rng),
+        accumulator_gain=r.accumulator_gain.draw(rng),
+        accumulator_leak=r.accumulator_leak.draw(rng),
+        accumulator_noise=r.accumulator_noise.draw(rng),
+        correction_duration=r.correction_duration.draw(rng),
+        refractory_period=r.refractory_period.draw(rng),
+        **common,
+    )
+
+
+_DRAW = {"two-point": _draw_two_point, "preview": _draw_preview, "intermittent": _draw_intermittent}
+
+
+def _legacy_population(spec: PopulationSpec, seed: int, key: int, size: int) -> list[HumanParams]:
+    """Two-point drivers drawn in the original population's order (bit for bit the old drivers).
+
+    The output stage, if the spec has one, is drawn afterwards from each
+    driver's own stream, so it leaves the PI traits unchanged.
+    """
+    rng = np.random.default_rng(np.random.SeedSequence([seed, key]))
+    r = spec.two_point
+    behaviours = [spec.speed_behaviours[i % len(spec.speed_behaviours)] for i in range(size)]
+    order = rng.permutation(size)
+    drivers: list[HumanParams] = []
+    for index, driver_name in enumerate(_driver_names(size)):
+        speed = _draw_speed(behaviours[int(order[index])], spec, rng)
+        traits = _two_point_traits(r, rng)
+        params = DriverParams.from_loop(
+            **traits,
+            name=driver_name,
+            delay=spec.delay.draw(rng),
+            neuromuscular_frequency=spec.neuromuscular_frequency.draw(rng),
+            neuromuscular_damping=spec.neuromuscular_damping.draw(rng),
+            noise_std=r.noise_std.draw(rng),
+            speed=speed,
+        )
+        if spec.motor is not None:
+            own = np.random.default_rng(np.random.SeedSequence([seed, key, 1 + index]))
+            motor = spec.motor.draw(own, spec.remnant_scale)
+            params = replace(params, motor=motor)
+        drivers.append(params)
+    return drivers
