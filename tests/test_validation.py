@@ -626,8 +626,8 @@ def test_validate_fields_stores_converted_values_also_on_frozen_dataclasses():
         Settings(runs=0)
 
 
-# The specs FilterSettings (estimators/gm_ekf.py) and DriverParams / SpeedProfile
-# (hasa_env/drivers) will be migrated to: they must accept what the classes accept and
+# The specs FilterSettings (estimators/gm_ekf.py) and DriverParams / SpeedProfile /
+# MotorParams (hasa_env/drivers) will be migrated to: they must accept what the classes accept and
 # refuse what they refuse (both checked here against the classes' own validation).
 def _positive(unit: str = "") -> Field:
     return Field("number", unit=unit, low=0.0, low_open=True)
@@ -669,6 +669,18 @@ SPEED_PROFILE = schema(
         "max_acceleration": _positive("m/s^2"),
     }
 )
+MOTOR_PARAMS = schema(
+    {
+        "broadband_std": Field("number", unit="rad", low=0.0, high=0.05),
+        "broadband_time_constant": Field("number", unit="s", low=0.0, high=10.0),
+        "tremor_std": Field("number", unit="rad", low=0.0, high=0.05),
+        "tremor_frequency": Field("number", unit="Hz", low=0.5, high=40.0),
+        "tremor_damping": Field("number", low=0.0, high=1.0, low_open=True),
+        "signal_dependent_gain": Field("number", unit="s", low=0.0, high=1.0),
+        "steering_ratio": Field("number", low=1.0, high=100.0),
+        "wheel_resolution": Field("number", unit="rad", low=0.0, high=0.1),
+    }
+)
 DRIVER_PARAMS = schema(
     {
         "name": Field("string"),
@@ -683,6 +695,7 @@ DRIVER_PARAMS = schema(
         "noise_time_constant": _non_negative("s"),
         "speed": SPEED_PROFILE,
         "max_steering": _positive("rad"),
+        "motor": MOTOR_PARAMS,
     }
 )
 
@@ -744,19 +757,25 @@ def test_the_filter_settings_spec_agrees_with_filter_settings(name, value):
         ("speed", "max_lateral_acceleration", 0.0),
         ("speed", "start_time", float("nan")),
         ("speed", "ramp_rate", 2.0),
+        ("motor", "tremor_damping", 0.0),
+        ("motor", "tremor_damping", 1.0),
+        ("motor", "steering_ratio", 0.5),
+        ("motor", "wheel_resolution", float("inf")),
     ],
 )
 def test_the_driver_params_spec_agrees_with_driver_params(where, name, value):
     import dataclasses
 
     from hasa_env.drivers.base import SpeedProfile
+    from hasa_env.drivers.motor import MotorParams
     from hasa_env.drivers.synthetic import DriverParams
 
     values = dataclasses.asdict(DriverParams())
     assert _accepts(DRIVER_PARAMS, values)
-    if where == "speed":
-        values["speed"][name] = value
-        accepted = _constructs(lambda: DriverParams(speed=SpeedProfile(**{name: value})))
+    part = {"speed": SpeedProfile, "motor": MotorParams}.get(where)
+    if part is not None:
+        values[where][name] = value
+        accepted = _constructs(lambda: DriverParams(**{where: part(**{name: value})}))
     else:
         values[name] = value
         accepted = _constructs(lambda: DriverParams(**{name: value}))
