@@ -11,6 +11,7 @@ import hasa_env  # noqa: F401  (registers the env ids)
 from hasa_env.drivers import (
     ARCHETYPES,
     G29_RESOLUTION,
+    POPULATIONS,
     DriverParams,
     IntermittentDriver,
     IntermittentParams,
@@ -214,7 +215,19 @@ def test_intermittent_steering_comes_in_bursts():
 
 
 def test_applied_steering_is_on_the_wheel_grid_and_shows_the_tremor():
-    params = population("paper", seed=0)
+    # at the population's full remnant scale: the calibrated default ("paper", scale 0.1)
+    # puts the tremor at about the wheel's own resolution, where quantization hides it
+    POPULATIONS["_full_remnant"] = dataclasses.replace(
+        POPULATIONS["paper"], remnant_scale=1.0, seed_key="paper"
+    )
+    try:
+        # without the command noise before the lag, which reaches 8-12 Hz too, through the lag
+        params = [
+            dataclasses.replace(p, motor=dataclasses.replace(p.motor, command_std=0.0))
+            for p in population("_full_remnant", seed=0)
+        ]
+    finally:
+        del POPULATIONS["_full_remnant"]
     runs = run_population(params, runs=1, seed=0)
     no_tremor = [
         dataclasses.replace(p, motor=dataclasses.replace(p.motor, tremor_std=0.0)) for p in params

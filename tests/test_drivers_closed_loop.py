@@ -66,7 +66,8 @@ def test_every_synthetic_driver_stays_on_the_curved_road():
         frame = runs[p.name][0]
         assert len(frame) == 3001 and not frame["terminated"].any(), p.name
         assert frame["lateral_offset"].abs().max() < 1.8, p.name  # rear axle stays in its lane
-        assert frame["station"].iloc[-1] > 450.0, p.name  # it drove through several bends
+        # it drove into the bends (a driver holding 15 m/s who slows for them ends near 450 m)
+        assert frame["station"].iloc[-1] > 400.0, p.name
 
 
 def peak_lateral_acceleration(frame):

@@ -34,7 +34,8 @@ def test_the_paper_population_mixes_three_archetypes_reproducibly():
 
 
 def test_remnant_scale_multiplies_the_remnant_of_the_same_drivers(monkeypatch):
-    spec = dataclasses.replace(POPULATIONS["paper"], remnant_scale=2.5, seed_key="paper")
+    default = POPULATIONS["paper"].remnant_scale
+    spec = dataclasses.replace(POPULATIONS["paper"], remnant_scale=2.5 * default, seed_key="paper")
     monkeypatch.setitem(POPULATIONS, "paper-loud", spec)
     base, loud = population("paper", 3), population("paper-loud", 3)
     for a, b in zip(base, loud, strict=True):
@@ -67,7 +68,9 @@ def _renamed(seeds):
 @pytest.mark.parametrize("env_id", ["hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0"])
 def test_every_driver_of_five_populations_stays_in_its_lane_for_30_s(env_id):
     drivers = _renamed(SEEDS)  # 45 drivers in one vector env
-    runs = run_population(drivers, runs=1, seed=0, env_id=env_id)
+    # under the study's conditions: crosswind and camber on (the population's env config)
+    env = dict(POPULATIONS["paper"].env_config) | {"time_limit": 30.0}
+    runs = run_population(drivers, runs=1, seed=0, env_id=env_id, config=env)
     top = []
     for p in drivers:
         frame = runs[p.name][0]
@@ -79,25 +82,27 @@ def test_every_driver_of_five_populations_stays_in_its_lane_for_30_s(env_id):
 
 
 def _increment_stats(frame):
+    """(std of the one-step increments, RMS residual of the road-blind extrapolator
+    2 delta(k-1) - delta(k-2)) of a run's applied steering (rad)."""
     delta = frame["steering"].to_numpy()[1:]
     increments = np.diff(delta)
-    extrapolated = increments[:-1]  # 2 delta(k-1) - delta(k-2) - delta(k-1)
-    actual = increments[1:]
-    r2 = 1.0 - np.sum((actual - extrapolated) ** 2) / np.sum((actual - actual.mean()) ** 2)
-    return increments.std(), r2
+    extrapolation_error = increments[1:] - increments[:-1]
+    return increments.std(), np.sqrt(np.mean(extrapolation_error**2))
 
 
-def test_steering_is_human_like_not_extrapolable():
-    """One-step increments of the applied steering: std of order 1e-4 rad (the paper's
-    participants, Table 1 read at the road wheel: 2e-4..6e-4), and the road-blind
-    extrapolator 2 delta(k-1) - delta(k-2) no longer predicts them (it did, R^2 ~0.96, for
-    the old population)."""
+def test_steering_moves_like_the_papers_participants():
+    """Under the study's conditions the applied steering moves about as much per sample as
+    the paper's participants' (Table 1 read at the road wheel: the two-point model's RMSE,
+    about the increment's std, 2.2e-4..6.3e-4; the generalized model's, about what no
+    extrapolation of the past predicts, 2.7e-5..1.5e-4), medians within a factor 3; the old
+    all-PI population moved 15-30 times less."""
     for name, human in (("paper", True), ("paper-pi", False)):
         params = population(name, seed=0)
-        runs = run_population(params, runs=1, seed=0)
+        env = dict(POPULATIONS[name].env_config) | {"time_limit": 30.0}
+        runs = run_population(params, runs=1, seed=0, config=env)
         stats = np.array([_increment_stats(runs[p.name][0]) for p in params])
         if human:
-            assert np.all((stats[:, 0] > 5e-5) & (stats[:, 0] < 1e-3))
-            assert np.all(stats[:, 1] < 0.3)
+            assert 4e-4 / 3 < np.median(stats[:, 0]) < 3 * 4e-4, np.median(stats[:, 0])
+            assert 4.7e-5 / 3 < np.median(stats[:, 1]) < 3 * 4.7e-5, np.median(stats[:, 1])
         else:
-            assert np.median(stats[:, 0]) < 3e-5 and np.median(stats[:, 1]) > 0.9
+            assert np.median(stats[:, 0]) < 3e-5 and np.median(stats[:, 1]) < 3e-6

@@ -671,6 +671,8 @@ SPEED_PROFILE = schema(
 )
 MOTOR_PARAMS = schema(
     {
+        "command_std": Field("number", unit="rad", low=0.0, high=0.1),
+        "command_time_constant": Field("number", unit="s", low=0.0, high=10.0),
         "broadband_std": Field("number", unit="rad", low=0.0, high=0.05),
         "broadband_time_constant": Field("number", unit="s", low=0.0, high=10.0),
         "tremor_std": Field("number", unit="rad", low=0.0, high=0.05),
@@ -701,8 +703,18 @@ DRIVER_PARAMS = schema(
 
 
 def _accepts(spec: Field, values: dict) -> bool:
+    """Whether ``spec`` accepts ``values``, restricted to the spec's keys (a field the class
+    gains later does not make the comparison fail)."""
+
+    def restrict(spec: Field, values: dict) -> dict:
+        assert spec.fields is not None
+        return {
+            k: restrict(f, values[k]) if f.fields is not None else values[k]
+            for k, f in spec.fields.items()
+        }
+
     try:
-        check(values, spec)
+        check(restrict(spec, values), spec)
     except Bad:
         return False
     return True

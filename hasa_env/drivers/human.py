@@ -184,7 +184,7 @@ class HumanBatch(ABC):
             self._start(info, road, start)
             self._fresh = False
         command = self._command(info, road)
-        steering = self.motor.step(command)
+        steering = self.motor.step(command, info["speed"])
         acceleration = speed_command(self.profile, self._initial_speed, info, road)
         return steering, acceleration
 

@@ -3,10 +3,22 @@
 Every synthetic driver's control law produces a command u(k) (road-wheel
 angle, rad). Between it and the car stand, per car and env step Ts:
 
-1. A second-order neuromuscular lag, discretised exactly (zero-order hold on u)::
+0. Command noise BEFORE the lag (the part of a human's remnant injected at the
+   control input: variability of intent), an Ornstein-Uhlenbeck process scaled
+   with speed like the steering a given lateral acceleration needs, so the
+   lateral wander it causes is about the same at every speed::
 
-       delta_n'' = w_n^2 (u - delta_n) - 2 zeta_n w_n delta_n'
-       [delta_n, delta_n'](k) = Ad [delta_n, delta_n'](k-1) + Bd u(k)
+       rho_c = exp(-Ts / tau_c)                                  (0 if tau_c = 0)
+       c(k) = rho_c c(k-1) + sigma_c sqrt(1 - rho_c^2) e_c(k)
+       u'(k) = u(k) + (15 / max(v, 5))^2 c(k)                     (v in m/s)
+
+   Filtered by the lag it makes the steering move (the two-point model
+   cannot predict those moves) but stays smooth at the sample scale.
+
+1. A second-order neuromuscular lag, discretised exactly (zero-order hold on u')::
+
+       delta_n'' = w_n^2 (u' - delta_n) - 2 zeta_n w_n delta_n'
+       [delta_n, delta_n'](k) = Ad [delta_n, delta_n'](k-1) + Bd u'(k)
 
 2. Remnant added AFTER the lag (so it reaches the wheel unfiltered), all in rad
    at the road wheel:
@@ -73,6 +85,8 @@ NOISE_BLOCK = 1000
 
 _LIMITS: dict[str, tuple[float, float, bool]] = {
     # field: (low, high, low is exclusive)
+    "command_std": (0.0, 0.1, False),
+    "command_time_constant": (0.0, 10.0, False),
     "broadband_std": (0.0, 0.05, False),
     "broadband_time_constant": (0.0, 10.0, False),
     "tremor_std": (0.0, 0.05, False),
@@ -93,6 +107,9 @@ class MotorParams:
     for :class:`~hasa_env.drivers.synthetic.DriverParams`.
 
     Attributes:
+        command_std: sigma_c, std of the command noise before the lag at 15 m/s
+            (rad at the road wheel), in [0, 0.1].
+        command_time_constant: tau_c (s) of the command noise, in [0, 10]; 0 = white.
         broadband_std: sigma_b, rad at the road wheel, in [0, 0.05].
         broadband_time_constant: tau_b (s) of the broadband OU process, in [0, 10]; 0 = white.
         tremor_std: sigma_t, stationary std of the tremor, rad at the road wheel, in [0, 0.05].
@@ -105,6 +122,8 @@ class MotorParams:
             (:data:`G29_RESOLUTION` for a Logitech G29).
     """
 
+    command_std: float = 0.0
+    command_time_constant: float = 0.3
     broadband_std: float = 0.0
     broadband_time_constant: float = 0.0
     tremor_std: float = 0.0
@@ -128,14 +147,22 @@ class MotorParams:
     @property
     def has_remnant(self) -> bool:
         """Whether any remnant component is on."""
-        return self.broadband_std > 0 or self.tremor_std > 0 or self.signal_dependent_gain > 0
+        return (
+            self.command_std > 0
+            or self.broadband_std > 0
+            or self.tremor_std > 0
+            or self.signal_dependent_gain > 0
+        )
 
-    def scaled(self, factor: float) -> MotorParams:
-        """The same stage with every remnant std (and the signal-dependent gain) times ``factor``."""
-        if not (math.isfinite(factor) and factor >= 0):
-            raise ValueError(f"remnant scale must be a finite number >= 0, got {factor!r}")
+    def scaled(self, factor: float, command_factor: float = 1.0) -> MotorParams:
+        """The same stage with every remnant std after the lag (and the signal-dependent
+        gain) times ``factor`` and the command noise before it times ``command_factor``."""
+        for label, value in (("remnant", factor), ("command noise", command_factor)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{label} scale must be a finite number >= 0, got {value!r}")
         return replace(
             self,
+            command_std=self.command_std * command_factor,
             broadband_std=self.broadband_std * factor,
             tremor_std=self.tremor_std * factor,
             signal_dependent_gain=self.signal_dependent_gain * factor,
@@ -224,6 +251,7 @@ class MotorStage:
         def arr(key: str) -> np.ndarray:
             return np.array([getattr(m, key) for m in self.motors], dtype=np.float64)
 
+        self.command_std, self.command_tau = arr("command_std"), arr("command_time_constant")
         self.broadband_std, self.broadband_tau = (
             arr("broadband_std"),
             arr("broadband_time_constant"),
@@ -253,7 +281,11 @@ class MotorStage:
         tau = self.broadband_tau
         with np.errstate(divide="ignore"):
             self._rho = np.where(tau > 0, np.exp(-dt / np.maximum(tau, 1e-300)), 0.0)
+            tau_c = self.command_tau
+            self._rho_c = np.where(tau_c > 0, np.exp(-dt / np.maximum(tau_c, 1e-300)), 0.0)
         self._innovation = np.sqrt(1.0 - self._rho**2)
+        self._innovation_c = self.command_std * np.sqrt(1.0 - self._rho_c**2)
+        self.commanded = bool(np.any(self.command_std > 0))
         # a tremor at or above the Nyquist frequency of the env step cannot be carried by
         # actions held over the step (e.g. a policy acting every 0.1 s): it is left out
         self.tremor_on = self.tremor_frequency < 0.5 / dt
@@ -268,7 +300,7 @@ class MotorStage:
         self.quantized = self.resolution > 0
         self._q = np.where(self.quantized, self.resolution, 1.0)
         self._levels = np.floor(self.ratio * self.max_steering / self._q)
-        self._noise = NoiseBlocks(rngs, 3)
+        self._noise = NoiseBlocks(rngs, 4 if self.commanded else 3)
         self._fresh = True
 
     def start(self, steering: np.ndarray) -> None:
@@ -276,18 +308,31 @@ class MotorStage:
         start = np.asarray(steering, dtype=np.float64)
         self._angle, self._rate = start.copy(), np.zeros(self.num_cars)
         zeros = np.zeros(self.num_cars)
+        self._command_noise = zeros.copy()
         self._broadband, self._dependent = zeros.copy(), zeros.copy()
         self._tremor, self._tremor_prev = zeros.copy(), zeros.copy()
         self._fresh = True
 
-    def step(self, command: np.ndarray) -> np.ndarray:
-        """Applied steering (rad at the road wheel) for the command u(k) (rad)."""
+    def step(self, command: np.ndarray, speed: np.ndarray | None = None) -> np.ndarray:
+        """Applied steering (rad at the road wheel) for the command u(k) (rad) at ``speed``
+        (m/s; needed with command noise)."""
         if self._dt is None:
             raise RuntimeError("MotorStage: call reset() before step()")
+        e = self._noise.next()
+        if self.commanded:
+            if speed is None:
+                raise ValueError("MotorStage.step needs the speed when there is command noise")
+            if self._fresh:  # stationary start
+                self._command_noise = self.command_std * e[:, 3]
+            else:
+                self._command_noise = self._rho_c * self._command_noise + (
+                    self._innovation_c * e[:, 3]
+                )
+            scale = (15.0 / np.maximum(np.asarray(speed, dtype=np.float64), 5.0)) ** 2
+            command = command + scale * self._command_noise
         angle = self._a00 * self._angle + self._a01 * self._rate + self._b0 * command
         rate = self._a10 * self._angle + self._a11 * self._rate + self._b1 * command
         self._angle, self._rate = angle, rate
-        e = self._noise.next()
         dependent_std = self.gain * np.abs(rate)
         if self._fresh:  # stationary start of the OU components
             self._broadband = self.broadband_std * e[:, 0]

@@ -21,7 +21,9 @@ copies: ``replace(POPULATIONS["paper"], remnant_scale=2.0, seed_key="paper")``.
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -105,18 +107,37 @@ class MotorRanges:
     signal_dependent_gain: _Range
     steering_ratio: float = 15.0
     wheel_resolution: float = G29_RESOLUTION
+    command_std: _Range = _Range(0.0, 0.0)
+    command_time_constant: _Range = _Range(0.3, 0.3)
 
-    def draw(self, rng: np.random.Generator, scale: float) -> MotorParams:
+    def draw(
+        self,
+        rng: np.random.Generator,
+        scale: float,
+        command_scale: float = 1.0,
+        command_rng: np.random.Generator | None = None,
+    ) -> MotorParams:
+        """The output stage of one driver; ``command_rng`` (default ``rng``) draws the
+        command noise, so adding it left every other trait's stream as it was."""
+        after_lag = {
+            "broadband_std": self.broadband_std.draw(rng),
+            "broadband_time_constant": self.broadband_time_constant.draw(rng),
+            "tremor_std": self.tremor_std.draw(rng),
+            "tremor_frequency": self.tremor_frequency.draw(rng),
+            "tremor_damping": self.tremor_damping.draw(rng),
+            "signal_dependent_gain": self.signal_dependent_gain.draw(rng),
+        }
+        other = rng if command_rng is None else command_rng
+        before_lag = {
+            "command_std": self.command_std.draw(other),
+            "command_time_constant": self.command_time_constant.draw(other),
+        }
         return MotorParams(
-            broadband_std=self.broadband_std.draw(rng),
-            broadband_time_constant=self.broadband_time_constant.draw(rng),
-            tremor_std=self.tremor_std.draw(rng),
-            tremor_frequency=self.tremor_frequency.draw(rng),
-            tremor_damping=self.tremor_damping.draw(rng),
-            signal_dependent_gain=self.signal_dependent_gain.draw(rng),
+            **after_lag,
+            **before_lag,
             steering_ratio=self.steering_ratio,
             wheel_resolution=self.wheel_resolution,
-        ).scaled(scale)
+        ).scaled(scale, command_scale)
 
 
 _SpeedBehaviour = tuple[_Range | None, _Range, _Range]
@@ -140,7 +161,12 @@ class PopulationSpec:
         max_lateral_acceleration: ranges of the traits every archetype has.
         two_point, preview, intermittent: the archetypes' trait ranges.
         motor: the output stage's ranges; None: no remnant, no quantization.
-        remnant_scale: multiplies every remnant std of the drawn drivers (>= 0).
+        remnant_scale: multiplies every remnant std after the lag of the drawn
+            drivers (>= 0).
+        command_scale: multiplies the command noise before the lag (>= 0).
+        env_config: the env settings the population is studied under (deep-merged
+            onto the env defaults by the benchmark): e.g. the disturbances and
+            the steering-sensor noise of a wheel study.
         seed_key: the name whose hash seeds the draws (None: the population's
             own name); a copy with another remnant_scale and the original's
             key has the same drivers.
@@ -160,6 +186,8 @@ class PopulationSpec:
     intermittent: IntermittentRanges | None = None
     motor: MotorRanges | None = None
     remnant_scale: float = 1.0
+    command_scale: float = 1.0
+    env_config: Mapping[str, Any] = field(default_factory=dict)
     seed_key: str | None = None
     legacy: bool = False
 
@@ -175,10 +203,12 @@ class PopulationSpec:
                 raise ValueError(f"PopulationSpec.{name} ranges are needed for {name} drivers")
         if self.legacy and set(self.archetypes) != {"two-point"}:
             raise ValueError("PopulationSpec.legacy draws two-point drivers only")
-        if not (np.isfinite(self.remnant_scale) and self.remnant_scale >= 0):
-            raise ValueError(
-                f"PopulationSpec.remnant_scale must be a finite number >= 0, got {self.remnant_scale!r}"
-            )
+        for name in ("remnant_scale", "command_scale"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(
+                    f"PopulationSpec.{name} must be a finite number >= 0, got {value!r}"
+                )
 
 
 _HOLD = (None, _Range(1.0, 1.0), _Range(0.0, 0.0))
@@ -209,7 +239,15 @@ _HUMAN_MOTOR = MotorRanges(
     tremor_frequency=_Range(8.0, 12.0),
     tremor_damping=_Range(0.1, 0.3),
     signal_dependent_gain=_Range(0.01, 0.04),
+    command_std=_Range(0.003, 0.009),
+    command_time_constant=_Range(0.07, 0.13),
 )
+_WHEEL_STUDY = {
+    # what a G29 study measures: the wheel's own (quantized) reading, no automotive sensor noise
+    "noise": {"steering": 0.0},
+    # external excitation of the closed loop, as identification experiments with people use
+    "disturbance": {"crosswind": 0.3, "camber": 0.2},
+}
 _PI_DESCRIPTION = (
     "Nine two-point PI drivers: 'Ill' and 1-8, differing in gains (lateral-loop bandwidth "
     "0.9-1.25 rad/s, damping 0.5-0.75), look-ahead times, delay 0.15-0.25 s, neuromuscular "
@@ -251,6 +289,8 @@ POPULATIONS: dict[str, PopulationSpec] = {
             refractory_period=_Range(0.1, 0.25),
         ),
         motor=_HUMAN_MOTOR,
+        remnant_scale=0.1,
+        env_config=_WHEEL_STUDY,
     ),
     "paper-pi": PopulationSpec(
         description=_PI_DESCRIPTION + " No remnant after the lag, no quantization: the original "
@@ -324,6 +364,7 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanP
     for index, driver_name in enumerate(_driver_names(size)):
         archetype, behaviour = slots[int(order[index])]
         own = np.random.default_rng(np.random.SeedSequence([int(seed), key, 1 + index]))
+        command = np.random.default_rng(np.random.SeedSequence([int(seed), key, 1 + index, 2]))
         common = {
             "name": driver_name,
             "speed": _draw_speed(behaviour, spec, own),
@@ -332,7 +373,7 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanP
             "neuromuscular_damping": spec.neuromuscular_damping.draw(own),
             "motor": MotorParams()
             if spec.motor is None
-            else spec.motor.draw(own, spec.remnant_scale),
+            else spec.motor.draw(own, spec.remnant_scale, spec.command_scale, command),
         }
         drivers.append(_DRAW[archetype](spec, own, common))
     return drivers
@@ -429,7 +470,8 @@ def _legacy_population(spec: PopulationSpec, seed: int, key: int, size: int) -> 
         )
         if spec.motor is not None:
             own = np.random.default_rng(np.random.SeedSequence([seed, key, 1 + index]))
-            motor = spec.motor.draw(own, spec.remnant_scale)
+            command = np.random.default_rng(np.random.SeedSequence([seed, key, 1 + index, 2]))
+            motor = spec.motor.draw(own, spec.remnant_scale, spec.command_scale, command)
             params = replace(params, motor=motor)
         drivers.append(params)
     return drivers
