@@ -1,9 +1,11 @@
-"""State estimation with the human as advisor (paper section 5, DESIGN.md section 5).
+"""State estimation with the human as advisor (paper section 4, docs/design.md §8).
 
 - :class:`GaussianMixtureEKF`: one EKF per lane hypothesis, the human's
   steering entering through any ARX steering model
   (:class:`~hasa_env.steering.arx.ARXForm`); vectorized over hypotheses and
-  over many runs at once.
+  over many runs at once (:mod:`~estimators.gm_ekf`); its
+  :class:`FilterSettings` (:mod:`~estimators.settings`) and
+  :class:`FilterMatrices` (:mod:`~estimators.filter_matrices`).
 - :class:`ARXStateSpace`: the augmented state [v_x, y, v_y, b, m_1..m_n] of a
   car and an ARX steering model, with exact Jacobians.
 - Baselines: :class:`NoSteeringEKF`, :class:`SingleHypothesisEKF`,
@@ -23,8 +25,10 @@ from estimators.base import (
     measurements_from_info,
 )
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
-from estimators.gm_ekf import FilterMatrices, FilterSettings, GaussianMixtureEKF
+from estimators.filter_matrices import FilterMatrices
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.offline import EstimationResult, hypotheses_of, run_estimator
+from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
 from estimators.wrappers import (
     EstimatorInfoWrapper,

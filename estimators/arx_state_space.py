@@ -1,7 +1,7 @@
 """The augmented state-space model: vehicle + bias + an ARX steering model's memory.
 
-Paper section 5.1 (eqs. 11-14), generalised to any ARX order and corrected
-as in DESIGN.md section 5. Equation numbers count the equations of the
+Paper section 4.1 (eqs. 11-14), generalised to any ARX order and corrected
+as in docs/design.md §8.2. Equation numbers count the equations of the
 paper's source (``paper/000_27bb222d17a6bc2b.txt``): (4) discrete vehicle
 model, (5)-(6) bearings, (8) generalized steering model, (10) its fitted
 form, (11) augmented transition, (12) sensor model, (13) A_h, (14) C_h,
@@ -17,12 +17,20 @@ lateral offset from the lane centre of this hypothesis (m), ``b`` camera bias
 canonical form. With no steering model (``arx=None``) the state is the first
 four entries (paper eq. 4).
 
-Visual features of a state (DESIGN.md section 3, straight-road formulas)::
+Visual features of a state (docs/design.md §5.1 and §5.2). With the road points
+``p = (dx_near, dy_near, dx_far, dy_far)`` (m) of the lane centre ahead in
+the road-tangent frame at the car (:mod:`estimators.road_geometry`; a known
+input per step)::
 
-    theta = atan(v_y / v_x)
-    phi   = -(theta + atan(y / near))          near-point bearing (rad)
-    Omega = -(theta + atan(y / far))           far-point bearing (rad)
+    theta = atan2(v_y, v_x)
+    phi   = atan2(dy_near - y, dx_near) - theta      near-point bearing (rad)
+    Omega = atan2(dy_far - y, dx_far) - theta        far-point bearing (rad)
     u     = [phi, Omega, v_y]
+
+Without road points (``road_points=None``) the road is straight,
+``p = (near, 0, far, 0)``, and the straight-road formulas are used as written::
+
+    phi   = -(theta + atan(y / near)),    Omega = -(theta + atan(y / far))
 
 Steering model (paper eq. 8, fitted form eq. 10; ``a_j`` multiplies delta(k-j), ``beta_j``
 the vector (b_j, c_j, d_j) multiplying u(k-j), zero beyond each order)::
@@ -30,7 +38,7 @@ the vector (b_j, c_j, d_j) multiplying u(k-j), zero beyond each order)::
     delta(k) = sum_{j=1}^{n} a_j delta(k-j) + sum_{j=0}^{n} beta_j . u(k-j) + e(k)
 
 Observer canonical form (the corrected, non-circular g_i of paper eq. 11; for the
-paper's order it is DESIGN.md's g1, g2, g3 and h3)::
+paper's order it is the g1, g2, g3 and h3 of docs/design.md §8.3)::
 
     delta(k)   = m_n(k) + beta_0 . u(k) + e(k)                                 (h3)
     m_i(k+1)   = a_{n-i+1} delta(k) + beta_{n-i+1} . u(k) + m_{i-1}(k),  m_0 = 0
@@ -44,19 +52,23 @@ Vehicle (paper eq. 4) with the IMU's road-frame accelerations as inputs::
     v_y(k+1) = v_y + Ts a_y
     b(k+1)   = b
 
-Measurements (paper eq. 12, with DESIGN.md's erratum: the speedometer
+Measurements (paper eq. 12, with the erratum of docs/design.md §10: the speedometer
 measures the speed, so h1 is the exact speed, not v_x)::
 
     h1 = sqrt(v_x^2 + v_y^2)      speedometer (m/s)
     h2 = y + b                    camera (m)
     h3 = m_n + beta_0 . u         steering, in the model's units (rad)
 
-Jacobians (paper eqs. 13-14, exact: DESIGN.md notes the paper's A_h has
+Jacobians (paper eqs. 13-14, exact: docs/design.md §10 notes the paper's A_h has
 a_2 c_0 / 6.2 where / 20 belongs, and its entries are small-angle ones)::
 
     d theta / d v_x = -v_y / (v_x^2 + v_y^2),   d theta / d v_y = v_x / (v_x^2 + v_y^2)
-    d phi / d y     = -near / (near^2 + y^2),   d Omega / d y  = -far / (far^2 + y^2)
+    d phi / d y     = -dx_near / (dx_near^2 + (dy_near - y)^2)     (straight: -near / (near^2 + y^2))
+    d Omega / d y   = -dx_far / (dx_far^2 + (dy_far - y)^2)
     d phi / d v     = d Omega / d v = -d theta / d v        (v = v_x or v_y)
+
+The transition uses the road points at the state's own sample (k, for
+x(k) -> x(k+1)), the measurement those at the measured sample.
 
 All functions accept any leading batch shape (``x[..., n_states]``).
 """
@@ -69,7 +81,7 @@ import numpy as np
 
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 
-__all__ = ["ARXStateSpace", "PHYSICAL_STATE_NAMES", "MEASUREMENT_NAMES"]
+__all__ = ["ARXStateSpace", "PHYSICAL_STATE_NAMES", "MEASUREMENT_NAMES", "check_road_points"]
 
 PHYSICAL_STATE_NAMES = ("longitudinal_velocity", "lateral_offset", "lateral_velocity", "bias")
 """Names of the first four states (m/s, m, m/s, m)."""
@@ -80,6 +92,28 @@ MEASUREMENT_NAMES = ("speed", "camera_lateral", "steering")
 VX, Y, VY, BIAS = 0, 1, 2, 3
 N_PHYSICAL = 4
 _MIN_SPEED_SQ = 1e-12  # floor of v_x^2 + v_y^2 (m^2/s^2) against division by zero
+
+
+def check_road_points(road_points: np.ndarray) -> np.ndarray:
+    """``road_points`` as a float64 array (..., 4), checked: finite, with dx_near, dx_far > 0.
+
+    Raises:
+        ValueError: naming the problem (wrong last axis, non-finite values, a
+            point not ahead of the car).
+    """
+    points = np.asarray(road_points, dtype=np.float64)
+    if points.ndim == 0 or points.shape[-1] != 4:
+        raise ValueError(
+            "road_points must have a last axis of 4 (dx_near, dy_near, dx_far, dy_far) (m), "
+            f"got shape {points.shape}"
+        )
+    ahead = points[..., 0::2]
+    if not (np.all(np.isfinite(points)) and np.all(ahead > 0)):
+        raise ValueError(
+            "road_points must be finite with dx_near > 0 and dx_far > 0 (points ahead of the "
+            "car, m)"
+        )
+    return points
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,6 +231,16 @@ class ARXStateSpace:
         out[N_PHYSICAL:, N_PHYSICAL:] = self.memory_matrix
         return out
 
+    def held_memory_transition_matrix(self) -> np.ndarray:
+        """dF/dx (n, n) of the transition with the memory states held (below ``min_speed``).
+
+        The vehicle rows of :meth:`transition_matrix_template` (paper eq. 4) and
+        the identity on the memory block: ``m(k+1) = m(k)``, no bearing terms.
+        """
+        out = self.transition_matrix_template()
+        out[N_PHYSICAL:, N_PHYSICAL:] = np.eye(self.n_memory)
+        return out
+
     def input_matrix(self) -> np.ndarray:
         """B_D (paper eq. 4/11): (n, 2) map of (a_x, a_y) into the state."""
         dt = self.dt
@@ -208,19 +252,37 @@ class ARXStateSpace:
 
     # ------------------------------------------------------------- features
     def bearings(
-        self, x: np.ndarray, with_jacobian: bool = False
+        self,
+        x: np.ndarray,
+        with_jacobian: bool = False,
+        road_points: np.ndarray | None = None,
     ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Features u = [phi, Omega, v_y] of states ``x[..., n_states]`` (at least the first 3).
+
+        Args:
+            x: states, shape (..., >= 3).
+            with_jacobian: also return du/d(v_x, y, v_y).
+            road_points: (..., 4) or (4,) road points (dx_near, dy_near, dx_far,
+                dy_far) (m) at the states' sample; None: a straight road.
 
         Returns u with shape (..., 3) and, with ``with_jacobian``, du/d(v_x, y, v_y)
         with shape (..., 3, 3) (rows: phi, Omega, v_y; columns: v_x, y, v_y).
         """
         vx, y, vy = x[..., VX], x[..., Y], x[..., VY]
-        near, far = self.near_distance, self.far_distance
         theta = np.arctan2(vy, vx)
         u = np.empty(x.shape[:-1] + (3,))
-        u[..., 0] = -(theta + np.arctan(y / near))
-        u[..., 1] = -(theta + np.arctan(y / far))
+        if road_points is None:
+            near, far = self.near_distance, self.far_distance
+            u[..., 0] = -(theta + np.arctan(y / near))
+            u[..., 1] = -(theta + np.arctan(y / far))
+            across = (near, far), (y, y)
+        else:
+            points = check_road_points(road_points)
+            dx_near, dx_far = points[..., 0], points[..., 2]
+            off_near, off_far = y - points[..., 1], y - points[..., 3]
+            u[..., 0] = -(theta + np.arctan2(off_near, dx_near))
+            u[..., 1] = -(theta + np.arctan2(off_far, dx_far))
+            across = (dx_near, dx_far), (off_near, off_far)
         u[..., 2] = vy
         if not with_jacobian:
             return u
@@ -230,19 +292,26 @@ class ARXStateSpace:
         du = np.zeros(x.shape[:-1] + (3, 3))
         du[..., 0, 0] = du[..., 1, 0] = -dtheta_dvx
         du[..., 0, 2] = du[..., 1, 2] = -dtheta_dvy
-        du[..., 0, 1] = -near / (near * near + y * y)
-        du[..., 1, 1] = -far / (far * far + y * y)
+        (d_near, d_far), (o_near, o_far) = across
+        du[..., 0, 1] = -d_near / (d_near * d_near + o_near * o_near)
+        du[..., 1, 1] = -d_far / (d_far * d_far + o_far * o_far)
         du[..., 2, 2] = 1.0
         return u, du
 
     # ------------------------------------------------------------ transition
-    def transition(self, x: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
+    def transition(
+        self,
+        x: np.ndarray,
+        acceleration: np.ndarray,
+        road_points: np.ndarray | None = None,
+    ) -> np.ndarray:
         """F(x) + B_D [a_x, a_y] (paper eq. 11 without noise): the state one sample later.
 
         Args:
             x: states, shape (..., n_states).
             acceleration: road-frame accelerations (a_x, a_y) (m/s^2) over the
                 sample, shape broadcastable to (..., 2).
+            road_points: road points at x's sample (see :meth:`bearings`); None: straight.
         """
         acceleration = np.asarray(acceleration, dtype=np.float64)
         dt = self.dt
@@ -254,42 +323,57 @@ class ARXStateSpace:
         out[..., VY] = vy + dt * ay
         out[..., BIAS] = x[..., BIAS]
         if self.n_memory:
-            u = self.bearings(x)
+            u = self.bearings(x, road_points=road_points)
             memory = x[..., N_PHYSICAL:]
             out[..., N_PHYSICAL:] = memory @ self.memory_matrix.T + u @ self.bearing_gain.T
         return out
 
-    def transition_jacobian(self, x: np.ndarray) -> np.ndarray:
-        """dF/dx at ``x[..., n_states]`` (paper eq. 13, exact), shape (..., n, n)."""
+    def transition_jacobian(
+        self, x: np.ndarray, road_points: np.ndarray | None = None
+    ) -> np.ndarray:
+        """dF/dx at ``x[..., n_states]`` (paper eq. 13, exact), shape (..., n, n).
+
+        ``road_points``: at x's sample (see :meth:`bearings`); None: straight road.
+        """
         out = np.broadcast_to(
             self.transition_matrix_template(), x.shape[:-1] + (self.n_states,) * 2
         ).copy()
         if self.n_memory:
-            _, du = self.bearings(x, with_jacobian=True)
+            _, du = self.bearings(x, with_jacobian=True, road_points=road_points)
             out[..., N_PHYSICAL:, :3] = self.bearing_gain @ du
         return out
 
     # ----------------------------------------------------------- measurement
-    def measurement(self, x: np.ndarray) -> np.ndarray:
-        """h(x) = [speed, y + b, predicted steering] (paper eq. 12), shape (..., 3)."""
+    def measurement(self, x: np.ndarray, road_points: np.ndarray | None = None) -> np.ndarray:
+        """h(x) = [speed, y + b, predicted steering] (paper eq. 12), shape (..., 3).
+
+        ``road_points``: at the measured sample (see :meth:`bearings`); None: straight road.
+        """
         out = np.empty(x.shape[:-1] + (3,))
         vx, vy = x[..., VX], x[..., VY]
         out[..., 0] = np.sqrt(vx * vx + vy * vy)
         out[..., 1] = x[..., Y] + x[..., BIAS]
-        out[..., 2] = self.predicted_steering(x)
+        out[..., 2] = self.predicted_steering(x, road_points)
         return out
 
-    def predicted_steering(self, x: np.ndarray) -> np.ndarray:
+    def predicted_steering(
+        self, x: np.ndarray, road_points: np.ndarray | None = None
+    ) -> np.ndarray:
         """h3(x) = m_n + beta_0 . u(x) (rad, model units), shape (...)."""
         if not self.has_steering:
             return np.zeros(x.shape[:-1])
-        value = self.bearings(x) @ self.output_gain
+        value = self.bearings(x, road_points=road_points) @ self.output_gain
         if self.n_memory:
             value = value + x[..., -1]
         return value
 
-    def measurement_jacobian(self, x: np.ndarray) -> np.ndarray:
-        """dh/dx at ``x[..., n_states]`` (paper eq. 14, exact), shape (..., 3, n)."""
+    def measurement_jacobian(
+        self, x: np.ndarray, road_points: np.ndarray | None = None
+    ) -> np.ndarray:
+        """dh/dx at ``x[..., n_states]`` (paper eq. 14, exact), shape (..., 3, n).
+
+        ``road_points``: at the measured sample (see :meth:`bearings`); None: straight road.
+        """
         out = np.zeros(x.shape[:-1] + (3, self.n_states))
         vx, vy = x[..., VX], x[..., VY]
         speed = np.sqrt(np.maximum(vx * vx + vy * vy, _MIN_SPEED_SQ))
@@ -298,23 +382,26 @@ class ARXStateSpace:
         out[..., 1, Y] = 1.0
         out[..., 1, BIAS] = 1.0
         if self.has_steering:
-            _, du = self.bearings(x, with_jacobian=True)
+            _, du = self.bearings(x, with_jacobian=True, road_points=road_points)
             out[..., 2, :3] = self.output_gain @ du
             if self.n_memory:
                 out[..., 2, -1] = 1.0
         return out
 
     # --------------------------------------------------------------- memory
-    def steady_memory(self, steering: np.ndarray, x: np.ndarray) -> np.ndarray:
+    def steady_memory(
+        self, steering: np.ndarray, x: np.ndarray, road_points: np.ndarray | None = None
+    ) -> np.ndarray:
         """Memory states of a constant past: delta(k-j) = ``steering``, u(k-j) = u(x), j >= 1.
 
         Unrolling g_i gives ``m_i = sum_{j=n-i+1}^{n} (a_j delta + beta_j . u)``.
         Each hypothesis passes its *own* state ``x`` (its own y), so the
-        memory never encodes which lane is true (DESIGN.md section 5).
+        memory never encodes which lane is true (docs/design.md §8.1).
 
         Args:
             steering: measured steering delta (rad, model units), shape (...).
             x: states whose first three entries give u, shape (..., >= 3).
+            road_points: road points at x's sample (see :meth:`bearings`); None: straight.
 
         Returns:
             (..., n_memory) memory states.
@@ -322,7 +409,7 @@ class ARXStateSpace:
         n = self.n_memory
         if not n:
             return np.zeros(x.shape[:-1] + (0,))
-        u = self.bearings(x)
+        u = self.bearings(x, road_points=road_points)
         steering = np.asarray(steering, dtype=np.float64)
         # contribution of lag j = n - i + 1 for memory i: a_j delta + beta_j . u
         beta_lagged = self.bearing_gain - self.feedback[:, None] * self.output_gain

@@ -12,9 +12,14 @@ Measurements (one row per run), in :data:`MEASUREMENT_KEYS` order:
 Inputs, in :data:`ACCELERATION_KEYS` order: the IMU's road-frame
 accelerations (a_x, a_y) (m/s^2) averaged over the sample that *ended* at this
 row; predicting state k from k-1 uses row k's IMU, then row k's measurements
-update it (paper eq. 4, DESIGN.md section 2). A NaN measurement is missing
-(that row of the update is skipped); a NaN acceleration is treated as zero
-with a large process noise.
+update it (paper eq. 4, docs/design.md §4.5). A non-finite measurement
+(NaN, +-inf) is missing (that row of the update is skipped); a non-finite
+acceleration is treated as zero with a large process noise.
+
+Road points (optional, per run and step): the lane-centre points ahead
+(dx_near, dy_near, dx_far, dy_far) (m) in the road-tangent frame at the car,
+the known road geometry (:mod:`estimators.road_geometry`); None means a
+straight road.
 """
 
 from __future__ import annotations
@@ -51,7 +56,7 @@ class Estimate:
     read-only (they may be shared with the estimator's next step input).
 
     Attributes:
-        mean: (..., n) mixture mean ``sum_i w_i x_i`` (paper section 5.2).
+        mean: (..., n) mixture mean ``sum_i w_i x_i`` (paper section 4.2).
         component_means: (..., C, n) per-hypothesis state means x_i.
         component_covariances: (..., C, n, n) per-hypothesis covariances P_i.
         weights: (..., C) hypothesis probabilities w_i (sum 1; 0 once pruned).
@@ -126,7 +131,10 @@ class LaneEstimator(Protocol):
     (R, C). With ``runs`` (an index array into an existing batch) only those
     runs are reset or stepped, the others are left untouched; the returned
     estimate then covers the whole batch. ``true_bias`` is used only by the
-    oracle baseline (``uses_true_bias``); others ignore it.
+    oracle baseline (``uses_true_bias``); others ignore it. ``road_points``
+    ((4,) or (R, 4), m; :mod:`estimators.road_geometry`) is the road ahead at
+    that sample; None (the default) is a straight road, and callers pass it
+    only on curved roads, so an estimator for straight roads may omit it.
     """
 
     state_names: tuple[str, ...]
@@ -140,6 +148,7 @@ class LaneEstimator(Protocol):
         prior: np.ndarray | None = None,
         true_bias: np.ndarray | float | None = None,
         runs: np.ndarray | None = None,
+        road_points: np.ndarray | None = None,
     ) -> Estimate: ...
 
     def step(
@@ -148,6 +157,7 @@ class LaneEstimator(Protocol):
         acceleration: np.ndarray,
         *,
         runs: np.ndarray | None = None,
+        road_points: np.ndarray | None = None,
     ) -> Estimate: ...
 
     def estimate(self) -> Estimate: ...

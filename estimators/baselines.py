@@ -1,4 +1,4 @@
-"""Baselines of the human-as-advisor estimator (DESIGN.md section 5).
+"""Baselines of the human-as-advisor estimator (docs/design.md §8.10).
 
 - :class:`NoSteeringEKF`: the mixture filter without the human's steering
   (speed and camera only). The camera measures y + b, so the lanes cannot be
@@ -80,6 +80,7 @@ class SingleHypothesisEKF(GaussianMixtureEKF):
         prior: np.ndarray | None = None,
         true_bias: np.ndarray | float | None = None,
         runs: np.ndarray | None = None,
+        road_points: np.ndarray | None = None,
     ) -> Estimate:
         """Reset with only hypothesis ``hypothesis_index`` of ``hypotheses`` (weight 1)."""
         hyp = np.asarray(hypotheses, dtype=np.float64)
@@ -89,7 +90,7 @@ class SingleHypothesisEKF(GaussianMixtureEKF):
                 f"hypothesis_index {self.hypothesis_index} is out of range for {count} hypotheses"
             )
         i = self.hypothesis_index % count
-        return super().reset(measurement, hyp[..., i : i + 1], runs=runs)
+        return super().reset(measurement, hyp[..., i : i + 1], runs=runs, road_points=road_points)
 
 
 class OracleEKF(GaussianMixtureEKF):
@@ -121,6 +122,7 @@ class OracleEKF(GaussianMixtureEKF):
         prior: np.ndarray | None = None,
         true_bias: np.ndarray | float | None = None,
         runs: np.ndarray | None = None,
+        road_points: np.ndarray | None = None,
     ) -> Estimate:
         """Reset with the single hypothesis ``true_bias`` (scalar, or one per run); required."""
         if true_bias is None:
@@ -131,4 +133,4 @@ class OracleEKF(GaussianMixtureEKF):
             hyp = bias.reshape(1)
         else:
             hyp = np.broadcast_to(bias.reshape(-1, 1), (measurement.shape[0], 1))
-        return super().reset(measurement, hyp, runs=runs)
+        return super().reset(measurement, hyp, runs=runs, road_points=road_points)

@@ -18,9 +18,10 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.special import logsumexp
 
-from estimators.arx_state_space import ARXStateSpace
+from estimators.arx_state_space import ARXStateSpace, check_road_points
 from estimators.base import Estimate
-from estimators.gm_ekf import FilterMatrices, FilterSettings
+from estimators.filter_matrices import FilterMatrices
+from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
 __all__ = ["FilterpyGMEKF", "ARXExtendedKalmanFilter"]
@@ -29,10 +30,12 @@ __all__ = ["FilterpyGMEKF", "ARXExtendedKalmanFilter"]
 class ARXExtendedKalmanFilter(ExtendedKalmanFilter):
     """filterpy's EKF with the augmented model's nonlinear prediction.
 
-    ``predict(u)`` with ``u = (a_x, a_y, z_3)``: the IMU input and the
-    steering measured at k (model units, NaN if missing). It sets ``F`` and
-    ``Q`` to the (decorrelated, see :class:`estimators.gm_ekf.FilterMatrices`)
-    Jacobian and process noise, then filterpy propagates ``P = F P F^T + Q``.
+    ``predict(u)`` with ``u = (a_x, a_y, z_3, held, *road_points)``: the IMU
+    input, the steering measured at k (model units, NaN if missing), whether
+    the memory is held (below ``min_speed``: 1, else 0) and, optionally, the
+    road points at k (4 values). It sets ``F`` and ``Q`` to the (decorrelated,
+    see :class:`estimators.gm_ekf.FilterMatrices`) Jacobian and process noise,
+    then filterpy propagates ``P = F P F^T + Q``.
     """
 
     def __init__(self, matrices: FilterMatrices) -> None:
@@ -46,16 +49,23 @@ class ARXExtendedKalmanFilter(ExtendedKalmanFilter):
         x = self.x[:, 0]
         acceleration = np.asarray(u[:2], dtype=np.float64)
         steering = float(u[2])
+        held = bool(u[3]) or (mats.unstable_memory and math.isnan(steering))
+        points = np.asarray(u[4:8], dtype=np.float64) if len(u) > 4 else None
         missing_acc = bool(np.isnan(acceleration).any())
         acceleration = np.where(np.isnan(acceleration), 0.0, acceleration)
-        x_new = model.transition(x, acceleration)
-        jac = model.transition_jacobian(x)
-        q = mats.process_noise
-        if mats.decorrelates and not math.isnan(steering):
-            gain = mats.steering_gain
-            x_new = x_new + gain * (steering - model.predicted_steering(x))
-            jac = jac - np.outer(gain, model.measurement_jacobian(x)[2])
-            q = mats.process_noise_decorrelated
+        if held:
+            jac = model.held_memory_transition_matrix()
+            x_new = jac @ x + model.input_matrix() @ acceleration
+            q = mats.process_noise_vehicle
+        else:
+            x_new = model.transition(x, acceleration, points)
+            jac = model.transition_jacobian(x, points)
+            q = mats.process_noise
+            if mats.decorrelates and not math.isnan(steering):
+                gain = mats.steering_gain
+                x_new = x_new + gain * (steering - model.predicted_steering(x, points))
+                jac = jac - np.outer(gain, model.measurement_jacobian(x, points)[2])
+                q = mats.process_noise_decorrelated
         if missing_acc:
             q = q + mats.process_noise_missing_acceleration
         self.F = jac
@@ -70,7 +80,10 @@ class FilterpyGMEKF:
     (see it for the equations; paper eq. 11-19): filterpy's
     ``ExtendedKalmanFilter.update`` uses the Joseph form and its
     ``log_likelihood`` the full multivariate normal of the innovation. Missing
-    measurements drop their rows from z, H and R.
+    (non-finite) measurements drop their rows from z, H and R; so do the
+    channels the outlier gate rejects and, below ``min_speed``, the steering
+    (the rules of :class:`estimators.gm_ekf.FilterSettings`, written out per
+    run and hypothesis).
 
     Args:
         steering_model: the steering model's ARX description (None: no steering).
@@ -115,6 +128,7 @@ class FilterpyGMEKF:
         prior: np.ndarray | None = None,
         true_bias: np.ndarray | float | None = None,
         runs: np.ndarray | None = None,
+        road_points: np.ndarray | None = None,
     ) -> Estimate:
         """See :meth:`estimators.gm_ekf.GaussianMixtureEKF.reset`."""
         measurement = np.asarray(measurement, dtype=np.float64)
@@ -133,7 +147,8 @@ class FilterpyGMEKF:
             p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
             with np.errstate(divide="ignore"):
                 log_w = np.log(p / p.sum(axis=1, keepdims=True))
-        x0 = self.matrices.initial_state(z, hyp)
+        points = _points_rows(road_points, n_runs)
+        x0 = self.matrices.initial_state(z, hyp, road_points=points)
         banks = []
         for r in range(n_runs):
             bank: list[ARXExtendedKalmanFilter | None] = []
@@ -148,6 +163,11 @@ class FilterpyGMEKF:
                 bank.append(ekf)
             banks.append(bank)
         steering = z[:, 2] * self.settings.steering_ratio
+        steering = np.where(np.isfinite(steering), steering, np.nan)
+        min_speed = self.settings.min_speed if self.model.has_steering else 0.0
+        slow = (z[:, 0] < min_speed) & (min_speed > 0)
+        if points is None:
+            points = np.full((n_runs, 4), np.nan)  # NaN: a straight road
         if runs is None:
             self._single = single
             self._filters, self._log_w, self._hyp, self._steering = (
@@ -156,6 +176,9 @@ class FilterpyGMEKF:
                 hyp.copy(),
                 steering,
             )
+            self._points, self._slow = points.copy(), slow
+            self._gated_count = np.zeros((n_runs, 3), dtype=np.int64)
+            self._gated = np.zeros((n_runs, 3), dtype=bool)
             self._last_x = x0.copy()
             self._last_P = np.broadcast_to(
                 self.matrices.initial_covariance, x0.shape + (x0.shape[-1],)
@@ -171,6 +194,10 @@ class FilterpyGMEKF:
                 self._log_w[r] = log_w[j]
                 self._hyp[r] = hyp[j]
                 self._steering[r] = steering[j]
+                self._points[r] = points[j]
+                self._slow[r] = slow[j]
+                self._gated_count[r] = 0
+                self._gated[r] = False
                 self._last_x[r] = x0[j]
                 self._last_P[r] = self.matrices.initial_covariance
         return self.estimate()
@@ -181,6 +208,7 @@ class FilterpyGMEKF:
         acceleration: np.ndarray,
         *,
         runs: np.ndarray | None = None,
+        road_points: np.ndarray | None = None,
     ) -> Estimate:
         """See :meth:`estimators.gm_ekf.GaussianMixtureEKF.step`."""
         if self._filters is None:
@@ -195,56 +223,142 @@ class FilterpyGMEKF:
                 if np.asarray(runs).dtype == bool
                 else np.asarray(runs, dtype=np.intp)
             )
+        points = _points_rows(road_points, idx.size)
         for j, r in enumerate(idx):
-            self._step_run(int(r), z_all[j], acc_all[j])
+            self._step_run(
+                int(r), z_all[j], acc_all[j], None if points is None else np.array(points[j])
+            )
         return self.estimate()
 
-    def _step_run(self, r: int, z: np.ndarray, acceleration: np.ndarray) -> None:
+    @property
+    def gated_counts(self) -> np.ndarray:
+        """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.gated_counts`."""
+        return self._gated_count[0].copy() if self._single else self._gated_count.copy()
+
+    @property
+    def last_gated(self) -> np.ndarray:
+        """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.last_gated`."""
+        return self._gated[0].copy() if self._single else self._gated.copy()
+
+    @property
+    def low_speed(self) -> np.ndarray:
+        """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.low_speed`."""
+        return self._slow[0].copy() if self._single else self._slow.copy()
+
+    def _step_run(
+        self, r: int, z: np.ndarray, acceleration: np.ndarray, points: np.ndarray | None
+    ) -> None:
         model = self.model
         mats = self.matrices
+        settings = self.settings
         z = z.copy()
-        z[2] *= self.settings.steering_ratio
+        z[2] *= settings.steering_ratio
+        z[~np.isfinite(z)] = np.nan  # NaN and +-inf are missing
         steering = z[2]
-        if not model.has_steering:
+        acceleration = np.where(
+            np.abs(acceleration) <= settings.max_acceleration, acceleration, np.nan
+        )
+        slow = bool(self._slow[r])
+        if not model.has_steering or slow:
             z[2] = np.nan
-        rows = np.flatnonzero(~np.isnan(z))
-        r_matrix = np.diag(mats.measurement_var[rows])
+        previous = self._points[r]
+        u = np.array(
+            [acceleration[0], acceleration[1], self._steering[r], float(slow), *previous]
+            if np.all(np.isfinite(previous))
+            else [acceleration[0], acceleration[1], self._steering[r], float(slow)]
+        )
         log_w = self._log_w[r].copy()
-        u = np.array([acceleration[0], acceleration[1], self._steering[r]])
-        for c, ekf in enumerate(self._filters[r]):
+        bank = self._filters[r]
+        for ekf in bank:
+            if ekf is not None:
+                ekf.predict(u=u)
+        # the outlier gate: channels no hypothesis explains (weighed by its log-odds) are dropped
+        rows = np.flatnonzero(~np.isnan(z))
+        if rows.size and math.isfinite(settings.innovation_gate):
+            score = np.full(rows.size, np.inf)
+            for c, ekf in enumerate(bank):
+                if ekf is None:
+                    continue
+                xc = ekf.x[:, 0]
+                hc = model.measurement_jacobian(xc, points)[rows]
+                s_diag = np.diag(hc @ ekf.P @ hc.T) + mats.measurement_var[rows]
+                nu = z[rows] - model.measurement(xc, points)[rows]
+                odds = np.max(log_w) - log_w[c]
+                with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
+                    score = np.minimum(score, nu * nu / s_diag + 2.0 * odds)
+            gated = score > settings.innovation_gate**2
+            self._gated_count[r, rows[gated]] += 1
+            self._gated[r] = False
+            self._gated[r, rows[gated]] = True
+            rows = rows[~gated]
+        else:
+            self._gated[r] = False
+        r_matrix = np.diag(mats.measurement_var[rows])
+        for c, ekf in enumerate(bank):
             if ekf is None:
                 continue
-            ekf.predict(u=u)
             if rows.size:
                 ekf.update(
                     z[rows][:, None],
-                    lambda x: model.measurement_jacobian(x[:, 0])[rows],
-                    lambda x: model.measurement(x[:, 0])[rows][:, None],
+                    lambda x: model.measurement_jacobian(x[:, 0], points)[rows],
+                    lambda x: model.measurement(x[:, 0], points)[rows][:, None],
                     R=r_matrix,
                 )
                 log_w[c] += ekf.log_likelihood
-            self._last_x[r, c] = ekf.x[:, 0]
+            self._last_x[r, c] = ekf.x[:, 0]  # a hypothesis pruned now stays at this posterior
             self._last_P[r, c] = ekf.P
         total = logsumexp(log_w)
         if np.isfinite(total):
             log_w = log_w - total
         else:
             log_w = self._log_w[r].copy()
-        threshold = self.settings.prune_threshold
+        threshold = settings.prune_threshold
         if threshold > 0:
-            best = int(np.argmax(log_w))
+            best_index = int(np.argmax(log_w))
             pruned = [
                 c
                 for c in range(log_w.size)
-                if c != best and np.isfinite(log_w[c]) and log_w[c] < math.log(threshold)
+                if c != best_index and np.isfinite(log_w[c]) and log_w[c] < math.log(threshold)
             ]
             if pruned:
                 for c in pruned:
-                    self._filters[r][c] = None
+                    bank[c] = None
                     log_w[c] = -np.inf
                 log_w = log_w - logsumexp(log_w)
+        restart = False
+        min_speed = settings.min_speed if model.has_steering else 0.0
+        if min_speed > 0:
+            speed = sum(
+                math.exp(log_w[c]) * math.hypot(ekf.x[0, 0], ekf.x[2, 0])
+                for c, ekf in enumerate(bank)
+                if ekf is not None
+            )
+            now_slow = speed < min_speed
+            if slow and not now_slow:
+                if math.isnan(steering):
+                    now_slow = True  # restart only from a steering reading
+                else:
+                    restart = True
+            self._slow[r] = now_slow
+        if self._gated[r, 2] and not restart:
+            steering = np.nan  # an outlier must not enter the memory at the next prediction
+        if restart and model.n_memory:
+            mem = slice(4, model.n_states)
+            for ekf in bank:
+                if ekf is not None:
+                    x = ekf.x[:, 0]
+                    ekf.x[mem, 0] = model.steady_memory(np.array(steering), x, points)
+                    ekf.P[mem, :] = 0.0
+                    ekf.P[:, mem] = 0.0
+                    ekf.P[mem, mem] = mats.initial_covariance[mem, mem]
+        if restart:
+            for c, ekf in enumerate(bank):
+                if ekf is not None:
+                    self._last_x[r, c] = ekf.x[:, 0]
+                    self._last_P[r, c] = ekf.P
         self._log_w[r] = log_w
         self._steering[r] = steering
+        self._points[r] = np.nan if points is None else points
 
     def estimate(self) -> Estimate:
         """The current estimate (mixture and hypotheses)."""
@@ -265,3 +379,11 @@ class FilterpyGMEKF:
             self.state_names,
         )
         return est.run(0) if self._single else est
+
+
+def _points_rows(road_points: np.ndarray | None, n_rows: int) -> np.ndarray | None:
+    """Road points as (n_rows, 4) (a (4,) row shared by all runs), or None (straight road)."""
+    if road_points is None:
+        return None
+    points = check_road_points(road_points)
+    return np.broadcast_to(points, (n_rows, 4)) if points.ndim == 1 else points

@@ -4,12 +4,16 @@
 recording columns, :data:`hasa_env.sim.setup.RECORDING_COLUMNS`) to an
 estimator as one batch: row 0 resets it, row k steps it with row k's
 measurements and IMU. Runs of different lengths are padded (their padded
-steps are marked invalid).
+steps are marked invalid). Each recording's row spacing must be the
+estimator's sample time (:func:`estimators.timing.check_sample_time`); on a
+curved track the estimator gets the road ahead of each row's ``station``
+(:func:`estimators.road_geometry.lane_points_ahead`).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -19,8 +23,12 @@ import pandas as pd
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
+from estimators.timing import check_sample_time, recording_sample_time
 from hasa_env.recording.format import Recording
+from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
+from hasa_env.steering.features import road_of_frame
 
 __all__ = [
     "EstimationResult",
@@ -66,6 +74,10 @@ class EstimationResult:
         truth: {column: (R, T)} true values from the recordings
             (``TRUTH_COLUMNS`` and ``bias_index`` where present; NaN/-1 when padded).
         component_means: (R, T, C, n) per-hypothesis means, when requested.
+        gated: (R, T, 3) channels [speed, camera, steering] the estimator's
+            outlier gate rejected at each step (None if it has no gate).
+        low_speed: (R, T) steps with the steering channel off below the
+            estimator's ``min_speed`` (None if it has no such mode).
     """
 
     state_names: tuple[str, ...]
@@ -79,6 +91,8 @@ class EstimationResult:
     most_likely: np.ndarray
     truth: dict[str, np.ndarray] = field(default_factory=dict)
     component_means: np.ndarray | None = None
+    gated: np.ndarray | None = None
+    low_speed: np.ndarray | None = None
 
     @property
     def num_runs(self) -> int:
@@ -141,6 +155,8 @@ def run_estimator(
     hypotheses: Sequence[float] | np.ndarray | None = None,
     prior: np.ndarray | None = None,
     store_components: bool = False,
+    roads: Road | Sequence[Road | None] | None = None,
+    road_geometry: bool = True,
 ) -> EstimationResult:
     """Filter recordings offline, all runs in one batch.
 
@@ -153,9 +169,20 @@ def run_estimator(
             config (:func:`hypotheses_of`).
         prior: hypothesis probabilities, (C,) or (R, C); default uniform.
         store_components: also keep the per-hypothesis means (R, T, C, n).
+        roads: the road of every recording (one, or one per recording; None
+            entries: straight); default: the track of each recording's
+            metadata (:func:`hasa_env.steering.features.road_of_frame`).
+        road_geometry: give the estimator the road ahead on curved roads
+            (``road_points`` from the ``station`` column); False: the
+            straight-road bearings everywhere.
 
     Returns:
         An :class:`EstimationResult` (a single recording gives R = 1).
+
+    Raises:
+        ValueError: a recording lacks sensor columns, is empty, is sampled at
+            another rate than the estimator's (naming both rates), or is on a
+            curved road without a ``station`` column.
     """
     if isinstance(frames, pd.DataFrame):
         frames = [frames]
@@ -169,6 +196,13 @@ def run_estimator(
             raise ValueError(f"recording {i} lacks the columns {missing}")
         if len(frame) < 1:
             raise ValueError(f"recording {i} is empty")
+        timing = recording_sample_time(frame)
+        if timing is not None:
+            step, frequency, repeat = timing
+            source = "the recording" if len(frames) == 1 else f"recording {i}"
+            check_sample_time(
+                estimator, step, source=source, sim_frequency=frequency, action_repeat=repeat
+            )
     lengths = np.array([len(f) for f in frames])
     n_steps = int(lengths.max())
     z = np.full((n_runs, n_steps, 3), np.nan)
@@ -207,7 +241,12 @@ def run_estimator(
                 "this estimator needs the true bias: the recordings lack a 'bias' column"
             )
         true_bias = truth["bias"][:, 0]
-    est = estimator.reset(z[:, 0], hyp, prior=prior, true_bias=true_bias)
+    points = _road_points(estimator, frames, roads, n_steps) if road_geometry else None
+
+    def road(k: int) -> dict[str, np.ndarray]:
+        return {} if points is None else {"road_points": points[:, k]}
+
+    est = estimator.reset(z[:, 0], hyp, prior=prior, true_bias=true_bias, **road(0))
     n_states = est.mean.shape[-1]
     n_comp = est.weights.shape[-1]
     mean = np.empty((n_runs, n_steps, n_states))
@@ -215,6 +254,8 @@ def run_estimator(
     weights = np.empty((n_runs, n_steps, n_comp))
     most_likely = np.empty((n_runs, n_steps), dtype=np.int64)
     components = np.empty((n_runs, n_steps, n_comp, n_states)) if store_components else None
+    gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if hasattr(estimator, "last_gated") else None
+    low_speed = np.zeros((n_runs, n_steps), dtype=bool) if hasattr(estimator, "low_speed") else None
 
     def store(k: int, e) -> None:  # noqa: ANN001 - an Estimate
         mean[:, k] = e.mean
@@ -228,10 +269,14 @@ def run_estimator(
         most_likely[:, k] = e.most_likely
         if components is not None:
             components[:, k] = e.component_means
+        if gated is not None and k:
+            gated[:, k] = estimator.last_gated
+        if low_speed is not None:
+            low_speed[:, k] = estimator.low_speed
 
     store(0, est)
     for k in range(1, n_steps):
-        est = estimator.step(z[:, k], acc[:, k])
+        est = estimator.step(z[:, k], acc[:, k], **road(k))
         store(k, est)
     return EstimationResult(
         state_names=tuple(est.state_names),
@@ -245,6 +290,8 @@ def run_estimator(
         most_likely=most_likely,
         truth=truth,
         component_means=components,
+        gated=None if gated is None else gated & valid[:, :, None],
+        low_speed=None if low_speed is None else low_speed & valid,
     )
 
 
@@ -313,3 +360,54 @@ def estimate_recording(
     else:
         trusted = math.nan
     return EstimatorRun(weights, hypotheses, lateral, rmse, true_index, float(w_true[-1]), trusted)
+
+
+def _road_points(
+    estimator: LaneEstimator,
+    frames: Sequence[pd.DataFrame],
+    roads: Road | Sequence[Road | None] | None,
+    n_steps: int,
+) -> np.ndarray | None:
+    """(R, T, 4) road points of the recordings' rows, or None when every road is straight.
+
+    Rows of straight roads get ``(near, 0, far, 0)``; padded rows repeat the last row's.
+    """
+    if roads is None:
+        per_run = [road_of_frame(f) for f in frames]
+    elif isinstance(roads, Road):
+        per_run = [roads] * len(frames)
+    else:
+        per_run = list(roads)
+        if len(per_run) != len(frames):
+            raise ValueError(f"got {len(per_run)} roads for {len(frames)} recordings")
+    near, far = look_ahead_distances(estimator)
+    points = None
+    for r, (frame, road) in enumerate(zip(frames, per_run, strict=True)):
+        if road is None and roads is None and _is_curved(frame):
+            warnings.warn(
+                f"recording {r} has a non-zero road_curvature but names no track "
+                "(attrs['config']['track']): the estimator uses straight-road bearings; "
+                "pass roads=...",
+                stacklevel=3,
+            )
+        if road is None or road.is_straight:
+            continue
+        if "station" not in frame.columns:
+            raise ValueError(
+                f"recording {r} is on a curved road but lacks the 'station' column the "
+                "estimator needs for the road ahead"
+            )
+        if points is None:
+            points = np.empty((len(frames), n_steps, 4))
+            points[:] = straight_road_points(near, far)
+        station = frame["station"].to_numpy(dtype=np.float64)
+        points[r, : station.size] = lane_points_ahead(road, station, near, far)
+        points[r, station.size :] = points[r, station.size - 1]
+    return points
+
+
+def _is_curved(frame: pd.DataFrame) -> bool:
+    if "road_curvature" not in frame.columns:
+        return False
+    curvature = frame["road_curvature"].to_numpy(dtype=np.float64)
+    return bool(np.any(np.abs(curvature[np.isfinite(curvature)]) > 0))

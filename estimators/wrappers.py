@@ -47,6 +47,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.road_geometry import lane_points_ahead, look_ahead_distances
+from estimators.timing import check_sample_time, config_sample_time
+from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
 
 __all__ = [
@@ -163,20 +166,38 @@ def _markings(config: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray 
 def _check_timing(config: Mapping[str, Any] | None, estimator: LaneEstimator) -> None:
     if config is None:
         return
-    repeat = int(config.get("action_repeat", 1))
-    if repeat != 1:
-        raise ValueError(
-            f"the env has action_repeat={repeat}: its sensors and IMU are sampled once per "
-            "env step but the IMU averages only the last simulation sample, so the estimator "
-            "cannot predict across a step; use action_repeat=1"
-        )
-    env_dt = 1.0 / float(config["sim_frequency"])
-    est_dt = getattr(estimator, "dt", env_dt)
-    if abs(env_dt - est_dt) > 1e-12 * max(env_dt, 1.0):
-        raise ValueError(
-            f"the estimator's sample time {est_dt:g} s differs from the env's {env_dt:g} s "
-            "(1 / sim_frequency)"
-        )
+    step, frequency, repeat = config_sample_time(config)
+    check_sample_time(
+        estimator, step, source="the env", sim_frequency=frequency, action_repeat=repeat
+    )
+
+
+def _env_road(env: Any) -> Road | None:
+    """The env's road (single env, native vector env, or gymnasium's vector envs)."""
+    setup = getattr(env.unwrapped, "setup", None)
+    if setup is None:
+        try:
+            setup = env.get_attr("setup")[0]
+        except (AttributeError, IndexError):
+            return None
+    return getattr(setup, "road", None)
+
+
+class _RoadPoints:
+    """The road points of the cars' stations (None on a straight road), for the estimator."""
+
+    def __init__(self, env: Any, estimator: LaneEstimator) -> None:
+        road = _env_road(env)
+        self.road = None if road is None or road.is_straight else road
+        self.near, self.far = look_ahead_distances(estimator)
+
+    def kwargs(self, info: Mapping[str, Any], rows: np.ndarray | None = None) -> dict[str, Any]:
+        if self.road is None:
+            return {}
+        station = np.asarray(info["station"], dtype=np.float64)
+        if rows is not None:
+            station = station[rows]
+        return {"road_points": lane_points_ahead(self.road, station, self.near, self.far)}
 
 
 def _single_config(env: gym.Env) -> Mapping[str, Any] | None:
@@ -203,8 +224,11 @@ class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     Given a vector env this constructs a :class:`VectorEstimatorInfoWrapper`.
 
     Args:
-        env: a hasa env (``action_repeat`` 1; the estimator's dt must equal
-            the env's 1 / sim_frequency).
+        env: a hasa env whose step (``action_repeat / sim_frequency``) equals
+            the estimator's dt and its steering model's Ts
+            (:func:`estimators.timing.check_sample_time`). On a curved track
+            the estimator gets the road ahead of ``info["station"]``
+            (:func:`estimators.road_geometry.lane_points_ahead`).
         estimator: any :class:`~estimators.base.LaneEstimator`.
         hypotheses: lane hypotheses b_i (m); default the env's config.
         prior: their probabilities; default the env's config (uniform if unset).
@@ -244,6 +268,7 @@ class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.prior = prior
         self.prefix = prefix
         self.estimate: Estimate | None = None
+        self._road_points = _RoadPoints(env, estimator)
 
     def _add(self, info: dict[str, Any], est: Estimate) -> dict[str, Any]:
         info = dict(info)
@@ -266,12 +291,15 @@ class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             self.hypotheses,
             prior=self.prior,
             true_bias=float(info["bias"]),
+            **self._road_points.kwargs(info),
         )
         return obs, self._add(info, self.estimate)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self.estimate = self.estimator.step(measurements_from_info(info), inputs_from_info(info))
+        self.estimate = self.estimator.step(
+            measurements_from_info(info), inputs_from_info(info), **self._road_points.kwargs(info)
+        )
         return obs, reward, terminated, truncated, self._add(info, self.estimate)
 
 
@@ -339,6 +367,7 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
         self.prefix = prefix
         self.estimate: Estimate | None = None
         self._ended = np.zeros(self.num_envs, dtype=bool)
+        self._road_points = _RoadPoints(env, estimator)
 
     def _add(self, infos: dict[str, Any], est: Estimate) -> dict[str, Any]:
         infos = dict(infos)
@@ -359,6 +388,7 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
                 self.hypotheses,
                 prior=self.prior,
                 true_bias=np.asarray(infos["bias"], dtype=np.float64),
+                **self._road_points.kwargs(infos),
             )
             self._ended[:] = False
         else:  # gymnasium's partial reset: restart only those cars' filters
@@ -369,6 +399,7 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
                 prior=self.prior,
                 true_bias=np.asarray(infos["bias"], dtype=np.float64)[idx],
                 runs=idx,
+                **self._road_points.kwargs(infos, idx),
             )
             self._ended[idx] = False
         return obs, self._add(infos, self.estimate)
@@ -384,13 +415,17 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
         else:  # SAME_STEP: the env already reset the cars that ended, info is their new start
             restarted = done
         stepping = ~restarted
+        road = self._road_points
         if stepping.all():
-            est = self.estimator.step(measurement, acceleration)
+            est = self.estimator.step(measurement, acceleration, **road.kwargs(infos))
         else:
             est = None
             if stepping.any():
                 est = self.estimator.step(
-                    measurement[stepping], acceleration[stepping], runs=np.flatnonzero(stepping)
+                    measurement[stepping],
+                    acceleration[stepping],
+                    runs=np.flatnonzero(stepping),
+                    **road.kwargs(infos, stepping),
                 )
             est = self.estimator.reset(
                 measurement[restarted],
@@ -398,6 +433,7 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
                 prior=self.prior,
                 true_bias=np.asarray(infos["bias"], dtype=np.float64)[restarted],
                 runs=np.flatnonzero(restarted),
+                **road.kwargs(infos, restarted),
             )
         self.estimate = est
         return obs, rewards, terminated, truncated, self._add(infos, est)

@@ -173,7 +173,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs: dict[int, EstimatorRun] = {}
     if args.estimator:
         for i, rec in enumerate(recordings):
-            result = estimate_recording(rec, model, ratio)
+            try:
+                result = estimate_recording(rec, model, ratio)
+            except ValueError as exc:  # e.g. sampled at another rate than the model
+                print(f"hasa-replay: {rec.path}: cannot run the estimator: {exc}", file=sys.stderr)
+                problems.append(str(exc))
+                continue
             runs[i] = result
             hyp = ", ".join(
                 f"{b:+g} m: {w:.3f}"

@@ -402,7 +402,7 @@ def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) 
     config = ProtocolConfig(seeds=(0,), drivers=2, runs=2, ill_runs=3, duration=3.0, curved_runs=1)
     synthetic = run_protocol(config, workers=1)
     drivers = population("paper", seed=0, size=2)
-    env = {"time_limit": 3.0}
+    env = config.env_config()  # the population's study conditions and the run length
     straight = run_population(drivers, runs=2, seed=0, config=env, runs_by_name={"Ill": 3})
     curved = run_population(
         drivers[:1], runs=1, seed=0, env_id="hasa_env/LaneKeepingCurved-v0", config=env

@@ -201,6 +201,10 @@ def test_fast_filter_tables_match_the_model(arx, lag, seed):
                 )
                 jac = jac - np.outer(mats.steering_gain, model.measurement_jacobian(x[i])[2])
                 q = mats.process_noise_decorrelated
+            elif mats.decorrelates and mats.unstable_memory:  # no open-loop prediction: held
+                jac = model.held_memory_transition_matrix()
+                expected = jac @ x[i] + model.input_matrix() @ acc[i]
+                q = mats.process_noise_vehicle
             np.testing.assert_allclose(x_new[i], expected, rtol=1e-10, atol=1e-10)
             np.testing.assert_allclose(cov_new[i], jac @ jac.T + q, rtol=1e-9, atol=1e-9)
     z = np.array([[15.0, 0.1, 0.02]] * 3)

@@ -7,6 +7,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from hasa_env.drivers import POPULATIONS
+from hasa_env.sim.config import deep_merge
 from hasa_env.validation import ABSENT, Field, schema, validate_fields
 
 __all__ = [
@@ -168,10 +170,17 @@ class ProtocolConfig:
         return (None,) if self.recordings is not None else self.seeds
 
     def env_config(self) -> dict[str, Any]:
-        """The env configuration of the synthetic runs (deep-merged onto the defaults)."""
-        config: dict[str, Any] = {"time_limit": float(self.duration)}
+        """The env configuration of the synthetic runs (deep-merged onto the defaults): the
+        population's study conditions (:attr:`hasa_env.drivers.PopulationSpec.env_config`:
+        disturbances, the steering sensor of a wheel study), the run length, and the
+        ``noise`` overrides."""
+        population = POPULATIONS.get(self.population)
+        config = deep_merge(dict(population.env_config) if population else {}, {})
+        config["time_limit"] = float(self.duration)
         if self.noise:
-            config["noise"] = {k: float(v) for k, v in dict(self.noise).items()}
+            config = deep_merge(
+                config, {"noise": {k: float(v) for k, v in dict(self.noise).items()}}
+            )
         return config
 
     def to_dict(self) -> dict[str, Any]:

@@ -3,7 +3,7 @@
 - :class:`Driver`: the protocol (``reset(seed, dt=...)``, ``act(info, road)``
   -> (road-wheel angle rad, acceleration m/s^2)), acting on the env's true
   ``info``, never the biased camera.
-- Synthetic humans of three archetypes (DESIGN.md sections 4 and 9), all
+- Synthetic humans of three archetypes (docs/design.md §7.2 and §7.7), all
   with delay, neuromuscular lag, remnant after the lag and wheel
   quantization (:class:`MotorParams`): two-point PI (:class:`DriverParams`),
   preview optimal control (:class:`PreviewParams`), intermittent control

@@ -1,4 +1,4 @@
-"""The motor and output stage shared by every synthetic driver (DESIGN.md section 9).
+"""The motor and output stage shared by every synthetic driver (docs/design.md §7.7).
 
 Every synthetic driver's control law produces a command u(k) (road-wheel
 angle, rad). Between it and the car stand, per car and env step Ts:

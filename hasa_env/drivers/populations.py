@@ -239,14 +239,14 @@ _HUMAN_MOTOR = MotorRanges(
     tremor_frequency=_Range(8.0, 12.0),
     tremor_damping=_Range(0.1, 0.3),
     signal_dependent_gain=_Range(0.01, 0.04),
-    command_std=_Range(0.003, 0.009),
-    command_time_constant=_Range(0.07, 0.13),
+    command_std=_Range(0.004, 0.012),
+    command_time_constant=_Range(0.028, 0.052),
 )
 _WHEEL_STUDY = {
     # what a G29 study measures: the wheel's own (quantized) reading, no automotive sensor noise
     "noise": {"steering": 0.0},
     # external excitation of the closed loop, as identification experiments with people use
-    "disturbance": {"crosswind": 0.3, "camber": 0.2},
+    "disturbance": {"crosswind": 0.1, "camber": 0.1},
 }
 _PI_DESCRIPTION = (
     "Nine two-point PI drivers: 'Ill' and 1-8, differing in gains (lateral-loop bandwidth "

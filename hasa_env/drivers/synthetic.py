@@ -1,4 +1,4 @@
-"""The two-point PI synthetic driver (DESIGN.md sections 4 and 9).
+"""The two-point PI synthetic driver (docs/design.md §7.2 and §7.7).
 
 The paper's fitted models are one-step predictors, not drivers (in closed
 loop the generalized one only stabilises the car at Ts <= 0.02 s, the
@@ -13,7 +13,7 @@ for the others) combines:
 2. A sensorimotor delay of ``delay`` s (0.15-0.25): the controller sees the
    bearings of that long ago.
 3. Two-point PI control (Salvucci & Gray, velocity form; paper eq. 10 with
-   DESIGN.md's corrected signs) on the delayed bearings::
+   the corrected signs of docs/design.md §10) on the delayed bearings::
 
        c(k) = c(k-1) + g(v) [k_f (omega(k) - omega(k-1)) + k_n (phi(k) - phi(k-1)) + k_I Ts phi(k)]
 

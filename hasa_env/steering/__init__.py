@@ -8,8 +8,9 @@
   model implements (how to write your own is in its docstring).
 - :mod:`~hasa_env.steering.models`: :class:`TwoPointModel` and
   :class:`GeneralizedModel` with the paper's presets.
-- :mod:`~hasa_env.steering.fitting`: ridge fitting with cross-validated
-  penalty, standard errors and the fit's checks;
+- :mod:`~hasa_env.steering.fitting`: fitting a model, with the fit's checks;
+- :mod:`~hasa_env.steering.regression`: least squares and ridge regression
+  with standard errors, the penalty by blocked cross-validation;
 - :mod:`~hasa_env.steering.identifiability`: can the model tell lanes apart,
   is it stable;
 - :mod:`~hasa_env.steering.scoring`: scores and residual diagnostics.

@@ -1,0 +1,553 @@
+"""The model and noise matrices of the mixture filter and its batched predict/update.
+
+Shared by the fast filter (:class:`estimators.gm_ekf.GaussianMixtureEKF`) and
+the filterpy reference (:mod:`estimators.filterpy_ekf`); docs/design.md §8.5-8.7.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from estimators.arx_state_space import (
+    BIAS,
+    N_PHYSICAL,
+    VX,
+    VY,
+    ARXStateSpace,
+    Y,
+)
+from estimators.settings import FilterSettings
+
+__all__ = ["FilterMatrices"]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+_VARIANTS = ("full", "decorrelated", "held")  # transition tables, by code 0, 1, 2
+
+
+class FilterMatrices:
+    """The model and noise matrices of the mixture filter, shared by the fast
+    filter and the filterpy reference.
+
+    The steering model's equation error e(k) drives both the steering
+    measurement (h3) and the memory states (through a_j delta(k), see
+    :mod:`estimators.arx_state_space`): process and measurement noise are
+    correlated, ``E[w(k) v_3(k)] = s = [0, 0, 0, 0, a_n, ..., a_1] sigma_e^2``.
+    The filter removes the correlation exactly (Simon, *Optimal State
+    Estimation*, 2006, sec. 7.1). When the steering was measured at k::
+
+        x(k+1) = F(x) + B_D a + J (z_3(k) - h_3(x)),      J = s / R_33
+        F'     = dF/dx - J H_3,      Q' = Q - s s^T / R_33
+
+    so the memory states follow the *measured* steering (the ARX model's
+    one-step-ahead predictor). When it was not (NaN)::
+
+        x(k+1) = F(x) + B_D a,       Q = Q_vehicle + a a^T sigma_e^2
+
+    with ``Q_vehicle = B_D diag(sigma_imu^2) B_D^T`` and
+    ``R = diag(sigma_speed^2, sigma_camera^2, sigma_e^2 + (ratio sigma_sensor)^2)``.
+    Below ``min_speed`` (:class:`FilterSettings`) the memory is held::
+
+        x(k+1) = A_held x + B_D a,   A_held = dF/dx with the memory block I and
+                                     no bearing terms,   Q = Q_vehicle
+
+    and so it is after a missing (or gated) steering reading when the model's
+    autoregressive part is unstable (``unstable_memory``: the memory matrix'
+    spectral radius, the largest |root| of ``z^n - a_1 z^(n-1) - ... - a_n``,
+    exceeds 1, as least-squares fits on nearly noise-free drivers can give):
+    such a model has no open-loop prediction (it diverges geometrically and
+    overflows within a second); a stable one, like the paper's (0.94), is
+    propagated open loop as above.
+
+    Attributes:
+        model: the :class:`ARXStateSpace`.
+        process_noise: Q, (n, n), steering not measured at k.
+        process_noise_decorrelated: Q', (n, n), steering measured at k.
+        process_noise_vehicle: Q_vehicle (with the bias drift), (n, n), memory held.
+        process_noise_missing_acceleration: added to Q when an IMU reading is missing.
+        steering_cross_covariance: s, (n,).
+        steering_gain: J = s / R_33, (n,).
+        measurement_var: diagonal of R, (3,).
+        initial_covariance: P_0 of every hypothesis, (n, n).
+        decorrelates: True when J != 0 (a steering model with memory).
+        unstable_memory: True when the memory matrix' spectral radius exceeds 1.
+    """
+
+    def __init__(self, model: ARXStateSpace, settings: FilterSettings) -> None:
+        self.model = model
+        self.settings = settings
+        n = model.n_states
+        mem = slice(N_PHYSICAL, n)
+        s = settings
+        input_matrix = model.input_matrix()
+        input_outer = input_matrix @ input_matrix.T
+        accel_var = s.acceleration_noise_std**2
+        q_vehicle = accel_var * input_outer
+        q_vehicle[BIAS, BIAS] += s.bias_drift_std**2
+        self.process_noise_missing_acceleration = (
+            s.missing_acceleration_std**2 - accel_var
+        ) * input_outer
+        residual_var = s.steering_residual_std**2
+        sensor_var = (s.steering_ratio * s.steering_sensor_std) ** 2
+        steering_var = residual_var + sensor_var
+        cross = np.zeros(n)
+        cross[mem] = model.feedback * residual_var
+        self.steering_cross_covariance = cross
+        self.steering_gain = cross / steering_var
+        q_full = q_vehicle.copy()
+        q_full[mem, mem] += residual_var * np.outer(model.feedback, model.feedback)
+        q_full[mem, mem] += s.memory_process_std**2 * np.eye(model.n_memory)
+        self.process_noise = q_full
+        self.process_noise_decorrelated = q_full - np.outer(cross, cross) / steering_var
+        self.process_noise_vehicle = q_vehicle
+        self.decorrelates = bool(np.any(self.steering_gain != 0))
+        radius = np.abs(np.linalg.eigvals(model.memory_matrix)).max() if model.n_memory else 0.0
+        self.unstable_memory = bool(radius > 1.0)
+        self.measurement_var = np.array([s.speed_noise_std**2, s.camera_noise_std**2, steering_var])
+        lateral_std = s.camera_noise_std if s.initial_lateral_std is None else s.initial_lateral_std
+        p0 = np.zeros((n, n))
+        p0[VX, VX] = s.initial_speed_std**2
+        p0[Y, Y] = lateral_std**2 + s.bias_std**2
+        p0[VY, VY] = s.initial_lateral_velocity_std**2
+        p0[BIAS, BIAS] = s.bias_std**2
+        p0[Y, BIAS] = p0[BIAS, Y] = -(s.bias_std**2)  # y_i = camera - b_i
+        p0[mem, mem] = s.memory_std**2 * np.eye(model.n_memory)
+        self.initial_covariance = p0
+        self._build_fast_path(input_matrix)
+        for arr in (
+            self.process_noise,
+            self.process_noise_decorrelated,
+            self.process_noise_vehicle,
+            self.process_noise_missing_acceleration,
+            self.steering_cross_covariance,
+            self.steering_gain,
+            self.measurement_var,
+            self.initial_covariance,
+        ):
+            arr.setflags(write=False)
+
+    # --------------------------------------------------------------- prior
+    def initial_state(
+        self,
+        measurement: np.ndarray,
+        hypotheses: np.ndarray,
+        road_points: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Prior means (R, C, n) from the first measurements (R, 3) and biases (R, C).
+
+        ``v_x`` = speed reading (``v_y`` = 0), ``y_i`` = camera - ``b_i``,
+        ``b`` = ``b_i``, memory = the constant-past memory
+        (:meth:`ARXStateSpace.steady_memory`) of the measured steering and
+        hypothesis i's *own* bearings (with the run's ``road_points`` (R, 4),
+        None: straight road), never shared between hypotheses (a missing
+        first steering reading counts as 0).
+        """
+        model = self.model
+        speed, camera, steering = measurement[:, 0], measurement[:, 1], measurement[:, 2]
+        if not (np.all(np.isfinite(speed)) and np.all(np.isfinite(camera))):
+            raise ValueError("the first measurement needs a finite speed and camera reading")
+        steering = np.where(np.isfinite(steering), steering, 0.0) * self.settings.steering_ratio
+        x = np.zeros(hypotheses.shape + (model.n_states,))
+        x[..., VX] = speed[:, None]
+        x[..., Y] = camera[:, None] - hypotheses
+        x[..., BIAS] = hypotheses
+        if model.n_memory:
+            points = None if road_points is None else road_points[:, None, :]
+            x[..., N_PHYSICAL:] = model.steady_memory(
+                np.broadcast_to(steering[:, None], hypotheses.shape), x, points
+            )
+        return x
+
+    # ------------------------------------------------------ fast-path tables
+    def _build_fast_path(self, input_matrix: np.ndarray) -> None:
+        """Constant tables of the vectorized filter.
+
+        With ``w = [theta + atan(y/near), theta + atan(y/far), v_y]`` (so
+        u = [-w_0, -w_1, w_2]; with road points ``atan((y - dy_near) / dx_near)``
+        and ``atan((y - dy_far) / dx_far)``) the transition is ``x' = x A^T +
+        w G^T + a B_D^T [+ J z_3]`` and, with ``D = [dtheta/dv_x, dtheta/dv_y,
+        d atan(.)/dy (near), d atan(.)/dy (far)]``, its Jacobian is
+        ``F = F_0 + sum_k D_k T_k``; likewise ``H = H_0 + sum_k D_k U_k`` plus
+        the speed row. The decorrelated, plain and held-memory variants are
+        tabulated.
+        """
+        model = self.model
+        n = model.n_states
+        mem = slice(N_PHYSICAL, n)
+        self.input_matrix_t = np.ascontiguousarray(input_matrix.T)
+        sign = np.array([-1.0, -1.0, 1.0])
+        base_a = model.transition_matrix_template()
+        gains = np.zeros((n, 3))
+        gains[mem] = model.bearing_gain * sign
+        last = np.zeros(n)
+        if model.n_memory:
+            last[-1] = 1.0
+        variants = {"full": (base_a, gains)}
+        if self.decorrelates:
+            variants["decorrelated"] = (
+                base_a - np.outer(self.steering_gain, last),
+                gains - np.outer(self.steering_gain, model.output_gain * sign),
+            )
+        variants["held"] = (model.held_memory_transition_matrix(), np.zeros((n, 3)))
+        self._tables: dict[str, tuple[np.ndarray, ...]] = {}
+        for name, (a_mat, g_mat) in variants.items():
+            jac_base = a_mat.copy()
+            jac_base[:, VY] += g_mat[:, 2]
+            both = g_mat[:, 0] + g_mat[:, 1]
+            maps = np.zeros((4, n, n))
+            maps[0, :, VX] = both
+            maps[1, :, VY] = both
+            maps[2, :, Y] = g_mat[:, 0]
+            maps[3, :, Y] = g_mat[:, 1]
+            self._tables[name] = (
+                np.ascontiguousarray(a_mat.T),
+                np.ascontiguousarray(g_mat.T),
+                jac_base.ravel().copy(),
+                maps.reshape(4, n * n).copy(),
+            )
+        # measurement: h_1 = |v|, [h_2, h_3] = x L^T (+ beta_0' . w)
+        beta0 = model.output_gain * sign
+        linear = np.zeros((3, n))  # row 0 (speed) is nonlinear, filled separately
+        linear[1, Y] = linear[1, BIAS] = 1.0
+        h_base = np.zeros((3, n))
+        h_base[1, Y] = h_base[1, BIAS] = 1.0
+        h_maps = np.zeros((4, 3, n))
+        if model.has_steering:
+            linear[2, VY] = beta0[2]
+            h_base[2, VY] = beta0[2]
+            if model.n_memory:
+                linear[2, -1] = 1.0
+                h_base[2, -1] = 1.0
+            both = beta0[0] + beta0[1]
+            h_maps[0, 2, VX] = both
+            h_maps[1, 2, VY] = both
+            h_maps[2, 2, Y] = beta0[0]
+            h_maps[3, 2, Y] = beta0[1]
+        self._measurement_linear_t = np.ascontiguousarray(linear.T)
+        self._steering_bearing_gain = beta0[:2].copy()
+        self._steering_uses_bearings = bool(model.has_steering and np.any(beta0[:2] != 0))
+        self._h_base = h_base.ravel().copy()
+        self._h_base_t = np.ascontiguousarray(h_base.T).ravel().copy()
+        self._h_maps = h_maps.reshape(4, 3 * n).copy()
+        self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
+        self._h_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
+        self._measurement_var_column = self.measurement_var[:, None].copy()
+        self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
+        self._theta_sign = np.array([-1.0, 1.0])
+        self._process_noise_variants = np.stack(
+            [self.process_noise, self.process_noise_decorrelated, self.process_noise_vehicle]
+        )
+
+    def _features(
+        self, x: np.ndarray, points: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """w = [theta + atan(y/near), theta + atan(y/far), v_y] (B, 3) and
+        D = [dtheta/dv_x, dtheta/dv_y, d atan(y/near)/dy, d atan(y/far)/dy] (B, 4).
+
+        With ``points`` (B, 4) road points: ``atan((y - dy) / dx)`` and its
+        derivative ``(1 / dx) / (1 + ((y - dy) / dx)^2)`` for near and far."""
+        vx, vy = x[:, VX], x[:, VY]
+        if points is None:
+            inverse = self._inverse_distance
+            ratio = x[:, Y, None] * inverse
+        else:
+            inverse = 1.0 / points[:, 0::2]
+            ratio = (x[:, Y, None] - points[:, 1::2]) * inverse
+        w = np.empty((x.shape[0], 3))
+        np.add(np.arctan(ratio), np.arctan2(vy, vx)[:, None], out=w[:, :2])
+        w[:, 2] = vy
+        deriv = np.empty((x.shape[0], 4))
+        # dtheta/dv_x = -v_y / v^2, dtheta/dv_y = v_x / v^2 (x[:, 2::-2] = [v_y, v_x])
+        speed_sq = np.hypot(vx, vy)
+        speed_sq *= speed_sq
+        np.maximum(speed_sq, 1e-12, out=speed_sq)
+        np.multiply(x[:, VY::-VY], self._theta_sign / speed_sq[:, None], out=deriv[:, :2])
+        np.divide(inverse, 1.0 + ratio * ratio, out=deriv[:, 2:])
+        return w, deriv
+
+    def predict_batch(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        acceleration: np.ndarray,
+        previous_steering: np.ndarray,
+        n_comp: int,
+        *,
+        road_points: np.ndarray | None = None,
+        held: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """x(k+1|k) (B, n) and P(k+1|k) (B, n, n) for B = R * C flattened hypotheses.
+
+        Args:
+            x, cov: posterior means (B, n) and covariances (B, n, n) at k.
+            acceleration: (R, 2) IMU input over k -> k+1 (NaN: missing).
+            previous_steering: (R,) measured steering at k, model units (NaN: missing).
+            n_comp: C, hypotheses per run.
+            road_points: (R, 4) road points at k (None: straight road).
+            held: (R,) True for runs whose memory is held (below ``min_speed``);
+                None: none.
+        """
+        n_runs = acceleration.shape[0]
+        n = x.shape[1]
+        any_missing_acc = math.isnan(acceleration.sum())
+        if any_missing_acc:
+            missing_acc = np.isnan(acceleration)
+            acceleration = np.where(missing_acc, 0.0, acceleration)
+        if held is not None and not held.any():
+            held = None
+        known = None
+        if self.decorrelates and math.isnan(previous_steering.sum()):
+            known = ~np.isnan(previous_steering)
+        if held is None and known is None:
+            codes = None
+            variant = "decorrelated" if self.decorrelates else "full"
+        else:
+            # per run: 0 plain, 1 decorrelated, 2 memory held
+            codes = np.full(n_runs, 1 if self.decorrelates else 0)
+            if known is not None:
+                codes[~known] = 2 if self.unstable_memory else 0
+            if held is not None:
+                codes[held] = 2
+            variant = _VARIANTS[codes[0]] if np.all(codes == codes[0]) else "mixed"
+            if variant != "mixed":
+                codes = None
+        has_memory = self.model.n_memory > 0
+        if has_memory and variant != "held":
+            points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
+            w, deriv = self._features(x, points_b)
+
+        def propagate(name: str) -> tuple[np.ndarray, np.ndarray]:
+            a_t, g_t, jac_base, maps = self._tables[name]
+            x_new = x @ a_t
+            if not has_memory or name == "held":
+                return x_new, np.broadcast_to(jac_base.reshape(n, n), (x.shape[0], n, n))
+            x_new += w @ g_t
+            jac = deriv @ maps
+            jac += jac_base
+            return x_new, jac.reshape(-1, n, n)
+
+        drive = acceleration @ self.input_matrix_t  # (R, n)
+        if codes is not None:
+            codes_b = np.repeat(codes, n_comp)
+            x_new = np.empty_like(x)
+            jac = np.empty((x.shape[0], n, n))
+            for code in np.unique(codes):
+                rows = codes_b == code
+                x_c, jac_c = propagate(_VARIANTS[code])
+                x_new[rows], jac[rows] = x_c[rows], jac_c[rows]
+            q = self._process_noise_variants[codes_b]
+            decorrelated = codes == 1
+            if decorrelated.any():
+                steering = np.where(decorrelated, previous_steering, 0.0)
+                drive = drive + steering[:, None] * self.steering_gain
+        else:
+            x_new, jac = propagate(variant)
+            q = self._process_noise_variants[_VARIANTS.index(variant)]
+            if variant == "decorrelated":
+                drive += previous_steering[:, None] * self.steering_gain
+        if n_comp == 1:
+            x_new += drive
+        else:
+            x_new = (x_new.reshape(n_runs, n_comp, n) + drive[:, None, :]).reshape(-1, n)
+        if any_missing_acc:
+            extra = (
+                np.repeat(missing_acc.any(axis=1), n_comp)[:, None, None]
+                * self.process_noise_missing_acceleration
+            )
+            q = q + extra
+        # F P F^T = F (F P)^T: P is exactly symmetric (symmetrized after each update)
+        cov_new = jac @ (jac @ cov).transpose(0, 2, 1)
+        cov_new += q
+        return x_new, cov_new
+
+    def update_batch(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z: np.ndarray,
+        n_comp: int,
+        all_observed: bool,
+        **options: Any,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joseph-form EKF update of every hypothesis and its log-likelihood.
+
+        Args:
+            x, cov: predicted means (B, n) and covariances (B, n, n).
+            z: (R, 3) measurements (steering in model units); NaN = missing.
+            n_comp: C.
+            all_observed: True when z has no NaN.
+            **options: ``road_points``, ``gate`` and ``log_weights`` of
+                :meth:`gated_update_batch` (default: straight road, no gate).
+
+        Returns:
+            x(k|k) (B, n), P(k|k) (B, n, n), log N(nu; 0, S) (B,).
+        """
+        return self.gated_update_batch(x, cov, z, n_comp, all_observed, **options)[:3]
+
+    def gated_update_batch(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z: np.ndarray,
+        n_comp: int,
+        all_observed: bool,
+        *,
+        road_points: np.ndarray | None = None,
+        gate: float = math.inf,
+        log_weights: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`update_batch` with the outlier gate g of :class:`FilterSettings`.
+
+        ``road_points``: (R, 4) road points at this sample (None: straight road).
+
+        Channel c of run r is dropped for every hypothesis of that run when
+        no hypothesis explains it, each weighed by its log-odds against the
+        most likely one (``log_weights`` (R, C), before the update)::
+
+            min_i [ nu_ic^2 / S_i,cc + 2 (max_j log w_j - log w_i) ] > g^2
+
+        and the update is done without it (see ``innovation_gate``).
+
+        Returns:
+            x(k|k) (B, n), P(k|k) (B, n, n), log N(nu; 0, S) (B,) and the
+            (R, 3) mask of gated channels.
+        """
+        points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
+        x_post, cov_post, log_lik, innovation, s_diag, distance_sq = self._update(
+            x, cov, z, n_comp, all_observed, points_b
+        )
+        n_runs = z.shape[0]
+        if log_weights is None or math.isinf(gate):
+            return x_post, cov_post, log_lik, np.zeros((n_runs, 3), dtype=bool)
+        # quick exit: the most likely hypothesis explains every channel, its score having no
+        # odds; nu_c^2 / S_cc <= nu^T S^-1 nu (Cauchy-Schwarz), so its distance bounds them all
+        favourite = log_weights.argmax(axis=1)
+        if n_comp > 1:
+            favourite += self._run_offsets(n_runs, n_comp)
+        if distance_sq[favourite].max() <= gate * gate:
+            return x_post, cov_post, log_lik, np.zeros((n_runs, 3), dtype=bool)
+        odds = log_weights.max(axis=1, keepdims=True) - log_weights  # (R, C), >= 0 (inf: pruned)
+        with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
+            score = (innovation * innovation / s_diag).reshape(n_runs, n_comp, 3)
+        score += 2.0 * odds[:, :, None]
+        gated = score.min(axis=1) > gate * gate
+        if gated.any():
+            z = np.where(gated, np.nan, z)
+            x_post, cov_post, log_lik, *_ = self._update(x, cov, z, n_comp, False, points_b)
+        return x_post, cov_post, log_lik, gated
+
+    def _update(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z: np.ndarray,
+        n_comp: int,
+        all_observed: bool,
+        points: np.ndarray | None,
+    ) -> tuple[np.ndarray, ...]:
+        """The update, plus the innovations (B, 3) (0 where missing), diag(S) (B, 3) and
+        the squared Mahalanobis distances ``nu^T S^-1 nu`` (B,)."""
+        n = x.shape[1]
+        n_b = x.shape[0]
+        speed = np.hypot(x[:, VX], x[:, VY])
+        h = x @ self._measurement_linear_t  # [0, y + b, linear part of h_3]
+        h[:, 0] = speed
+        jac_base, jac_base_t = self._measurement_jacobian_bases(n_b)
+        if self._steering_uses_bearings:
+            w, deriv = self._features(x, points)
+            h[:, 2] += w[:, :2] @ self._steering_bearing_gain
+            jac = deriv @ self._h_maps
+            jac += jac_base
+            jac_t = deriv @ self._h_maps_t
+            jac_t += jac_base_t
+        else:
+            jac = jac_base.copy()
+            jac_t = jac_base_t.copy()
+        # speed row: d|v|/dv_x = v_x / |v|, d|v|/dv_y = v_y / |v| (flat indices (0, VX), (0, VY))
+        speed_row = x[:, VX : VY + 1 : VY - VX] / np.maximum(speed, 1e-6)[:, None]
+        jac[:, VX : VY + 1 : VY - VX] = speed_row
+        jac_t[:, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
+        jac = jac.reshape(n_b, 3, n)
+        jac_t = jac_t.reshape(n_b, n, 3)
+        if n_comp > 1:
+            innovation = (z[:, None, :] - h.reshape(-1, n_comp, 3)).reshape(n_b, 3)
+        else:
+            innovation = z - h
+        r = self.measurement_var
+        n_obs: float | np.ndarray = 3.0
+        if not all_observed:
+            obs_b = np.repeat(~np.isnan(z), n_comp, axis=0)  # (B, 3)
+            innovation = np.where(obs_b, innovation, 0.0)
+            jac = jac * obs_b[:, :, None]
+            jac_t = jac_t * obs_b[:, None, :]
+            r = np.where(obs_b, r, 1.0)
+            n_obs = obs_b.sum(axis=1)
+        hp = jac @ cov  # H P = (P H^T)^T, (B, 3, n)
+        s = hp @ jac_t
+        s = s.reshape(n_b, 9)
+        s[:, ::4] += r
+        s_diag = s[:, ::4]  # (s is not written to below)
+        s_inv, det = _inverse_3x3(s)
+        gain_t = s_inv @ hp  # K^T (B, 3, n)
+        gain = gain_t.transpose(0, 2, 1)
+        x_post = (innovation[:, None, :] @ gain_t)[:, 0, :]
+        x_post += x
+        # Joseph form (I - K H) P (I - K H)^T + K R K^T, evaluated as
+        # A = (I - K H) P = P - K (H P), then A (I - K H)^T + K R K^T
+        # = A + (R K^T - (A H^T)^T)^T K^T
+        joseph = cov - gain @ hp
+        r_col = self._measurement_var_column if np.ndim(r) == 1 else r[:, :, None]
+        correction = gain_t * r_col
+        correction -= (joseph @ jac_t).transpose(0, 2, 1)
+        joseph += correction.transpose(0, 2, 1) @ gain_t
+        cov_post = joseph
+        cov_post += joseph.transpose(0, 2, 1)
+        cov_post *= 0.5
+        mahalanobis_sq = np.einsum("bi,bij,bj->b", innovation, s_inv, innovation)
+        log_lik = mahalanobis_sq + np.log(det)
+        log_lik += n_obs * _LOG_2PI
+        log_lik *= -0.5
+        return x_post, cov_post, log_lik, innovation, s_diag, mahalanobis_sq
+
+    def _run_offsets(self, n_runs: int, n_comp: int) -> np.ndarray:
+        """``[0, C, 2C, ...]`` (R,): the flat index of each run's first hypothesis (cached)."""
+        cached = self._offsets_cache.get((n_runs, n_comp))
+        if cached is None:
+            cached = np.arange(0, n_runs * n_comp, n_comp)
+            cached.setflags(write=False)
+            self._offsets_cache = {(n_runs, n_comp): cached}
+        return cached
+
+    def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
+        """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
+        cached = self._h_cache.get(n_b)
+        if cached is None:
+            cached = (np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1)))
+            self._h_cache = {n_b: cached}  # keep only the latest batch size
+        return cached
+
+
+# adjugate of a 3x3 matrix s flattened row-major: adj[p] = s[A[p]] s[B[p]] - s[C[p]] s[D[p]]
+_COF_A = np.array([4, 2, 1, 5, 0, 2, 3, 1, 0])
+_COF_B = np.array([8, 7, 5, 6, 8, 3, 7, 6, 4])
+_COF_C = np.array([5, 1, 2, 3, 2, 0, 4, 0, 1])
+_COF_D = np.array([7, 8, 4, 8, 6, 5, 6, 7, 3])
+
+
+def _inverse_3x3(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse and determinant of 3x3 matrices given flattened, (B, 9), by the adjugate.
+
+    Cheaper than ``numpy.linalg.inv`` on many small matrices and the same
+    arithmetic whatever the batch size.
+    """
+    adjugate = s.take(_COF_A, axis=1)
+    adjugate *= s.take(_COF_B, axis=1)
+    adjugate -= s.take(_COF_C, axis=1) * s.take(_COF_D, axis=1)
+    det = s[:, 0] * adjugate[:, 0]
+    det += s[:, 1] * adjugate[:, 3]
+    det += s[:, 2] * adjugate[:, 6]
+    adjugate /= det[:, None]
+    return adjugate.reshape(-1, 3, 3), det

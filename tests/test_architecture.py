@@ -1,0 +1,170 @@
+"""The architecture of docs/design.md §2, checked: layers, no cycles, no hidden imports.
+
+- import-linter's contracts in pyproject.toml (layers between and inside the
+  packages, no cycles between sibling modules or packages) hold;
+- independently of it, no module of ``hasa_env`` imports ``estimators``,
+  ``benchmarks`` or ``hasa_cli``, at module level or inside a function;
+- imports inside functions are kept for optional or heavy dependencies
+  (pygame on paths that must stay headless, the optional extras), each with a
+  one-line reason on the import's line.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("hasa_env", "estimators", "benchmarks", "hasa_cli")
+
+LOCAL_IMPORTS_ALLOWED = {
+    "pygame": "SDL: never loaded on headless paths",
+    "evdev": "optional: force feedback on Linux",
+    "minari": "optional extra 'minari'",
+    "pyarrow": "optional extras 'parquet' / 'minari'",
+    "imageio": "optional: videos",
+    "stable_baselines3": "optional extra 'rl' (torch)",
+    "torch": "optional extra 'rl'",
+    "distributed": "optional extra 'dask'",
+    "highway_env": "optional extra 'compare'",
+}
+"""Top-level modules that may be imported inside a function, and why."""
+
+
+def _modules(package: str) -> list[Path]:
+    return sorted((ROOT / package).rglob("*.py"))
+
+
+def _imports(tree: ast.AST) -> list[tuple[ast.Import | ast.ImportFrom, bool]]:
+    """Every import statement of a module and whether it sits inside a function."""
+    found: list[tuple[ast.Import | ast.ImportFrom, bool]] = []
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.Import | ast.ImportFrom):
+                found.append((child, in_function))
+            inside = in_function or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef)
+            visit(child, inside)
+
+    visit(tree, False)
+    return found
+
+
+def _imported_names(node: ast.Import | ast.ImportFrom) -> list[str]:
+    if isinstance(node, ast.ImportFrom):
+        return [node.module or ""] if node.level == 0 else []
+    return [alias.name for alias in node.names]
+
+
+@pytest.mark.skipif(shutil.which("lint-imports") is None, reason="import-linter not installed")
+def test_import_linter_contracts_hold():
+    result = subprocess.run(
+        ["lint-imports", "--no-cache", "--config", str(ROOT / "pyproject.toml")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "BROKEN" not in result.stdout and "0 broken" in result.stdout
+
+
+@pytest.mark.parametrize("path", _modules("hasa_env"), ids=lambda p: str(p.relative_to(ROOT)))
+def test_hasa_env_never_imports_the_layers_above_it(path):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    above = [
+        (node.lineno, name)
+        for node, _ in _imports(tree)
+        for name in _imported_names(node)
+        if name.split(".")[0] in ("estimators", "benchmarks", "hasa_cli")
+    ]
+    assert not above, f"{path.relative_to(ROOT)} imports an upper layer: {above}"
+
+
+def test_function_level_imports_are_few_and_say_why():
+    offenders = []
+    for package in PACKAGES:
+        for path in _modules(package):
+            text = path.read_text(encoding="utf-8")
+            lines = text.splitlines()
+            for node, in_function in _imports(ast.parse(text)):
+                if not in_function:
+                    continue
+                names = _imported_names(node)
+                where = f"{path.relative_to(ROOT)}:{node.lineno}"
+                if not names or any(n.split(".")[0] not in LOCAL_IMPORTS_ALLOWED for n in names):
+                    offenders.append(f"{where}: {lines[node.lineno - 1].strip()} (not optional)")
+                elif "#" not in lines[node.lineno - 1]:
+                    offenders.append(f"{where}: {lines[node.lineno - 1].strip()} (no reason)")
+    assert not offenders, "function-level imports:\n" + "\n".join(offenders)
+
+
+def test_the_checks_above_can_fail(tmp_path):
+    """The AST scan sees an import of an upper layer inside a function."""
+    module = "def f():\n    from estimators import base  # sneaky\n    return base\n"
+    tree = ast.parse(module)
+    ((node, in_function),) = _imports(tree)
+    assert in_function and _imported_names(node) == ["estimators"]
+
+
+def test_long_modules_say_why():
+    """No module over about 600 lines without a stated reason in its docstring."""
+    long = []
+    for package in PACKAGES:
+        for path in _modules(package):
+            text = path.read_text(encoding="utf-8")
+            if text.count("\n") > 620:
+                doc = ast.get_docstring(ast.parse(text)) or ""
+                if "Why this module is long" not in doc:
+                    long.append(f"{path.relative_to(ROOT)} ({text.count(chr(10))} lines)")
+    assert not long, "long modules without a reason: " + ", ".join(long)
+
+
+def test_no_module_cites_a_design_document_outside_the_repository():
+    """Docstrings cite docs/design.md (in the repository), never a DESIGN.md."""
+    citing = [
+        str(path.relative_to(ROOT))
+        for package in PACKAGES
+        for path in _modules(package)
+        if "DESIGN.md" in path.read_text(encoding="utf-8")
+    ]
+    assert not citing, f"cite docs/design.md instead of DESIGN.md in: {citing}"
+
+
+def _design_sections() -> set[str]:
+    sections = set()
+    for line in (ROOT / "docs" / "design.md").read_text(encoding="utf-8").splitlines():
+        match = re.match(r"#{2,3} (\d+(?:\.\d+)?)[. ]", line)
+        if match:
+            sections.add(match.group(1))
+    return sections
+
+
+def test_every_design_citation_resolves_to_a_section():
+    """Each ``docs/design.md §N`` / ``§N.M`` (ranges and lists too) names a section that exists."""
+    sections = _design_sections()
+    assert {"2", "3", "5.7", "8.5", "10", "11"} <= sections
+    citation = re.compile(r"docs/design\.md((?:[ ,;]*(?:and )?§\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?)+)")
+    files = [p for package in PACKAGES for p in _modules(package)]
+    files += sorted((ROOT / "tests").glob("*.py")) + sorted((ROOT / "examples").glob("*.py"))
+    files += [ROOT / "README.md", ROOT / "recordings" / "README.md"]
+    bad, cited = [], 0
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        for match in citation.finditer(text):
+            for number in re.findall(r"\d+(?:\.\d+)?", match.group(1)):
+                cited += 1
+                if number not in sections:
+                    bad.append(f"{path.relative_to(ROOT)}: §{number}")
+    assert cited > 20, "found almost no citations: is the pattern right?"
+    assert not bad, "citations of sections that do not exist: " + ", ".join(bad)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(pytest.main([__file__]))
