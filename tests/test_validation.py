@@ -626,7 +626,7 @@ def test_validate_fields_stores_converted_values_also_on_frozen_dataclasses():
         Settings(runs=0)
 
 
-# The specs FilterSettings (estimators/gm_ekf.py) and DriverParams / SpeedProfile /
+# The specs FilterSettings (estimators/settings.py) and DriverParams / SpeedProfile /
 # MotorParams (hasa_env/drivers) will be migrated to: they must accept what the classes accept and
 # refuse what they refuse (both checked here against the classes' own validation).
 def _positive(unit: str = "") -> Field:
@@ -654,6 +654,9 @@ FILTER_SETTINGS = schema(
         "memory_process_std": _non_negative("rad"),
         "missing_acceleration_std": _non_negative("m/s^2"),
         "prune_threshold": Field("number", low=0.0, high=1.0, high_open=True),
+        "innovation_gate": Field("number", low=0.0, low_open=True, infinite=True),
+        "min_speed": _non_negative("m/s"),
+        "max_acceleration": Field("number", unit="m/s^2", low=0.0, low_open=True, infinite=True),
     }
 )
 SPEED_PROFILE = schema(
@@ -741,12 +744,17 @@ def _constructs(build) -> bool:
         ("prune_threshold", 1.0),
         ("prune_threshold", 0.5),
         ("steering_ratio", float("inf")),
+        ("innovation_gate", float("inf")),
+        ("innovation_gate", 0.0),
+        ("max_acceleration", float("nan")),
+        ("min_speed", float("inf")),
+        ("min_speed", 0.0),
     ],
 )
 def test_the_filter_settings_spec_agrees_with_filter_settings(name, value):
     import dataclasses
 
-    from estimators.gm_ekf import FilterSettings
+    from estimators.settings import FilterSettings
 
     values = dataclasses.asdict(FilterSettings())
     assert _accepts(FILTER_SETTINGS, values)
