@@ -85,6 +85,7 @@ from hasa_env.sim.setup import INFO_KEYS, EnvSetup, build_setup, physical_action
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.loading import default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
+from hasa_env.validation import ANY_JSON, Field, schema, validate
 
 __all__ = [
     "ADVISOR_INFO_KEYS",
@@ -112,98 +113,93 @@ TRAINING_SEED = 0
 
 
 # ------------------------------------------------------------------ configuration
-@dataclass(frozen=True)
-class _Leaf:
-    """Allowed values of one key of the advisor's own sections."""
-
-    default: Any
-    doc: str
-    kind: str  # choice | integer | bool | number | string | mapping | driver
-    choices: tuple[Any, ...] = ()
-    low: float | None = None
-    high: float | None = None
-    optional: bool = False
-
-    def allowed(self) -> str:
-        text = {
-            "choice": "one of " + ", ".join(repr(c) for c in self.choices),
-            "integer": f"an integer in [{self.low:g}, {self.high:g}]",
-            "bool": "true or false",
-            "number": f"a finite number in ({self.low:g}, {self.high:g}]",
-            "string": "a non-empty string",
-            "mapping": "a mapping of FilterSettings fields to values",
-            "driver": "'random', a driver's name or its index in the population",
-        }[self.kind]
-        return text + (" or null" if self.optional else "")
+def _describe(path: str) -> str:
+    return f"config key '{path}'" if path else "config"
 
 
-_SCHEMA: dict[str, dict[str, _Leaf]] = {
-    "advisor": {
-        "population": _Leaf(
-            "paper",
-            "The advisors' population (hasa_env.drivers.POPULATIONS).",
-            "choice",
-            tuple(POPULATIONS),
-        ),
-        "population_seed": _Leaf(0, "Seed of the population.", "integer", low=0, high=2**31 - 1),
-        "population_size": _Leaf(9, "Drivers in the population.", "integer", low=1, high=1000),
-        "driver": _Leaf(
-            "random",
-            "The advisor: 'random' (drawn per episode from the car's generator), a driver's "
-            "name ('Ill', '1', ...) or its index.",
-            "driver",
-        ),
-        "drives": _Leaf(
-            "car",
-            "'car': the policy's action drives and the human only advises; 'human': the "
-            "human's steering and speed drive the car (the action is ignored).",
-            "choice",
-            ("car", "human"),
-        ),
-        "study_conditions": _Leaf(
-            True,
-            "Apply the population's study conditions (PopulationSpec.env_config: "
-            "disturbances, wheel-study steering sensor) under the user's keys.",
-            "bool",
-        ),
-    },
-    "estimator": {
-        "type": _Leaf(
-            "mixture",
-            "'mixture' (GaussianMixtureEKF), 'no_steering', 'oracle' or 'single_hypothesis'.",
-            "choice",
-            tuple(ESTIMATORS),
-        ),
-        "steering_model": _Leaf(
-            "generalized",
-            "'fit:generalized' or 'fit:two-point' (fitted on one run of the population's "
-            "first driver, as hasa-bench does), 'generalized' or 'two-point' (paper "
-            "presets), a saved model file, or 'package.module:Name'.",
-            "string",
-        ),
-        "steering_ratio": _Leaf(
-            None,
-            "Model units per road-wheel radian; null: 15 for the paper's presets, else 1.",
-            "number",
-            low=0.0,
-            high=100.0,
-            optional=True,
-        ),
-        "steering_residual_std": _Leaf(
-            None,
-            "The steering model's residual std (rad, model units); null: the fit's for "
-            "'fit:' models, else FilterSettings' default.",
-            "number",
-            low=0.0,
-            high=1.0,
-            optional=True,
-        ),
-        "settings": _Leaf({}, "Further FilterSettings fields by name.", "mapping"),
-    },
-}
+def _error(path: str, message: str) -> ConfigError:
+    return ConfigError(message)
 
-_STEERING_ONLY = _Leaf(
-    True, "The action is the steering alone (Box(1,)); the acceleration is 0 m/s^2.", "bool"
+
+_OWN = schema(
+    {
+        "advisor": {
+            "population": Field(
+                "choice",
+                "paper",
+                "The advisors' population (hasa_env.drivers.POPULATIONS).",
+                choices=tuple(POPULATIONS),
+            ),
+            "population_seed": Field(
+                "integer", 0, "Seed of the population.", low=0, high=2**31 - 1
+            ),
+            "population_size": Field("integer", 9, "Drivers in the population.", low=1, high=1000),
+            "driver": Field(
+                "json",
+                "random",
+                "The advisor: 'random' (drawn per episode from the car's generator), a "
+                "driver's name ('Ill', '1', ...) or its index in the population.",
+                max_depth=0,
+            ),
+            "drives": Field(
+                "choice",
+                "car",
+                "'car': the policy's action drives and the human only advises; 'human': "
+                "the human's steering and speed drive the car (the action is ignored).",
+                choices=("car", "human"),
+            ),
+            "study_conditions": Field(
+                "bool",
+                True,
+                "Apply the population's study conditions (PopulationSpec.env_config: "
+                "disturbances, wheel-study steering sensor) under the user's keys.",
+            ),
+        },
+        "estimator": {
+            "type": Field(
+                "choice",
+                "mixture",
+                "'mixture' (GaussianMixtureEKF), 'no_steering', 'oracle' or 'single_hypothesis'.",
+                choices=tuple(ESTIMATORS),
+            ),
+            "steering_model": Field(
+                "string",
+                "generalized",
+                "'generalized' or 'two-point' (the paper's presets), 'fit:generalized' or "
+                "'fit:two-point' (fitted on one run of the population's first driver, as "
+                "hasa-bench does), a saved model file, or 'package.module:Name'.",
+                non_empty=True,
+            ),
+            "steering_ratio": Field(
+                "number",
+                None,
+                "Model units per road-wheel radian; null: 15 for the paper's presets, else 1.",
+                low=0.0,
+                high=100.0,
+                low_open=True,
+                optional=True,
+            ),
+            "steering_residual_std": Field(
+                "number",
+                None,
+                "The steering model's residual std (rad, model units); null: the fit's "
+                "for 'fit:' models, else FilterSettings' default.",
+                unit="rad",
+                low=0.0,
+                high=1.0,
+                optional=True,
+            ),
+            "settings": Field(
+                "mapping",
+                {},
+                "Further FilterSettings fields by name (estimators.settings).",
+                each=ANY_JSON,
+            ),
+        },
+    }
+)
+_STEERING_ONLY = Field(
+    "bool", True, "The action is the steering alone (Box(1,)); the acceleration is 0 m/s^2."
 )
 
 
@@ -212,8 +208,7 @@ def default_config() -> dict[str, Any]:
     config = env_default_config()
     del config["observation"]
     config["action"]["steering_only"] = _STEERING_ONLY.default
-    for section, leaves in _SCHEMA.items():
-        config[section] = {key: copy.deepcopy(leaf.default) for key, leaf in leaves.items()}
+    config.update(validate({}, _OWN, describe=_describe, error=_error))
     return config
 
 
@@ -222,59 +217,11 @@ def describe_config() -> str:
     lines = [
         line for line in env_describe_config().splitlines() if not line.startswith("observation.")
     ]
-    own = [("action.steering_only", _STEERING_ONLY)] + [
-        (f"{section}.{key}", leaf)
-        for section, leaves in _SCHEMA.items()
-        for key, leaf in leaves.items()
-    ]
-    lines += [
-        f"{path} = {leaf.default!r}: {leaf.doc} Allowed: {leaf.allowed()}." for path, leaf in own
-    ]
+    own = [("action.steering_only", _STEERING_ONLY), *_OWN.leaves()]
+    for path, f in own:
+        allowed = _DRIVER_ALLOWED if path == "advisor.driver" else f.allowed()
+        lines.append(f"{path} = {f.default!r}: {f.doc} Allowed: {allowed}.")
     return "\n".join(lines)
-
-
-def _fail(path: str, value: Any, leaf: _Leaf) -> ConfigError:
-    return ConfigError(f"config key '{path}' = {value!r} is not allowed: {leaf.allowed()}")
-
-
-def _check_leaf(path: str, value: Any, leaf: _Leaf) -> Any:
-    if value is None and leaf.optional:
-        return None
-    kind = leaf.kind
-    if kind == "choice":
-        if isinstance(value, str) and value in leaf.choices:
-            return value
-    elif kind == "bool":
-        if isinstance(value, bool):
-            return value
-    elif kind == "integer":
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        if isinstance(value, int | np.integer) and not isinstance(value, bool):
-            if leaf.low <= value <= leaf.high:
-                return int(value)
-            raise ConfigError(
-                f"config key '{path}' = {value!r} is out of range: allowed {leaf.allowed()}"
-            )
-    elif kind == "number":
-        if isinstance(value, int | float | np.number) and not isinstance(value, bool):
-            if math.isfinite(value) and leaf.low < value <= leaf.high:
-                return float(value)
-            raise ConfigError(
-                f"config key '{path}' = {value!r} is out of range: allowed {leaf.allowed()}"
-            )
-    elif kind == "string":
-        if isinstance(value, str) and value:
-            return value
-    elif kind == "mapping":
-        if isinstance(value, Mapping) and all(isinstance(k, str) for k in value):
-            return dict(value)
-    elif kind == "driver":
-        if isinstance(value, str) and value:
-            return value
-        if isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 0:
-            return int(value)
-    raise _fail(path, value, leaf)
 
 
 def _split_config(config: Mapping[str, Any] | None) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -283,49 +230,44 @@ def _split_config(config: Mapping[str, Any] | None) -> tuple[dict[str, Any], dic
         config = {}
     if not isinstance(config, Mapping):
         raise ConfigError(f"config must be a mapping (dict), got {type(config).__name__}")
-    env_part = {k: copy.deepcopy(v) for k, v in config.items() if k not in _SCHEMA}
+    env_part = {k: copy.deepcopy(v) for k, v in config.items() if k not in _OWN.fields}
     if "observation" in env_part:
         raise ConfigError(
             "config key 'observation' does not apply to the advisor task: its observation is "
             "the estimate and the raw sensors (see help(estimators.advisor_env))"
         )
-    own: dict[str, Any] = {}
+    own = validate(
+        {k: v for k, v in config.items() if k in _OWN.fields},
+        _OWN,
+        describe=_describe,
+        error=_error,
+    )
+    own["steering_only"] = _STEERING_ONLY.default
     action = env_part.get("action")
-    steering_only = _STEERING_ONLY.default
     if isinstance(action, Mapping) and "steering_only" in action:
         action = dict(action)
-        steering_only = _check_leaf(
-            "action.steering_only", action.pop("steering_only"), _STEERING_ONLY
+        own["steering_only"] = validate(
+            action.pop("steering_only"),
+            _STEERING_ONLY,
+            describe=_describe,
+            error=_error,
+            path="action.steering_only",
         )
         env_part["action"] = action
-    own["steering_only"] = steering_only
-    for section, leaves in _SCHEMA.items():
-        given = config.get(section, {})
-        if not isinstance(given, Mapping):
-            raise ConfigError(
-                f"config key '{section}' must be a mapping of {sorted(leaves)}, got {given!r}"
-            )
-        unknown = [k for k in given if k not in leaves]
-        if unknown:
-            raise ConfigError(
-                f"unknown config key '{section}.{unknown[0]}' (allowed keys here: "
-                f"{', '.join(sorted(leaves))})"
-            )
-        own[section] = {
-            key: _check_leaf(f"{section}.{key}", given.get(key, leaf.default), leaf)
-            if key in given
-            else copy.deepcopy(leaf.default)
-            for key, leaf in leaves.items()
-        }
     return env_part, own
 
 
-def _driver_index(value: str | int, drivers: list[HumanParams]) -> int | None:
+_DRIVER_ALLOWED = "'random', a driver's name in the population or its index"
+
+
+def _driver_index(value: Any, drivers: list[HumanParams]) -> int | None:
     """The configured advisor's index in the population (None: random per episode)."""
     names = [d.name for d in drivers]
     if value == "random":
         return None
-    if isinstance(value, int):
+    if not isinstance(value, str | int) or isinstance(value, bool):
+        raise ConfigError(f"config key 'advisor.driver' must be {_DRIVER_ALLOWED}, got {value!r}")
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
         if value < len(drivers):
             return value
         raise ConfigError(
