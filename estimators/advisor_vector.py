@@ -70,6 +70,8 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         "autoreset_mode": AutoresetMode.NEXT_STEP,
         "render_fps": 30,
     }
+    partial_reset = True
+    """``reset(options={"reset_mask": m})`` resets exactly the cars of ``m`` (for SB3VecEnv)."""
 
     def __init__(
         self,

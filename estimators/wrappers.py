@@ -167,9 +167,19 @@ def _check_timing(config: Mapping[str, Any] | None, estimator: LaneEstimator) ->
     if config is None:
         return
     step, frequency, repeat = config_sample_time(config)
-    check_sample_time(
-        estimator, step, source="the env", sim_frequency=frequency, action_repeat=repeat
-    )
+    try:
+        check_sample_time(
+            estimator, step, source="the env", sim_frequency=frequency, action_repeat=repeat
+        )
+    except ValueError as exc:
+        if repeat == 1:
+            raise
+        raise ValueError(
+            f"{exc}. For a policy acting every {repeat} samples with an estimate made from "
+            "every sample, use the advisor task gym.make('hasa_env/LaneKeepingAdvisor-v0', "
+            f"config={{'action_repeat': {repeat}}}) (estimators.advisor_env), whose estimator "
+            "steps at the simulation rate inside each env step"
+        ) from None
 
 
 def _env_road(env: Any) -> Road | None:

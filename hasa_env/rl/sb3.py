@@ -93,7 +93,8 @@ _STATELESS_WRAPPERS = (
 def _check_partial_reset(venv: VectorEnv, trusted: tuple[type, ...]) -> None:
     """Raise unless every layer of ``venv`` resets a subset of envs correctly.
 
-    The base must be the native env or gymnasium's sync / async vector env; wrappers in between must be
+    The base must be the native env, a vector env declaring ``partial_reset = True`` (the
+    advisor task's), or gymnasium's sync / async vector env; wrappers in between must be
     stateless action / observation / reward wrappers, or in ``trusted``.
     """
     env: Any = venv
@@ -107,9 +108,8 @@ def _check_partial_reset(venv: VectorEnv, trusted: tuple[type, ...]) -> None:
                 f"SB3VecEnv(venv, trusted_wrappers=({type(env).__name__},))."
             )
         env = env.env
-    if not isinstance(
-        env, LaneKeepingVectorEnv | gym.vector.SyncVectorEnv | gym.vector.AsyncVectorEnv
-    ):
+    native = isinstance(env, LaneKeepingVectorEnv) or getattr(env, "partial_reset", False)
+    if not native and not isinstance(env, gym.vector.SyncVectorEnv | gym.vector.AsyncVectorEnv):
         raise TypeError(
             f"SB3VecEnv cannot tell whether a {type(env).__name__} supports "
             "reset(options={'reset_mask': ...}) in its autoreset mode; give it a SAME_STEP "

@@ -1,0 +1,280 @@
+"""The human-as-advisor task (estimators.advisor_env / advisor_vector): spaces, config,
+determinism, the estimator at the simulation rate, and the vector twin bit for bit."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import hasa_env
+from estimators.advisor_setup import ADVISOR_INFO_KEYS, default_config, observation_names
+from hasa_env import ConfigError
+
+ID = "hasa_env/LaneKeepingAdvisor-v0"
+CURVED = "hasa_env/LaneKeepingAdvisorCurved-v0"
+SHORT = {
+    "time_limit": 0.5,
+    "initial_state": {"lateral_offset_std": 1.0, "heading_std": 0.08},
+}
+"""Short episodes that often leave the road: truncations and terminations at many times."""
+
+
+def _vec(env_id: str, n: int, config: dict) -> gym.vector.VectorEnv:
+    return gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", config=config)
+
+
+def _same_step(vector_out, single_out, i: int) -> None:
+    obs, reward, terminated, truncated, info = vector_out
+    o, r, te, tr, inf = single_out
+    assert np.array_equal(obs[i], o)
+    assert (reward[i], terminated[i], truncated[i]) == (r, te, tr)
+    assert set(inf) == set(ADVISOR_INFO_KEYS)
+    for key, value in inf.items():
+        assert np.array_equal(np.asarray(info[key][i]), np.asarray(value)), key
+
+
+def test_registered_by_entry_point_strings_without_importing_estimators_at_import():
+    for env_id in hasa_env.ADVISOR_ENV_IDS:
+        spec = gym.spec(env_id)
+        assert spec.entry_point == "estimators.advisor_env:LaneKeepingAdvisorEnv"
+        assert spec.vector_entry_point == "estimators.advisor_vector:LaneKeepingAdvisorVectorEnv"
+    import subprocess
+
+    code = "import sys, hasa_env; print('estimators' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("env_id", [ID, CURVED])
+def test_gymnasium_and_sb3_check_env_are_clean(env_id):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(gym.make(env_id, config={"time_limit": 1.0}).unwrapped, skip_render_check=True)
+        sb3_check_env(gym.make(env_id, config={"time_limit": 1.0}), warn=True)
+
+
+def test_spaces_and_the_same_info_keys_at_reset_and_step():
+    env = gym.make(ID, config={"action_repeat": 4})
+    assert env.action_space.shape == (1,)
+    names = observation_names(2)
+    assert env.observation_space.shape == (len(names),) == (13,)
+    obs, info = env.reset(seed=1)
+    assert list(info) == list(ADVISOR_INFO_KEYS)
+    assert obs.dtype == np.float32 and env.observation_space.contains(obs)
+    obs, _, _, _, step_info = env.step(env.action_space.sample())
+    assert list(step_info) == list(info)
+    assert step_info["substep_lateral_offset"].shape == (4,)
+    assert step_info["substep_lateral_offset"][-1] == step_info["lateral_offset"]
+    # the observation holds the estimate, the lane weights, the raw sensors and the wheel
+    assert obs[names.index("estimate_lateral_offset")] == np.float32(
+        step_info["estimate_lateral_offset"]
+    )
+    weights = [obs[names.index(f"estimate_weight_{i}")] for i in range(2)]
+    assert np.allclose(weights, step_info["estimate_weights"], atol=1e-7)
+    assert obs[names.index("sensor_camera_lateral")] == np.float32(
+        step_info["sensor_camera_lateral"]
+    )
+    assert obs[-1] == np.float32(step_info["sensor_advisor_steering"])
+    full = gym.make(ID, config={"action": {"steering_only": False, "type": "physical"}})
+    assert full.action_space.shape == (2,)
+
+
+def test_deterministic_per_seed_and_random_advisors_per_episode():
+    def run(seed: int) -> tuple[np.ndarray, list[int]]:
+        env = gym.make(ID, config=SHORT)
+        rng = np.random.default_rng(0)
+        obs, info = env.reset(seed=seed)
+        out, advisors = [obs], [info["advisor_index"]]
+        for _ in range(150):
+            obs, _, terminated, truncated, info = env.step(rng.uniform(-1, 1, 1).astype(np.float32))
+            out.append(obs)
+            if terminated or truncated:
+                obs, info = env.reset()
+                advisors.append(info["advisor_index"])
+        return np.array(out), advisors
+
+    a, advisors = run(3)
+    b, again = run(3)
+    assert np.array_equal(a, b) and advisors == again
+    assert len(set(advisors)) > 1  # "random": a new human is drawn per episode
+    assert not np.array_equal(a, run(4)[0])
+
+
+def test_config_is_deep_merged_and_errors_name_the_key_and_the_range():
+    env = gym.make(ID, config={"advisor": {"driver": "Ill"}, "noise": {"camera": 0.1}})
+    config = env.unwrapped.config
+    assert config["advisor"]["driver"] == "Ill" and config["advisor"]["population"] == "paper"
+    assert config["noise"]["camera"] == 0.1 and config["noise"]["speed"] == 0.05
+    assert config["disturbance"]["crosswind"] == 0.1  # the population's study conditions
+    assert set(default_config()) == set(config)
+    for bad, message in [
+        ({"advisor": {"population": "x"}}, r"'advisor\.population' = 'x' is not allowed: one of"),
+        ({"advisor": {"driver": "nobody"}}, r"'advisor\.driver' = 'nobody'.*'Ill'"),
+        ({"advisor": {"drver": 1}}, r"unknown config key 'advisor\.drver'"),
+        ({"estimator": {"steering_ratio": 0}}, r"'estimator\.steering_ratio' = 0 .*\(0, 100\]"),
+        ({"estimator": {"settings": {"bias_std": -1}}}, r"'estimator\.settings'.*bias_std"),
+        ({"observation": {"type": "state"}}, r"'observation' does not apply"),
+        ({"noise": {"camera": -1}}, r"'noise\.camera' = -1 is out of range: allowed \[0, 10\] m"),
+        ({"estimator": {"steering_model": "no-such-model"}}, r"'estimator\.steering_model'"),
+    ]:
+        with pytest.raises(ConfigError, match=message):
+            gym.make(ID, config=bad)
+
+
+@pytest.mark.parametrize(
+    "env_id, config",
+    [
+        (ID, SHORT),
+        (ID, {**SHORT, "action_repeat": 3}),
+        (ID, {**SHORT, "action_repeat": 2, "advisor": {"drives": "human"}}),
+        (CURVED, {**SHORT, "action_repeat": 2, "action": {"steering_only": False}}),
+    ],
+    ids=["car drives", "action_repeat 3", "human drives", "curved, acceleration"],
+)
+def test_car_i_of_the_vector_env_is_the_single_env_seeded_seed_plus_i(env_id, config):
+    n, seed = 3, 11
+    vector = _vec(env_id, n, config)
+    singles = [gym.make(env_id, config=config) for _ in range(n)]
+    obs, info = vector.reset(seed=seed)
+    for i, single in enumerate(singles):
+        o, inf = single.reset(seed=seed + i)
+        _same_step(
+            (obs, np.zeros(n), np.zeros(n, bool), np.zeros(n, bool), info),
+            (o, 0.0, False, False, inf),
+            i,
+        )
+    rng = np.random.default_rng(5)
+    pending, ends = [False] * n, 0
+    for _ in range(120):
+        actions = (0.5 * rng.uniform(-1, 1, vector.action_space.shape)).astype(np.float32)
+        out = vector.step(actions)
+        for i, single in enumerate(singles):
+            if pending[i]:  # NEXT_STEP autoreset: the car restarts, its action is ignored
+                o, inf = single.reset()
+                expected = (o, 0.0, False, False, inf)
+                pending[i] = False
+            else:
+                expected = single.step(actions[i])
+                pending[i] = expected[2] or expected[3]
+                ends += pending[i]
+            _same_step(out, expected, i)
+    assert ends >= 2 * n, "too few episode ends: the autoresets are hardly tested"
+
+
+def test_partial_reset_restarts_only_the_masked_cars():
+    n = 3
+    vector, untouched = _vec(ID, n, SHORT), _vec(ID, n, SHORT)
+    vector.reset(seed=0)
+    untouched.reset(seed=0)
+    actions = np.zeros((n, 1), np.float32)
+    for _ in range(5):
+        vector.step(actions)
+        untouched.step(actions)
+    mask = np.array([False, True, False])
+    before = vector.step(actions)[4]
+    untouched.step(actions)
+    obs, info = vector.reset(seed=[None, 42, None], options={"reset_mask": mask})
+    assert np.array_equal(info["_time"], mask) and info["time"][1] == 0.0
+    single = gym.make(ID, config=SHORT)
+    o, inf = single.reset(seed=42)
+    assert np.array_equal(obs[1], o) and inf["advisor_index"] == info["advisor_index"][1]
+    after = vector.step(actions)
+    expected = single.step(actions[1])
+    _same_step(after, expected, 1)
+    assert after[4]["time"][0] == pytest.approx(before["time"][0] + 0.01)  # the others went on
+    reference = untouched.step(actions)
+    for i in (0, 2):  # exactly as if car 1 had not been reset
+        obs_r, reward_r, terminated_r, truncated_r, info_r = reference
+        row = {key: value[i] for key, value in info_r.items() if not key.startswith("_")}
+        _same_step(after, (obs_r[i], reward_r[i], terminated_r[i], truncated_r[i], row), i)
+
+
+def test_an_env_step_of_action_repeat_r_is_r_samples_of_the_estimator():
+    """action_repeat 10 (a 10 Hz policy): the estimate is the one of the 100 Hz env whose
+    policy holds each action for 10 steps, bit for bit."""
+    slow = gym.make(ID, config={"action_repeat": 10})
+    fast = gym.make(ID, config={"action_repeat": 1})
+    obs_slow, _ = slow.reset(seed=2)
+    obs_fast, _ = fast.reset(seed=2)
+    assert np.array_equal(obs_slow, obs_fast)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        action = (0.05 * rng.uniform(-1, 1, 1)).astype(np.float32)
+        obs_slow, *_, info_slow = slow.step(action)
+        for _ in range(10):
+            obs_fast, *_, info_fast = fast.step(action)
+        assert np.array_equal(obs_slow, obs_fast)
+        for key in ("estimate_lateral_offset", "estimate_weights", "sensor_advisor_steering"):
+            assert np.array_equal(info_slow[key], info_fast[key])
+
+
+@pytest.mark.parametrize("bias_index", [0, 1])
+def test_with_the_car_driving_the_human_advice_finds_the_true_lane(bias_index):
+    env = gym.make(ID, config={"action_repeat": 10, "advisor": {"driver": "Ill"}})
+    obs, info = env.reset(seed=0, options={"bias_index": bias_index})
+    for _ in range(50):  # 5 s of a lane keeper on the true state at 10 Hz
+        steer = -0.15 * info["lateral_offset"] - 0.8 * info["heading"]
+        obs, _, terminated, _, info = env.step(np.array([steer / 0.5], np.float32))
+        assert not terminated
+    assert info["estimate_weights"][bias_index] > 0.99
+    assert abs(info["estimate_lateral_offset"] - info["lateral_offset"]) < 0.15
+    assert info["policy_steering"] == pytest.approx(info["steering"])
+    assert info["advisor_steering"] != info["steering"]  # the human only advises
+
+
+def test_the_human_drives_and_the_action_is_ignored():
+    env = gym.make(ID, config={"advisor": {"drives": "human", "driver": 0}})
+    env.reset(seed=0)
+    for _ in range(100):
+        *_, info = env.step(np.array([1.0], np.float32))  # full lock, ignored
+    assert info["steering"] == info["advisor_steering"] and info["policy_steering"] == 0.5
+    assert info["sensor_advisor_steering"] == info["sensor_steering"]
+    assert abs(info["lateral_offset"]) < 1.0
+
+
+def test_invalid_actions_and_reset_options_are_refused():
+    env = gym.make(ID).unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([np.nan], np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(2, np.float32))
+    with pytest.raises(ValueError, match="advisor_index"):
+        env.reset(options={"advisor_index": 9})
+    _, info = env.reset(seed=0, options={"advisor_index": 4, "bias_index": 1})
+    assert info["advisor_index"] == 4 and info["bias_index"] == 1
+    with pytest.raises(ValueError, match="unknown reset option"):
+        _vec(ID, 2, {}).reset(options={"nope": 1})
+
+
+def test_the_estimator_wrappers_point_to_the_advisor_task_for_a_slow_policy():
+    from estimators import EstimatorInfoWrapper, GaussianMixtureEKF
+    from hasa_env.steering.models import GeneralizedModel
+
+    env = gym.make("hasa_env/LaneKeeping-v0", config={"action_repeat": 10})
+    with pytest.raises(ValueError, match=r"LaneKeepingAdvisor-v0.*'action_repeat': 10"):
+        EstimatorInfoWrapper(env, GaussianMixtureEKF(GeneralizedModel.paper().arx()))
+
+
+def test_sb3_adapter_runs_the_vector_advisor_task():
+    from hasa_env.rl import SB3VecEnv
+
+    venv = SB3VecEnv(_vec(ID, 2, SHORT))
+    venv.seed(0)
+    obs = venv.reset()
+    assert obs.shape == (2, 13)
+    dones = 0
+    for _ in range(60):
+        obs, rewards, done, infos = venv.step(np.zeros((2, 1), np.float32))
+        dones += int(done.sum())
+        for i in np.flatnonzero(done):
+            assert infos[i]["terminal_observation"].shape == (13,)
+            assert venv.reset_infos[i]["time"] == 0.0
+    assert dones >= 2
