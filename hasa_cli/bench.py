@@ -34,7 +34,7 @@ from benchmarks.tables import Column, render_text
 
 __all__ = ["main", "build_parser", "perf_rows", "format_perf_table", "PERF_MODULES"]
 
-PERF_MODULES = ("perf_env", "perf_estimators", "perf_render")
+PERF_MODULES = ("perf_env", "perf_estimators", "perf_render", "perf_advisor")
 """Performance benchmark modules of :mod:`benchmarks` run by ``hasa-bench perf``."""
 
 EXIT_OK, EXIT_MODEL_FAILED, EXIT_USAGE = 0, 1, 2
