@@ -13,6 +13,9 @@
 - :func:`run_estimator`: filter recordings offline, batched.
 - Gymnasium wrappers: :class:`EstimatorInfoWrapper`,
   :class:`EstimatorObservationWrapper` (single and vector envs).
+- The human-as-advisor task ``hasa_env/LaneKeepingAdvisor-v0``:
+  :class:`LaneKeepingAdvisorEnv` and :class:`LaneKeepingAdvisorVectorEnv`
+  (:mod:`estimators.advisor_env`, :mod:`estimators.advisor_vector`; loaded on first access).
 """
 
 from estimators.arx_state_space import MEASUREMENT_NAMES, PHYSICAL_STATE_NAMES, ARXStateSpace
@@ -52,6 +55,8 @@ __all__ = [
     "FilterpyGMEKF",  # noqa: F822 - a lazy attribute (see below)
     "GaussianMixtureEKF",
     "LaneEstimator",
+    "LaneKeepingAdvisorEnv",  # noqa: F822 - a lazy attribute (see below)
+    "LaneKeepingAdvisorVectorEnv",  # noqa: F822 - a lazy attribute (see below)
     "MEASUREMENT_KEYS",
     "MEASUREMENT_NAMES",
     "NoSteeringEKF",
@@ -70,10 +75,13 @@ __all__ = [
 ]
 
 
-# the filterpy reference filter imports filterpy (and with it scipy.stats, about a
-# second); it loads on first access
+# loaded on first access: the filterpy reference filter imports filterpy (and with it
+# scipy.stats, about a second); the advisor task the drivers and the RL layer
+_LAZY = {
+    "FilterpyGMEKF": "estimators.filterpy_ekf",
+    "LaneKeepingAdvisorEnv": "estimators.advisor_env",
+    "LaneKeepingAdvisorVectorEnv": "estimators.advisor_vector",
+}
 __getattr__, __dir__ = lazy_attributes(
-    __name__,
-    {"FilterpyGMEKF": "estimators.filterpy_ekf"},
-    eager=[n for n in __all__ if n != "FilterpyGMEKF"],
+    __name__, _LAZY, eager=[n for n in __all__ if n not in _LAZY]
 )

@@ -33,6 +33,8 @@ estimator.steering_ratio        model units per road-wheel radian; null: 15 for 
                                 paper's presets, 1 otherwise (null)
 estimator.steering_residual_std the model's residual std (rad, model units); null: the
                                 fit's, else FilterSettings' 2e-3 (null)
+estimator.outlier_gate          gate outlying measurements (FilterSettings.innovation_gate
+                                6); off by default here, see docs/design.md §12.4 (false)
 estimator.settings              further FilterSettings fields by name ({})
 ==============================  ==========================================================
 
@@ -49,6 +51,7 @@ import copy
 import dataclasses
 import functools
 import json
+import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -66,7 +69,7 @@ from hasa_env.sim.config import describe_config as env_describe_config
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.loading import default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
-from hasa_env.validation import ANY_JSON, Field, schema, validate
+from hasa_env.validation import Field, schema, validate
 
 __all__ = [
     "ESTIMATORS",
@@ -168,11 +171,19 @@ _OWN = schema(
                 high=1.0,
                 optional=True,
             ),
+            "outlier_gate": Field(
+                "bool",
+                False,
+                "Gate outliers (FilterSettings.innovation_gate 6, docs/design.md §12.4); off "
+                "in this task: a policy driving hard makes the camera look like an outlier, "
+                "the gate then drops it for good and the estimate runs away.",
+            ),
             "settings": Field(
                 "mapping",
                 {},
-                "Further FilterSettings fields by name (estimators.settings).",
-                each=ANY_JSON,
+                "Further FilterSettings fields by name (estimators.settings), e.g. "
+                "{'innovation_gate': inf}.",
+                each=Field("number", infinite=True, optional=True),
             ),
         },
     }
@@ -331,6 +342,8 @@ def estimator_factory(
             f"{', '.join(sorted(names))})"
         )
     overrides.setdefault("steering_ratio", ratio)
+    if not est["outlier_gate"]:
+        overrides.setdefault("innovation_gate", math.inf)
     if residual is not None:
         overrides.setdefault("steering_residual_std", residual)
     try:

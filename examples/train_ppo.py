@@ -1,33 +1,36 @@
 """Train Stable-Baselines3 PPO to keep the lane, and compare it with a human and zero steering.
 
-Two observation variants, both steering only (the acceleration is held at
-0 m/s^2, so the car keeps its 15 m/s) and acting at 10 Hz
-(``--action-repeat 10`` of the 100 Hz simulation):
+Two tasks, both steering only (the acceleration is held at 0 m/s^2, so the car keeps its
+15 m/s) and acting at 10 Hz (``--action-repeat 10`` of the 100 Hz simulation), both
+trained on native vector envs through ``hasa_env.rl.SB3VecEnv``:
 
-- ``camera``: the env's sensors (speed, the *biased* camera, heading, IMU,
-  steering). Trained on the native vector env (``hasa_env.rl.make_vector_env``)
-  through ``hasa_env.rl.SB3VecEnv``, with ``config["action_repeat"]``.
-- ``estimator``: the human-as-advisor estimate of the Gaussian-mixture EKF
-  (``estimators.wrappers.EstimatorObservationWrapper``: mixture mean and std
-  of [v_x, y, v_y, b] and the lane weights). The estimator reads a human's
-  steering; here a synthetic driver who sees the true lane advises
-  (``hasa_env.rl.HumanAdvisor``) while PPO drives. The estimator needs every
-  100 Hz sample, so the env runs at 100 Hz and ``hasa_env.rl.ActionRepeat``
-  holds PPO's action for 10 samples; single envs in SB3's ``DummyVecEnv``
-  (the vector estimator wrapper cannot reset single cars, which SB3's
-  same-step autoreset needs).
+- ``camera``: ``hasa_env/LaneKeeping-v0``'s sensors (speed, the *biased* camera,
+  heading, IMU, steering);
+- ``advisor``: the human-as-advisor task ``hasa_env/LaneKeepingAdvisor-v0``
+  (:mod:`estimators.advisor_env`): PPO drives; a synthetic human of the "paper"
+  population (a new one each episode) advises by steering alongside, and the
+  Gaussian-mixture EKF, stepping at every 100 Hz sample inside each 10 Hz step, turns
+  that advice into the estimate PPO observes (lateral offset and its std, heading,
+  speed, lane weights) with the raw sensors.
 
-Episodes: 30 s on the straight road, two equally likely lane centres (camera
-bias 0 or -1.8 m), start at y = -0.5 m with std 0.5 m and heading std
-0.02 rad. (From the paper's exact start, y = -0.5 m and heading 0, zero
-steering would hold y = -0.5 m forever on a straight road: nothing disturbs
-the car.) Every policy is evaluated on the same seeded episodes, each lane
-hypothesis equally often, in the 100 Hz env; the return is the sum of the
-100 Hz rewards over the episode (policies acting at 10 Hz hold their action).
+Episodes: 30 s on the straight road, two equally likely lane centres (camera bias 0 or
+-1.8 m), start at y = -0.5 m with std 0.5 m and heading std 0.02 rad, under the "paper"
+population's study conditions (crosswind and camber of 0.1 m/s^2; the advisor task
+applies them by default, the other policies get them too). Every policy is evaluated on
+the same seeded episodes, each lane hypothesis equally often: mean |y| of the true offset
+at every 100 Hz sample, the return summed over the 100 Hz rewards (PPO's actions held for
+10 samples; the advisor task evaluated at action_repeat 1 under ``ActionRepeat``, the same
+episodes bit for bit), and the share of episodes that left the road.
+
+PPO runs on normalized observations and rewards (SB3's ``VecNormalize``; the evaluation
+uses the training's observation statistics): the observations mix speeds of 15 m/s with
+offsets of centimetres. Without it, the advisor-task policy of 300k steps kept the
+start offset of -0.5 m whenever the camera bias was 0 (mean |y| 0.47 m).
 
 Usage::
 
-    python examples/train_ppo.py                          # both variants (50k / 20k steps)
+    python examples/train_ppo.py                        # both tasks (camera 50k, advisor 300k steps)
+    python examples/train_ppo.py --variant advisor --curve docs/advisor_ppo_curve.png
     python examples/train_ppo.py --variant camera --timesteps 20000 --num-envs 8 --seed 1
 
 Needs the RL extra (``pip install "hasa-env[rl]"``: stable-baselines3, torch).
@@ -42,15 +45,15 @@ from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 import hasa_env  # noqa: F401 - registers the env ids
-from hasa_env.drivers import SpeedProfile, SyntheticDriver, population
+from hasa_env.drivers import POPULATIONS, SpeedProfile, SyntheticDriver, population
 from hasa_env.rl import (
     ActionRepeat,
     ConstantSteering,
     DriverPolicy,
     EvalResult,
-    HumanAdvisor,
     SB3Policy,
     SteeringOnly,
     evaluate,
@@ -59,13 +62,19 @@ from hasa_env.rl import (
 )
 from hasa_env.sim.config import deep_merge
 
-ENV_ID = "hasa_env/LaneKeeping-v0"
-BASE_CONFIG: dict[str, Any] = {
-    "initial_state": {"lateral_offset_std": 0.5, "heading_std": 0.02},
-}
-"""The task: the default env (100 Hz, 30 s, lanes {0, -1.8} m) with a random start."""
-DEFAULT_TIMESTEPS = {"camera": 50_000, "estimator": 20_000}
-"""PPO steps per variant; the estimator variant costs ~10x more per step (EKF at 100 Hz)."""
+CAMERA_ID = "hasa_env/LaneKeeping-v0"
+ADVISOR_ID = "hasa_env/LaneKeepingAdvisor-v0"
+CONDITIONS: dict[str, Any] = deep_merge(
+    POPULATIONS["paper"].env_config,
+    {"initial_state": {"lateral_offset_std": 0.5, "heading_std": 0.02}},
+)
+"""The episodes: the default env (100 Hz, 30 s, lanes {0, -1.8} m), a random start and the
+"paper" population's study conditions (disturbances; the wheel read without noise)."""
+DEFAULT_TIMESTEPS = {"camera": 50_000, "advisor": 300_000}
+"""PPO steps per task."""
+DEFAULT_NUM_ENVS = {"camera": 8, "advisor": 64}
+"""Cars per vector env: the advisor task's humans and estimators are cheaper per car in
+larger batches."""
 
 
 def advisor_driver(name: str = "Ill", seed: int = 0) -> SyntheticDriver:
@@ -76,45 +85,123 @@ def advisor_driver(name: str = "Ill", seed: int = 0) -> SyntheticDriver:
     return SyntheticDriver(dataclasses.replace(drivers[name], speed=SpeedProfile.hold()))
 
 
-def camera_env(config: dict[str, Any], repeat: int) -> gym.Env:
+def camera_env(repeat: int) -> gym.Env:
     """Single 100 Hz env, steering only, action held for ``repeat`` samples (evaluation)."""
-    return ActionRepeat(SteeringOnly(gym.make(ENV_ID, config=config)), repeat)
+    return ActionRepeat(SteeringOnly(gym.make(CAMERA_ID, config=CONDITIONS)), repeat)
 
 
-def estimator_env(config: dict[str, Any], repeat: int, driver_name: str, population_seed: int):
-    """100 Hz env -> steering only -> human advisor -> estimate observation -> action repeat."""
-    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
-    from estimators.wrappers import EstimatorObservationWrapper
-    from hasa_env.steering.models import GeneralizedModel
+def advisor_config(repeat: int) -> dict[str, Any]:
+    """The advisor task's config: the episodes above at ``repeat`` samples per step."""
+    return deep_merge(CONDITIONS, {"action_repeat": repeat})
 
-    env = SteeringOnly(gym.make(ENV_ID, config=config))
-    env = HumanAdvisor(env, advisor_driver(driver_name, population_seed))
-    ekf = GaussianMixtureEKF(
-        GeneralizedModel.paper().arx(), FilterSettings.from_env_config(env.unwrapped.config)
-    )
-    return ActionRepeat(EstimatorObservationWrapper(env, ekf), repeat)
+
+def advisor_eval_env(repeat: int) -> gym.Env:
+    """The advisor task at 100 Hz with each action held for ``repeat`` steps: the same
+    episodes as ``action_repeat = repeat`` bit for bit (docs/design.md §12.2), with the
+    return summed over the 100 Hz rewards as for the other policies."""
+    return ActionRepeat(gym.make(ADVISOR_ID, config=advisor_config(1)), repeat)
+
+
+class LateralOffsetCurve:
+    """Mean |y| (m) of the true offset against the training steps, two ways: over each PPO
+    rollout (the stochastic training policy, from the infos' ``substep_lateral_offset``:
+    every 100 Hz sample) and at checkpoints, evaluating the deterministic policy on
+    ``episodes`` fixed episodes (lanes balanced; seeds 20000.., never the final
+    evaluation's)."""
+
+    def __init__(self, every: int, episodes: int, repeat: int) -> None:
+        self.every, self.episodes, self.repeat = every, episodes, repeat
+        self.steps: list[int] = []
+        self.rollout_mean_abs_y: list[float] = []
+        self.checkpoint_steps: list[int] = []
+        self.checkpoint_mean_abs_y: list[float] = []
+        self.evaluation_seconds = 0.0
+        self._total, self._count = 0.0, 0
+
+    def add(self, infos: list[dict[str, Any]]) -> None:
+        for info in infos:
+            offsets = np.abs(np.asarray(info["substep_lateral_offset"]))
+            self._total += float(offsets.sum())
+            self._count += offsets.size
+
+    def close_rollout(self, timesteps: int) -> None:
+        if self._count:
+            self.steps.append(int(timesteps))
+            self.rollout_mean_abs_y.append(self._total / self._count)
+        self._total, self._count = 0.0, 0
+
+    def checkpoint(self, timesteps: int, model: Any, normalizer: Any) -> None:
+        start = time.perf_counter()
+        policy = SB3Policy(model, normalize=normalizer.normalize_obs)
+        result = evaluate(policy, lambda: advisor_eval_env(self.repeat), self.episodes, 20_000)
+        self.checkpoint_steps.append(int(timesteps))
+        self.checkpoint_mean_abs_y.append(result.mean_abs_lateral_error)
+        self.evaluation_seconds += time.perf_counter() - start
+
+    def save_plot(self, path: str, evaluated: float | None) -> None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6.4, 3.8))
+        ax.plot(self.steps, self.rollout_mean_abs_y, color="C0", alpha=0.6,
+                label="training rollouts (stochastic policy)")  # fmt: skip
+        ax.plot(self.checkpoint_steps, self.checkpoint_mean_abs_y, "o-", color="C1",
+                label=f"deterministic policy, {self.episodes} episodes")  # fmt: skip
+        if evaluated is not None:
+            ax.axhline(evaluated, color="C2", ls="--", label=f"final evaluation: {evaluated:.3f} m")
+        ax.axhline(0.15, color="grey", lw=0.8, ls=":", label="0.15 m")
+        ax.set_xlabel("PPO training steps (10 Hz env steps)")
+        ax.set_ylabel("mean |y| (m)")
+        ax.set_yscale("log")
+        ax.set_title("PPO on LaneKeepingAdvisor-v0: the car drives, a human advises", fontsize=10)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+
+
+def _curve_callback(curve: LateralOffsetCurve) -> Any:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Callback(BaseCallback):
+        def _on_step(self) -> bool:
+            curve.add(self.locals["infos"])
+            return True
+
+        def _on_rollout_end(self) -> None:
+            curve.close_rollout(self.num_timesteps)
+            due = len(curve.checkpoint_steps) * curve.every
+            if curve.every and self.num_timesteps >= due:
+                curve.checkpoint(self.num_timesteps, self.model, self.model.get_env())
+
+    return Callback()
 
 
 def train(
-    variant: str, timesteps: int, seed: int, num_envs: int, repeat: int, args: argparse.Namespace
-) -> tuple[Any, float]:
-    """Train PPO on one variant; returns (model, wall-clock training time in s)."""
+    variant: str, timesteps: int, seed: int, num_envs: int, repeat: int, curve: LateralOffsetCurve
+) -> tuple[Any, Any, float]:
+    """Train PPO on one task; returns (model, its VecNormalize, wall-clock training time in s)."""
     require_sb3()
     from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from hasa_env.rl import SB3VecEnv
 
     if variant == "camera":
-        config = deep_merge(BASE_CONFIG, {"action_repeat": repeat})
-        venv = SB3VecEnv(make_vector_env(ENV_ID, num_envs, config, steering_only=True))
+        config = deep_merge(CONDITIONS, {"action_repeat": repeat})
+        vector = make_vector_env(CAMERA_ID, num_envs, config, steering_only=True)
     else:
-
-        def make() -> gym.Env:
-            return estimator_env(BASE_CONFIG, repeat, args.driver, args.population_seed)
-
-        venv = DummyVecEnv([make for _ in range(num_envs)])
-    venv = VecMonitor(venv)
+        vector = gym.make_vec(
+            ADVISOR_ID,
+            num_envs=num_envs,
+            vectorization_mode="vector_entry_point",
+            config=advisor_config(repeat),
+        )
+    # observations of very different scales (speeds of 15 m/s beside offsets of cm) and a
+    # reward whose gradient is small near the lane centre: normalize both
+    venv = VecNormalize(VecMonitor(SB3VecEnv(vector)), norm_obs=True, norm_reward=True, gamma=0.99)
     venv.seed(seed)
     model = PPO(
         "MlpPolicy",
@@ -128,34 +215,49 @@ def train(
         verbose=0,
     )
     start = time.perf_counter()
-    model.learn(total_timesteps=timesteps)
+    callback = _curve_callback(curve) if variant == "advisor" else None
+    model.learn(total_timesteps=timesteps, progress_bar=True, callback=callback)
     elapsed = time.perf_counter() - start
+    if variant == "advisor":
+        elapsed -= curve.evaluation_seconds  # the checkpoints are not training
+    venv.training = False  # evaluation uses the training's observation statistics
     venv.close()
-    return model, elapsed
+    return model, venv, elapsed
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--variant", choices=("camera", "estimator", "both"), default="both")
+    parser.add_argument("--variant", choices=("camera", "advisor", "both"), default="both")
     parser.add_argument(
         "--timesteps",
         type=int,
         default=None,
-        help="PPO steps per variant (default: camera 50000, estimator 20000)",
+        help="PPO steps per task (default: camera 50000, advisor 300000)",
     )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--num-envs", type=int, default=8)
+    parser.add_argument(
+        "--num-envs", type=int, default=None, help="cars per vector env (camera 8, advisor 64)"
+    )
     parser.add_argument(
         "--action-repeat", type=int, default=10, help="100 Hz samples per policy step"
     )
     parser.add_argument("--eval-episodes", type=int, default=20)
-    parser.add_argument("--driver", default="Ill", help="synthetic driver (advisor, reference)")
+    parser.add_argument("--driver", default="Ill", help="the synthetic driver of the reference row")
     parser.add_argument("--population-seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--save", default=None, help="save the models as <SAVE>_<variant>.zip")
+    parser.add_argument(
+        "--curve", default=None, help="save the advisor task's |y| training curve (PNG)"
+    )
+    parser.add_argument(
+        "--curve-every",
+        type=int,
+        default=25_000,
+        help="training steps between the curve's checkpoints (evaluation not timed)",
+    )
     args = parser.parse_args(argv)
     if (args.timesteps is not None and args.timesteps < 1) or min(
-        args.num_envs, args.action_repeat, args.eval_episodes
+        args.num_envs or 1, args.action_repeat, args.eval_episodes
     ) < 1:
         parser.error("--timesteps, --num-envs, --action-repeat, --eval-episodes must be positive")
 
@@ -163,33 +265,35 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    variants = ("camera", "estimator") if args.variant == "both" else (args.variant,)
+    variants = ("camera", "advisor") if args.variant == "both" else (args.variant,)
     repeat = args.action_repeat
     eval_seed = 10_000 + args.seed  # episodes never seen in training
 
+    def plain() -> gym.Env:
+        return SteeringOnly(gym.make(CAMERA_ID, config=CONDITIONS))
+
     runs: list[tuple[Any, Callable[[], gym.Env]]] = [
-        (ConstantSteering(), lambda: SteeringOnly(gym.make(ENV_ID, config=BASE_CONFIG))),
-        (
-            DriverPolicy(advisor_driver(args.driver, args.population_seed)),
-            lambda: SteeringOnly(gym.make(ENV_ID, config=BASE_CONFIG)),
-        ),
+        (ConstantSteering(), plain),
+        (DriverPolicy(advisor_driver(args.driver, args.population_seed)), plain),
     ]
     times: dict[str, tuple[int, float]] = {}
+    curve = LateralOffsetCurve(args.curve_every if args.curve else 0, 4, repeat)
     for variant in variants:
         steps = args.timesteps or DEFAULT_TIMESTEPS[variant]
-        print(f"training PPO ({variant}) for {steps} steps on {args.num_envs} envs ...")
-        model, elapsed = train(variant, steps, args.seed, args.num_envs, repeat, args)
+        num_envs = args.num_envs or DEFAULT_NUM_ENVS[variant]
+        print(f"training PPO ({variant}) for {steps} steps on {num_envs} envs ...")
+        model, normalizer, elapsed = train(variant, steps, args.seed, num_envs, repeat, curve)
         times[variant] = (steps, elapsed)
         print(f"  done in {elapsed:.1f} s ({steps / elapsed:.0f} steps/s)")
         if args.save:
             model.save(f"{args.save}_{variant}")
+            normalizer.save(f"{args.save}_{variant}_vecnormalize.pkl")
         if variant == "camera":
-            factory: Callable[[], gym.Env] = lambda: camera_env(BASE_CONFIG, repeat)  # noqa: E731
+            factory: Callable[[], gym.Env] = lambda: camera_env(repeat)  # noqa: E731
         else:
-            factory = lambda: estimator_env(  # noqa: E731
-                BASE_CONFIG, repeat, args.driver, args.population_seed
-            )
-        runs.append((SB3Policy(model, name=f"PPO ({variant})"), factory))
+            factory = lambda: advisor_eval_env(repeat)  # noqa: E731
+        policy = SB3Policy(model, name=f"PPO ({variant})", normalize=normalizer.normalize_obs)
+        runs.append((policy, factory))
 
     print(
         f"\nevaluation: {args.eval_episodes} episodes of 30 s, seeds {eval_seed}.., "
@@ -212,6 +316,12 @@ def main(argv: list[str] | None = None) -> int:
         )
     for variant, (steps, elapsed) in times.items():
         print(f"training time PPO ({variant}): {elapsed:.1f} s for {steps} steps")
+    if args.curve and curve.steps:
+        evaluated = next(
+            (r.mean_abs_lateral_error for r in results if r.name == "PPO (advisor)"), None
+        )
+        curve.save_plot(args.curve, evaluated)
+        print(f"wrote {args.curve}")
     return 0
 
 

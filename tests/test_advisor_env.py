@@ -263,18 +263,41 @@ def test_the_estimator_wrappers_point_to_the_advisor_task_for_a_slow_policy():
         EstimatorInfoWrapper(env, GaussianMixtureEKF(GeneralizedModel.paper().arx()))
 
 
-def test_sb3_adapter_runs_the_vector_advisor_task():
+def test_sb3_adapter_over_the_vector_task_is_dummy_vec_env_over_single_envs():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
     from hasa_env.rl import SB3VecEnv
 
-    venv = SB3VecEnv(_vec(ID, 2, SHORT))
-    venv.seed(0)
-    obs = venv.reset()
-    assert obs.shape == (2, 13)
+    n = 2
+    adapted = SB3VecEnv(_vec(ID, n, SHORT))
+    reference = DummyVecEnv([lambda: gym.make(ID, config=SHORT) for _ in range(n)])
+    adapted.seed(3)
+    reference.seed(3)
+    assert np.array_equal(adapted.reset(), reference.reset())
+    rng = np.random.default_rng(0)
     dones = 0
-    for _ in range(60):
-        obs, rewards, done, infos = venv.step(np.zeros((2, 1), np.float32))
-        dones += int(done.sum())
-        for i in np.flatnonzero(done):
-            assert infos[i]["terminal_observation"].shape == (13,)
-            assert venv.reset_infos[i]["time"] == 0.0
+    for _ in range(80):
+        actions = (0.5 * rng.uniform(-1, 1, (n, 1))).astype(np.float32)
+        obs_a, rewards_a, done_a, infos_a = adapted.step(actions)
+        obs_b, rewards_b, done_b, infos_b = reference.step(actions)
+        assert np.array_equal(obs_a, obs_b) and np.array_equal(rewards_a, rewards_b)
+        assert np.array_equal(done_a, done_b)
+        for i in np.flatnonzero(done_a):
+            assert np.array_equal(
+                infos_a[i]["terminal_observation"], infos_b[i]["terminal_observation"]
+            )
+        dones += int(done_a.sum())
     assert dones >= 2
+
+
+def test_renders_headless_with_the_estimator_weights_in_the_info():
+    env = gym.make(ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.zeros(1, np.float32))
+    frame = env.render()
+    assert frame.shape == (480, 640, 3) and frame.dtype == np.uint8
+    vector = gym.make_vec(
+        ID, num_envs=2, vectorization_mode="vector_entry_point", render_mode="rgb_array"
+    )
+    vector.reset(seed=0)
+    assert [f.shape for f in vector.render()] == [(480, 640, 3)] * 2

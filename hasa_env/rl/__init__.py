@@ -9,6 +9,9 @@
   :class:`HumanAdvisor`, :func:`env_action`.
 - :mod:`~hasa_env.rl.evaluation`: :func:`evaluate` and :func:`compare` of
   policies (:class:`SB3Policy`, :class:`DriverPolicy`, :class:`ConstantSteering`).
+- :class:`HumanPool` (:mod:`~hasa_env.rl.humans`): synthetic humans for the N cars of a
+  vector env, each car's human chosen per episode (the advisor task's,
+  :mod:`estimators.advisor_vector`).
 """
 
 from hasa_env._lazy import lazy_attributes
@@ -22,6 +25,7 @@ from hasa_env.rl.evaluation import (
     evaluate,
     require_sb3,
 )
+from hasa_env.rl.humans import HumanPool
 from hasa_env.rl.wrappers import (
     ActionRepeat,
     HumanAdvisor,
@@ -37,6 +41,7 @@ __all__ = [
     "DriverPolicy",
     "EvalResult",
     "HumanAdvisor",
+    "HumanPool",
     "Policy",
     "SB3Policy",
     "SB3VecEnv",  # noqa: F822 - a lazy attribute (see below)

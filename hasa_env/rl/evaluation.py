@@ -55,17 +55,30 @@ class Policy(Protocol):
 
 
 class SB3Policy:
-    """A trained Stable-Baselines3 model (``model.predict``, deterministic by default)."""
+    """A trained Stable-Baselines3 model (``model.predict``, deterministic by default).
 
-    def __init__(self, model: Any, name: str = "ppo", deterministic: bool = True) -> None:
+    ``normalize``: applied to each observation first, e.g. the ``normalize_obs`` of the
+    ``VecNormalize`` the model was trained under (with its ``training`` set to False).
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        name: str = "ppo",
+        deterministic: bool = True,
+        normalize: Callable[[Any], Any] | None = None,
+    ) -> None:
         self.model = model
         self.name = name
         self.deterministic = deterministic
+        self.normalize = normalize
 
     def reset(self, seed: int, env: gym.Env) -> None:
         return None
 
     def act(self, observation: Any, info: Mapping[str, Any]) -> np.ndarray:
+        if self.normalize is not None:
+            observation = self.normalize(observation)
         action, _ = self.model.predict(observation, deterministic=self.deterministic)
         return action
 
