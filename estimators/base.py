@@ -24,6 +24,7 @@ straight road.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -65,6 +66,17 @@ class Estimate:
         hypotheses: (..., C) camera bias b of each hypothesis (m).
         state_names: names of the n states (first four: longitudinal_velocity,
             lateral_offset, lateral_velocity, bias).
+        decision: (...) the decision state, ``"undecided"``, ``"decided"``
+            or ``"model_mismatch"`` (:mod:`estimators.evidence` states the
+            rule): a str for a single run, an array of str for a batch.
+        model_error: (...) the statistic behind ``"model_mismatch"``: the best
+            hypothesis' running mean normalized steering innovation squared
+            (1: the steering model is as good as the filter assumes; NaN: no
+            steering data yet or no steering model).
+        innovation_autocorrelation: (...) the lag-1 autocorrelation of that
+            hypothesis' normalized steering innovations (NaN: no data).
+        evidence_scale: (...) the factor (>= 1) the steering evidence was
+            divided by at the last step.
         covariance: (..., n, n) mixture covariance
             ``sum_i w_i (P_i + (x_i - mean)(x_i - mean)^T)`` (computed on first access).
     """
@@ -77,6 +89,16 @@ class Estimate:
     most_likely: np.ndarray
     hypotheses: np.ndarray
     state_names: tuple[str, ...]
+    decision: np.ndarray | str = "undecided"
+    model_error: np.ndarray | float = math.nan
+    innovation_autocorrelation: np.ndarray | float = math.nan
+    evidence_scale: np.ndarray | float = 1.0
+
+    @property
+    def decided(self) -> np.ndarray | bool:
+        """True where the decision state is ``"decided"`` (a bool for a single run)."""
+        decided = np.asarray(self.decision) == "decided"
+        return bool(decided) if decided.ndim == 0 else decided
 
     @cached_property
     def covariance(self) -> np.ndarray:
@@ -118,7 +140,17 @@ class Estimate:
             self.most_likely[index],
             self.hypotheses[index],
             self.state_names,
+            _item(self.decision, index, str),
+            _item(self.model_error, index, float),
+            _item(self.innovation_autocorrelation, index, float),
+            _item(self.evidence_scale, index, float),
         )
+
+
+def _item(value: Any, index: int, kind: type) -> Any:
+    """Run ``index`` of a per-run statistic (a scalar is shared by every run)."""
+    array = np.asarray(value)
+    return kind(array[index] if array.ndim else array)
 
 
 @runtime_checkable

@@ -73,9 +73,29 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     data.add_argument(
         "--curved-runs",
         type=int,
-        default=1,
+        default=4,
         metavar="N",
-        help="extra curved-track runs of 'Ill' (steering scores; 0: none; default 1)",
+        help="extra curved-track runs of 'Ill' (steering scores and estimation; 0: none; "
+        "default 4)",
+    )
+    data.add_argument(
+        "--stress",
+        action="store_true",
+        help="also score the stress set of bad advisors (benchmarks.stress): no lane "
+        "information, sign-flipped, random stable ARX, unregularized constant-speed fit",
+    )
+    data.add_argument(
+        "--filter",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="a FilterSettings field for every estimator, e.g. forgetting_time=10 "
+        "(repeatable; JSON values: numbers, true/false)",
+    )
+    data.add_argument(
+        "--compare-checks",
+        action="store_true",
+        help="also run every model's estimator without the evidence checks ('<model> (no checks)')",
     )
     noise = parser.add_argument_group("sensor noise (std; default: the env's)")
     noise.add_argument("--speed-noise", type=float, metavar="M/S", help="speedometer (0.05)")
@@ -208,7 +228,24 @@ def _config(args: argparse.Namespace) -> Any:
         illustrative=args.illustrative,
         training_run=args.training_run,
         batch_size=args.batch_size,
+        stress=bool(getattr(args, "stress", False)),
+        filter_settings=_filter_settings(getattr(args, "filter", [])),
+        compare_checks=bool(getattr(args, "compare_checks", False)),
     )
+
+
+def _filter_settings(items: list[str]) -> dict[str, Any]:
+    """``["field=value", ...]`` as a dict (values parsed as JSON, else kept as text)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise BenchmarkError(f"--filter expects FIELD=VALUE, got {item!r}")
+        try:
+            out[name.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            out[name.strip()] = text
+    return out
 
 
 class _Progress:

@@ -161,8 +161,9 @@ def test_results_json_structure(outputs) -> None:
     drivers = ["Ill", "1", "2"]
     models = ["two_point", "generalized", "near_far_pd"]
     steering = doc["steering"]
+    with_baseline = ["two_point", "generalized", "road_blind", "near_far_pd"]
     assert [(r["driver"], r["model"]) for r in steering] == [
-        (d, m) for d in drivers for m in models
+        (d, m) for d in drivers for m in with_baseline
     ]
     for row in steering:
         for key in ("rmse", "r2", "r2_increments"):
@@ -177,9 +178,20 @@ def test_results_json_structure(outputs) -> None:
     for row in estimation:
         assert row["lateral_rmse_mean"] >= 0 and row["lateral_rmse_std"] >= 0
         assert row["n_runs"] == 2
-    assert [(r["driver"], r["model"]) for r in doc["curved"]] == [("Ill", m) for m in models]
-    assert len(doc["runs_steering"]) == (6 + 1) * 3
-    assert len(doc["runs_estimation"]) == 6 * 5
+    assert [(r["driver"], r["model"]) for r in doc["curved"]] == [("Ill", m) for m in with_baseline]
+    assert len(doc["runs_steering"]) == (6 + 1) * 4
+    main_rows = [r for r in doc["runs_estimation"] if r["track"] == "straight"]
+    curved_rows = [r for r in doc["runs_estimation"] if r["track"] == "curved"]
+    assert len(main_rows) == 6 * 5 and len(curved_rows) == 1 * 5
+    assert [(r["driver"], r["model"]) for r in doc["curved_estimation"]] == [
+        ("Ill", m) for m in expected
+    ]
+    for row in doc["runs_estimation"]:  # the safety metrics of every run
+        assert row["final_decision"] in ("undecided", "decided", "model_mismatch")
+        assert isinstance(row["wrong_lane_confident"], bool)
+        assert row["lateral_nees"] >= 0
+    assert {"wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs",
+            "lateral_nees", "curved_lateral_rmse"} <= set(doc["summary"][0])  # fmt: skip
     assert doc["errors"] == []
     # the paper's values sit beside ours
     ill = {r["model"]: r for r in steering if r["driver"] == "Ill"}
@@ -310,7 +322,7 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert errors["fit_raises"]["stage"] == "fit"
     assert "cannot fit this" in errors["fit_raises"]["message"]
     scored = {r["model"] for r in doc["steering"]}
-    assert scored == {"two_point", "generalized", "near_far_pd", "no_arx"}
+    assert scored == {"two_point", "generalized", "road_blind", "near_far_pd", "no_arx"}
     estimated = {"two_point", "generalized", "near_far_pd", "no_steering", "oracle"}
     assert {r["model"] for r in doc["estimation"]} == estimated
     no_arx = next(m for m in doc["models"] if m["name"] == "no_arx")
@@ -327,7 +339,7 @@ def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     doc = result.to_json_dict()
     assert doc["config"]["seeds"] == [3, 4]
     assert {r["seed"] for r in doc["steering"]} == {3, 4} == {r["seed"] for r in doc["estimation"]}
-    assert len(doc["models"]) == 2 * 3  # every model fitted on each seed's own training run
+    assert len(doc["models"]) == 2 * 4  # every model fitted on each seed's own training run
     per_seed = [r for r in doc["seed_summary"] if r["model"] == "generalized"]
     assert [r["seed"] for r in per_seed] == [3, 4]
     summary = {r["model"]: r for r in doc["summary"]}
@@ -338,10 +350,32 @@ def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     half = 12.706 * np.std(values, ddof=1) / np.sqrt(2)  # Student t, 1 degree of freedom
     assert gen["lateral_rmse_ci_high"] - gen["lateral_rmse"] == pytest.approx(half, rel=1e-3)
     for row in summary.values():
-        if row["kind"] != "baseline":
+        if row["kind"] in ("builtin", "user") and row["lateral_rmse"] is not None:
             assert row["rank_lateral_stability"] in (0.0, 0.5, 1.0)
     text = format_tables(result)
     assert "Verdict over 2 population seeds [3, 4]" in text and "95% CI" in text
+
+
+def test_stress_set_and_unchecked_estimators_are_scored() -> None:
+    config = ProtocolConfig(**(SMALL | {"curved_runs": 0}), stress=True, compare_checks=True)
+    result = run_protocol(config, workers=1)
+    summary = {r["model"]: r for r in result.summary}
+    stress = ["stress_no_lane_info", "stress_sign_flipped", "stress_random_arx",
+              "stress_unregularized"]  # fmt: skip
+    for name in stress:
+        assert summary[name]["kind"] == "stress"
+        assert summary[f"{name} (no checks)"]["kind"] == "unchecked"
+        assert summary[name]["rank_lateral"] is None  # not ranked against real models
+    assert summary["generalized (no checks)"]["estimated_runs"] == 6
+    # the constant-speed least-squares fit is the collinear one of issue 10
+    fit = next(m for m in result.models if m["name"] == "stress_unregularized")
+    assert fit["checks"]["ridge_lambda"] == 0.0
+    assert fit["checks"]["condition_number"] > 1e6 and "ill_conditioned" in fit["checks"]["flags"]
+    # no lane information: the filter stays at the prior and says so
+    rows = [r for r in result.runs_estimation if r["model"] == "stress_no_lane_info"]
+    assert all(r["final_decision"] == "undecided" and not r["wrong_lane_confident"] for r in rows)
+    text = format_tables(result)
+    assert "Lane decisions" in text and "stress_sign_flipped (no checks)" in text
 
 
 # --------------------------------------------------------------- determinism

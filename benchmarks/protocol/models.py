@@ -15,7 +15,13 @@ from typing import Any
 
 import pandas as pd
 
-from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, BenchmarkError
+from benchmarks.protocol.config import (
+    BASELINES,
+    BUILTIN_MODELS,
+    STEERING_BASELINE,
+    BenchmarkError,
+)
+from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.tuning import steering_residual_std
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
@@ -164,8 +170,11 @@ class Candidate:
     model: Any
 
 
-def load_models(user_specs: Sequence[str], errors: list[ModelError]) -> list[Candidate]:
-    """The built-in models and every user model that loads (failures go to ``errors``).
+def load_models(
+    user_specs: Sequence[str], errors: list[ModelError], *, stress: bool = False
+) -> list[Candidate]:
+    """The built-in models, every user model that loads (failures go to ``errors``)
+    and, with ``stress``, the stress set (:mod:`benchmarks.stress`, kind "stress").
 
     Done before any run is generated, so a model that does not import costs
     nothing and is reported at once.
@@ -173,8 +182,16 @@ def load_models(user_specs: Sequence[str], errors: list[ModelError]) -> list[Can
     candidates = [
         Candidate("two_point", "builtin", None, TwoPointModel()),
         Candidate("generalized", "builtin", None, GeneralizedModel()),
+        Candidate(
+            STEERING_BASELINE,
+            "baseline",
+            None,
+            GeneralizedModel(2, 0, 0, 0, name=STEERING_BASELINE),
+        ),
     ]
-    used = set(BUILTIN_MODELS) | set(BASELINES)
+    if stress:
+        candidates += [Candidate(name, "stress", None, model) for name, model in stress_models()]
+    used = set(BUILTIN_MODELS) | set(BASELINES) | set(STRESS_MODELS) | {STEERING_BASELINE}
     for spec in user_specs:
         try:
             model = load_user_model(spec)
@@ -196,9 +213,12 @@ def fit_models(
     *,
     seed: int | None = None,
     sensor_std: float = 0.0,
+    constant_speed_train: pd.DataFrame | None = None,
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
     """Fit every candidate on one training run (a seed's); the fitted models and their
-    descriptions (parameters, training statistics, the fit's checks)."""
+    descriptions (parameters, training statistics, the fit's checks). A stress model
+    that trains on a constant-speed run (``training = "constant_speed"``) gets
+    ``constant_speed_train``; its filter's residual level still comes from ``train``."""
     dt = steering_features(train).attrs.get("dt", 0.01)
     fitted: list[FittedModel] = []
     infos: list[dict[str, Any]] = []
@@ -206,12 +226,17 @@ def fit_models(
         name, kind = candidate.name, candidate.kind
         info: dict[str, Any] = {"name": name, "kind": kind, "spec": candidate.spec, "seed": seed}
         model = copy.deepcopy(candidate.model)
-        if kind == "builtin" and abs(model.dt - dt) > 1e-12:
+        if kind in ("builtin", "baseline") and abs(model.dt - dt) > 1e-12:
             model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
+        own = train
+        if getattr(model, "training", "") == "constant_speed":
+            if constant_speed_train is None:
+                raise BenchmarkError(f"stress model {name!r} needs a constant-speed training run")
+            own = constant_speed_train
         try:
-            model_fitted, info_fit = _fit_one(name, model, train, sensor_std)
+            model_fitted, info_fit = _fit_one(name, model, own, sensor_std, residual_on=train)
         except ModelError as exc:
-            if kind == "builtin":
+            if kind in ("builtin", "stress", "baseline"):
                 raise BenchmarkError(f"the built-in {exc}") from None
             errors.append(exc)
             info["error"] = str(exc)
@@ -219,15 +244,22 @@ def fit_models(
             continue
         info.update(info_fit)
         info["error"] = None
-        fitted.append(FittedModel(name, kind, model_fitted, info_fit["filter_residual_std"]))
+        # the road-blind baseline is a steering reference only: it has no lane information
+        residual = None if kind == "baseline" else info_fit["filter_residual_std"]
+        fitted.append(FittedModel(name, kind, model_fitted, residual))
         infos.append(info)
     return fitted, infos
 
 
 def _fit_one(
-    name: str, model: Any, train: pd.DataFrame, sensor_std: float
+    name: str,
+    model: Any,
+    train: pd.DataFrame,
+    sensor_std: float,
+    residual_on: pd.DataFrame | None = None,
 ) -> tuple[Any, dict[str, Any]]:
-    """Fit one model on the training run; its description; ModelError if it fails."""
+    """Fit one model on the training run; its description; ModelError if it fails.
+    The filter's residual level is measured on ``residual_on`` (default ``train``)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SteeringFitWarning)
         try:
@@ -284,7 +316,9 @@ def _fit_one(
     residual = None
     if arx is not None:
         try:
-            residual = steering_residual_std(arx, train, decision_lag=fitted.decision_lag)
+            residual = steering_residual_std(
+                arx, train if residual_on is None else residual_on, decision_lag=fitted.decision_lag
+            )
         except Exception as exc:  # noqa: BLE001
             raise ModelError(
                 name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"

@@ -12,7 +12,7 @@ from typing import Any
 import pandas as pd
 
 from benchmarks.protocol.config import _ENV_IDS, ILLUSTRATIVE, BenchmarkError, ProtocolConfig
-from hasa_env.drivers import SyntheticDriver, population, run_drivers, run_seeds
+from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
 from hasa_env.recording import load_recording
 
 __all__ = ["RunRef", "chunks", "load_frames", "recording_plan", "synthetic_plan"]
@@ -146,6 +146,17 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
         "driver_order": order,
         "notes": notes,
     }
+
+
+def constant_speed_run(
+    training: RunRef, track: str, env_config: Mapping[str, Any], params: Mapping[str, Any]
+) -> pd.DataFrame:
+    """The training run driven again at constant speed (the driver holds its start speed;
+    same seeds): the closed-loop data that make plain least squares collinear (the
+    stress set's ``stress_unregularized``, :mod:`benchmarks.stress`)."""
+    driver = params[training.driver]
+    held = driver.with_speed(SpeedProfile.hold(driver.speed.max_lateral_acceleration))
+    return load_frames([training], track, env_config, {training.driver: held})[0]
 
 
 def load_frames(

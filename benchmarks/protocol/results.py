@@ -39,6 +39,7 @@ class BenchmarkResult:
         steering: rows per (seed, driver, model), main track (paper table 1).
         curved: rows per (seed, driver, model) on the curved track.
         estimation: rows per (seed, driver, model) incl. the baselines (paper table 2).
+        curved_estimation: the same on the curved track.
         seed_summary: per (seed, model), means over drivers and the ranks.
         summary: per model, the verdict over seeds: means with 95 % confidence
             intervals, ranks and their stability
@@ -55,6 +56,7 @@ class BenchmarkResult:
     steering: list[dict[str, Any]]
     curved: list[dict[str, Any]]
     estimation: list[dict[str, Any]]
+    curved_estimation: list[dict[str, Any]]
     seed_summary: list[dict[str, Any]]
     summary: list[dict[str, Any]]
     runs_steering: list[dict[str, Any]]
@@ -86,6 +88,7 @@ class BenchmarkResult:
             "steering": self.steering,
             "curved": self.curved,
             "estimation": self.estimation,
+            "curved_estimation": self.curved_estimation,
             "seed_summary": self.seed_summary,
             "summary": self.summary,
             "runs_steering": self.runs_steering,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from benchmarks.protocol.config import UNCHECKED_SUFFIX
 from benchmarks.protocol.models import FittedModel, ModelError, describe
 from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
@@ -40,6 +42,8 @@ class ChunkTask:
     error_window: float
     trace_runs: frozenset[tuple[int | None, str, str, int]]
     detail_driver: str
+    compare_checks: bool = False
+    filter_settings: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -147,6 +151,7 @@ def _score_model(
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
         row = scores.iloc[0]
+        lateral = frame["lateral_offset"].to_numpy(dtype=np.float64)
         out.steering.append(
             {
                 "seed": ref.seed,
@@ -161,6 +166,10 @@ def _score_model(
                 "n": int(row["n"]),
                 "free_run_rmse": float(row["free_run_rmse"]) if free_run else None,
                 "free_run_diverged": bool(row["free_run_diverged"]) if free_run else None,
+                # how the driver drove this run (the same for every model)
+                "sdlp": float(np.std(lateral)),
+                "max_abs_lateral_offset": float(np.max(np.abs(lateral))),
+                "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
             }
         )
         if task.estimate and ref.driver == task.detail_driver:
@@ -206,14 +215,26 @@ def _estimate(
         if fm.residual_std is None or fm.name in failed:
             continue
 
-        def make(settings: Any, fm: FittedModel = fm) -> Any:
+        def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
             return GaussianMixtureEKF(
                 fm.model.arx(),
-                replace(settings, steering_residual_std=max(fm.residual_std, 1e-9)),
+                replace(
+                    settings,
+                    steering_residual_std=max(fm.residual_std, 1e-9),
+                    evidence_checks=checks,
+                ),
                 decision_lag=fm.model.decision_lag,
             )
 
         estimators.append((fm.name, fm.kind, make))
+        if task.compare_checks:
+            estimators.append(
+                (
+                    f"{fm.name}{UNCHECKED_SUFFIX}",
+                    fm.kind,
+                    lambda s, fm=fm, make=make: make(s, fm, checks=False),
+                )
+            )
     estimators.append(("no_steering", "baseline", lambda s: NoSteeringEKF(s)))
     estimators.append(("oracle", "baseline", lambda s: OracleEKF(None, s)))
     for name, kind, make in estimators:
@@ -221,18 +242,20 @@ def _estimate(
         try:
             for indices in groups.values():
                 group = [frames[i] for i in indices]
-                settings = FilterSettings.from_env_config(group[0].attrs["config"])
+                settings = FilterSettings.from_env_config(
+                    group[0].attrs["config"], **task.filter_settings
+                )
                 result = run_estimator(make(settings), group)
                 rows += _estimation_rows(task, indices, result, name, out)
         except ModelError:
             raise
         except Exception as exc:  # noqa: BLE001
-            if kind != "user":
+            if kind not in ("user", "stress"):
                 raise
             out.failures.append(ModelError(name, "estimate", f"the filter raised {describe(exc)}"))
             continue
         bad = [r for r in rows if not math.isfinite(r["lateral_rmse"])]
-        if bad and kind == "user":
+        if bad and kind in ("user", "stress"):
             out.failures.append(
                 ModelError(
                     name,
@@ -257,6 +280,18 @@ def _estimation_rows(
     final_true = result.picked_true_lane()
     last = result.lengths - 1
     final_weight = true_weight[np.arange(len(refs)), last]
+    final_decision = result.final_decision()
+    wrong_confident = result.wrong_lane_confident(task.weight_threshold)
+    wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
+    nees = result.lateral_nees()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
+        model_error = np.nanmedian(result.model_error, axis=1)
+    nis = (
+        result.mean_channel_nis()
+        if result.channel_nis is not None
+        else np.full((len(refs), 3), np.nan)
+    )
     n_window = int(round(task.error_window / float(np.nanmedian(np.diff(result.time[0]))))) + 1
     rows = []
     for j, ref in enumerate(refs):
@@ -271,6 +306,14 @@ def _estimation_rows(
                 "steps_to_decide": None if not np.isfinite(steps[j]) else int(steps[j]),
                 "true_lane_final": bool(final_true[j]),
                 "final_true_lane_weight": float(final_weight[j]),
+                "final_decision": str(final_decision[j]),
+                "wrong_lane_confident": bool(wrong_confident[j]),
+                "wrong_lane_confident_share": float(wrong_share[j]),
+                "lateral_nees": float(nees[j]),
+                "model_error_median": float(model_error[j]),
+                "nis_speed": float(nis[j, 0]),
+                "nis_camera": float(nis[j, 1]),
+                "nis_steering": float(nis[j, 2]),
                 "bias": float(bias0[j]),
             }
         )
