@@ -20,6 +20,13 @@ from hasa_env.sim.setup import RECORDING_COLUMNS, RESET_OPTIONS, recording_row
 __all__ = ["ReplayCheck", "check_replay", "compare_recordings", "replay", "replay_actions"]
 
 
+RESET_LATERAL_LIMIT = 30.0
+"""Largest |lateral_offset| (m) ``env.reset(options=...)`` accepts (the env's own limit)."""
+
+RESET_HEADING_LIMIT = 0.5 * math.pi
+"""Largest |heading| (rad) ``env.reset(options=...)`` accepts (the env's own limit)."""
+
+
 # -------------------------------------------------------------------- replay
 def _data(recording: Recording | pd.DataFrame) -> pd.DataFrame:
     if isinstance(recording, Recording):
@@ -49,8 +56,8 @@ def _replay_options(
     else:
         options["bias"] = float(row0["bias"])
     limits = {
-        "lateral_offset": (-10.0, 10.0),
-        "heading": (-1.0, 1.0),
+        "lateral_offset": (-RESET_LATERAL_LIMIT, RESET_LATERAL_LIMIT),
+        "heading": (-RESET_HEADING_LIMIT, RESET_HEADING_LIMIT),
         "speed": (0.0, config["vehicle"]["max_speed"]),
         "steering": (-config["action"]["max_steering"], config["action"]["max_steering"]),
     }
