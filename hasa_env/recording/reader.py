@@ -73,7 +73,9 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
 def _load_recording(path: str | os.PathLike[str]) -> Recording:
     csv_path, json_path = _paths(path)
     if not os.path.lexists(csv_path) and not os.path.lexists(json_path):
-        raise RecordingError(f"no such recording (neither it nor {json_path.name} exists)", csv_path)
+        raise RecordingError(
+            f"no such recording (neither it nor {json_path.name} exists)", csv_path
+        )
     meta = _read_sidecar(json_path)
     try:
         text = _read_regular(csv_path, "the CSV")
