@@ -107,9 +107,16 @@ def run_protocol(
     start = time.perf_counter()
     errors: list[ModelError] = []
     notes: list[str] = []
+    skipped: list[dict[str, str]] = []
+    paths: dict[tuple[int | None, str, str, int], str] = {}
 
-    # 0. every model loads before any run is generated
-    candidates = load_models(user_models, errors)
+    # 0. every model loads before any run is generated: one that does not is an input error
+    candidates = load_models(user_models, errors, time_limit=config.model_time_limit)
+    if errors:
+        raise BenchmarkError(
+            f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
+            "run:\n" + "\n".join(f"  {e}" for e in errors)
+        )
 
     # 1.-2. per seed: the runs, the training run, the fits
     tasks: list[ChunkTask] = []
@@ -124,14 +131,15 @@ def run_protocol(
         illustrative = plan["illustrative"]
         main_runs: list[RunRef] = plan["main"]
         curved_runs: list[RunRef] = plan["curved"]
+        training_index = plan.get("training_run", config.training_run)
         training = next(
-            (r for r in main_runs if r.driver == illustrative and r.index == config.training_run),
+            (r for r in main_runs if r.driver == illustrative and r.index == training_index),
             None,
         )
         where = "" if seed is None else f" (seed {seed})"
         if training is None:
             raise BenchmarkError(
-                f"no run {config.training_run} of the illustrative driver {illustrative!r} on "
+                f"no run {training_index} of the illustrative driver {illustrative!r} on "
                 f"the {config.track} track to train on{where}"
             )
         validation = [r for r in main_runs if r is not training]
@@ -146,7 +154,11 @@ def run_protocol(
         train_frame = load_frames([training], config.track, plan["env_config"], plan["params"])[0]
         t0 = time.perf_counter()
         sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
-        fitted, info = fit_models(train_frame, candidates, errors, seed=seed, sensor_std=sensor_std)
+        fitted, info = fit_models(
+            train_frame, candidates, errors, seed=seed, sensor_std=sensor_std,
+            time_limit=config.model_time_limit,
+        )  # fmt: skip
+        skipped += plan.get("skipped", [])
         t_fit += time.perf_counter() - t0
         fitted_by_seed[seed] = fitted
         model_info += info
@@ -168,6 +180,7 @@ def run_protocol(
             "error_window": config.error_window,
             "trace_runs": frozenset(trace_runs) if is_first else frozenset(),
             "detail_driver": illustrative if is_first else "",
+            "time_limit": config.model_time_limit,
         }
         tasks += [
             ChunkTask(runs=tuple(chunk), track="curved", estimate=False, **common)
@@ -177,6 +190,7 @@ def run_protocol(
             ChunkTask(runs=tuple(chunk), track=config.track, estimate=True, **common)
             for chunk in chunks(validation, config.batch_size)
         ]
+        paths.update({r.key: r.path for r in validation + curved_runs if r.path is not None})
     timing["fit"] = t_fit
 
     # 3. every seed's tasks at once
@@ -233,6 +247,7 @@ def run_protocol(
         else []
     )
     estimation_rows = aggregate_estimation(runs_estimation)
+    degenerate = _degenerate_runs(runs_steering + runs_estimation, paths)
     seed_summary = summarize_seeds(steering_rows, estimation_rows, ok_models)
     summary = verdict(seed_summary, ok_models)
     plots = plot_data(
@@ -272,7 +287,25 @@ def run_protocol(
         executor=executor,
         versions=versions(),
         notes=notes,
+        skipped=skipped,
+        degenerate=degenerate,
     )
+
+
+def _degenerate_runs(
+    rows: Sequence[dict[str, Any]], paths: dict[tuple[int | None, str, str, int], str]
+) -> list[dict[str, Any]]:
+    """One entry per run left out of the means as degenerate (its key, file and reason)."""
+    seen: dict[tuple[int | None, str, str, int], dict[str, Any]] = {}
+    for row in rows:
+        reason = row.get("degenerate")
+        key = (row.get("seed"), row["driver"], row["track"], row["run"])
+        if reason and key not in seen:
+            seen[key] = {
+                "seed": key[0], "driver": key[1], "track": key[2], "run": key[3],
+                "file": paths.get(key), "reason": reason,
+            }  # fmt: skip
+    return list(seen.values())
 
 
 def _row_order(
