@@ -15,16 +15,15 @@ import pandas as pd
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording.format import Recording, _frame
 from hasa_env.sim.config import deep_merge
-from hasa_env.sim.setup import RECORDING_COLUMNS, RESET_OPTIONS, recording_row
+from hasa_env.sim.setup import (
+    RECORDING_COLUMNS,
+    RESET_HEADING_LIMIT,
+    RESET_LATERAL_LIMIT,
+    RESET_OPTIONS,
+    recording_row,
+)
 
 __all__ = ["ReplayCheck", "check_replay", "compare_recordings", "replay", "replay_actions"]
-
-
-RESET_LATERAL_LIMIT = 30.0
-"""Largest |lateral_offset| (m) ``env.reset(options=...)`` accepts (the env's own limit)."""
-
-RESET_HEADING_LIMIT = 0.5 * math.pi
-"""Largest |heading| (rad) ``env.reset(options=...)`` accepts (the env's own limit)."""
 
 
 # -------------------------------------------------------------------- replay
