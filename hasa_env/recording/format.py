@@ -279,15 +279,30 @@ def _read_regular(path: Path, what: str) -> str:
         OSError, UnicodeDecodeError: unreadable (the message says why, e.g. a FIFO).
     """
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    with open(fd, "rb") as f:
-        info = os.fstat(f.fileno())
+    try:
+        info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            kind = "a FIFO" if stat.S_ISFIFO(info.st_mode) else "not a regular file"
-            raise OSError(f"{what} is {kind}, not a regular file")
+            raise OSError(f"{what} is {_file_kind(info.st_mode)}, not a regular file")
         if info.st_size > MAX_FILE_BYTES:
             raise OSError(f"{what} is {info.st_size} bytes, more than the {MAX_FILE_BYTES} read")
+    except BaseException:
+        os.close(fd)
+        raise
+    with open(fd, "rb") as f:
         data = f.read()
     return data.decode("utf-8")
+
+
+def _file_kind(mode: int) -> str:
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "a special file"
 
 
 def _format_value(column: str, value: Any) -> str:
@@ -505,7 +520,8 @@ def _check_table(
     if bad.size:
         i = int(bad[0])
         raise RecordingError(
-            f"time = {time[i]!r} s does not match step {i}: expected {expected[i]!r} s "
+            f"time = {float(time[i])!r} s does not match step {i}: expected "
+            f"{float(expected[i])!r} s "
             f"(step x {dt_step!r} s per env step, from the config's sim_frequency and "
             "action_repeat)",
             source,

@@ -20,6 +20,7 @@ from hasa_env.recording.format import (
     RecordingList,
     RecordingWarning,
     _check_table,
+    _file_kind,
     _frame,
     _magnitude_limit,
     _parse_lines,
@@ -76,7 +77,16 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
         raise RecordingError(
             f"no such recording (neither it nor {json_path.name} exists)", csv_path
         )
-    meta = _read_sidecar(json_path)
+    try:
+        meta = _read_sidecar(json_path)
+    except RecordingError as exc:
+        if exc.reason.startswith("missing sidecar") and _is_started_episode(csv_path):
+            raise RecordingError(
+                "incomplete: its recorder stopped while starting the episode (no sidecar yet, "
+                "at most the reset row written); nothing of it can be used",
+                csv_path,
+            ) from None
+        raise
     try:
         text = _read_regular(csv_path, "the CSV")
     except FileNotFoundError:
@@ -127,6 +137,15 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
         "path": str(csv_path),
     }
     return Recording(frame, meta, csv_path, notes)
+
+
+def _is_started_episode(csv_path: Path) -> bool:
+    """A CSV that a recorder had only begun: empty, or at most the header and row 0."""
+    try:
+        text = _read_regular(csv_path, "the CSV")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return text.count("\n") <= 2 and (not text or text.startswith(RECORDING_COLUMNS[0] + ","))
 
 
 def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) -> RecordingList:
@@ -320,8 +339,8 @@ def read_parquet(path: str | os.PathLike[str]) -> Recording:
             bad = np.flatnonzero(~(np.abs(values) <= limit))
             if bad.size:
                 raise RecordingError(
-                    f"row {int(bad[0])}: {values[bad[0]]!r} is not a finite value of at most "
-                    f"{limit:g} in magnitude",
+                    f"row {int(bad[0])}: {float(values[bad[0]])!r} is not a finite value of at "
+                    f"most {limit:g} in magnitude",
                     path,
                     column=column,
                 )
@@ -345,5 +364,4 @@ def _check_regular(path: Path, what: str) -> None:
     """Raise OSError unless ``path`` is a regular file (a FIFO would block the reader)."""
     info = os.stat(path)
     if not stat.S_ISREG(info.st_mode):
-        kind = "a FIFO" if stat.S_ISFIFO(info.st_mode) else "not a regular file"
-        raise OSError(f"{what} is {kind}")
+        raise OSError(f"{what} is {_file_kind(info.st_mode)}, not a regular file")

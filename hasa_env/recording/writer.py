@@ -251,9 +251,13 @@ class RecordingWrapper(gym.Wrapper):
         )
         self._sidecar = sidecar
         try:
+            # header and row 0 in one write, then the sidecar: a process killed in between
+            # leaves a CSV of at most its reset row and no sidecar, which the loader names
+            # as an episode that was being started (nothing of it had been returned yet)
+            self._write_text(_HEADER + _format_row(recording_row(0, info, 0.0, False, False)),
+                             "the header and row 0")  # fmt: skip
+            self._rows = 1
             _write_atomic(self._sidecar_path, _to_json(sidecar))
-            self._write_text(_HEADER, "the header")
-            self._write(recording_row(0, info, 0.0, False, False))
         except (OSError, RecordingError):
             # nothing of this episode is recorded: leave no half-made recording behind
             fd, self._fd = self._fd, None
