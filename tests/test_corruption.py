@@ -282,13 +282,13 @@ BAD: dict[str, Maker] = {
     "time mismatch": _cell(9, "time", "0.5"),
     "time NaN": _cell(9, "time", "nan"),
     "time of another rate": _text_edit(
-        lambda t: "\n".join(
-            ",".join(
-                [f[0], repr(float(f[1]) * 2)] + f[2:] if i else f
+        lambda t: (
+            "\n".join(
+                ",".join([f[0], repr(float(f[1]) * 2)] + f[2:] if i else f)
+                for i, f in enumerate(ln.split(",") for ln in t.split("\n")[:-1])
             )
-            for i, f in enumerate(ln.split(",") for ln in t.split("\n")[:-1])
+            + "\n"
         )
-        + "\n"
     ),
     # the CSV is not a file
     "CSV is a FIFO": _replace_csv(lambda p: os.mkfifo(p)),
@@ -301,14 +301,18 @@ BAD: dict[str, Maker] = {
     "sidecar not JSON": _sidecar_text(lambda t: "schema_version: 1"),
     "sidecar cut": _sidecar_text(lambda t: t[: len(t) // 2]),
     "sidecar with a BOM": _sidecar_text(lambda t: b"\xef\xbb\xbf" + t.encode()),
-    "sidecar in latin-1": _sidecar_text(lambda t: t.replace("hasa_env", "h\xe4sa_env").encode("latin-1")),
+    "sidecar in latin-1": _sidecar_text(
+        lambda t: t.replace("hasa_env", "h\xe4sa_env").encode("latin-1")
+    ),
     "sidecar is a FIFO": _replace_sidecar(lambda p: os.mkfifo(p)),
     "sidecar is a directory": _replace_sidecar(lambda p: p.mkdir()),
     "sidecar an array": _sidecar(lambda meta: [1, 2]),
     "sidecar null": _sidecar_text(lambda t: "null"),
     "sidecar a string": _sidecar_text(lambda t: '"run"'),
     "sidecar deeply nested": _sidecar_text(lambda t: "[" * 100_000 + "]" * 100_000),
-    "sidecar huge integer": _sidecar_text(lambda t: t.replace('"seed": ', '"seed": ' + "9" * 5000 + ", \"x\": ", 1)),
+    "sidecar huge integer": _sidecar_text(
+        lambda t: t.replace('"seed": ', '"seed": ' + "9" * 5000 + ', "x": ', 1)
+    ),
     "sidecar NaN": _sidecar_text(lambda t: t.replace('"seed": ', '"seed": NaN, "y": ', 1)),
     # sidecar: fields
     "schema_version 2": _set(schema_version=2),
@@ -457,7 +461,9 @@ def test_hasa_replay_names_every_bad_file_and_replays_every_good_one(batch, caps
     out, err = capsys.readouterr()
     assert code == 1
     assert not _named(err, batch["bad"])
-    assert all(line.startswith("hasa-replay: error: ") for line in err.splitlines() if line[:1] != " ")
+    assert all(
+        line.startswith("hasa-replay: error: ") for line in err.splitlines() if line[:1] != " "
+    )
     for stem in [*batch["good"], *batch["benign"].values()]:
         line = next(ln for ln in out.splitlines() if f"{stem}." in ln)
         assert "replay matches the recording bit for bit" in line, line

@@ -393,7 +393,13 @@ def _action_array(action: Any, expected: tuple[int, ...]) -> np.ndarray:
     )
     if isinstance(action, np.ma.MaskedArray):
         raise ValueError(f"{what} must be a plain array of numbers, got a masked array")
-    raw = np.asarray(action)
+    try:
+        raw = np.asarray(action)
+    except (ValueError, TypeError, OverflowError):  # ragged lists, mixed str/bytes, ...
+        raise ValueError(
+            f"{what} must be an array of real numbers of shape {expected} ({layout}), got "
+            f"{type(action).__name__} {action!r:.80}"
+        ) from None
     if raw.dtype.kind not in "iuf":
         raise ValueError(
             f"{what} must be real numbers (int or float), got dtype {raw.dtype} ({action!r:.80})"
