@@ -16,7 +16,7 @@ from typing import Any, TypeVar
 
 __all__ = ["SCHEDULER_TIMEOUT", "SchedulerError", "check_scheduler", "default_workers", "map_tasks"]
 
-SCHEDULER_TIMEOUT = 9.0
+SCHEDULER_TIMEOUT = 6.0
 """Seconds :func:`check_scheduler` waits, in all, for a Dask scheduler to answer."""
 
 _SCHEMES = ("tcp", "tls", "ws", "wss", "inproc", "ucx")

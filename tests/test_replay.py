@@ -172,3 +172,20 @@ def test_paper_presets_are_scored_in_steering_wheel_units(capsys):
     # the paper's generalized coefficients describe the steering-wheel angle (ratio 15)
     assert r2([]) > 0.5
     assert r2(["--steering-ratio", "1"]) < 0.0
+
+
+def test_replay_accepts_every_start_that_reset_accepts(tmp_path):
+    """Replay passes row 0 as reset options within reset's own limits (+-30 m, +-pi/2 rad)."""
+    import gymnasium as gym
+
+    from hasa_env.recording import RecordingWrapper, check_replay, load_recording
+
+    config = {"road": {"lanes_left": 5, "lane_width": 6.0}, "time_limit": 0.5}
+    env = RecordingWrapper(gym.make("hasa_env/LaneKeeping-v0", config=config), tmp_path)
+    env.reset(seed=4, options={"lateral_offset": 21.5, "heading": 1.3})
+    for _ in range(50):
+        env.step(np.zeros(2, dtype=np.float32))
+    env.close()
+    rec = load_recording(env.path)
+    assert rec.data["lateral_offset"].iloc[0] == 21.5 and rec.data["heading"].iloc[0] == 1.3
+    assert check_replay(rec).matches
