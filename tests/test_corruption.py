@@ -514,3 +514,12 @@ def test_hasa_bench_skips_and_names_every_bad_file_and_scores_the_rest(batch, tm
     runs = {(r["driver"], r["run"]) for r in doc["runs_estimation"] if r["model"] == "oracle"}
     assert len(runs) == len(scored) - 1  # every run but the training run is estimated
     assert all(np.isfinite(r["lateral_rmse"]) for r in doc["runs_estimation"])
+
+
+def test_other_json_documents_in_a_folder_are_not_taken_for_orphan_sidecars(good, tmp_path):
+    _copy(good[0], tmp_path / good[0].name)
+    (tmp_path / "session.json").write_text('{"format": "hasa_env study session", "runs": []}')
+    (tmp_path / "orphan.json").write_text('{"schema_version": 1}')
+    loaded = load_paths([tmp_path])
+    assert len(loaded) == 1
+    assert [e.path.name for e in loaded.errors] == ["orphan.csv"]

@@ -139,6 +139,17 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(frame, meta, csv_path, notes)
 
 
+def _other_document(path: Path) -> bool:
+    """A JSON file that says it is something else than a recording's sidecar (a study's
+    session file, a calibration, a model file: its ``format`` names another document)."""
+    try:
+        doc = json.loads(_read_regular(path, "the file"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    fmt = doc.get("format") if isinstance(doc, dict) else None
+    return isinstance(fmt, str) and fmt != "hasa_env recording"
+
+
 def _is_started_episode(csv_path: Path) -> bool:
     """A CSV that a recorder had only begun: empty, or at most the header and row 0."""
     try:
@@ -155,7 +166,9 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
     is reported with a :class:`RecordingWarning` naming the file, line and
     column, and collected in the result's ``errors`` list
     (:class:`RecordingError` objects; ``error.path`` is the file). A sidecar
-    without its CSV counts as corrupt too. With ``strict=True`` a
+    without its CSV counts as corrupt too; a JSON file whose ``format`` names
+    another kind of document (a study's session file, a calibration) is not
+    a recording and is left alone. With ``strict=True`` a
     :class:`RecordingError` listing every corrupt file is raised instead
     (its ``loaded`` attribute holds the recordings that did load).
     """
@@ -174,7 +187,7 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
             errors.append(exc)
     stems = {p.stem for p in csvs}
     for side in sorted(root.glob("*.json")):
-        if side.stem not in stems:
+        if side.stem not in stems and not _other_document(side):
             errors.append(RecordingError("sidecar without its CSV file", side.with_suffix(".csv")))
     result = RecordingList(good, errors)
     if errors and strict:
