@@ -130,12 +130,12 @@ def test_hanging_and_exiting_models_fail_alone(hostile_module, reference):
     specs = [f"{hostile_module}:{name}" for name in
              ("Mutator", "SleepyFit", "ExitInFit", "HardExitInPredict")]  # fmt: skip
     started = time.perf_counter()
-    result = run_protocol(ProtocolConfig(**SMALL, model_time_limit=3.0), specs, workers=1)
-    assert time.perf_counter() - started < 45  # the sleeping fit was stopped at 3 s
+    result = run_protocol(ProtocolConfig(**SMALL, model_time_limit=2.0), specs, workers=1)
+    assert time.perf_counter() - started < 45  # the sleeping fit was stopped at 2 s
     errors = {e["model"]: e for e in result.errors}
     assert set(errors) == {"sleepy_fit", "exit_in_fit", "hard_exit"}
     assert errors["sleepy_fit"]["stage"] == "fit"
-    assert "longer than the time limit of 3 s" in errors["sleepy_fit"]["message"]
+    assert "longer than the time limit of 2 s" in errors["sleepy_fit"]["message"]
     assert errors["exit_in_fit"]["stage"] == "fit"
     assert "SystemExit: 3" in errors["exit_in_fit"]["message"]
     assert errors["hard_exit"]["stage"] == "score"

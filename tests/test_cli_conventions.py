@@ -150,8 +150,9 @@ def test_calibrate_without_a_wheel_ends_on_ctrl_c_and_sigterm(tmp_path):
     for signum in (signal.SIGINT, signal.SIGTERM):  # both at once: one start-up's wait
         out = tmp_path / f"cal_{signum}.json"
         procs[signum] = subprocess.Popen(
-            [sys.executable, "-c", "import sys; from hasa_cli.drive import main; "
-             f"sys.exit(main(['calibrate', '--output', {str(out)!r}, '--timeout', '60']))"],
+            [sys.executable, "-c", "import sys; from hasa_env.devices.calibrator import calibrate; "
+             f"sys.exit(calibrate({str(out)!r}, wheel_range_deg=900.0, steering_ratio=15.0, "
+             "timeout=60.0, log=lambda s: print(s, flush=True)))"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True,
         )  # fmt: skip
     try:
