@@ -27,12 +27,13 @@ import argparse
 import os
 import signal
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from estimators.wrappers import estimator_wrapper
-from hasa_cli import EXIT_ENVIRONMENT
+from hasa_cli import EXIT_ENVIRONMENT, EXIT_USAGE, add_version, console_script, error
 from hasa_env.devices.calibration import (
     CalibrationError,
     JoystickCalibration,
@@ -79,7 +80,7 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
         default=None,
         help="camera bias b in metres for every run, or 'random' (default: drawn per run)",
     )
-    p.add_argument("--runs", type=int, default=10, help="number of runs (default 10)")
+    p.add_argument("--runs", type=int, default=10, help="number of runs (default %(default)s)")
     p.add_argument("--seconds", type=float, default=30.0, help="length of a run in s (default 30)")
     p.add_argument("--speed", type=float, default=15.0, help="initial speed in m/s (default 15)")
     p.add_argument(
@@ -116,13 +117,13 @@ def _joystick_profiles(path: Path | None, log: Callable[[str], None]) -> list[Jo
 def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     reason = no_screen_reason()
     if reason is not None:
-        print(
-            f"hasa-drive: no screen to drive on: {reason}.\n"
+        error(
+            "hasa-drive",
+            f"no screen to drive on: {reason}.\n"
             "hasa-drive shows the road to a human driver and needs a display. Run it in a desktop "
             "session (for a test without one: xvfb-run hasa-drive ...). Headless work: hasa-replay "
             "replays and checks recordings, and 'hasa-drive synthetic' drives a synthetic driver "
             "through a virtual wheel.",
-            file=sys.stderr,
         )
         return EXIT_NO_SCREEN
     try:
@@ -156,17 +157,18 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
             env_wrapper = estimator_wrapper(model, ratio)
             env_wrapper(probe)  # fail now, not after the countdown
     except (ValueError, ConfigError, ImportError, OSError) as exc:
-        print(f"hasa-drive: {exc}", file=sys.stderr)
-        return 2
+        error("hasa-drive", str(exc))
+        return EXIT_USAGE
+    problem = _unwritable(settings.directory)
+    if problem is not None:
+        error("hasa-drive", problem)
+        return EXIT_USAGE
     try:
         pg = init_pygame_input()
         flags = pg.FULLSCREEN if args.fullscreen else 0
         display = pg.display.set_mode((args.width, args.height), flags)
     except Exception as exc:  # noqa: BLE001 - pygame.error and friends: no usable screen
-        print(
-            f"hasa-drive: no screen to drive on: pygame could not open a window ({exc})",
-            file=sys.stderr,
-        )
+        error("hasa-drive", f"no screen to drive on: pygame could not open a window ({exc})")
         return EXIT_NO_SCREEN
     pg.display.set_caption(f"hasa-drive: {settings.participant}")
     inputs = InputManager(keyboard, profiles, use_joystick=not args.keyboard_only, pygame_module=pg)
@@ -198,6 +200,17 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     return 0
 
 
+def _unwritable(directory: Path) -> str | None:
+    """Why recordings cannot be written into ``directory`` (checked before any window opens)."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        return f"cannot write recordings to {directory}: {exc.strerror or exc}"
+    return None
+
+
 def _probe_env(settings: DriveSettings) -> Any:
     return LaneKeepingEnv(config=settings.env_config())
 
@@ -221,11 +234,11 @@ def _start_autocentre(inputs: InputManager, strength: float, log: Callable[[str]
 def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
     if args.driver not in drivers:
-        print(
-            f"hasa-drive: unknown driver {args.driver!r}; this population has {', '.join(drivers)}",
-            file=sys.stderr,
+        error(
+            "hasa-drive",
+            f"unknown driver {args.driver!r}; this population has {', '.join(drivers)}",
         )
-        return 2
+        return EXIT_USAGE
     params = drivers[args.driver]
     participant = (
         args.participant or f"synthetic-{args.population}-{args.population_seed}-{args.driver}"
@@ -246,15 +259,19 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         )
         settings.env_config()
     except (ValueError, ConfigError) as exc:
-        print(f"hasa-drive: {exc}", file=sys.stderr)
-        return 2
+        error("hasa-drive", str(exc))
+        return EXIT_USAGE
+    problem = _unwritable(settings.directory)
+    if problem is not None:
+        error("hasa-drive", problem)
+        return EXIT_USAGE
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     pg = init_pygame_input()
     try:
         wheel = VirtualJoystick.g29()
     except VirtualJoystickUnavailable as exc:
-        print(f"hasa-drive: cannot create the virtual wheel: {exc}", file=sys.stderr)
-        return 1
+        error("hasa-drive", f"cannot create the virtual wheel: {exc}")
+        return EXIT_ENVIRONMENT
     g29 = shipped_calibration("g29")
     assert isinstance(g29, JoystickCalibration)
     profile = JoystickCalibration(**{**_fields(g29), "match_names": (wheel.name,)})
@@ -290,6 +307,7 @@ def _fields(cal: JoystickCalibration) -> dict[str, Any]:
     return {k: getattr(cal, k) for k in cal.__dataclass_fields__ if k != "device"}
 
 
+@console_script("hasa-drive")
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-drive`` (see the module docstring)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -299,6 +317,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             prog="hasa-drive calibrate",
             description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
         )
+        add_version(p)
         p.add_argument("--output", type=Path, default=user_calibration_path(), help="file to write")
         p.add_argument(
             "--wheel-range", type=float, default=900.0, help="lock-to-lock range in degrees"
@@ -323,20 +342,24 @@ def main(argv: Sequence[str] | None = None) -> int:
             "virtual G29 "
             "(headless; the recordings are labelled synthetic).",
         )
+        add_version(p)
         _add_session_arguments(p, participant_required=False)
         p.add_argument(
             "--driver", default="Ill", help="driver name in the population (default Ill)"
         )
         p.add_argument("--population", default="paper", help="population name (default paper)")
         p.add_argument("--population-seed", type=int, default=0, help="population seed (default 0)")
-        p.set_defaults(runs=1)
+        p.set_defaults(runs=1)  # the help shows it: "(default %(default)s)"
         return _synthetic(p.parse_args(argv[1:]), log)
     p = argparse.ArgumentParser(
         prog="hasa-drive",
         description="Drive the lane-keeping env with a wheel (G29), a joystick or the keyboard; "
         "record each run. "
         "Subcommands: 'hasa-drive calibrate', 'hasa-drive synthetic' (see their --help).",
+        epilog="Exit status: 0 ok, 1 fewer runs than asked, 2 usage or input error, "
+        "3 no screen or no virtual wheel.",
     )
+    add_version(p)
     _add_session_arguments(p, participant_required=True)
     p.add_argument(
         "--countdown", type=float, default=3.0, help="countdown before each run in s (default 3)"

@@ -18,8 +18,11 @@ Three levels, all with pandas ``groupby``:
    is the share of seeds on which a model holds its overall rank (the rank
    of its mean over seeds).
 
-Degenerate runs (a non-finite score, e.g. a recording too short to score)
-are counted per row (``degenerate_runs``) and left out of the means.
+Degenerate runs are counted per row (``degenerate_runs``), left out of the
+means and of ``n_runs``: a run whose rows carry a ``degenerate`` reason
+(:func:`benchmarks.protocol.tasks.degenerate_reason`: too short, steering
+that does not vary, a car that stands; the same runs for every model), and
+a row whose score is not finite.
 """
 
 from __future__ import annotations
@@ -81,9 +84,27 @@ def _finite_std(values: pd.Series) -> float:
     return float(arr.std(ddof=1)) if arr.size > 1 else float("nan")
 
 
-def _count_degenerate(values: pd.Series) -> int:
-    arr = pd.to_numeric(values, errors="coerce").to_numpy(dtype=np.float64)
-    return int(np.sum(~np.isfinite(arr)))
+def _without_degenerate(frame: pd.DataFrame, key: str, columns: Sequence[str]) -> pd.DataFrame:
+    """``frame`` with a bool ``_degenerate`` column (a ``degenerate`` reason, or a non-finite
+    ``key``) and, in those rows, NaN in ``columns``: left out of every mean and count."""
+    values = pd.to_numeric(frame[key], errors="coerce").to_numpy(dtype=np.float64)
+    flagged = ~np.isfinite(values)
+    if "degenerate" in frame:
+        flagged |= frame["degenerate"].notna().to_numpy()
+    frame = frame.copy()
+    frame["_degenerate"] = flagged
+    for column in columns:
+        if column in frame:
+            frame[column] = frame[column].astype(object).where(~flagged, None)
+    return frame
+
+
+def _kept(flags: pd.Series) -> int:
+    return int((~flags.astype(bool)).sum())
+
+
+def _count(flags: pd.Series) -> int:
+    return int(flags.astype(bool).sum())
 
 
 def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[dict]:
@@ -93,18 +114,23 @@ def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) ->
         return []
     frame = _frame(rows)
     frame = frame[frame["model"].isin(models)]
+    scored = ("n", "rmse", "r2", "r2_increments", "ljung_box_p", "free_run_rmse",
+              "free_run_diverged")  # fmt: skip
+    frame = _without_degenerate(frame, "rmse", scored)
     grouped = frame.groupby(_GROUP, sort=False, dropna=False)
     table = grouped.agg(
-        n_runs=("rmse", "size"),
-        n_samples=("n", "sum"),
+        n_runs=("_degenerate", _kept),
+        n_samples=("n", lambda n: int(pd.to_numeric(n).fillna(0).sum())),
         rmse=("rmse", _finite_mean),
         rmse_std=("rmse", _finite_std),
         r2=("r2", _finite_mean),
         r2_increments=("r2_increments", _finite_mean),
-        degenerate_runs=("rmse", _count_degenerate),
+        degenerate_runs=("_degenerate", _count),
         ljung_box_p_median=(
             "ljung_box_p",
-            lambda p: float(np.nanmedian(p)) if np.isfinite(p.astype(float)).any() else None,
+            lambda p: (
+                float(np.nanmedian(p.astype(float))) if np.isfinite(p.astype(float)).any() else None
+            ),
         ),
         white_runs=("ljung_box_p", lambda p: int(np.sum(p.astype(float) > 0.05))),
         **(
@@ -189,22 +215,29 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
     if not rows:
         return []
     frame = _frame(rows)
+    frame = _without_degenerate(
+        frame, "lateral_rmse",
+        ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight"),
+    )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (
         frame.groupby(_GROUP, sort=False, dropna=False)
         .agg(
-            n_runs=("lateral_rmse", "size"),
+            n_runs=("_degenerate", _kept),
             lateral_rmse_mean=("lateral_rmse", _finite_mean),
             lateral_rmse_std=("lateral_rmse", _finite_std),
-            lateral_rmse_max=("lateral_rmse", lambda v: float(np.nanmax(v)) if len(v) else None),
-            degenerate_runs=("lateral_rmse", _count_degenerate),
+            lateral_rmse_max=(
+                "lateral_rmse",
+                lambda v: float(np.nanmax(v.astype(float))) if v.notna().any() else None,
+            ),
+            degenerate_runs=("_degenerate", _count),
             steps_to_decide_median=(
                 "steps",
                 lambda v: float(v.median()) if v.notna().any() else None,
             ),
             steps_to_decide_max=("steps", lambda v: float(v.max()) if v.notna().any() else None),
             decided_runs=("steps", lambda v: int(v.notna().sum())),
-            true_lane_final_runs=("true_lane_final", lambda v: int(v.astype(bool).sum())),
+            true_lane_final_runs=("true_lane_final", lambda v: int((v == True).sum())),  # noqa: E712
             final_true_lane_weight_mean=("final_true_lane_weight", _finite_mean),
             wrong_lane_confident_runs=(
                 "wrong_lane_confident",
@@ -306,6 +339,12 @@ def summarize_seeds(
                 "nis_steering": _finite_mean(ee["nis_steering"]) if len(ee) else None,
                 "curved_lateral_rmse": _finite_mean(cc["lateral_rmse_mean"]) if len(cc) else None,
                 "curved_estimated_runs": int(cc["n_runs"].sum()) if len(cc) else None,
+                "degenerate_runs": int(
+                    max(
+                        ss["degenerate_runs"].sum() if len(ss) else 0,
+                        ee["degenerate_runs"].sum() if len(ee) else 0,
+                    )
+                ),
             }
             for key in _SAFETY_COUNTS:
                 row[key] = int(ee[key].sum()) if len(ee) else None
@@ -371,7 +410,7 @@ def verdict(
             row[f"{key}_ci_low"] = low
             row[f"{key}_ci_high"] = high
         counts = ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged",
-                  "curved_estimated_runs", *_SAFETY_COUNTS,
+                  "degenerate_runs", "curved_estimated_runs", *_SAFETY_COUNTS,
                   *(f"curved_{k}" for k in _SAFETY_COUNTS))  # fmt: skip
         for key in counts:
             values = pd.to_numeric(part[key], errors="coerce")

@@ -15,6 +15,7 @@ from hasa_env.validation import ABSENT, Field, schema, validate_fields
 __all__ = [
     "BASELINES",
     "BUILTIN_MODELS",
+    "DEFAULT_MODEL_TIME_LIMIT",
     "DEFAULT_SEEDS",
     "ILLUSTRATIVE",
     "BenchmarkError",
@@ -42,6 +43,8 @@ UNCHECKED_SUFFIX = " (no checks)"
 ILLUSTRATIVE = "Ill"
 DEFAULT_SEEDS = (0, 1, 2, 3, 4)
 """Population seeds of the default protocol."""
+DEFAULT_MODEL_TIME_LIMIT = 600.0
+"""Default time limit (s) of one call into a user model: import, one fit, one batch scored."""
 _ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
 _NOISE_UNITS = {"speed": "m/s", "camera": "m", "camera_heading": "rad", "imu": "m/s^2",
                 "steering": "rad"}  # fmt: skip
@@ -95,6 +98,17 @@ _SCHEMA = schema(
             "mapping", doc="FilterSettings fields for every estimator.", each=Field("json")
         ),
         "compare_checks": Field("bool", doc="Also run the estimators without the evidence checks."),
+        "min_duration": Field(
+            "number", doc="Shortest recording that is scored.", unit="s", low=0.0
+        ),
+        "allow_incomplete": Field("bool", doc="Score recordings whose writer stopped early."),
+        "training_file": Field(
+            "string", doc="The recording that trains the models.", optional=True, non_empty=True
+        ),
+        "model_time_limit": Field(
+            "number", doc="Time limit of one call into a user model (null: none, in-process).",
+            unit="s", low=0.0, low_open=True, optional=True,
+        ),
     }
 )  # fmt: skip
 
@@ -148,6 +162,18 @@ class ProtocolConfig:
             for every estimator (e.g. ``{"forgetting_time": 10.0}``), over the
             run's sensor noise; the steering residual level stays the fitted
             model's.
+        min_duration: recordings shorter than this (s) are skipped, each
+            named with its reason (a crash or an early stop is no run to
+            train on or to score).
+        allow_incomplete: also use recordings whose writer stopped before
+            finalizing them (a crash, a failed write); skipped by default.
+        training_file: the recording that trains the models (recordings;
+            overrides ``illustrative`` and ``training_run``).
+        model_time_limit: the longest one call into a user model may take (s):
+            importing it, one fit, scoring one batch of runs; each call runs
+            isolated in its own process, so a model that hangs, exits or
+            crashes fails alone (:func:`benchmarks.protocol.models.run_isolated`).
+            None: no limit, user code runs in the benchmark's processes.
     """
 
     population: str = "paper"
@@ -171,6 +197,10 @@ class ProtocolConfig:
     compare_checks: bool = False
     estimate: bool = True
     filter_settings: Mapping[str, Any] = field(default_factory=dict)
+    min_duration: float = 5.0
+    allow_incomplete: bool = False
+    training_file: str | None = None
+    model_time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT
 
     def __post_init__(self) -> None:
         """Validate every setting (shared validator) and keep the converted values.
@@ -178,8 +208,9 @@ class ProtocolConfig:
         Raises:
             BenchmarkError: naming the setting and its allowed range.
         """
-        if isinstance(self.recordings, os.PathLike):
-            object.__setattr__(self, "recordings", os.fspath(self.recordings))
+        for name in ("recordings", "training_file"):
+            if isinstance(getattr(self, name), os.PathLike):
+                object.__setattr__(self, name, os.fspath(getattr(self, name)))
         validate_fields(
             self,
             _SCHEMA,

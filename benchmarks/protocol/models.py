@@ -1,14 +1,31 @@
-"""The steering models a benchmark scores: user-model loading, fitting on the training run."""
+"""The steering models a benchmark scores: user-model loading, fitting on the training run,
+and the isolation of user code.
+
+Isolation (:func:`run_isolated`): with a time limit (``ProtocolConfig.model_time_limit``,
+600 s by default) every call into a user model -- importing it, fitting it on one
+training run, scoring it on one batch of runs -- runs in a child process forked for
+it. A call that takes longer than the limit is stopped; ``sys.exit``, ``os._exit``,
+a segmentation fault or any exception inside it ends that model (a
+:class:`ModelError`), never the benchmark, and whatever the model does to the data it
+is given stays in its own process. Built-in models and baselines run in the calling
+process (trusted, and forking for them would cost time). Without a limit
+(``None``) user code runs in the calling process too: faster, but a model that
+hangs or exits takes the benchmark with it. Where processes cannot be forked
+(Windows, or a daemonic Dask worker: set ``distributed.worker.daemon: false``)
+user code runs in the calling process, guarded against exceptions and
+``SystemExit`` only.
+"""
 
 from __future__ import annotations
 
 import copy
 import importlib
 import math
+import multiprocessing
 import pickle
 import traceback
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +35,7 @@ import pandas as pd
 from benchmarks.protocol.config import (
     BASELINES,
     BUILTIN_MODELS,
+    DEFAULT_MODEL_TIME_LIMIT,
     STEERING_BASELINE,
     BenchmarkError,
 )
@@ -27,6 +45,7 @@ from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringMode
 from hasa_env.steering.features import steering_features
 
 __all__ = [
+    "DEFAULT_MODEL_TIME_LIMIT",
     "Candidate",
     "FittedModel",
     "ModelError",
@@ -34,6 +53,8 @@ __all__ = [
     "fit_models",
     "load_models",
     "load_user_model",
+    "private_copy",
+    "run_isolated",
 ]
 
 
@@ -138,6 +159,109 @@ def describe(exc: BaseException) -> str:
     return text
 
 
+def private_copy(frame: pd.DataFrame) -> pd.DataFrame:
+    """A deep copy of a run frame (values and ``attrs``) for one model to do with as it likes."""
+    out = frame.copy(deep=True)
+    out.attrs = copy.deepcopy(frame.attrs)
+    return out
+
+
+def _fork_context() -> Any:
+    """The multiprocessing "fork" context, or None where user code cannot be isolated."""
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return None
+    if multiprocessing.current_process().daemon:  # e.g. a Dask worker under a nanny
+        return None
+    return multiprocessing.get_context("fork")
+
+
+def _guarded(func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str) -> Any:
+    """``func(*args)``; any exception and ``SystemExit`` become this model's ModelError."""
+    try:
+        return func(*args)
+    except ModelError:
+        raise
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - SystemExit in user code is its failure
+        raise ModelError(model, stage, f"raised {describe(exc)}") from None
+
+
+def _child(
+    conn: Any, func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str
+) -> None:
+    try:
+        outcome: tuple[str, Any] = ("ok", _guarded(func, args, model, stage))
+    except ModelError as exc:
+        outcome = ("error", exc)
+    except KeyboardInterrupt:
+        outcome = ("error", ModelError(model, stage, "interrupted"))
+    try:
+        conn.send(outcome)
+    except Exception as exc:  # noqa: BLE001 - an unpicklable result
+        conn.send(
+            ("error", ModelError(model, stage, f"its result cannot be sent back: {describe(exc)}"))
+        )
+    conn.close()
+
+
+def run_isolated(
+    func: Callable[..., Any],
+    args: tuple[Any, ...],
+    *,
+    model: str,
+    stage: str,
+    time_limit: float | None,
+) -> Any:
+    """``func(*args)`` for user model ``model``, isolated (see the module docstring).
+
+    With ``time_limit`` (s) the call runs in a forked child process and its
+    result (picklable) comes back through a pipe; without one, or where
+    processes cannot be forked, it runs here, guarded.
+
+    Raises:
+        ModelError: ``func`` raised (or raised ModelError itself), called
+            ``sys.exit``/``os._exit``, crashed, or ran out of time.
+    """
+    context = _fork_context() if time_limit is not None else None
+    if context is None:
+        return _guarded(func, args, model, stage)
+    receive, send = context.Pipe(duplex=False)
+    process = context.Process(
+        target=_child, args=(send, func, args, model, stage), name=f"hasa-bench {model} {stage}"
+    )
+    process.daemon = True
+    process.start()
+    send.close()
+    try:
+        if not receive.poll(time_limit):
+            process.kill()
+            raise ModelError(
+                model, stage, f"took longer than the time limit of {time_limit:g} s and was stopped"
+            )
+        try:
+            status, value = receive.recv()
+        except (EOFError, OSError, pickle.UnpicklingError):
+            process.join(5.0)
+            code = process.exitcode
+            how = f"signal {-code}" if code is not None and code < 0 else f"exit status {code}"
+            raise ModelError(
+                model,
+                stage,
+                f"its process ended without a result ({how}: os._exit, a crash or "
+                "the system's out-of-memory killer)",
+            ) from None
+    finally:
+        receive.close()
+        process.join(5.0)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    if status == "error":
+        raise value
+    return value
+
+
 @dataclass(frozen=True)
 class FittedModel:
     """A fitted model as the tasks receive it.
@@ -170,14 +294,33 @@ class Candidate:
     model: Any
 
 
+def _check_user_model(spec: str) -> str:
+    """Import and create the model (in a child process when isolated); its class name."""
+    model = load_user_model(spec)
+    try:
+        pickle.dumps(model)
+    except Exception as exc:  # noqa: BLE001
+        raise ModelError(
+            spec, "interface", f"the model cannot be pickled for the workers: {describe(exc)}"
+        ) from None
+    return type(model).__qualname__
+
+
 def load_models(
-    user_specs: Sequence[str], errors: list[ModelError], *, stress: bool = False
+    user_specs: Sequence[str],
+    errors: list[ModelError],
+    *,
+    time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
+    stress: bool = False,
 ) -> list[Candidate]:
     """The built-in models, every user model that loads (failures go to ``errors``)
     and, with ``stress``, the stress set (:mod:`benchmarks.stress`, kind "stress").
 
     Done before any run is generated, so a model that does not import costs
-    nothing and is reported at once.
+    nothing and is reported at once. With a ``time_limit`` each user model is
+    first imported and created in a child process (:func:`run_isolated`), so
+    a module that hangs, exits or crashes while importing is reported, not
+    fatal; only then is it imported here.
     """
     candidates = [
         Candidate("two_point", "builtin", None, TwoPointModel()),
@@ -194,7 +337,12 @@ def load_models(
     used = set(BUILTIN_MODELS) | set(BASELINES) | set(STRESS_MODELS) | {STEERING_BASELINE}
     for spec in user_specs:
         try:
-            model = load_user_model(spec)
+            if time_limit is not None:
+                run_isolated(
+                    _check_user_model, (spec,), model=str(spec), stage="import",
+                    time_limit=time_limit,
+                )  # fmt: skip
+            model = _guarded(load_user_model, (spec,), str(spec), "import")
         except ModelError as exc:
             errors.append(exc)
             continue
@@ -214,11 +362,15 @@ def fit_models(
     seed: int | None = None,
     sensor_std: float = 0.0,
     constant_speed_train: pd.DataFrame | None = None,
+    time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
     """Fit every candidate on one training run (a seed's); the fitted models and their
-    descriptions (parameters, training statistics, the fit's checks). A stress model
-    that trains on a constant-speed run (``training = "constant_speed"``) gets
-    ``constant_speed_train``; its filter's residual level still comes from ``train``."""
+    descriptions (parameters, training statistics, the fit's checks).
+
+    A stress model that trains on a constant-speed run (``training =
+    "constant_speed"``) gets ``constant_speed_train``; its filter's residual
+    level still comes from ``train``. A user model gets its own copy of the
+    training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`)."""
     dt = steering_features(train).attrs.get("dt", 0.01)
     fitted: list[FittedModel] = []
     infos: list[dict[str, Any]] = []
@@ -234,7 +386,13 @@ def fit_models(
                 raise BenchmarkError(f"stress model {name!r} needs a constant-speed training run")
             own = constant_speed_train
         try:
-            model_fitted, info_fit = _fit_one(name, model, own, sensor_std, residual_on=train)
+            if kind != "user":
+                model_fitted, info_fit = _fit_one(name, model, own, sensor_std, residual_on=train)
+            else:
+                model_fitted, info_fit = run_isolated(
+                    _fit_one, (name, model, private_copy(train), sensor_std), model=name,
+                    stage="fit", time_limit=time_limit,
+                )  # fmt: skip
         except ModelError as exc:
             if kind in ("builtin", "stress", "baseline"):
                 raise BenchmarkError(f"the built-in {exc}") from None

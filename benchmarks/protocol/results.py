@@ -49,6 +49,12 @@ class BenchmarkResult:
         drivers: the drivers (synthetic parameters or recording files).
         plots: data of the figures (not written to results.json).
         timing: wall-clock seconds per phase; executor: how tasks ran.
+        notes: what the reader should know (files used, tracks not scored, ...).
+        skipped: the recordings that were not used, ``{"file", "reason"}`` each
+            (a file that does not load, or fails a quality gate).
+        degenerate: the runs left out of every mean, ``{"seed", "driver",
+            "track", "run", "file", "reason"}`` each
+            (:func:`benchmarks.protocol.tasks.degenerate_reason`).
     """
 
     config: dict[str, Any]
@@ -68,6 +74,8 @@ class BenchmarkResult:
     executor: dict[str, Any]
     versions: dict[str, str]
     notes: list[str] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+    degenerate: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def model_names(self) -> list[str]:
@@ -94,6 +102,8 @@ class BenchmarkResult:
             "runs_steering": self.runs_steering,
             "runs_estimation": self.runs_estimation,
             "errors": self.errors,
+            "skipped": self.skipped,
+            "degenerate": self.degenerate,
             "notes": self.notes,
             "paper": {
                 "table_1": {

@@ -126,9 +126,18 @@ def run_protocol(
     start = time.perf_counter()
     errors: list[ModelError] = []
     notes: list[str] = []
+    skipped: list[dict[str, str]] = []
+    paths: dict[tuple[int | None, str, str, int], str] = {}
 
-    # 0. every model loads before any run is generated
-    candidates = load_models(user_models, errors, stress=config.stress)
+    # 0. every model loads before any run is generated: one that does not is an input error
+    candidates = load_models(
+        user_models, errors, time_limit=config.model_time_limit, stress=config.stress
+    )
+    if errors:
+        raise BenchmarkError(
+            f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
+            "run:\n" + "\n".join(f"  {e}" for e in errors)
+        )
 
     # 1.-2. per seed: the runs, the training run, the fits
     tasks: list[ChunkTask] = []
@@ -143,14 +152,15 @@ def run_protocol(
         illustrative = plan["illustrative"]
         main_runs: list[RunRef] = plan["main"]
         curved_runs: list[RunRef] = plan["curved"]
+        training_index = plan.get("training_run", config.training_run)
         training = next(
-            (r for r in main_runs if r.driver == illustrative and r.index == config.training_run),
+            (r for r in main_runs if r.driver == illustrative and r.index == training_index),
             None,
         )
         where = "" if seed is None else f" (seed {seed})"
         if training is None:
             raise BenchmarkError(
-                f"no run {config.training_run} of the illustrative driver {illustrative!r} on "
+                f"no run {training_index} of the illustrative driver {illustrative!r} on "
                 f"the {config.track} track to train on{where}"
             )
         validation = [r for r in main_runs if r is not training]
@@ -177,7 +187,9 @@ def run_protocol(
             seed=seed,
             sensor_std=sensor_std,
             constant_speed_train=constant_speed,
+            time_limit=config.model_time_limit,
         )
+        skipped += plan.get("skipped", [])
         t_fit += time.perf_counter() - t0
         fitted_by_seed[seed] = fitted
         model_info += info
@@ -201,6 +213,7 @@ def run_protocol(
             "detail_driver": illustrative if is_first else "",
             "compare_checks": config.compare_checks,
             "filter_settings": dict(config.filter_settings),
+            "time_limit": config.model_time_limit,
         }
         tasks += [
             ChunkTask(runs=tuple(chunk), track="curved", estimate=config.estimate, **common)
@@ -210,6 +223,7 @@ def run_protocol(
             ChunkTask(runs=tuple(chunk), track=config.track, estimate=config.estimate, **common)
             for chunk in chunks(validation, config.batch_size)
         ]
+        paths.update({r.key: r.path for r in validation + curved_runs if r.path is not None})
     timing["fit"] = t_fit
 
     # 3. every seed's tasks at once
@@ -274,6 +288,7 @@ def run_protocol(
     estimation_all = aggregate_estimation(runs_estimation)
     estimation_rows = [r for r in estimation_all if r["track"] == config.track]
     curved_estimation_rows = [r for r in estimation_all if r["track"] != config.track]
+    degenerate = _degenerate_runs(runs_steering + runs_estimation, paths)
     seed_summary = summarize_seeds(
         steering_rows, estimation_rows, estimators, kinds, curved_estimation_rows
     )
@@ -316,7 +331,25 @@ def run_protocol(
         executor=executor,
         versions=versions(),
         notes=notes,
+        skipped=skipped,
+        degenerate=degenerate,
     )
+
+
+def _degenerate_runs(
+    rows: Sequence[dict[str, Any]], paths: dict[tuple[int | None, str, str, int], str]
+) -> list[dict[str, Any]]:
+    """One entry per run left out of the means as degenerate (its key, file and reason)."""
+    seen: dict[tuple[int | None, str, str, int], dict[str, Any]] = {}
+    for row in rows:
+        reason = row.get("degenerate")
+        key = (row.get("seed"), row["driver"], row["track"], row["run"])
+        if reason and key not in seen:
+            seen[key] = {
+                "seed": key[0], "driver": key[1], "track": key[2], "run": key[3],
+                "file": paths.get(key), "reason": reason,
+            }  # fmt: skip
+    return list(seen.values())
 
 
 def _row_order(
