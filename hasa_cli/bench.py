@@ -320,6 +320,17 @@ def perf_rows(name: str, results: dict[str, Any], module: Any = None) -> list[di
                     "passed": None if ratio is None else bool(ratio >= 1.0),
                 }
             )
+        for key, value in (results.get("ratios") or {}).items():
+            rows.append(
+                {
+                    "benchmark": name,
+                    "measure": f"{key.replace('_', ' ')} (ratio, same run)",
+                    "value": value,
+                    "target": None,
+                    "ratio_to_target": None,
+                    "passed": None,
+                }
+            )
     return rows
 
 
