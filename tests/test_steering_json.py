@@ -86,7 +86,7 @@ def good():
             r"field 'type' is 'neural'; allowed: .*generalized.*two_point",
         ),
         (lambda d: d.pop("parameters"), r"missing field 'parameters'"),
-        (lambda d: d.update(colour="red"), r"unknown field 'colour'; allowed fields: dt, features"),
+        (lambda d: d.update(colour="red"), r"unknown field 'colour'; allowed fields: class, dt, features"),
         (lambda d: d.update(dt=-0.01), r"field 'dt' must be a finite positive number, got -0.01"),
         (lambda d: d.update(dt="fast"), r"field 'dt' must be a finite positive number"),
         (lambda d: d["features"].update(near_distance=0), r"field 'features.near_distance'"),

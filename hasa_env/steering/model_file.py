@@ -7,8 +7,11 @@ object with ``format`` (= ``"hasa_env.steering_model"``), ``format_version``
 ``model_type`` in :data:`MODEL_TYPES` when it is defined), ``name``, ``dt``
 (s), ``features`` (near/far distances in m, decision lag, the regressors),
 ``structure`` (the model's keyword arguments, e.g. its orders),
-``parameters`` and ``standard_errors``. :func:`model_from_dict` validates
-every field and names the file, the field and the allowed values.
+``parameters``, ``standard_errors`` and, optionally, ``class``
+(``"package.module:ClassName"``, so that
+:func:`hasa_env.steering.loading.load_model_file` can import a user type's
+module). :func:`model_from_dict` validates every field and names the file,
+the field and the allowed values.
 """
 
 from __future__ import annotations
@@ -73,7 +76,7 @@ def model_from_dict(
         raise ModelFileError(f"{source}: expected a JSON object, got {type(document).__name__}")
     known = {
         "format", "format_version", "type", "name", "dt", "features", "structure",
-        "parameters", "standard_errors",
+        "parameters", "standard_errors", "class",
     }  # fmt: skip
     unknown = sorted(set(document) - known)
     if unknown:
@@ -92,12 +95,20 @@ def model_from_dict(
         raise ModelFileError(
             f"{source}: field 'format_version' is {version!r}; allowed: {MODEL_FILE_VERSION}"
         )
+    cls = document.get("class")
+    if cls is not None and not isinstance(cls, str):
+        raise ModelFileError(
+            f"{source}: field 'class' must be a string 'package.module:ClassName', got {cls!r}"
+        )
     model_type = document["type"]
     if model_type not in MODEL_TYPES:
+        where = f" ({cls})" if cls else ""
         raise ModelFileError(
             f"{source}: field 'type' is {model_type!r}; "
             f"allowed: {', '.join(sorted(MODEL_TYPES))} "
-            "(a custom model's class must be defined (imported) before loading its file)"
+            f"(a custom model's class{where} must be defined (imported) before loading its "
+            "file; hasa_env.steering.loading.load_model_file imports the module its 'class' "
+            "field names)"
         )
     target = MODEL_TYPES[model_type]
     if expected is not None and not issubclass(target, expected):
