@@ -467,11 +467,13 @@ def test_cli_rejects_bad_arguments(args: list[str], tmp_path: Path) -> None:
 
 
 def test_protocol_config_validation() -> None:
-    with pytest.raises(BenchmarkError, match="training_run 3"):
+    with pytest.raises(BenchmarkError, match="'training_run' = 3 needs at least 4 runs"):
         ProtocolConfig(ill_runs=3, training_run=3)
-    with pytest.raises(BenchmarkError, match="unknown noise key 'lidar'"):
+    with pytest.raises(
+        BenchmarkError, match=r"unknown protocol setting 'noise.lidar' \(allowed keys here: camera,"
+    ):
         ProtocolConfig(noise={"lidar": 0.1})
-    with pytest.raises(BenchmarkError, match="duration"):
+    with pytest.raises(BenchmarkError, match=r"'duration' must be a finite number >= 1 s, got 0.1"):
         ProtocolConfig(duration=0.1)
 
 

@@ -342,9 +342,12 @@ def test_synthetic_command_labels_its_recordings(tmp_path, capsys):
 
 
 def test_settings_are_validated(tmp_path):
-    with pytest.raises(ValueError, match="participant id"):
+    with pytest.raises(ValueError, match=r"drive setting 'participant' must be a string of at"):
         DriveSettings(participant="../escape", output=tmp_path)
-    with pytest.raises(ValueError, match="runs"):
+    with pytest.raises(ValueError, match=r"at most 64 characters .* \(65 characters\)$"):
+        DriveSettings(participant="p" * 65, output=tmp_path)
+    assert DriveSettings(participant="p" * 64, output=tmp_path).participant == "p" * 64
+    with pytest.raises(ValueError, match="drive setting 'runs' must be a positive integer, got 0"):
         DriveSettings(participant="p", runs=0)
     with pytest.raises(SystemExit):
         main(["--participant", "p", "--bias", "left"])

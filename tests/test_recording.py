@@ -78,7 +78,7 @@ configs = st.fixed_dictionaries(
             }
         ),
         "markings": st.fixed_dictionaries(
-            {"hypotheses": st.lists(st.floats(-3.0, 3.0), min_size=1, max_size=3)}
+            {"hypotheses": st.lists(st.floats(-3.0, 3.0), min_size=1, max_size=3, unique=True)}
         ),
         "noise": st.fixed_dictionaries(
             {"camera": st.floats(0.0, 0.5), "block_size": st.sampled_from([1, 7, 1000])}
@@ -430,10 +430,13 @@ def test_deleting_the_last_rows_of_a_complete_recording_is_caught(tmp_path):
 SIDECAR_CORRUPTIONS = {
     "missing sidecar": (lambda p: p.with_suffix(".json").unlink(), "missing sidecar"),
     "not JSON": (_edit_sidecar(lambda t: t[: len(t) // 2]), "not valid JSON"),
-    "unknown schema": (_edit_sidecar(_json_edit(schema_version=2)), "unknown schema_version 2"),
+    "unknown schema": (
+        _edit_sidecar(_json_edit(schema_version=2)),
+        "sidecar field 'schema_version' = 2 is not allowed: only 1",
+    ),
     "no schema": (
         _edit_sidecar(lambda t: t.replace('"schema_version"', '"schema"')),
-        "no 'schema_version'",
+        "sidecar field 'schema_version' is missing",
     ),
     "bad config": (_edit_sidecar(_json_edit(config={"sim_frequncy": 100.0})), "sim_frequncy"),
     "not an object": (_edit_sidecar(lambda t: "[1, 2]"), "JSON object"),

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import math
+import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import numpy as np
-
 from hasa_env.drivers import POPULATIONS
 from hasa_env.sim.config import deep_merge
+from hasa_env.validation import ABSENT, Field, schema, validate_fields
 
 __all__ = [
     "BASELINES",
@@ -32,11 +31,54 @@ ILLUSTRATIVE = "Ill"
 DEFAULT_SEEDS = (0, 1, 2, 3, 4)
 """Population seeds of the default protocol."""
 _ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
-_NOISE_KEYS = ("speed", "camera", "camera_heading", "imu", "steering")
+_NOISE_UNITS = {"speed": "m/s", "camera": "m", "camera_heading": "rad", "imu": "m/s^2",
+                "steering": "rad"}  # fmt: skip
 
 
 class BenchmarkError(RuntimeError):
     """The protocol cannot run (invalid configuration or data); nothing was measured."""
+
+
+def _count(doc: str, low: int, optional: bool = False) -> Field:
+    return Field("integer", doc=doc, low=low, optional=optional)
+
+
+_SCHEMA = schema(
+    {
+        "population": Field("string", doc="Synthetic population name.", non_empty=True),
+        "seeds": Field(
+            "integers", doc="Population seeds, one protocol pass each.", low=0, non_empty=True,
+            unique=True,
+        ),
+        "drivers": _count("Number of drivers.", 1),
+        "runs": _count("Runs per driver on the main track.", 1),
+        "ill_runs": _count("Runs of the illustrative driver (null: runs + 4).", 1, True),
+        "duration": Field("number", doc="Length of each run.", unit="s", low=1.0),
+        "track": Field("choice", doc="The main track.", choices=tuple(_ENV_IDS)),
+        "curved_runs": _count("Runs on the curved track.", 0),
+        "noise": Field(
+            "mapping",
+            fields={
+                key: Field("number", ABSENT, f"Sensor noise std ({unit}).", unit=unit, low=0.0)
+                for key, unit in _NOISE_UNITS.items()
+            },
+        ),
+        "recordings": Field("string", doc="Directory of recordings.", optional=True),
+        "illustrative": Field("string", doc="The training driver.", optional=True),
+        "training_run": _count("Index of the training run.", 0),
+        "batch_size": _count("Runs per task.", 1),
+        "ljung_box_lags": _count("Lags of the Ljung-Box test.", 1),
+        "acf_lags": _count("Lags of the autocorrelation plot.", 1),
+        "weight_threshold": Field(
+            "number", doc="True-lane weight that counts as decided.", low=0.5, high=1.0,
+            high_open=True,
+        ),
+        "error_window": Field(
+            "number", doc="Length of the error-over-time figure.", unit="s", low=0.0,
+            low_open=True,
+        ),
+    }
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -96,51 +138,26 @@ class ProtocolConfig:
     error_window: float = 5.0
 
     def __post_init__(self) -> None:
-        def positive_int(name: str, value: Any, low: int = 1) -> None:
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
-                raise BenchmarkError(f"{name} must be an integer >= {low}, got {value!r}")
+        """Validate every setting (shared validator) and keep the converted values.
 
-        positive_int("drivers", self.drivers)
-        positive_int("runs", self.runs)
-        seeds = tuple(self.seeds) if not isinstance(self.seeds, str | bytes) else ()
-        if not seeds:
-            raise BenchmarkError(
-                f"seeds must be a non-empty list of integers >= 0, got {self.seeds!r}"
-            )
-        for seed in seeds:
-            positive_int("seeds[i]", seed, 0)
-        if len(set(seeds)) != len(seeds):
-            raise BenchmarkError(f"seeds must not repeat, got {list(seeds)}")
-        object.__setattr__(self, "seeds", tuple(int(s) for s in seeds))
-        positive_int("curved_runs", self.curved_runs, 0)
-        positive_int("training_run", self.training_run, 0)
-        positive_int("batch_size", self.batch_size)
-        positive_int("ljung_box_lags", self.ljung_box_lags)
-        positive_int("acf_lags", self.acf_lags)
-        if self.ill_runs is not None:
-            positive_int("ill_runs", self.ill_runs)
+        Raises:
+            BenchmarkError: naming the setting and its allowed range.
+        """
+        if isinstance(self.recordings, os.PathLike):
+            object.__setattr__(self, "recordings", os.fspath(self.recordings))
+        validate_fields(
+            self,
+            _SCHEMA,
+            describe=lambda path: f"protocol setting '{path}'",
+            error=lambda path, message: BenchmarkError(message),
+        )
+        object.__setattr__(self, "seeds", tuple(self.seeds))
         if self.recordings is None and self.training_run >= self.illustrative_runs:
             raise BenchmarkError(
-                f"training_run {self.training_run} needs at least {self.training_run + 1} runs of "
-                f"the illustrative driver, got ill_runs = {self.illustrative_runs}"
+                f"protocol setting 'training_run' = {self.training_run} needs at least "
+                f"{self.training_run + 1} runs of the illustrative driver, got 'ill_runs' = "
+                f"{self.illustrative_runs}"
             )
-        if not (math.isfinite(self.duration) and self.duration >= 1.0):
-            raise BenchmarkError(f"duration must be at least 1 s, got {self.duration!r}")
-        if self.track not in _ENV_IDS:
-            raise BenchmarkError(f"track must be one of {sorted(_ENV_IDS)}, got {self.track!r}")
-        if not 0.5 <= self.weight_threshold < 1.0:
-            raise BenchmarkError(
-                f"weight_threshold must be in [0.5, 1), got {self.weight_threshold!r}"
-            )
-        if not (math.isfinite(self.error_window) and self.error_window > 0):
-            raise BenchmarkError(f"error_window must be > 0 s, got {self.error_window!r}")
-        for key, value in dict(self.noise).items():
-            if key not in _NOISE_KEYS:
-                raise BenchmarkError(
-                    f"unknown noise key {key!r}; allowed: {', '.join(_NOISE_KEYS)}"
-                )
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-                raise BenchmarkError(f"noise {key} must be a finite std >= 0, got {value!r}")
 
     @property
     def illustrative_runs(self) -> int:

@@ -43,8 +43,9 @@ is still reached. Readings beyond ``left``/``right``/``full`` saturate.
 Shipped defaults live in ``hasa_env/data`` (``g29.json``, ``gamepad.json``,
 ``keyboard.json``) and are found through :mod:`importlib.resources`, so
 they work from any working directory and from an installed wheel.
-:func:`load_calibration` validates every field and raises
-:class:`CalibrationError` naming the file, the field and the allowed range.
+:func:`load_calibration` validates every field (through the shared validator,
+:mod:`hasa_env.validation`) and raises :class:`CalibrationError` naming the
+file, the field and the allowed range.
 """
 
 from __future__ import annotations
@@ -52,11 +53,13 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from hasa_env.validation import Field, schema, validate, version
 
 __all__ = [
     "CALIBRATION_FORMAT",
@@ -87,10 +90,12 @@ class CalibrationError(ValueError):
     """An invalid calibration file: names the file, the field and what is allowed."""
 
     def __init__(self, source: str, field_name: str | None, message: str) -> None:
+        """``message`` follows the field's name (``"= 5 is out of range: allowed [0, 1]"``), or
+        follows ``source`` alone when ``field_name`` is None."""
         self.source = source
         self.field = field_name
-        where = f"{source}: field '{field_name}'" if field_name else source
-        super().__init__(f"{where}: {message}")
+        text = f"{source}: field '{field_name}' {message}" if field_name else f"{source}: {message}"
+        super().__init__(text)
 
 
 # ---------------------------------------------------------------- dataclasses
@@ -305,118 +310,104 @@ def _deadzone(u: float, deadzone: float) -> float:
 
 
 # ----------------------------------------------------------------- validation
-class _Reader:
-    """Typed access to a JSON object with errors naming the file and field."""
+def _raw(doc: str) -> Field:
+    return Field("number", doc=doc, low=-1.0, high=1.0)
 
-    def __init__(self, data: Mapping[str, Any], source: str, prefix: str = "") -> None:
-        self.data, self.source, self.prefix = data, source, prefix
-        self.used: set[str] = set()
 
-    def _name(self, key: str) -> str:
-        return f"{self.prefix}{key}"
-
-    def fail(self, key: str | None, message: str) -> CalibrationError:
-        return CalibrationError(self.source, None if key is None else self._name(key), message)
-
-    def _get(self, key: str, default: Any) -> Any:
-        self.used.add(key)
-        if key not in self.data:
-            if default is _REQUIRED:
-                raise self.fail(key, "is missing")
-            return default
-        return self.data[key]
-
-    def number(
-        self, key: str, low: float, high: float, default: Any = None, low_open: bool = False
-    ) -> float:
-        value = self._get(key, _REQUIRED if default is None else default)
-        allowed = f"{'(' if low_open else '['}{low:g}, {high:g}]"
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
-            raise self.fail(key, f"must be a finite number in {allowed}, got {value!r}")
-        if (value <= low if low_open else value < low) or value > high:
-            raise self.fail(key, f"= {value!r} is out of range: allowed {allowed}")
-        return float(value)
-
-    def integer(self, key: str, low: int, high: int) -> int:
-        value = self._get(key, _REQUIRED)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"must be an integer in [{low}, {high}], got {value!r}")
-        if not low <= value <= high:
-            raise self.fail(key, f"= {value!r} is out of range: allowed integers [{low}, {high}]")
-        return value
-
-    def string(self, key: str, default: Any = None) -> str:
-        value = self._get(key, _REQUIRED if default is None else default)
-        if not isinstance(value, str):
-            raise self.fail(key, f"must be a string, got {value!r}")
-        return value
-
-    def strings(
-        self, key: str, default: Sequence[str] | None = None, nonempty: bool = False
-    ) -> tuple[str, ...]:
-        value = self._get(key, _REQUIRED if default is None else list(default))
-        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
-            raise self.fail(key, f"must be a list of non-empty strings, got {value!r}")
-        if nonempty and not value:
-            raise self.fail(key, "must list at least one entry")
-        return tuple(value)
-
-    def section(self, key: str) -> _Reader:
-        value = self._get(key, _REQUIRED)
-        if not isinstance(value, Mapping):
-            raise self.fail(key, f"must be a JSON object, got {value!r}")
-        return _Reader(value, self.source, f"{self._name(key)}.")
-
-    def finish(self) -> None:
-        unknown = [k for k in self.data if k not in self.used]
-        if unknown:
-            raise self.fail(
-                unknown[0], f"is not a known field here (allowed: {', '.join(sorted(self.used))})"
+_AXIS = Field("integer", doc="Axis index as pygame numbers them.", low=0, high=_MAX_AXIS)
+_DEADZONE = Field("number", 0.0, "Fraction of the travel that reads 0.", low=0.0, high=0.5)
+_HEADER: dict[str, Field] = {
+    "format": Field("choice", choices=(CALIBRATION_FORMAT,)),
+    "version": version(CALIBRATION_VERSION),
+    "device": Field("choice", choices=("joystick", "keyboard")),
+    "name": Field("string", doc="Profile name."),
+}
+_JOYSTICK = schema(
+    {
+        **_HEADER,
+        "match_names": Field("strings", [], "Used for devices whose name contains one of these."),
+        "wheel_range_deg": Field(
+            "number", doc="Steering-wheel travel lock to lock.", unit="deg", low=10.0, high=3600.0
+        ),
+        "steering_ratio": Field(
+            "number", doc="Steering-wheel angle / road-wheel angle.", low=0.1, high=100.0
+        ),
+        "steering": Field(
+            "mapping",
+            fields={
+                "axis": _AXIS,
+                "centre": _raw("Raw value with the wheel centred."),
+                "left": _raw("Raw value at the left lock."),
+                "right": _raw("Raw value at the right lock."),
+                "deadzone": _DEADZONE,
+            },
+        ),
+        **{
+            pedal: Field(
+                "mapping",
+                fields={
+                    "axis": _AXIS,
+                    "rest": _raw("Raw value with the pedal released."),
+                    "full": _raw("Raw value with the pedal fully pressed."),
+                    "deadzone": _DEADZONE,
+                },
             )
+            for pedal in ("throttle", "brake")
+        },
+        "max_acceleration": Field(
+            "number", doc="At full throttle.", unit="m/s^2", low=0.0, high=30.0
+        ),
+        "max_deceleration": Field("number", doc="At full brake.", unit="m/s^2", low=0.0, high=30.0),
+        "notes": Field("string", "", "Free text."),
+    }
+)
+_KEYBOARD = schema(
+    {
+        **_HEADER,
+        "max_road_wheel_angle_deg": Field(
+            "number",
+            doc="Road-wheel angle a held key ramps to.",
+            unit="deg",
+            low=0.0,
+            high=60.0,
+            low_open=True,
+        ),
+        "ramp_time": Field("number", doc="From 0 to the full angle.", unit="s", low=0.0, high=10.0),
+        "return_time_constant": Field(
+            "number", doc="Of the return to 0.", unit="s", low=0.0, high=10.0
+        ),
+        "acceleration": Field("number", doc="Throttle key held.", unit="m/s^2", low=0.0, high=30.0),
+        "deceleration": Field("number", doc="Brake key held.", unit="m/s^2", low=0.0, high=30.0),
+        "keys": Field(
+            "mapping",
+            fields={
+                action: Field("strings", doc="pygame key names.", non_empty=True)
+                for action in ("left", "right", "throttle", "brake")
+            },
+        ),
+        "notes": Field("string", "", "Free text."),
+    }
+)
 
 
-_REQUIRED = object()
-
-
-def _steering_axis(r: _Reader) -> SteeringAxis:
-    axis = SteeringAxis(
-        axis=r.integer("axis", 0, _MAX_AXIS),
-        centre=r.number("centre", -1.0, 1.0),
-        left=r.number("left", -1.0, 1.0),
-        right=r.number("right", -1.0, 1.0),
-        deadzone=r.number("deadzone", 0.0, 0.5, default=0.0),
-    )
-    r.finish()
+def _check_steering_axis(axis: SteeringAxis, source: str) -> None:
     if (axis.left - axis.centre) * (axis.right - axis.centre) >= 0.0:
-        raise r.fail(
-            None,
-            f"field '{r.prefix}left' = {axis.left!r} and '{r.prefix}right' = {axis.right!r} "
-            "must lie on "
-            f"opposite sides of '{r.prefix}centre' = {axis.centre!r}",
+        raise CalibrationError(
+            source,
+            "steering.left",
+            f"= {axis.left!r} and 'steering.right' = {axis.right!r} must lie on opposite sides "
+            f"of 'steering.centre' = {axis.centre!r}",
         )
-    return axis
 
 
-def _pedal_axis(r: _Reader) -> PedalAxis:
-    axis = PedalAxis(
-        axis=r.integer("axis", 0, _MAX_AXIS),
-        rest=r.number("rest", -1.0, 1.0),
-        full=r.number("full", -1.0, 1.0),
-        deadzone=r.number("deadzone", 0.0, 0.5, default=0.0),
-    )
-    r.finish()
+def _check_pedal_axis(axis: PedalAxis, name: str, source: str) -> None:
     if abs(axis.full - axis.rest) < 0.1:
-        raise r.fail(
-            None,
-            f"field '{r.prefix}full' = {axis.full!r} must differ from "
-            f"'{r.prefix}rest' = {axis.rest!r} "
-            "by at least 0.1 (was the pedal pressed during calibration?)",
+        raise CalibrationError(
+            source,
+            f"{name}.full",
+            f"= {axis.full!r} must differ from '{name}.rest' = {axis.rest!r} by at least 0.1 "
+            "(was the pedal pressed during calibration?)",
         )
-    return axis
 
 
 def parse_calibration(
@@ -428,61 +419,57 @@ def parse_calibration(
         CalibrationError: a missing or unknown field, a value of the wrong type or
             out of range, or inconsistent axes; the message names ``source`` and the field.
     """
-    if not isinstance(data, Mapping):
-        raise CalibrationError(source, None, f"must hold a JSON object, got {type(data).__name__}")
-    r = _Reader(data, source)
-    fmt = r.string("format")
-    if fmt != CALIBRATION_FORMAT:
-        raise r.fail("format", f"must be {CALIBRATION_FORMAT!r}, got {fmt!r}")
-    version = r.integer("version", 0, 1_000_000)
-    if version != CALIBRATION_VERSION:
-        raise r.fail(
-            "version",
-            f"= {version} is not supported: this hasa_env reads version {CALIBRATION_VERSION}",
-        )
-    device = r.string("device")
-    name = r.string("name")
-    notes = r.string("notes", default="")
-    if device == "keyboard":
-        keys_r = r.section("keys")
-        keys = {k: keys_r.strings(k, nonempty=True) for k in ("left", "right", "throttle", "brake")}
-        keys_r.finish()
-        cal: JoystickCalibration | KeyboardCalibration = KeyboardCalibration(
-            name=name,
-            max_road_wheel_angle_deg=r.number("max_road_wheel_angle_deg", 0.0, 60.0, low_open=True),
-            ramp_time=r.number("ramp_time", 0.0, 10.0),
-            return_time_constant=r.number("return_time_constant", 0.0, 10.0),
-            acceleration=r.number("acceleration", 0.0, 30.0),
-            deceleration=r.number("deceleration", 0.0, 30.0),
-            keys=keys,
+
+    def fail(path: str, message: str) -> CalibrationError:
+        exc = CalibrationError(source, None, message)  # the message names the field itself
+        exc.field = path or None
+        return exc
+
+    device = data.get("device") if isinstance(data, Mapping) else None
+    keyboard = isinstance(device, str) and device == "keyboard"
+    doc = validate(
+        data,
+        _KEYBOARD if keyboard else _JOYSTICK,
+        describe=lambda path: f"field '{path}'" if path else "the document",
+        error=fail,
+    )
+    if keyboard:
+        return KeyboardCalibration(
+            name=doc["name"],
+            max_road_wheel_angle_deg=doc["max_road_wheel_angle_deg"],
+            ramp_time=doc["ramp_time"],
+            return_time_constant=doc["return_time_constant"],
+            acceleration=doc["acceleration"],
+            deceleration=doc["deceleration"],
+            keys={action: tuple(names) for action, names in doc["keys"].items()},
             source=source,
-            notes=notes,
+            notes=doc["notes"],
         )
-        r.finish()
-        return cal
-    if device != "joystick":
-        raise r.fail("device", f"= {device!r} is not allowed: one of 'joystick', 'keyboard'")
-    steering = _steering_axis(r.section("steering"))
-    throttle = _pedal_axis(r.section("throttle"))
-    brake = _pedal_axis(r.section("brake"))
+    steering = SteeringAxis(**doc["steering"])
+    _check_steering_axis(steering, source)
+    throttle = PedalAxis(**doc["throttle"])
+    _check_pedal_axis(throttle, "throttle", source)
+    brake = PedalAxis(**doc["brake"])
+    _check_pedal_axis(brake, "brake", source)
     cal = JoystickCalibration(
-        name=name,
+        name=doc["name"],
         steering=steering,
         throttle=throttle,
         brake=brake,
-        wheel_range_deg=r.number("wheel_range_deg", 10.0, 3600.0),
-        steering_ratio=r.number("steering_ratio", 0.1, 100.0),
-        max_acceleration=r.number("max_acceleration", 0.0, 30.0),
-        max_deceleration=r.number("max_deceleration", 0.0, 30.0),
-        match_names=r.strings("match_names", default=()),
+        wheel_range_deg=doc["wheel_range_deg"],
+        steering_ratio=doc["steering_ratio"],
+        max_acceleration=doc["max_acceleration"],
+        max_deceleration=doc["max_deceleration"],
+        match_names=tuple(doc["match_names"]),
         source=source,
-        notes=notes,
+        notes=doc["notes"],
     )
-    r.finish()
     if steering.axis in (throttle.axis, brake.axis):
         which = "throttle" if steering.axis == throttle.axis else "brake"
-        raise r.fail(
-            "steering.axis", f"= {steering.axis} is also the {which} axis; use separate axes"
+        raise CalibrationError(
+            source,
+            "steering.axis",
+            f"= {steering.axis} is also the {which} axis; use separate axes",
         )
     if throttle.axis == brake.axis:
         # one axis for both pedals (e.g. a gamepad stick): they must share the rest value
@@ -490,7 +477,8 @@ def parse_calibration(
         same_rest = abs(throttle.rest - brake.rest) < 1e-9
         opposite = (throttle.full - throttle.rest) * (brake.full - brake.rest) < 0.0
         if not (same_rest and opposite):
-            raise r.fail(
+            raise CalibrationError(
+                source,
                 "brake.axis",
                 f"= {brake.axis} is also the throttle axis; that needs the same 'rest' and 'full' "
                 "values on opposite sides of it",

@@ -12,7 +12,9 @@ A recording is a pair of files in one directory:
   and ``truncated`` are ``true`` / ``false``.
 - ``run_000.json``: the sidecar (schema version, env id, full config, seed,
   reset options, versions, columns and units, times, completeness, free-form
-  ``metadata``). See ``recordings/README.md`` for every field.
+  ``metadata``). See ``recordings/README.md`` for every field; the loader
+  checks each field's type through the shared validator
+  (:mod:`hasa_env.validation`) and refuses fields it does not know.
 
 Writing: :mod:`hasa_env.recording.writer`; reading: :mod:`hasa_env.recording.reader`;
 re-simulating: :mod:`hasa_env.recording.replay`.
@@ -40,6 +42,7 @@ import pandas as pd
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
 from hasa_env.sim.setup import RECORDING_COLUMNS
+from hasa_env.validation import ABSENT, ANY_JSON, Field, schema, validate, version
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -289,20 +292,21 @@ def _base_sidecar(csv_name: str) -> dict[str, Any]:
     }
 
 
+def _python_error(path: str, message: str) -> ValueError:
+    return ValueError(message)
+
+
 def _check_json_able(name: str, value: Any) -> Any:
-    """Round-trip ``value`` through JSON (so the sidecar holds exactly what was given)."""
-    try:
-        return json.loads(_to_json(value))
-    except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"{name} must be JSON-serializable (finite numbers, str, lists, dicts): {exc}"
-        ) from None
+    """A fresh JSON-able copy of ``value`` (numpy values and tuples converted), so the sidecar
+    holds exactly what was given; ``name`` names it in the ``ValueError``."""
+    return validate(value, ANY_JSON, describe=lambda path: path, error=_python_error, path=name)
+
+
+_SEED = Field("integer", doc="A seed of numpy's generators.", low=0)
 
 
 def _check_seed(seed: Any, what: str) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"{what} must be a non-negative integer or None, got {seed!r}")
-    return int(seed)
+    return validate(seed, _SEED, describe=lambda path: path, error=_python_error, path=what)
 
 
 # ------------------------------------------------------------------- parsing
@@ -434,44 +438,67 @@ def _check_table(
         )
 
 
+_SIDECAR = schema(
+    {
+        "schema_version": version(SCHEMA_VERSION, "Version of the recording format."),
+        "format": Field("choice", ABSENT, choices=("hasa_env recording",)),
+        "csv": Field("string", ABSENT, "Name of the CSV file.", optional=True),
+        "env_id": Field("string", ABSENT, "Gymnasium id (null: unknown).", optional=True),
+        "seed": Field(
+            "integer", ABSENT, "Seed passed to env.reset (null: not replayable).", low=0,
+            optional=True,
+        ),
+        "seed_source": Field(
+            "choice", ABSENT, "Who chose the seed.", choices=("reset", "wrapper", "given"),
+            optional=True,
+        ),
+        "seed_sequence_entropy": Field(
+            "integer", ABSENT, "Root of the wrapper's seed generator.", low=0, optional=True
+        ),
+        "reset_options": Field(
+            "mapping", ABSENT, "The options passed to reset.", each=ANY_JSON, optional=True
+        ),
+        "config": Field("mapping", doc="The env's full configuration.", each=ANY_JSON),
+        "versions": Field("mapping", ABSENT, "Package versions.", each=Field("string")),
+        "columns": Field("strings", doc="The CSV columns in order."),
+        "units": Field("mapping", ABSENT, "Unit of each column.", each=Field("string")),
+        "created": Field("string", ABSENT, "UTC time (ISO 8601) of the start.", optional=True),
+        "finished": Field("string", ABSENT, "UTC time (ISO 8601) of the end.", optional=True),
+        "complete": Field("bool", doc="False until the recording is finalized."),
+        "steps": Field("integer", ABSENT, "Rows after row 0.", low=0, optional=True),
+        "end_reason": Field(
+            "choice", ABSENT, "Why the episode ended.", choices=_END_REASONS, optional=True
+        ),
+        "metadata": Field("mapping", ABSENT, "Free-form information.", each=ANY_JSON),
+    }
+)  # fmt: skip
+"""Every field of a sidecar (``recordings/README.md``); a field that is left out stays out."""
+
+
 def _validate_meta(meta: Any, source: Path) -> dict[str, Any]:
-    if not isinstance(meta, dict):
-        raise RecordingError(f"sidecar must hold a JSON object, got {type(meta).__name__}", source)
-    if "schema_version" not in meta:
-        raise RecordingError("sidecar has no 'schema_version'", source, column="schema_version")
-    version = meta["schema_version"]
-    if version != SCHEMA_VERSION or isinstance(version, bool):
-        raise RecordingError(
-            f"unknown schema_version {version!r}: this hasa_env reads version {SCHEMA_VERSION}",
-            source,
-            column="schema_version",
-        )
-    for key in ("config", "complete", "columns"):
-        if key not in meta:
-            raise RecordingError(f"sidecar has no {key!r}", source, column=key)
-    if not isinstance(meta["complete"], bool):
-        raise RecordingError(
-            f"'complete' must be true or false, got {meta['complete']!r}", source, column="complete"
-        )
-    if not isinstance(meta["config"], dict):
-        raise RecordingError("'config' must be a JSON object", source, column="config")
+    """The validated sidecar: every field's type, a valid config (made full), the columns."""
+
+    def fail(path: str, message: str) -> RecordingError:
+        return RecordingError(message, source, column=path or None)
+
+    checked: dict[str, Any] = validate(
+        meta,
+        _SIDECAR,
+        describe=lambda path: f"sidecar field '{path}'" if path else "the sidecar",
+        error=fail,
+    )
     try:
-        meta["config"] = make_config(meta["config"])
+        checked["config"] = make_config(checked["config"])
     except ConfigError as exc:
         raise RecordingError(f"invalid config: {exc}", source, column="config") from None
-    seed = meta.get("seed")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+    if checked["columns"] != list(RECORDING_COLUMNS):
         raise RecordingError(
-            f"'seed' must be a non-negative integer or null, got {seed!r}", source, column="seed"
-        )
-    if meta["columns"] != list(RECORDING_COLUMNS):
-        raise RecordingError(
-            f"'columns' = {meta['columns']!r} differs from the schema's columns "
+            f"sidecar field 'columns' = {checked['columns']!r} differs from the schema's columns "
             f"{list(RECORDING_COLUMNS)!r}",
             source,
             column="columns",
         )
-    return meta
+    return checked
 
 
 def _read_sidecar(path: Path) -> dict[str, Any]:
@@ -487,6 +514,8 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
         raise RecordingError(
             f"sidecar is not valid JSON: {exc.msg} (column {exc.colno})", path, exc.lineno
         ) from None
+    except (ValueError, RecursionError) as exc:  # an integer of > 4300 digits, deep nesting
+        raise RecordingError(f"sidecar cannot be read as JSON: {exc}", path) from None
     return _validate_meta(meta, path)
 
 

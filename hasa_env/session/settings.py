@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import math
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -10,10 +10,39 @@ from pathlib import Path
 from typing import Any
 
 from hasa_env.sim.config import deep_merge, make_config
+from hasa_env.validation import ANY_JSON, Field, schema, validate_fields
 
 __all__ = ["DriveSettings"]
 
 _PARTICIPANT_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]*")
+
+_SCHEMA = schema(
+    {
+        "participant": Field(
+            "string", doc="Participant id; recordings go to output / participant.",
+            max_length=64, pattern=_PARTICIPANT_RE,
+            pattern_doc="letters, digits, '_', '-', '.', starting with a letter or digit",
+        ),
+        "track": Field("choice", doc="The road.", choices=("straight", "curved")),
+        "bias": Field(
+            "number", doc="Camera bias of every run (null: drawn per run).", unit="m",
+            low=-20.0, high=20.0, optional=True,
+        ),
+        "runs": Field("integer", doc="Number of runs.", low=1),
+        "seconds": Field(
+            "number", doc="Length of a run.", unit="s", low=0.0, high=1e6, low_open=True
+        ),
+        "speed": Field("number", doc="Initial speed.", unit="m/s", low=0.0, high=150.0),
+        "lateral_offset": Field(
+            "number", doc="Initial lateral offset.", unit="m", low=-30.0, high=30.0
+        ),
+        "output": Field("string", doc="Root directory of the recordings.", non_empty=True),
+        "seed": Field("integer", doc="Root seed (null: fresh entropy).", low=0, optional=True),
+        "countdown": Field("number", doc="Countdown before each run.", unit="s", low=0.0),
+        "config": Field("mapping", doc="Extra env configuration.", each=ANY_JSON),
+        "fsync": Field("bool", doc="Also fsync every recorded row."),
+    }
+)  # fmt: skip
 
 
 @dataclass
@@ -21,7 +50,8 @@ class DriveSettings:
     """One session of runs (units: s, m/s, m).
 
     Attributes:
-        participant: participant id; recordings go to ``output / participant``.
+        participant: participant id (at most 64 letters, digits, '_', '-', '.',
+            starting with a letter or digit); recordings go to ``output / participant``.
         track: ``"straight"`` or ``"curved"``.
         bias: camera bias b (m) of every run, or None to draw it per run
             (equally likely hypotheses, from the run's seed).
@@ -50,19 +80,22 @@ class DriveSettings:
     fsync: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.participant, str) or not _PARTICIPANT_RE.fullmatch(self.participant):
-            raise ValueError(
-                "participant id must be letters, digits, '_', '-', '.' "
-                "(starting with a letter or digit), "
-                f"got {self.participant!r}"
-            )
-        if isinstance(self.runs, bool) or not isinstance(self.runs, int) or self.runs < 1:
-            raise ValueError(f"runs must be a positive integer, got {self.runs!r}")
-        if not (math.isfinite(self.seconds) and self.seconds > 0):
-            raise ValueError(f"seconds must be > 0, got {self.seconds!r}")
-        if self.seed is not None and (isinstance(self.seed, bool) or self.seed < 0):
-            raise ValueError(f"seed must be a non-negative integer or None, got {self.seed!r}")
+        """Validate every setting (shared validator) and keep the converted values.
+
+        Raises:
+            ValueError: naming the setting and its allowed range (a
+                :class:`~hasa_env.sim.config.ConfigError` for ``config``).
+        """
+        if isinstance(self.output, os.PathLike):
+            self.output = os.fspath(self.output)
+        validate_fields(
+            self,
+            _SCHEMA,
+            describe=lambda path: f"drive setting '{path}'",
+            error=lambda path, message: ValueError(message),
+        )
         self.output = Path(self.output)
+        self.env_config()  # a bad config is refused now, not at the first run
 
     def env_config(self) -> dict[str, Any]:
         """The env configuration of every run (validated)."""

@@ -1,20 +1,21 @@
 """Configuration of the lane-keeping environment.
 
 The configuration is a nested ``dict``. :func:`default_config` returns the
-documented defaults; :func:`make_config` deep-merges a user's (partial)
-configuration onto them and validates every value. An unknown key or a value
-outside its allowed range raises :class:`ConfigError` naming the key path
-(``"noise.camera"``) and the allowed range, so ``gym.make(id, config={...})``
-never silently ignores a typo.
+documented defaults; :func:`make_config` fills a user's (partial)
+configuration in with them and validates every value through the shared
+validator (:mod:`hasa_env.validation`). An unknown key or a value outside
+its allowed range raises :class:`ConfigError` naming the key path
+(``"noise.camera"``) and the allowed range with its unit, so
+``gym.make(id, config={...})`` never silently ignores a typo.
 """
 
 from __future__ import annotations
 
 import copy
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
+
+from hasa_env.validation import Field, schema, validate
 
 __all__ = ["ConfigError", "default_config", "make_config", "deep_merge", "describe_config"]
 
@@ -23,206 +24,205 @@ class ConfigError(ValueError):
     """An unknown configuration key or a value outside its allowed range."""
 
 
-@dataclass(frozen=True)
-class _Spec:
-    """Allowed values of one configuration leaf."""
-
-    default: Any
-    doc: str
-    kind: str = "float"  # float | int | bool | choice | list | optional_list
-    low: float | None = None
-    high: float | None = None
-    choices: tuple[Any, ...] = ()
-    low_open: bool = False  # True: value must be strictly greater than low
-
-    def allowed(self) -> str:
-        if self.kind == "choice":
-            return "one of " + ", ".join(repr(c) for c in self.choices)
-        if self.kind == "bool":
-            return "true or false"
-        if self.kind in ("list", "optional_list"):
-            rng = _range_text(self.low, self.high, self.low_open)
-            base = f"a non-empty list of finite numbers{(' in ' + rng) if rng else ''}"
-            return base + (" or null" if self.kind == "optional_list" else "")
-        rng = _range_text(self.low, self.high, self.low_open)
-        word = "an integer" if self.kind == "int" else "a finite number"
-        return f"{word}{(' in ' + rng) if rng else ''}"
+def _number(default: float, doc: str, low: float, high: float, unit: str, **kw: Any) -> Field:
+    return Field("number", default, doc, unit=unit, low=low, high=high, **kw)
 
 
-def _range_text(low: float | None, high: float | None, low_open: bool) -> str:
-    if low is None and high is None:
-        return ""
-    left = "(" if low_open else "["
-    lo = "-inf" if low is None else f"{low:g}"
-    hi = "inf" if high is None else f"{high:g}"
-    return f"{left}{lo}, {hi}]"
+def _integer(default: int, doc: str, low: int, high: int) -> Field:
+    return Field("integer", default, doc, low=low, high=high)
+
+
+def _choice(default: str, doc: str, *choices: str) -> Field:
+    return Field("choice", default, doc, choices=choices)
 
 
 # The schema: every leaf of the configuration with its default, unit and range.
-_SCHEMA: dict[str, Any] = {
-    "track": _Spec(
-        "straight",
-        "Road: 'straight' or 'curved' (the shipped curved track, see hasa_env.sim.road).",
-        kind="choice",
-        choices=("straight", "curved"),
-    ),
-    "sim_frequency": _Spec(
-        100.0, "Simulation rate (Hz); Ts = 1 / sim_frequency.", low=10.0, high=10000.0
-    ),
-    "action_repeat": _Spec(
-        1,
-        "Simulation steps per env step (policy rate = sim_frequency / action_repeat).",
-        kind="int",
-        low=1,
-        high=1000,
-    ),
-    "time_limit": _Spec(
-        30.0, "Episode length (s); then truncated=True.", low=0.0, high=1e6, low_open=True
-    ),
-    "vehicle": {
-        "wheelbase": _Spec(2.8, "Wheelbase L (m).", low=0.5, high=20.0),
-        "max_speed": _Spec(60.0, "Speed saturation (m/s).", low=1.0, high=150.0),
-    },
-    "road": {
-        "lane_width": _Spec(3.6, "Lane width (m).", low=2.0, high=6.0),
-        "lanes_left": _Spec(1, "Lanes left of the ego lane.", kind="int", low=0, high=5),
-        "lanes_right": _Spec(0, "Lanes right of the ego lane.", kind="int", low=0, high=5),
-        "offroad_margin": _Spec(
-            0.5,
-            "How far (m) the rear-axle centre may pass the road edge before termination.",
-            low=0.0,
-            high=10.0,
+_SCHEMA: Field = schema(
+    {
+        "track": _choice(
+            "straight",
+            "Road: 'straight' or 'curved' (the shipped curved track, see hasa_env.sim.road).",
+            "straight",
+            "curved",
         ),
-    },
-    "initial_state": {
-        "lateral_offset": _Spec(
-            -0.5, "Initial lateral offset y (m, left positive).", low=-10.0, high=10.0
+        "sim_frequency": _number(
+            100.0, "Simulation rate (Hz); Ts = 1 / sim_frequency.", 10.0, 10000.0, "Hz"
         ),
-        "heading": _Spec(0.0, "Initial heading relative to the road (rad).", low=-1.0, high=1.0),
-        "speed": _Spec(15.0, "Initial speed (m/s).", low=0.0, high=150.0),
-        "steering": _Spec(0.0, "Initial road-wheel angle (rad).", low=-1.0, high=1.0),
-        "lateral_offset_std": _Spec(
-            0.0, "Std of a Gaussian added to the initial offset (m).", low=0.0, high=5.0
+        "action_repeat": _integer(
+            1,
+            "Simulation steps per env step (policy rate = sim_frequency / action_repeat).",
+            1,
+            1000,
         ),
-        "heading_std": _Spec(
-            0.0, "Std of a Gaussian added to the initial heading (rad).", low=0.0, high=0.5
+        "time_limit": _number(
+            30.0, "Episode length (s); then truncated=True.", 0.0, 1e6, "s", low_open=True
         ),
-        "speed_std": _Spec(
-            0.0, "Std of a Gaussian added to the initial speed (m/s).", low=0.0, high=20.0
-        ),
-    },
-    "markings": {
-        "hypotheses": _Spec(
-            [0.0, -1.8],
-            "Lane-centre hypotheses: the camera bias b (m) of each; camera reads y + b.",
-            kind="list",
-            low=-20.0,
-            high=20.0,
-        ),
-        "probabilities": _Spec(
-            None,
-            "Probability of each hypothesis being true (null: uniform).",
-            kind="optional_list",
-            low=0.0,
-            high=1.0,
-        ),
-    },
-    "noise": {
-        "speed": _Spec(0.05, "Speedometer noise std (m/s).", low=0.0, high=10.0),
-        "camera": _Spec(0.05, "Camera lateral-offset noise std (m).", low=0.0, high=10.0),
-        "camera_heading": _Spec(0.002, "Camera heading noise std (rad).", low=0.0, high=1.0),
-        "imu": _Spec(0.05, "IMU acceleration noise std, both axes (m/s^2).", low=0.0, high=50.0),
-        "steering": _Spec(1e-4, "Steering-sensor noise std (rad).", low=0.0, high=1.0),
-        "block_size": _Spec(
-            256,
-            "Steps of noise drawn per generator call (same in single and vector env); each "
-            "reset starts a new block, so short episodes favour small blocks.",
-            kind="int",
-            low=1,
-            high=1_000_000,
-        ),
-    },
-    "disturbance": {
-        "crosswind": _Spec(
-            0.0,
-            "Crosswind gusts: std of their lateral acceleration (m/s^2); 0: none "
-            "(see hasa_env.sim.disturbance).",
-            low=0.0,
-            high=10.0,
-        ),
-        "crosswind_bandwidth": _Spec(
-            1.0, "Highest gust frequency (Hz); the lowest is 0.05 Hz.", low=0.05, high=20.0
-        ),
-        "camber": _Spec(
-            0.0,
-            "Road camber: std of its lateral acceleration along the road (m/s^2); 0: none.",
-            low=0.0,
-            high=10.0,
-        ),
-        "camber_wavelength": _Spec(
-            40.0, "Shortest camber wavelength (m); the longest is 20 times it.", low=1.0, high=1e4
-        ),
-        "components": _Spec(8, "Sines in each of the two sums.", kind="int", low=1, high=64),
-    },
-    "action": {
-        "type": _Spec(
-            "normalized",
-            "'normalized': Box(-1, 1, (2,)) mapped linearly onto the limits; 'physical': Box in rad, m/s^2.",
-            kind="choice",
-            choices=("normalized", "physical"),
-        ),
-        "max_steering": _Spec(
-            0.5, "Road-wheel angle limit (rad), symmetric.", low=0.0, high=1.2, low_open=True
-        ),
-        "min_acceleration": _Spec(-6.0, "Lowest acceleration (m/s^2).", low=-30.0, high=0.0),
-        "max_acceleration": _Spec(6.0, "Highest acceleration (m/s^2).", low=0.0, high=30.0),
-    },
-    "observation": {
-        "type": _Spec(
-            "sensors",
-            "'sensors' (biased camera etc.), 'state' (true state, oracle) or 'both' (Dict).",
-            kind="choice",
-            choices=("sensors", "state", "both"),
-        ),
-    },
-    "reward": {
-        "lateral_weight": _Spec(1.0, "Weight of (y / half lane width)^2.", low=0.0, high=1e3),
-        "steering_rate_weight": _Spec(
-            0.5, "Weight of (change of steering per env step / max_steering)^2.", low=0.0, high=1e3
-        ),
-        "offroad_penalty": _Spec(
-            10.0, "Subtracted once when the car leaves the road.", low=0.0, high=1e6
-        ),
-    },
-    "render": {
-        "width": _Spec(640, "Frame width (pixels).", kind="int", low=64, high=4096),
-        "height": _Spec(480, "Frame height (pixels).", kind="int", low=64, high=4096),
-        "pixels_per_metre": _Spec(12.0, "Top-down zoom.", low=0.5, high=200.0),
-        "fps": _Spec(30, "Frame rate of render_mode='human'.", kind="int", low=1, high=240),
-        "view": _Spec(
-            "top_down",
-            "'top_down' (map view following the car) or 'driver' (first-person perspective).",
-            kind="choice",
-            choices=("top_down", "driver"),
-        ),
-        "show_points": _Spec(
-            False,
-            "Driver view: draw the near (6.2 m) and far (20 m) lane-centre points.",
-            kind="bool",
-        ),
-        "horizontal_field_of_view": _Spec(
-            1.2, "Driver view: horizontal field of view (rad).", low=0.2, high=2.8
-        ),
-        "eye_height": _Spec(1.2, "Driver view: eye height above the road (m).", low=0.3, high=5.0),
-    },
-}
-
-
-def _defaults(schema: Mapping[str, Any]) -> dict[str, Any]:
-    return {
-        k: (_defaults(v) if isinstance(v, Mapping) else copy.deepcopy(v.default))
-        for k, v in schema.items()
+        "vehicle": {
+            "wheelbase": _number(2.8, "Wheelbase L (m).", 0.5, 20.0, "m"),
+            "max_speed": _number(60.0, "Speed saturation (m/s).", 1.0, 150.0, "m/s"),
+        },
+        "road": {
+            "lane_width": _number(3.6, "Lane width (m).", 2.0, 6.0, "m"),
+            "lanes_left": _integer(1, "Lanes left of the ego lane.", 0, 5),
+            "lanes_right": _integer(0, "Lanes right of the ego lane.", 0, 5),
+            "offroad_margin": _number(
+                0.5,
+                "How far (m) the rear-axle centre may pass the road edge before termination.",
+                0.0,
+                10.0,
+                "m",
+            ),
+        },
+        "initial_state": {
+            "lateral_offset": _number(
+                -0.5, "Initial lateral offset y (m, left positive).", -10.0, 10.0, "m"
+            ),
+            "heading": _number(
+                0.0, "Initial heading relative to the road (rad).", -1.0, 1.0, "rad"
+            ),
+            "speed": _number(
+                15.0, "Initial speed (m/s), at most vehicle.max_speed.", 0.0, 150.0, "m/s"
+            ),
+            "steering": _number(0.0, "Initial road-wheel angle (rad).", -1.0, 1.0, "rad"),
+            "lateral_offset_std": _number(
+                0.0, "Std of a Gaussian added to the initial offset (m).", 0.0, 5.0, "m"
+            ),
+            "heading_std": _number(
+                0.0, "Std of a Gaussian added to the initial heading (rad).", 0.0, 0.5, "rad"
+            ),
+            "speed_std": _number(
+                0.0, "Std of a Gaussian added to the initial speed (m/s).", 0.0, 20.0, "m/s"
+            ),
+        },
+        "markings": {
+            "hypotheses": Field(
+                "numbers",
+                [0.0, -1.8],
+                "Lane-centre hypotheses: the camera bias b (m) of each; camera reads y + b.",
+                unit="m",
+                low=-20.0,
+                high=20.0,
+                non_empty=True,
+                unique=True,
+            ),
+            "probabilities": Field(
+                "numbers",
+                None,
+                "Probability of each hypothesis being true (null: uniform).",
+                low=0.0,
+                high=1.0,
+                non_empty=True,
+                optional=True,
+            ),
+        },
+        "noise": {
+            "speed": _number(0.05, "Speedometer noise std (m/s).", 0.0, 10.0, "m/s"),
+            "camera": _number(0.05, "Camera lateral-offset noise std (m).", 0.0, 10.0, "m"),
+            "camera_heading": _number(0.002, "Camera heading noise std (rad).", 0.0, 1.0, "rad"),
+            "imu": _number(
+                0.05, "IMU acceleration noise std, both axes (m/s^2).", 0.0, 50.0, "m/s^2"
+            ),
+            "steering": _number(1e-4, "Steering-sensor noise std (rad).", 0.0, 1.0, "rad"),
+            "block_size": _integer(
+                256,
+                "Steps of noise drawn per generator call (same in single and vector env); each "
+                "reset starts a new block, so short episodes favour small blocks.",
+                1,
+                1_000_000,
+            ),
+        },
+        "disturbance": {
+            "crosswind": _number(
+                0.0,
+                "Crosswind gusts: std of their lateral acceleration (m/s^2); 0: none "
+                "(see hasa_env.sim.disturbance).",
+                0.0,
+                10.0,
+                "m/s^2",
+            ),
+            "crosswind_bandwidth": _number(
+                1.0, "Highest gust frequency (Hz); the lowest is 0.05 Hz.", 0.05, 20.0, "Hz"
+            ),
+            "camber": _number(
+                0.0,
+                "Road camber: std of its lateral acceleration along the road (m/s^2); 0: none.",
+                0.0,
+                10.0,
+                "m/s^2",
+            ),
+            "camber_wavelength": _number(
+                40.0, "Shortest camber wavelength (m); the longest is 20 times it.", 1.0, 1e4, "m"
+            ),
+            "components": _integer(8, "Sines in each of the two sums.", 1, 64),
+        },
+        "action": {
+            "type": _choice(
+                "normalized",
+                "'normalized': Box(-1, 1, (2,)) mapped linearly onto the limits; 'physical': Box in rad, m/s^2.",
+                "normalized",
+                "physical",
+            ),
+            "max_steering": _number(
+                0.5, "Road-wheel angle limit (rad), symmetric.", 0.0, 1.2, "rad", low_open=True
+            ),
+            "min_acceleration": _number(-6.0, "Lowest acceleration (m/s^2).", -30.0, 0.0, "m/s^2"),
+            "max_acceleration": _number(6.0, "Highest acceleration (m/s^2).", 0.0, 30.0, "m/s^2"),
+        },
+        "observation": {
+            "type": _choice(
+                "sensors",
+                "'sensors' (biased camera etc.), 'state' (true state, oracle) or 'both' (Dict).",
+                "sensors",
+                "state",
+                "both",
+            ),
+        },
+        "reward": {
+            "lateral_weight": _number(1.0, "Weight of (y / half lane width)^2.", 0.0, 1e3, ""),
+            "steering_rate_weight": _number(
+                0.5,
+                "Weight of (change of steering per env step / max_steering)^2.",
+                0.0,
+                1e3,
+                "",
+            ),
+            "offroad_penalty": _number(
+                10.0, "Subtracted once when the car leaves the road.", 0.0, 1e6, ""
+            ),
+        },
+        "render": {
+            "width": _integer(640, "Frame width (pixels).", 64, 4096),
+            "height": _integer(480, "Frame height (pixels).", 64, 4096),
+            "pixels_per_metre": _number(12.0, "Top-down zoom.", 0.5, 200.0, "pixels/m"),
+            "fps": _integer(30, "Frame rate of render_mode='human'.", 1, 240),
+            "view": _choice(
+                "top_down",
+                "'top_down' (map view following the car) or 'driver' (first-person perspective).",
+                "top_down",
+                "driver",
+            ),
+            "show_points": Field(
+                "bool",
+                False,
+                "Driver view: draw the near (6.2 m) and far (20 m) lane-centre points.",
+            ),
+            "horizontal_field_of_view": _number(
+                1.2, "Driver view: horizontal field of view (rad).", 0.2, 2.8, "rad"
+            ),
+            "eye_height": _number(
+                1.2, "Driver view: eye height above the road (m).", 0.3, 5.0, "m"
+            ),
+        },
     }
+)
+
+
+def _describe(path: str) -> str:
+    return f"config key '{path}'" if path else "config"
+
+
+def _error(path: str, message: str) -> ConfigError:
+    return ConfigError(message)
 
 
 def default_config() -> dict[str, Any]:
@@ -242,7 +242,7 @@ def default_config() -> dict[str, Any]:
     road.offroad_margin         m past the edge before termination (0.5)
     initial_state.*             y (m, -0.5), heading (rad), speed (m/s, 15),
                                 steering (rad), and *_std randomisation
-    markings.hypotheses         camera biases b (m, [0, -1.8])
+    markings.hypotheses         camera biases b (m, [0, -1.8]), distinct
     markings.probabilities      prior of each (uniform)
     noise.*                     sensor noise std: speed, camera, camera_heading,
                                 imu, steering; block_size
@@ -261,23 +261,15 @@ def default_config() -> dict[str, Any]:
 
     :func:`describe_config` prints every key with its documentation and range.
     """
-    return _defaults(_SCHEMA)
+    return validate({}, _SCHEMA, describe=_describe, error=_error)
 
 
 def describe_config() -> str:
-    """Every configuration key with its default, meaning and allowed range."""
-    lines: list[str] = []
-
-    def walk(schema: Mapping[str, Any], prefix: str) -> None:
-        for key, spec in schema.items():
-            path = f"{prefix}{key}"
-            if isinstance(spec, Mapping):
-                walk(spec, path + ".")
-            else:
-                lines.append(f"{path} = {spec.default!r}: {spec.doc} Allowed: {spec.allowed()}.")
-
-    walk(_SCHEMA, "")
-    return "\n".join(lines)
+    """Every configuration key with its default, meaning and allowed range (with its unit)."""
+    return "\n".join(
+        f"{path} = {spec.default!r}: {spec.doc} Allowed: {spec.allowed()}."
+        for path, spec in _SCHEMA.leaves()
+    )
 
 
 def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
@@ -291,84 +283,22 @@ def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict[str, 
     return out
 
 
-def _check_number(path: str, value: Any, spec: _Spec) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"config key '{path}' must be {spec.allowed()}, got {value!r}")
-    if not math.isfinite(value):
-        raise ConfigError(f"config key '{path}' must be {spec.allowed()}, got {value!r}")
-    bad_low = spec.low is not None and (value <= spec.low if spec.low_open else value < spec.low)
-    bad_high = spec.high is not None and value > spec.high
-    if bad_low or bad_high:
-        raise ConfigError(
-            f"config key '{path}' = {value!r} is out of range: allowed {spec.allowed()}"
-        )
-    return value
-
-
-def _validate_leaf(path: str, value: Any, spec: _Spec) -> Any:
-    if spec.kind == "choice":
-        if value not in spec.choices:
-            raise ConfigError(f"config key '{path}' = {value!r} is not allowed: {spec.allowed()}")
-        return value
-    if spec.kind == "bool":
-        if not isinstance(value, bool):
-            raise ConfigError(f"config key '{path}' must be {spec.allowed()}, got {value!r}")
-        return value
-    if spec.kind == "int":
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config key '{path}' must be {spec.allowed()}, got {value!r}")
-        _check_number(path, value, spec)
-        return value
-    if spec.kind in ("list", "optional_list"):
-        if value is None and spec.kind == "optional_list":
-            return None
-        if isinstance(value, str | bytes) or not hasattr(value, "__iter__"):
-            raise ConfigError(f"config key '{path}' must be {spec.allowed()}, got {value!r}")
-        items = list(value)
-        if not items:
-            raise ConfigError(f"config key '{path}' must be {spec.allowed()}, got an empty list")
-        return [float(_check_number(f"{path}[{i}]", v, spec)) for i, v in enumerate(items)]
-    return float(_check_number(path, value, spec))
-
-
-def _validate(config: Mapping[str, Any], schema: Mapping[str, Any], prefix: str) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    unknown = [k for k in config if k not in schema]
-    if unknown:
-        allowed = ", ".join(sorted(schema))
-        raise ConfigError(
-            f"unknown config key '{prefix}{unknown[0]}' (allowed keys here: {allowed})"
-        )
-    for key, spec in schema.items():
-        path = f"{prefix}{key}"
-        value = config[key]
-        if isinstance(spec, Mapping):
-            if not isinstance(value, Mapping):
-                raise ConfigError(
-                    f"config key '{path}' must be a mapping of {sorted(spec)}, got {value!r}"
-                )
-            out[key] = _validate(value, spec, path + ".")
-        else:
-            out[key] = _validate_leaf(path, value, spec)
-    return out
-
-
 def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Deep-merge ``config`` onto :func:`default_config` and validate the result.
+    """Fill ``config`` in with :func:`default_config` (a deep merge) and validate the result.
+
+    Accepts numpy scalars as numbers and integral floats for integer keys,
+    and returns plain Python values (``float``, ``int``, ``list``).
 
     Raises:
-        ConfigError: an unknown key, a value of the wrong type or out of its range,
-            or inconsistent values (e.g. probabilities that do not match the
-            hypotheses). The message names the key path and the allowed range.
+        ConfigError: a ``config`` that is not a mapping, an unknown key, a value
+            of the wrong type or out of its range, or inconsistent values (e.g.
+            probabilities that do not match the hypotheses, an initial speed
+            above ``vehicle.max_speed``). The message names the key path and
+            the allowed range.
     """
-    if config is None:
-        config = {}
-    if not isinstance(config, Mapping):
-        raise ConfigError(f"config must be a mapping (dict), got {type(config).__name__}")
-    merged = deep_merge(default_config(), config)
-    cfg = _validate(merged, _SCHEMA, "")
+    cfg: dict[str, Any] = validate(
+        {} if config is None else config, _SCHEMA, describe=_describe, error=_error
+    )
     probs = cfg["markings"]["probabilities"]
     hyps = cfg["markings"]["hypotheses"]
     if probs is not None:
@@ -384,5 +314,11 @@ def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     if cfg["action"]["min_acceleration"] >= cfg["action"]["max_acceleration"]:
         raise ConfigError(
             "config keys 'action.min_acceleration' and 'action.max_acceleration' must satisfy min < max"
+        )
+    speed, max_speed = cfg["initial_state"]["speed"], cfg["vehicle"]["max_speed"]
+    if speed > max_speed:
+        raise ConfigError(
+            f"config key 'initial_state.speed' = {speed!r} m/s is above 'vehicle.max_speed' = "
+            f"{max_speed!r} m/s; the car cannot start faster than its speed saturation"
         )
     return cfg

@@ -204,10 +204,10 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
     ``track`` sets the default track of a registered id; an explicit
     ``config["track"]`` wins.
     """
-    user = dict(config or {})
-    if track is not None and "track" not in user:
-        user["track"] = track
-    cfg = make_config(user)
+    if track is not None and (config is None or isinstance(config, Mapping)):
+        if config is None or "track" not in config:
+            config = {**(config or {}), "track": track}
+    cfg = make_config(config)  # a config that is not a mapping is a ConfigError there
     road_cfg = cfg["road"]
     width = road_cfg["lane_width"]
     road = make_road(cfg["track"], lane_width=width)

@@ -10,17 +10,19 @@ object with ``format`` (= ``"hasa_env.steering_model"``), ``format_version``
 ``parameters``, ``standard_errors`` and, optionally, ``class``
 (``"package.module:ClassName"``, so that
 :func:`hasa_env.steering.loading.load_model_file` can import a user type's
-module). :func:`model_from_dict` validates every field and names the file,
-the field and the allowed values.
+module). :func:`model_from_dict` validates every field through the shared
+validator (:mod:`hasa_env.validation`) and names the file, the field and the
+allowed values.
 """
 
 from __future__ import annotations
 
-import math
+import re
 from collections.abc import Mapping
 from typing import Any
 
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
+from hasa_env.validation import ANY_JSON, Field, schema, validate, version
 
 __all__ = [
     "MODEL_FILE_FORMAT",
@@ -43,17 +45,68 @@ class ModelFileError(ValueError):
     """A steering-model file or JSON document that cannot be read; the message names the field."""
 
 
-def _finite_positive(value: Any, field: str, source: str) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value <= 0
-    ):
-        raise ModelFileError(
-            f"{source}: field '{field}' must be a finite positive number, got {value!r}"
-        )
-    return float(value)
+_FEATURES = {
+    "near_distance": Field(
+        "number", NEAR_POINT_DISTANCE, "Near-point look-ahead distance.", unit="m", low=0.0,
+        low_open=True,
+    ),
+    "far_distance": Field(
+        "number", FAR_POINT_DISTANCE, "Far-point look-ahead distance.", unit="m", low=0.0,
+        low_open=True,
+    ),
+    "decision_lag": Field("integer", 1, "Samples between a decision and its steering.", low=0),
+    "steering_signal": Field(
+        "choice", "measured", "The steering the model was fitted on.",
+        choices=("measured", "applied"),
+    ),
+    "regressors": Field("strings", None, "The regressors' names (checked against the structure)."),
+}  # fmt: skip
+_PARAMETERS = Field(
+    "mapping", each=Field("number"), optional=True, doc="Parameter name -> value, or null."
+)
+_STANDARD_ERRORS = Field(
+    "mapping", None, "Parameter name -> standard error, or null.", each=Field("number", low=0.0),
+    optional=True,
+)  # fmt: skip
+
+
+CLASS_PATH = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*")
+"""What the ``class`` field holds: ``package.module:ClassName``."""
+
+
+def _schema(cls: str | None = None) -> Field:
+    """The fields of a model file; the allowed ``type`` values are the types registered now
+    (``cls``: the file's ``class`` field, named in the hint of an unregistered type)."""
+    where = f" ({cls})" if cls else ""
+    return schema(
+        {
+            "format": Field("choice", choices=(MODEL_FILE_FORMAT,)),
+            "format_version": version(MODEL_FILE_VERSION, default=MODEL_FILE_VERSION),
+            "class": Field(
+                "string",
+                None,
+                "The model's class, for importing a user type's module.",
+                optional=True,
+                pattern=CLASS_PATH,
+                pattern_doc="package.module:ClassName",
+            ),  # fmt: skip
+            "type": Field(
+                "choice",
+                choices=tuple(sorted(MODEL_TYPES)),
+                hint=f"a custom model's class{where} must be defined (imported) before loading "
+                "its file; hasa_env.steering.loading.load_model_file imports the module its "
+                "'class' field names",
+            ),
+            "name": Field("string", None, "Label of the model (default: its type)."),
+            "dt": Field(
+                "number", doc="Sample time of the coefficients.", unit="s", low=0.0, low_open=True
+            ),  # fmt: skip
+            "features": Field("mapping", fields=_FEATURES),
+            "structure": Field("mapping", {}, "The model's keyword arguments.", each=ANY_JSON),
+            "parameters": _PARAMETERS,
+            "standard_errors": _STANDARD_ERRORS,
+        }
+    )
 
 
 def model_from_dict(
@@ -67,105 +120,41 @@ def model_from_dict(
     ``decision_lag`` (int >= 0), ``steering_signal`` ("measured" or "applied"),
     ``regressors`` (optional; checked)},
     ``structure`` (the model's keyword arguments), ``parameters`` (name ->
-    number, or null) and ``standard_errors`` (same, or null).
+    number, or null) and ``standard_errors`` (same, >= 0, or null).
 
     Raises:
         ModelFileError: naming ``source``, the field and the allowed values.
     """
-    if not isinstance(document, Mapping):
-        raise ModelFileError(f"{source}: expected a JSON object, got {type(document).__name__}")
-    known = {
-        "format", "format_version", "type", "name", "dt", "features", "structure",
-        "parameters", "standard_errors", "class",
-    }  # fmt: skip
-    unknown = sorted(set(document) - known)
-    if unknown:
-        raise ModelFileError(
-            f"{source}: unknown field '{unknown[0]}'; allowed fields: {', '.join(sorted(known))}"
-        )
-    for field in ("format", "type", "dt", "features", "parameters"):
-        if field not in document:
-            raise ModelFileError(f"{source}: missing field '{field}'")
-    if document["format"] != MODEL_FILE_FORMAT:
-        raise ModelFileError(
-            f"{source}: field 'format' is {document['format']!r}; allowed: {MODEL_FILE_FORMAT!r}"
-        )
-    version = document.get("format_version", MODEL_FILE_VERSION)
-    if version != MODEL_FILE_VERSION:
-        raise ModelFileError(
-            f"{source}: field 'format_version' is {version!r}; allowed: {MODEL_FILE_VERSION}"
-        )
-    cls = document.get("class")
-    if cls is not None and not isinstance(cls, str):
-        raise ModelFileError(
-            f"{source}: field 'class' must be a string 'package.module:ClassName', got {cls!r}"
-        )
-    model_type = document["type"]
-    if model_type not in MODEL_TYPES:
-        where = f" ({cls})" if cls else ""
-        raise ModelFileError(
-            f"{source}: field 'type' is {model_type!r}; "
-            f"allowed: {', '.join(sorted(MODEL_TYPES))} "
-            f"(a custom model's class{where} must be defined (imported) before loading its "
-            "file; hasa_env.steering.loading.load_model_file imports the module its 'class' "
-            "field names)"
-        )
+
+    def fail(path: str, message: str) -> ModelFileError:
+        return ModelFileError(f"{source}: {message}")
+
+    cls = document.get("class") if isinstance(document, Mapping) else None
+    doc = validate(
+        document,
+        _schema(cls if isinstance(cls, str) else None),
+        describe=lambda path: f"field '{path}'" if path else "the document",
+        error=fail,
+    )
+    model_type = doc["type"]
     target = MODEL_TYPES[model_type]
     if expected is not None and not issubclass(target, expected):
         raise ModelFileError(
             f"{source}: field 'type' is {model_type!r} but {expected.__name__}.from_json expects "
             f"{expected.model_type!r}; use SteeringModel.load to read any model"
         )
-    dt = _finite_positive(document["dt"], "dt", source)
-    features = document["features"]
-    if not isinstance(features, Mapping):
-        raise ModelFileError(f"{source}: field 'features' must be an object, got {features!r}")
-    allowed_features = {
-        "near_distance",
-        "far_distance",
-        "decision_lag",
-        "steering_signal",
-        "regressors",
+    features = doc["features"]
+    common = {
+        "near_distance": features["near_distance"],
+        "far_distance": features["far_distance"],
+        "dt": doc["dt"],
+        "decision_lag": features["decision_lag"],
+        "steering_signal": features["steering_signal"],
+        "name": model_type if doc["name"] is None else doc["name"],
     }
-    bad = sorted(set(features) - allowed_features)
-    if bad:
-        raise ModelFileError(
-            f"{source}: unknown field 'features.{bad[0]}'; "
-            f"allowed: {', '.join(sorted(allowed_features))}"
-        )
-    near = _finite_positive(
-        features.get("near_distance", NEAR_POINT_DISTANCE), "features.near_distance", source
-    )
-    far = _finite_positive(
-        features.get("far_distance", FAR_POINT_DISTANCE), "features.far_distance", source
-    )
-    signal = features.get("steering_signal", "measured")
-    if signal not in ("measured", "applied"):
-        raise ModelFileError(
-            f"{source}: field 'features.steering_signal' must be 'measured' or 'applied', "
-            f"got {signal!r}"
-        )
-    lag = features.get("decision_lag", 1)
-    if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
-        raise ModelFileError(
-            f"{source}: field 'features.decision_lag' must be a non-negative integer, got {lag!r}"
-        )
-    name = document.get("name", model_type)
-    if not isinstance(name, str):
-        raise ModelFileError(f"{source}: field 'name' must be a string, got {name!r}")
-    structure = document.get("structure", {})
-    if not isinstance(structure, Mapping):
-        raise ModelFileError(f"{source}: field 'structure' must be an object, got {structure!r}")
+    structure = doc["structure"]
     try:
-        skeleton = target(
-            **structure,
-            near_distance=near,
-            far_distance=far,
-            dt=dt,
-            decision_lag=lag,
-            steering_signal=signal,
-            name=name,
-        )
+        skeleton = target(**structure, parameters=None, standard_errors=None, **common)
     except (TypeError, ValueError) as exc:
         raise ModelFileError(
             f"{source}: field 'structure' is not valid for {model_type!r}: {exc}"
@@ -173,55 +162,33 @@ def model_from_dict(
     names = skeleton.parameter_names
     values = {}
     for field in ("parameters", "standard_errors"):
-        raw = document.get(field)
-        if raw is None:
-            values[field] = None
-            continue
-        if not isinstance(raw, Mapping):
-            raise ModelFileError(
-                f"{source}: field '{field}' must be an object name -> number or null, got {raw!r}"
-            )
-        missing = [n for n in names if n not in raw]
-        extra = [k for k in raw if k not in names]
-        if missing or extra:
-            raise ModelFileError(
-                f"{source}: field '{field}' has "
-                f"{'missing ' + str(missing) if missing else ''}"
-                f"{' and ' if missing and extra else ''}"
-                f"{'unexpected ' + str(extra) if extra else ''}; "
-                f"allowed names for this structure: {list(names)}"
-            )
-        for key in names:
-            item = raw[key]
-            if (
-                isinstance(item, bool)
-                or not isinstance(item, int | float)
-                or not math.isfinite(item)
-            ):
+        raw = doc[field]
+        if raw is not None:
+            missing = [n for n in names if n not in raw]
+            extra = [k for k in raw if k not in names]
+            if missing or extra:
                 raise ModelFileError(
-                    f"{source}: field '{field}.{key}' must be a finite number, got {item!r}"
+                    f"{source}: field '{field}' has "
+                    f"{'missing ' + str(missing) if missing else ''}"
+                    f"{' and ' if missing and extra else ''}"
+                    f"{'unexpected ' + str(extra) if extra else ''}; "
+                    f"allowed names for this structure: {list(names)}"
                 )
-            if field == "standard_errors" and item < 0:
-                raise ModelFileError(f"{source}: field '{field}.{key}' must be >= 0, got {item!r}")
-        values[field] = {n: float(raw[n]) for n in names}
+            raw = {n: raw[n] for n in names}
+        values[field] = raw
     if values["parameters"] is None and values["standard_errors"] is not None:
         raise ModelFileError(f"{source}: field 'standard_errors' given without 'parameters'")
-    listed = features.get("regressors")
+    listed = features["regressors"]
     if listed is not None:
-        expected = [str(r) for r in skeleton.regressors]
-        if not isinstance(listed, list) or listed != expected:
+        regressors = [str(r) for r in skeleton.regressors]
+        if listed != regressors:
             raise ModelFileError(
                 f"{source}: field 'features.regressors' is {listed!r} but this structure uses "
-                f"{expected}"
+                f"{regressors}"
             )
     return target(
         **structure,
         parameters=values["parameters"],
         standard_errors=values["standard_errors"],
-        near_distance=near,
-        far_distance=far,
-        dt=dt,
-        decision_lag=lag,
-        steering_signal=signal,
-        name=name,
+        **common,
     )
