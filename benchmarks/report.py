@@ -307,6 +307,10 @@ def format_tables(result: BenchmarkResult) -> str:
         parts.append("")
         parts.append("Notes on the models:")
         parts.extend(f"  {name}: {note}" for name, note in notes)
+    if result.notes:
+        parts.append("")
+        parts.append("Notes on the runs:")
+        parts.extend(f"  {note}" for note in result.notes)
     if result.errors:
         parts.append("")
         parts.append("ERRORS (these models are left out of the tables):")

@@ -14,6 +14,7 @@ import pandas as pd
 from benchmarks.protocol.config import _ENV_IDS, ILLUSTRATIVE, BenchmarkError, ProtocolConfig
 from hasa_env.drivers import SyntheticDriver, population, run_drivers, run_seeds
 from hasa_env.recording import load_recording
+from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
 __all__ = ["RunRef", "chunks", "load_frames", "recording_plan", "synthetic_plan"]
 
@@ -87,14 +88,87 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> dict[str, Any]:
     }
 
 
+def _study_sessions(root: Path) -> tuple[dict[Path, str], set[Path], dict[str, Any], list[str]]:
+    """What the study session files under ``root`` say (``hasa-drive study``).
+
+    Returns (measured recording -> participant, recordings to leave out (practice
+    runs, aborted attempts, files the session does not list), per-participant
+    details, notes). A session file that cannot be read is named in the notes and its
+    folder's recordings are read like any others.
+    """
+    measured: dict[Path, str] = {}
+    excluded: set[Path] = set()
+    details: dict[str, Any] = {}
+    notes: list[str] = []
+    for path in find_session_files(root):
+        try:
+            session = SessionFile.open(path)
+        except SessionError as exc:
+            notes.append(f"skipped the session file {exc}")
+            continue
+        folder = path.parent
+        who = session.participant
+        listed: set[Path] = set()
+        practice = aborted = 0
+        for attempt in session.attempts:
+            if not attempt.get("file"):
+                continue
+            csv = (folder / attempt["file"]).resolve()
+            listed.add(csv)
+            if attempt["status"] == "completed" and attempt["block"] == "measured":
+                measured[csv] = who
+                continue
+            excluded.add(csv)
+            if attempt["block"] == "practice":
+                practice += 1
+            if attempt["status"] != "completed":
+                aborted += 1
+                notes.append(
+                    f"aborted run not analysed: {who} {attempt['block']} run "
+                    f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
+                    f"{attempt['steps']} steps): {folder / attempt['file']}"
+                )
+        unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
+        excluded |= unlisted
+        summary = session.summary()
+        details[who] = {
+            "session_file": str(path),
+            "study": session.doc["study"]["name"],
+            "participant_metadata": session.doc["participant"]["metadata"],
+            "session_state": summary["state"],
+            "measured_runs": summary["measured_completed"],
+            "measured_scheduled": summary["measured_scheduled"],
+            "practice_runs_excluded": practice,
+            "aborted_runs": aborted,
+        }
+        text = (
+            f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
+            f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
+            f"{practice} practice run(s) left out, {aborted} aborted"
+        )
+        if unlisted:
+            text += f", {len(unlisted)} recording(s) the session file does not list left out"
+        notes.append(text)
+    return measured, excluded, details, notes
+
+
 def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
-    """The runs of a folder of recordings (one recording per run)."""
+    """The runs of a folder of recordings (one recording per run).
+
+    Folders with a study session file (``session.json`` of ``hasa-drive
+    study``) contribute their completed measured runs only: practice runs and
+    aborted attempts are left out and reported in the notes, and the drivers
+    are the sessions' participants, with their metadata.
+    """
     root = Path(config.recordings or "")
     if not root.is_dir():
         raise BenchmarkError(f"recordings directory {str(root)!r} does not exist")
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
     skipped: list[str] = []
+    session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
     for csv in sorted(root.rglob("*.csv")):
+        if csv.resolve() in session_excluded:
+            continue
         sidecar = csv.with_suffix(".json")
         try:
             meta = json.loads(sidecar.read_text(encoding="utf-8"))
@@ -103,7 +177,9 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
             skipped.append(f"{csv}: no readable sidecar with config.track ({type(exc).__name__})")
             continue
         metadata = meta.get("metadata") or {}
-        driver = metadata.get("driver") or metadata.get("participant")
+        driver = (
+            session_runs.get(csv.resolve()) or metadata.get("driver") or metadata.get("participant")
+        )
         if not driver:
             relative = csv.parent.relative_to(root)
             driver = relative.parts[0] if relative.parts else "driver"
@@ -132,9 +208,11 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
                 "runs": len(main_paths),
                 "curved_runs": len(curved_paths) if name == illustrative else 0,
                 "recordings": [str(p) for p in main_paths + list(curved_paths)],
+                **({"study_session": session_details[name]} if name in session_details else {}),
             }
         )
     notes = [f"recordings: {len(main) + len(curved)} runs of {len(names)} drivers from {root}"]
+    notes += session_notes
     notes += [f"skipped {s}" for s in skipped]
     return {
         "illustrative": illustrative,
