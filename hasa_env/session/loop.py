@@ -55,6 +55,7 @@ from hasa_env.sim.config import deep_merge, make_config
 __all__ = ["DriveSession", "MAX_CATCH_UP", "RunResult", "RunSpec", "WAITING_STATES"]
 
 WAITING_STATES = ("idle", "between_runs", "break", "end")
+CONFIRM_HINT = "Press a wheel button or SPACE to start."
 """States in which the session shows a message and waits for the driver to confirm."""
 
 MAX_CATCH_UP = 0.25
@@ -283,8 +284,8 @@ class DriveSession:
                 self.log(f"hasa-drive: {n.message}")
             elif n.kind == "connected":
                 self.log(f"hasa-drive: {n.message}")
-                if self.state in ("idle", "between_runs"):
-                    self.message = f"{n.message}\nPress a wheel button or SPACE to start."
+                if self.state in WAITING_STATES:  # the screen's text stays, under the notice
+                    self.message = f"{n.message}\n{self.message or CONFIRM_HINT}"
                 elif self.state == "driving" and self.steps > 0:
                     self.state = "paused"
                     self.message = f"{n.message}\nPress a wheel button or SPACE to drive on."
@@ -301,7 +302,7 @@ class DriveSession:
             elif n.kind == "confirm":
                 if self.state == "paused":
                     self._resume()
-                elif self.state in ("idle", "between_runs"):
+                elif self.state in WAITING_STATES:
                     self.state = "confirmed"
 
     def _resume(self) -> None:
