@@ -462,6 +462,19 @@ def _study(args: argparse.Namespace) -> int:
             return 0
         synthetic = args.synthetic is not None
         headless = synthetic and not args.realtime
+        DriveSettings(participant=args.participant, output=args.output)  # a usable id
+        keyboard = (
+            load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
+        )
+        if not isinstance(keyboard, KeyboardCalibration):
+            raise CalibrationError(
+                str(args.keyboard), "device", "must be 'keyboard' for --keyboard"
+            )
+        env_wrapper = None
+        if args.estimator is not None:
+            track = study.document["measured"]["track"]
+            env_wrapper = _estimator(args.estimator, LaneKeepingEnv(config=study.env_config(track)))
+        # the input is checked first: a bad file is exit 2 with or without a screen
         if not headless:
             reason = no_screen_reason()
             if reason is not None:
@@ -478,17 +491,6 @@ def _study(args: argparse.Namespace) -> int:
         answers: dict[str, Any] = {}
         if not resuming:
             answers = _answers(study, dict(args.meta), not synthetic and sys.stdin.isatty())
-        keyboard = (
-            load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
-        )
-        if not isinstance(keyboard, KeyboardCalibration):
-            raise CalibrationError(
-                str(args.keyboard), "device", "must be 'keyboard' for --keyboard"
-            )
-        env_wrapper = None
-        if args.estimator is not None:
-            track = study.document["measured"]["track"]
-            env_wrapper = _estimator(args.estimator, LaneKeepingEnv(config=study.env_config(track)))
     except (StudyError, SessionError, ValueError, ConfigError, ImportError, OSError) as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
