@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from hasa_cli.bench import main as bench_main
-from hasa_cli.drive import EXIT_NO_SCREEN, StatusLine
+from hasa_cli.drive import EXIT_NO_SCREEN
+from hasa_cli.study import StatusLine
 from hasa_cli.drive import main as drive_main
 from hasa_env.recording import load_recording
 
