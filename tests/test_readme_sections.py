@@ -10,7 +10,7 @@ import shutil
 import sys
 
 import pytest
-from test_readme import README, run_blocks
+from test_readme import OWN_TESTS, README, run_blocks
 
 from hasa_cli.bench import main as hasa_bench
 from hasa_cli.drive import EXIT_NO_SCREEN
@@ -22,6 +22,7 @@ PROGRAMS = {"hasa-bench": hasa_bench, "hasa-drive": hasa_drive, "hasa-replay": h
 
 
 def section(title: str) -> str:
+    assert title in OWN_TESTS  # tests/test_readme.py leaves these sections to this file
     text = README.read_text()
     start = text.index(f"\n## {title}\n")
     end = text.find("\n## ", start + 1)

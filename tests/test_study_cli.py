@@ -18,8 +18,8 @@ import pytest
 
 from hasa_cli.bench import main as bench_main
 from hasa_cli.drive import EXIT_NO_SCREEN
-from hasa_cli.study import StatusLine
 from hasa_cli.drive import main as drive_main
+from hasa_cli.study import StatusLine
 from hasa_env.recording import load_recording
 
 STUDY = """
@@ -69,7 +69,7 @@ def _command(study: Path, out: Path, participant: str, *extra: str) -> list[str]
 
 @pytest.mark.slow
 def test_a_killed_study_resumes_at_the_next_run_and_the_benchmark_reads_it(tmp_path, capsys):
-    study = _study(tmp_path, seconds=5.0)
+    study = _study(tmp_path, seconds=4.0)
     out = tmp_path / "rec"
     folder = out / "P01"
     proc = subprocess.Popen(_command(study, out, "P01"), env=HEADLESS,
@@ -78,7 +78,7 @@ def test_a_killed_study_resumes_at_the_next_run_and_the_benchmark_reads_it(tmp_p
     try:
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
-            if target.exists() and target.stat().st_size > 60_000:  # a few hundred rows
+            if target.exists() and target.stat().st_size > 30_000:  # about 100 rows
                 break
             if proc.poll() is not None:
                 pytest.fail(f"the study ended early: {proc.stderr.read().decode()}")
@@ -101,7 +101,7 @@ def test_a_killed_study_resumes_at_the_next_run_and_the_benchmark_reads_it(tmp_p
     for name, digest in before.items():  # nothing lost or overwritten
         assert hashlib.sha256((folder / name).read_bytes()).hexdigest() == digest, name
     killed = load_recording(target)
-    assert not killed.complete and killed.steps > 100
+    assert not killed.complete and 50 < killed.steps < 400
     doc = json.loads((folder / "session.json").read_text())
     attempts = [(a["block"], a["number"], a["attempt"], a["status"], a["end_reason"], a["file"])
                 for a in doc["attempts"]]  # fmt: skip
