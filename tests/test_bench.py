@@ -315,6 +315,9 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert {r["model"] for r in doc["estimation"]} == estimated
     no_arx = next(m for m in doc["models"] if m["name"] == "no_arx")
     assert no_arx["arx"] is False and "not an ARX model" in no_arx["note"]
+    assert "no rows in the lateral-estimation table" in no_arx["note"]  # and why
+    report = (tmp_path / "report.md").read_text()
+    assert "it has no rows in the lateral-estimation table" in report
     ranks = {r["model"]: (r["rank_steering"], r["rank_lateral"]) for r in doc["summary"]}
     assert ranks["no_arx"][0] is not None and ranks["no_arx"][1] is None
     assert all(r["driver"] in ("Ill", "1", "2") for r in doc["steering"])
