@@ -257,7 +257,9 @@ class StudySession:
             },
         )
 
-    def _screen(self, run: ScheduledRun, previous: ScheduledRun | None, resumed: bool) -> list:
+    def _screen(
+        self, run: ScheduledRun, previous: ScheduledRun | None, resumed: bool
+    ) -> list[tuple[str, str, float]]:
         """The screens (message, state, shortest time) shown before ``run``."""
         study = self.study
         screens = []
