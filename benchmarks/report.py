@@ -343,11 +343,29 @@ def format_tables(result: BenchmarkResult) -> str:
         parts.append(title)
         parts.append(render_text(rows, columns, group) if rows else "(no rows)")
     parts.extend(_findings(result, markdown=False))
+    notes = _model_notes(result)
+    if notes:
+        parts.append("")
+        parts.append("Notes on the models:")
+        parts.extend(f"  {name}: {note}" for name, note in notes)
+    if result.notes:
+        parts.append("")
+        parts.append("Notes on the runs:")
+        parts.extend(f"  {note}" for note in result.notes)
     if result.errors:
         parts.append("")
         parts.append("ERRORS (these models are left out of the tables):")
         parts.extend(f"  {e['message']}" for e in result.errors)
     return "\n".join(parts)
+
+
+def _model_notes(result: BenchmarkResult) -> list[tuple[str, str]]:
+    """(model, note) once per model with a note (e.g. why it has no estimation rows)."""
+    seen: dict[str, str] = {}
+    for m in result.models:
+        if m.get("note") and not m.get("error"):
+            seen.setdefault(str(m["name"]), str(m["note"]))
+    return list(seen.items())
 
 
 def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:

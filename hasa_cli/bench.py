@@ -4,6 +4,8 @@ Usage::
 
     hasa-bench paper [options]                       # the paper's protocol, built-in models
     hasa-bench score my_pkg.my_module:MyModel [...]  # the same, ranking your model(s)
+    hasa-bench score path/to/model.json             # a saved model, with its own parameters
+    hasa-bench paper --recordings STUDY_DIR          # a study's recordings (session files)
     hasa-bench perf [--quick] [--json FILE]          # the performance benchmarks
 
 ``paper`` and ``score`` print the tables and write into ``--out``
@@ -123,12 +125,23 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     noise.add_argument("--camera-noise", type=float, metavar="M", help="camera offset (0.05)")
     noise.add_argument("--imu-noise", type=float, metavar="M/S2", help="IMU (0.05)")
     noise.add_argument("--steering-noise", type=float, metavar="RAD", help="steering (1e-4)")
+    parser.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="MODEL",
+        help="also score this steering model: 'package.module:ClassName' (a SteeringModel "
+        "subclass, fitted on the training run like the built-ins) or a saved model file "
+        "(scored with its own parameters); repeatable",
+    )
     rec = parser.add_argument_group("recorded drives instead")
     rec.add_argument(
         "--recordings",
         metavar="DIR",
         help="directory of recordings (hasa_env format); drivers from metadata.driver or "
-        "metadata.participant, else the sub-directory",
+        "metadata.participant, else the sub-directory. A study's directory (session.json "
+        "files of 'hasa-drive study'): its participants' measured runs, practice runs "
+        "excluded, aborted runs reported",
     )
     rec.add_argument(
         "--illustrative",
@@ -250,9 +263,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="score your steering model(s) with the same protocol",
         description="Import each MODEL ('package.module:ClassName', a SteeringModel subclass, "
         "from the working directory or the installed packages), fit it on the training run "
-        "like the built-ins and rank it against them.",
+        "like the built-ins and rank it against them; a saved model file (model.save(...), "
+        "any registered type) is scored with its own parameters.",
     )
-    score.add_argument("models", nargs="+", metavar="MODEL", help="package.module:ClassName")
+    score.add_argument(
+        "models",
+        nargs="+",
+        metavar="MODEL",
+        help="package.module:ClassName or path/to/model.json",
+    )
     _add_protocol_options(score)
     perf = sub.add_parser(
         "perf",
@@ -501,6 +520,17 @@ def perf_rows(name: str, results: dict[str, Any], module: Any = None) -> list[di
                     "passed": None if ratio is None else bool(ratio >= 1.0),
                 }
             )
+        for key, value in (results.get("ratios") or {}).items():
+            rows.append(
+                {
+                    "benchmark": name,
+                    "measure": f"{key.replace('_', ' ')} (ratio, same run)",
+                    "value": value,
+                    "target": None,
+                    "ratio_to_target": None,
+                    "passed": None,
+                }
+            )
     return rows
 
 
@@ -602,7 +632,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "perf":
         return _perf(args)
-    user_models = args.models if args.command == "score" else []
+    user_models = (args.models if args.command == "score" else []) + list(args.model)
     if user_models and os.getcwd() not in sys.path:
         # like other tools that import user code by path: modules in the working directory
         sys.path.insert(0, os.getcwd())

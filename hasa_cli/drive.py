@@ -3,6 +3,7 @@
 Commands::
 
     hasa-drive --participant P07 [--track straight|curved] [--bias random|B] [--runs 10]
+    hasa-drive study STUDY.toml --participant P07 [--meta KEY=VALUE ...] [--check]
     hasa-drive calibrate [--output FILE]
     hasa-drive synthetic --driver Ill [--population paper] [--participant NAME]
 
@@ -13,6 +14,9 @@ countdown precedes it. Each run is recorded under
 wheel and pedal values in ``run_NNN.inputs.tsv``), every step flushed at
 once (a killed process keeps every completed step). ``--estimator`` runs the
 Gaussian-mixture EKF alongside and shows its lane weights in the HUD.
+
+``hasa-drive study`` (:mod:`hasa_cli.study`) runs one participant's session of
+a study file (``studies/paper.toml``), with a session file that resumes it.
 
 ``hasa-drive synthetic`` drives through the same loop, headless and as fast
 as possible, with a synthetic driver (:mod:`hasa_env.drivers`) turning an SDL
@@ -32,8 +36,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from estimators.wrappers import estimator_wrapper
 from hasa_cli import EXIT_ENVIRONMENT, EXIT_USAGE, add_version, console_script, error
+from hasa_cli.inputs import estimator_for as _estimator
+from hasa_cli.inputs import joystick_profiles as _joystick_profiles
+from hasa_cli.inputs import start_autocentre as _start_autocentre
+from hasa_cli.study import main as study_main
 from hasa_env.devices.calibration import (
     CalibrationError,
     JoystickCalibration,
@@ -43,14 +50,16 @@ from hasa_env.devices.calibration import (
     user_calibration_path,
 )
 from hasa_env.devices.calibrator import calibrate
-from hasa_env.devices.force_feedback import Autocentre, ForceFeedbackUnavailable
 from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_reason
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
-from hasa_env.session import DriveSession, DriveSettings, VirtualWheelDriver
+from hasa_env.session import (
+    DriveSession,
+    DriveSettings,
+    VirtualWheelDriver,
+)
 from hasa_env.sim.config import ConfigError
-from hasa_env.steering.loading import default_steering_ratio, load_model
 
 __all__ = ["EXIT_NO_SCREEN", "main"]
 
@@ -100,20 +109,6 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
     )
 
 
-def _joystick_profiles(path: Path | None, log: Callable[[str], None]) -> list[JoystickCalibration]:
-    profiles: list[JoystickCalibration] = []
-    if path is None and user_calibration_path().exists():
-        path = user_calibration_path()
-    if path is not None:
-        cal = load_calibration(path)
-        if not isinstance(cal, JoystickCalibration):
-            raise CalibrationError(str(path), "device", "must be 'joystick' for --calibration")
-        log(f"hasa-drive: using the calibration {path}")
-        profiles.append(cal)
-    profiles += [shipped_calibration("g29"), shipped_calibration("gamepad")]  # type: ignore[list-item]
-    return profiles
-
-
 def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     reason = no_screen_reason()
     if reason is not None:
@@ -151,11 +146,7 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         profiles = _joystick_profiles(args.calibration, log)
         env_wrapper = None
         if args.estimator is not None:
-            probe = _probe_env(settings)
-            model = load_model(args.estimator, probe.setup.env_step_duration)
-            ratio = default_steering_ratio(args.estimator, fitted=False)
-            env_wrapper = estimator_wrapper(model, ratio)
-            env_wrapper(probe)  # fail now, not after the countdown
+            env_wrapper = _estimator(args.estimator, _probe_env(settings))
     except (ValueError, ConfigError, ImportError, OSError) as exc:
         error("hasa-drive", str(exc))
         return EXIT_USAGE
@@ -217,18 +208,6 @@ def _probe_env(settings: DriveSettings) -> Any:
 
 def _raise_exit(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
-
-
-def _start_autocentre(inputs: InputManager, strength: float, log: Callable[[str], None]) -> Any:
-    inputs.poll()
-    if inputs.active is None:
-        log("hasa-drive: --autocentre: no wheel connected; driving without force feedback")
-        return None
-    try:
-        return Autocentre(inputs.active.name, strength)
-    except ForceFeedbackUnavailable as exc:
-        log(f"hasa-drive: --autocentre: {exc}")
-        return None
 
 
 def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
@@ -335,6 +314,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             steering_ratio=args.steering_ratio,
             timeout=args.timeout,
         )
+    if argv and argv[0] == "study":
+        return study_main(argv[1:])
     if argv and argv[0] == "synthetic":
         p = argparse.ArgumentParser(
             prog="hasa-drive synthetic",
@@ -355,7 +336,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="hasa-drive",
         description="Drive the lane-keeping env with a wheel (G29), a joystick or the keyboard; "
         "record each run. "
-        "Subcommands: 'hasa-drive calibrate', 'hasa-drive synthetic' (see their --help).",
+        "Subcommands: 'hasa-drive study', 'hasa-drive calibrate', 'hasa-drive synthetic' "
+        "(see their --help).",
         epilog="Exit status: 0 ok, 1 fewer runs than asked, 2 usage or input error, "
         "3 no screen or no virtual wheel.",
     )
@@ -384,7 +366,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         metavar="MODEL",
         help="run the Gaussian-mixture EKF alongside; show its lane-hypothesis weights in the HUD "
-        "(steering model: two-point, generalized (default) or a saved model file)",
+        "(steering model: two-point, generalized (default), a saved model file or "
+        "package.module:Class)",
     )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)

@@ -11,8 +11,11 @@ recording in a directory and its subdirectories) it:
 2. optionally (``--model``) scores a steering model's prediction of the
    recorded steering (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the
    increments, Ljung-Box p) -- a paper preset (``two-point``,
-   ``generalized``), a saved model file, or, with ``--fit``, the model fitted
-   on the first recording and scored on all of them (the paper's protocol);
+   ``generalized``), a saved model file (any registered type, user types
+   included), a user model ``package.module:ClassName`` (imported from the
+   working directory or the installed packages), or, with ``--fit``, the
+   model fitted on the first recording and scored on all of them (the
+   paper's protocol);
 3. optionally (``--estimator``) runs the Gaussian-mixture EKF with that
    steering model over the recorded sensors and prints its lateral RMSE, the
    final weight of the true lane hypothesis and when it was first trusted
@@ -37,6 +40,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -116,7 +120,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument(
         "--model",
         default=None,
-        help="score a steering model: 'two-point', 'generalized' (paper presets) or a model file",
+        help="score a steering model: 'two-point', 'generalized' (paper presets), a saved model "
+        "file, or 'package.module:ClassName' (a SteeringModel subclass; with --fit if it has "
+        "no parameters)",
     )
     p.add_argument(
         "--fit", action="store_true", help="fit --model on the first recording, score on all"
@@ -155,7 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.frame_every < 1:
         p.error("--frame-every must be >= 1")
     if args.fit and args.model is None:
-        p.error("--fit needs --model (two-point or generalized)")
+        p.error(
+            "--fit needs --model (two-point, generalized, a model file or package.module:Class)"
+        )
     if not (math.isfinite(args.atol) and args.atol >= 0):
         p.error(f"--atol must be a finite tolerance >= 0, got {args.atol!r}")
     if args.video is not None:
@@ -188,10 +196,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     model = None
     if args.model is not None or args.estimator:
         spec = args.model or "generalized"
+        if ":" in spec and os.getcwd() not in sys.path:
+            sys.path.insert(0, os.getcwd())  # user models in the working directory
         try:
             model = load_model(spec, recordings[0].dt)
         except (ValueError, OSError) as exc:
             error(PROG, str(exc))
+            return EXIT_USAGE
+        if not model.is_fitted and not args.fit:
+            error(
+                PROG,
+                f"model {spec!r} has no parameters: add --fit to fit it on the first "
+                "recording, or give a saved model file (model.save('model.json'))",
+            )
             return EXIT_USAGE
         road = recordings[0].road
         if args.steering is not None:

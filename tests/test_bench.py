@@ -339,6 +339,9 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert {r["model"] for r in doc["estimation"]} == estimated
     no_arx = next(m for m in doc["models"] if m["name"] == "no_arx")
     assert no_arx["arx"] is False and "not an ARX model" in no_arx["note"]
+    assert "no rows in the lateral-estimation table" in no_arx["note"]  # and why
+    report = (tmp_path / "report.md").read_text()
+    assert "it has no rows in the lateral-estimation table" in report
     ranks = {r["model"]: (r["rank_steering"], r["rank_lateral"]) for r in doc["summary"]}
     assert ranks["no_arx"][0] is not None and ranks["no_arx"][1] is None
     assert all(r["driver"] in ("Ill", "1", "2") for r in doc["steering"])
@@ -560,16 +563,19 @@ def test_perf_rows_read_every_benchmark_layout() -> None:
     render_like = {
         "ratios_to_target": {"driver_draw": 2.5},
         "results": {"driver_draw": {"frames_per_second": 150.0}},
+        "ratios": {"participant_over_developer": 0.9},
     }
     rows = (
         perf_rows("perf_env", env_like)
         + perf_rows("perf_estimators", est_like)
         + perf_rows("perf_render", render_like, Render)
     )
-    assert [r["passed"] for r in rows] == [True, None, False, None, True]
+    assert [r["passed"] for r in rows] == [True, None, False, None, True, None]
     assert rows[0]["ratio_to_target"] == pytest.approx(1.5)
     assert rows[3]["measure"] == "filterpy over ours 8" and rows[3]["target"] is None
     assert rows[4]["value"] == 150.0 and rows[4]["target"] == 60.0
+    assert rows[5]["measure"] == "participant over developer (ratio, same run)"
+    assert rows[5]["value"] == 0.9 and rows[5]["target"] is None
     table = format_perf_table(rows)
     assert "FAIL" in table and "PASS" in table and "2.50x" in table
 

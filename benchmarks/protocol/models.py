@@ -19,15 +19,12 @@ user code runs in the calling process, guarded against exceptions and
 from __future__ import annotations
 
 import copy
-import importlib
 import math
 import multiprocessing
 import pickle
-import traceback
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -43,6 +40,14 @@ from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.tuning import steering_residual_std
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
+from hasa_env.steering.loading import (
+    ModelLoadError,
+    describe_exception,
+    import_model,
+    load_model,
+    model_spec_kind,
+)
+from hasa_env.steering.model_file import ModelFileError
 
 __all__ = [
     "DEFAULT_MODEL_TIME_LIMIT",
@@ -82,81 +87,45 @@ class ModelError(Exception):
 
 
 def load_user_model(spec: str) -> Any:
-    """Import ``"package.module:Name"`` and return an unfitted steering model.
+    """The steering model a user names: ``"package.module:Name"`` or a saved model file.
 
     ``Name`` may be a :class:`hasa_env.steering.SteeringModel` subclass
     (instantiated without arguments), an instance of one, or a function
-    returning one.
+    returning one; a model file (``model.save("m.json")``, any registered
+    type, user types included) gives a fitted model
+    (:func:`hasa_env.steering.loading.load_model`). A model whose
+    ``regressors`` and ``design()`` disagree is refused.
 
     Raises:
         ModelError: naming ``spec``, with stage "import" (module or attribute
-            not found, or the module raised) or "interface" (not a steering model).
+            not found, or the module raised; a model file that cannot be
+            read) or "interface" (not a steering model, or its regressors
+            and design disagree).
     """
-
-    if not isinstance(spec, str) or spec.count(":") != 1 or not all(spec.split(":")):
-        raise ModelError(
-            str(spec),
-            "import",
-            "expected 'package.module:ClassName' (a module path, a colon, a name in the module)",
-        )
-    module_name, attribute = spec.split(":")
     try:
-        module = importlib.import_module(module_name)
-    except Exception as exc:  # noqa: BLE001 - any error in the user's module
-        raise ModelError(
-            spec, "import", f"cannot import module {module_name!r}: {describe(exc)}"
-        ) from None
-    obj: Any = module
-    for part in attribute.split("."):
-        try:
-            obj = getattr(obj, part)
-        except AttributeError:
-            raise ModelError(
-                spec, "import", f"module {module_name!r} has no attribute {attribute!r}"
-            ) from None
-    hint = (
-        "a steering model must subclass hasa_env.steering.SteeringModel "
-        "(see its docstring and examples/custom_steering_model.py)"
-    )
-    if isinstance(obj, SteeringModel):
-        model = obj
-    elif isinstance(obj, type):
-        if not issubclass(obj, SteeringModel):
-            raise ModelError(
-                spec, "interface", f"{obj.__qualname__} is not a SteeringModel; {hint}"
-            )
-        try:
-            model = obj()
-        except TypeError as exc:
-            raise ModelError(
-                spec, "interface", f"cannot create {obj.__qualname__}(): {describe(exc)}"
-            ) from None
-        except Exception as exc:  # noqa: BLE001
-            raise ModelError(
-                spec, "interface", f"{obj.__qualname__}() raised {describe(exc)}"
-            ) from None
-    elif callable(obj):
-        try:
-            model = obj()
-        except Exception as exc:  # noqa: BLE001
-            raise ModelError(spec, "interface", f"{attribute}() raised {describe(exc)}") from None
-        if not isinstance(model, SteeringModel):
-            raise ModelError(
-                spec, "interface", f"{attribute}() returned {type(model).__name__}; {hint}"
-            )
-    else:
-        raise ModelError(spec, "interface", f"{attribute} is a {type(obj).__name__}; {hint}")
+        kind = model_spec_kind(spec) if isinstance(spec, str) else "import"
+        if kind == "preset":
+            raise ModelLoadError(
+                spec, "import", "the paper's presets are the built-in models already; name a "
+                "user model ('package.module:ClassName' or a saved model file)"
+            )  # fmt: skip
+        return load_model(spec) if kind == "file" else _checked(import_model(spec), spec)
+    except ModelLoadError as exc:
+        raise ModelError(str(spec), exc.stage, exc.detail) from None
+    except ModelFileError as exc:
+        raise ModelError(str(spec), "import", str(exc)) from None
+
+
+def _checked(model: Any, spec: str) -> Any:
+    try:
+        model.check_regressors()
+    except ValueError as exc:
+        raise ModelLoadError(spec, "interface", str(exc)) from None
     return model
 
 
-def describe(exc: BaseException) -> str:
-    """``Type: message (file:line)`` of an exception, the line being its innermost frame."""
-    text = f"{type(exc).__name__}: {exc}"
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<")]
-    if frames:
-        last = frames[-1]
-        text += f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
-    return text
+describe = describe_exception
+"""``Type: message (at file:line in function)`` of an exception (its innermost frame)."""
 
 
 def private_copy(frame: pd.DataFrame) -> pd.DataFrame:
@@ -285,13 +254,17 @@ class Candidate:
 
     Attributes:
         name: the name in the results; kind: "builtin" or "user";
-        spec: the user's import path (None for built-ins); model: the unfitted model.
+        spec: the user's import path or model file (None for built-ins);
+        model: the model, unfitted unless ``fixed``;
+        fixed: a saved model file's fitted model, scored with its own parameters
+            (not refitted on the training run).
     """
 
     name: str
     kind: str
     spec: str | None
     model: Any
+    fixed: bool = False
 
 
 def _check_user_model(spec: str) -> str:
@@ -350,7 +323,8 @@ def load_models(
         if name in used:
             name = spec if spec not in used else f"{spec}#{len(used)}"
         used.add(name)
-        candidates.append(Candidate(name, "user", spec, model))
+        fixed = model_spec_kind(spec) == "file" and model.is_fitted
+        candidates.append(Candidate(name, "user", spec, model, fixed))
     return candidates
 
 
@@ -387,11 +361,13 @@ def fit_models(
             own = constant_speed_train
         try:
             if kind != "user":
-                model_fitted, info_fit = _fit_one(name, model, own, sensor_std, residual_on=train)
+                model_fitted, info_fit = _fit_one(
+                    name, model, own, sensor_std, candidate.fixed, residual_on=train
+                )
             else:
                 model_fitted, info_fit = run_isolated(
-                    _fit_one, (name, model, private_copy(train), sensor_std), model=name,
-                    stage="fit", time_limit=time_limit,
+                    _fit_one, (name, model, private_copy(train), sensor_std, candidate.fixed),
+                    model=name, stage="fit", time_limit=time_limit,
                 )  # fmt: skip
         except ModelError as exc:
             if kind in ("builtin", "stress", "baseline"):
@@ -414,14 +390,18 @@ def _fit_one(
     model: Any,
     train: pd.DataFrame,
     sensor_std: float,
+    fixed: bool = False,
     residual_on: pd.DataFrame | None = None,
 ) -> tuple[Any, dict[str, Any]]:
-    """Fit one model on the training run; its description; ModelError if it fails.
-    The filter's residual level is measured on ``residual_on`` (default ``train``)."""
+    """Fit one model on the training run (a ``fixed`` one keeps its parameters); its
+    description; ModelError if it fails. The filter's residual level is measured on
+    ``residual_on`` (default ``train``)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SteeringFitWarning)
         try:
-            if type(model).fit is SteeringModel.fit:  # the project's fit: ridge + checks
+            if fixed:
+                fitted = model
+            elif type(model).fit is SteeringModel.fit:  # the project's fit: ridge + checks
                 fitted = model.fit(train, sensor_std=sensor_std)
             else:
                 fitted = model.fit(train)
@@ -449,6 +429,7 @@ def _fit_one(
         "identifiability": None,
         "checks": None,
         "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
+        "refitted": not fixed,
     }
     if result is not None:
         info["training"] = {
@@ -485,6 +466,19 @@ def _fit_one(
             raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
     info["arx"] = arx is not None
     info["filter_residual_std"] = residual
+    notes = []
+    if fixed:
+        notes.append(
+            "a saved model file: scored with the parameters of its file, not refitted on the "
+            "training run"
+        )
     if arx is None:
-        info["note"] = "not an ARX model: scored on steering only (the estimator needs arx())"
+        notes.append(
+            "not an ARX model (its arx() returns None): scored on steering prediction only, so "
+            "it has no rows in the lateral-estimation table (paper table 2): the "
+            "Gaussian-mixture EKF builds its state from the model's ARX form; implement arx() "
+            "(README 'Write a steering model') to have it estimated"
+        )
+    if notes:
+        info["note"] = "; ".join(notes)
     return fitted, info

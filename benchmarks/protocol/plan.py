@@ -14,6 +14,7 @@ from benchmarks.protocol.config import _ENV_IDS, ILLUSTRATIVE, BenchmarkError, P
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
 from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
+from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
 __all__ = [
     "RunRef",
@@ -133,6 +134,70 @@ def _driver_of(rec: Recording, root: Path) -> str:
     return relative.parts[0] if relative.parts else "driver"
 
 
+def _study_sessions(root: Path) -> tuple[dict[Path, str], set[Path], dict[str, Any], list[str]]:
+    """What the study session files under ``root`` say (``hasa-drive study``).
+
+    Returns (measured recording -> participant, recordings to leave out (practice
+    runs, aborted attempts, files the session does not list), per-participant
+    details, notes). A session file that cannot be read is named in the notes and its
+    folder's recordings are read like any others.
+    """
+    measured: dict[Path, str] = {}
+    excluded: set[Path] = set()
+    details: dict[str, Any] = {}
+    notes: list[str] = []
+    for path in find_session_files(root):
+        try:
+            session = SessionFile.open(path)
+        except SessionError as exc:
+            notes.append(f"skipped the session file {exc}")
+            continue
+        folder = path.parent
+        who = session.participant
+        listed: set[Path] = set()
+        practice = aborted = 0
+        for attempt in session.attempts:
+            if not attempt.get("file"):
+                continue
+            csv = (folder / attempt["file"]).resolve()
+            listed.add(csv)
+            if attempt["status"] == "completed" and attempt["block"] == "measured":
+                measured[csv] = who
+                continue
+            excluded.add(csv)
+            if attempt["block"] == "practice":
+                practice += 1
+            if attempt["status"] != "completed":
+                aborted += 1
+                notes.append(
+                    f"aborted run not analysed: {who} {attempt['block']} run "
+                    f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
+                    f"{attempt['steps']} steps): {folder / attempt['file']}"
+                )
+        unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
+        excluded |= unlisted
+        summary = session.summary()
+        details[who] = {
+            "session_file": str(path),
+            "study": session.doc["study"]["name"],
+            "participant_metadata": session.doc["participant"]["metadata"],
+            "session_state": summary["state"],
+            "measured_runs": summary["measured_completed"],
+            "measured_scheduled": summary["measured_scheduled"],
+            "practice_runs_excluded": practice,
+            "aborted_runs": aborted,
+        }
+        text = (
+            f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
+            f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
+            f"{practice} practice run(s) left out, {aborted} aborted"
+        )
+        if unlisted:
+            text += f", {len(unlisted)} recording(s) the session file does not list left out"
+        notes.append(text)
+    return measured, excluded, details, notes
+
+
 def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
     """The runs of a folder of recordings (one recording per run).
 
@@ -142,6 +207,11 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
     (``{"file", "reason"}``). Curved-track recordings of every driver are
     scored on steering (the curved table); recordings of a track the protocol
     does not score are listed in the notes.
+
+    Folders with a study session file (``session.json`` of ``hasa-drive
+    study``) contribute their completed measured runs only: practice runs and
+    aborted attempts are left out and reported in the notes, and the drivers
+    are the sessions' participants, with their metadata.
     """
     root = Path(config.recordings or "")
     if not root.is_dir():
@@ -155,15 +225,19 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
     training_file = Path(config.training_file).resolve() if config.training_file else None
     training: tuple[str, str] | None = None
+    session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
     for rec in loaded:
         assert rec.path is not None
+        if rec.path.resolve() in session_excluded:
+            continue
         problem = quality_problem(rec, config)
         if problem is not None:
             if training_file is not None and rec.path.resolve() == training_file:
                 raise BenchmarkError(f"the training file {rec.path} is not usable: {problem}")
             skipped.append({"file": str(rec.path), "reason": problem})
             continue
-        driver, track = _driver_of(rec, root), str(rec.config["track"])
+        driver = session_runs.get(rec.path.resolve()) or _driver_of(rec, root)
+        track = str(rec.config["track"])
         found[(driver, track)].append(rec.path)
         if training_file is not None and rec.path.resolve() == training_file:
             training = (driver, track)
@@ -212,6 +286,7 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
                 "runs": len(main_paths),
                 "curved_runs": len(curved_paths),
                 "recordings": [str(p) for p in main_paths + list(curved_paths)],
+                **({"study_session": session_details[name]} if name in session_details else {}),
             }
         )
     notes = [f"recordings: {len(main) + len(curved)} runs of {len(names)} drivers from {root}"]
@@ -225,6 +300,7 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
             f"{unused} recording(s) on another track than {config.track!r} not scored "
             "(--track chooses the main track)"
         )
+    notes += session_notes
     notes += [f"skipped {s['file']}: {s['reason']}" for s in skipped]
     train_ref = next(
         (r for r in main if r.driver == illustrative and r.index == training_index), None
