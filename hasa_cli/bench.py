@@ -18,6 +18,11 @@ as degenerate (each named on stderr and in results.json; every other result
 is written); 2 invalid arguments or data, a user model that does not
 import, an output folder that exists (nothing run, nothing written); 3 the
 Dask scheduler cannot be reached.
+
+Why this module is long: it is the argument parser and the output of three
+subcommands (paper, score, perf) with their options, each documented at
+the option, plus the mapping of every failure onto one exit status; the
+work itself is in :mod:`benchmarks`.
 """
 
 from __future__ import annotations

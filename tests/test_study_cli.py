@@ -123,7 +123,7 @@ def test_a_killed_study_resumes_at_the_next_run_and_the_benchmark_reads_it(tmp_p
     # the benchmark on the study: participants, measured runs only, the aborted one reported
     report = tmp_path / "bench"
     code = bench_main(["paper", "--recordings", str(out), "--out", str(report), "--no-plots",
-                       "--workers", "1"])  # fmt: skip
+                       "--workers", "1", "--min-duration", "1"])  # fmt: skip
     text = capsys.readouterr().out
     assert code == 0
     result = json.loads((report / "results.json").read_text())
