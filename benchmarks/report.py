@@ -30,6 +30,7 @@ import pandas as pd
 
 from benchmarks.figures import write_figures
 from benchmarks.protocol import BenchmarkResult
+from benchmarks.protocol.results import json_clean
 from benchmarks.tables import (
     Column,
     fixed,
@@ -423,7 +424,7 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     lines.append("## Configuration")
     lines.append("")
     lines.append("```json")
-    lines.append(json.dumps(_clean(cfg), indent=2))
+    lines.append(json.dumps(json_clean(cfg), indent=2))
     lines.append("```")
     lines.append("")
     for key, title, rows, columns, _ in _sections(result):
@@ -512,16 +513,6 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     )
     lines.append("")
     return "\n".join(lines)
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 # ----------------------------------------------------------------------- output

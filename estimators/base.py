@@ -39,6 +39,7 @@ __all__ = [
     "LaneEstimator",
     "inputs_from_info",
     "measurements_from_info",
+    "reset_inputs",
 ]
 
 MEASUREMENT_KEYS = ("sensor_speed", "sensor_camera_lateral", "sensor_steering")
@@ -193,6 +194,44 @@ class LaneEstimator(Protocol):
     ) -> Estimate: ...
 
     def estimate(self) -> Estimate: ...
+
+
+def reset_inputs(
+    measurement: np.ndarray,
+    hypotheses: Sequence[float] | np.ndarray,
+    prior: np.ndarray | None = None,
+) -> tuple[np.ndarray, bool, np.ndarray, np.ndarray]:
+    """The checked inputs of a mixture filter's ``reset``: the measurements as (R, 3), whether
+    one run was given (a (3,) measurement), the hypotheses as (R, C) and the log prior (R, C)
+    (uniform by default; -inf for a zero prior).
+
+    Raises:
+        ValueError: naming the shape or value that is wrong.
+    """
+    measurement = np.asarray(measurement, dtype=np.float64)
+    single = measurement.ndim == 1
+    z = measurement.reshape(1, -1) if single else measurement
+    if z.ndim != 2 or z.shape[1] != 3:
+        raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
+    n_runs = z.shape[0]
+    hyp = np.asarray(hypotheses, dtype=np.float64)
+    if hyp.ndim == 1:
+        hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
+    if hyp.ndim != 2 or hyp.shape[0] != n_runs or hyp.shape[1] < 1:
+        raise ValueError(
+            f"hypotheses must have shape (C,) or ({n_runs}, C), got {np.shape(hypotheses)}"
+        )
+    if not np.all(np.isfinite(hyp)):
+        raise ValueError("hypotheses must be finite")
+    n_comp = hyp.shape[1]
+    if prior is None:
+        return z, single, hyp, np.full((n_runs, n_comp), -math.log(n_comp))
+    p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
+    if np.any(~np.isfinite(p)) or np.any(p < 0) or not np.allclose(p.sum(axis=1), 1.0):
+        raise ValueError("prior must be non-negative and sum to 1 over the hypotheses")
+    with np.errstate(divide="ignore"):
+        log_w = np.log(p / p.sum(axis=1, keepdims=True))
+    return z, single, hyp, log_w
 
 
 def measurements_from_info(info: Mapping[str, Any]) -> np.ndarray:

@@ -19,7 +19,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 from scipy.special import logsumexp
 
 from estimators.arx_state_space import ARXStateSpace, road_point_rows
-from estimators.base import Estimate
+from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     DECIDED,
     EVIDENCE_STATE,
@@ -141,22 +141,8 @@ class FilterpyGMEKF:
         road_points: np.ndarray | None = None,
     ) -> Estimate:
         """See :meth:`estimators.gm_ekf.GaussianMixtureEKF.reset`."""
-        measurement = np.asarray(measurement, dtype=np.float64)
-        single = measurement.ndim == 1
-        z = np.atleast_2d(measurement)
-        if z.ndim != 2 or z.shape[1] != 3:
-            raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
-        n_runs = z.shape[0]
-        hyp = np.asarray(hypotheses, dtype=np.float64)
-        if hyp.ndim == 1:
-            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
-        n_comp = hyp.shape[1]
-        if prior is None:
-            log_w = np.full((n_runs, n_comp), -math.log(n_comp))
-        else:
-            p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
-            with np.errstate(divide="ignore"):
-                log_w = np.log(p / p.sum(axis=1, keepdims=True))
+        z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
+        n_runs, n_comp = hyp.shape
         points = road_point_rows(road_points, n_runs)
         x0 = self.matrices.initial_state(z, hyp, road_points=points)
         banks = []

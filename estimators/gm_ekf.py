@@ -21,7 +21,7 @@ from estimators.arx_state_space import (
     ARXStateSpace,
     road_point_rows,
 )
-from estimators.base import Estimate
+from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     DECIDED,
     EVIDENCE_STATE,
@@ -244,30 +244,8 @@ class GaussianMixtureEKF:
         Returns:
             The prior estimate (weights = prior).
         """
-        measurement = np.asarray(measurement, dtype=np.float64)
-        single = measurement.ndim == 1
-        z = measurement.reshape(1, -1) if single else measurement
-        if z.ndim != 2 or z.shape[1] != 3:
-            raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
-        n_runs = z.shape[0]
-        hyp = np.asarray(hypotheses, dtype=np.float64)
-        if hyp.ndim == 1:
-            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
-        if hyp.ndim != 2 or hyp.shape[0] != n_runs or hyp.shape[1] < 1:
-            raise ValueError(
-                f"hypotheses must have shape (C,) or ({n_runs}, C), got {np.shape(hypotheses)}"
-            )
-        if not np.all(np.isfinite(hyp)):
-            raise ValueError("hypotheses must be finite")
-        n_comp = hyp.shape[1]
-        if prior is None:
-            log_w = np.full((n_runs, n_comp), -math.log(n_comp))
-        else:
-            p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
-            if np.any(~np.isfinite(p)) or np.any(p < 0) or not np.allclose(p.sum(axis=1), 1.0):
-                raise ValueError("prior must be non-negative and sum to 1 over the hypotheses")
-            with np.errstate(divide="ignore"):
-                log_w = np.log(p / p.sum(axis=1, keepdims=True))
+        z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
+        n_runs, n_comp = hyp.shape
         points = road_point_rows(road_points, n_runs)
         if points is None:
             x = self.matrices.initial_state(z, hyp)

@@ -9,13 +9,13 @@ import platform
 import subprocess
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from benchmarks import paper_values
+from hasa_env._versions import installed_versions
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = ["BenchmarkResult", "versions"]
@@ -123,16 +123,18 @@ class BenchmarkResult:
                 "no_steering_lateral_rmse": paper_values.NO_STEERING_LATERAL_RMSE,
             },
         }
-        return _json_clean(doc)
+        return json_clean(doc)
 
 
-def _json_clean(value: Any) -> Any:
+def json_clean(value: Any) -> Any:
+    """``value`` as plain JSON data: numpy scalars and arrays as Python values, NaN and
+    infinities as None."""
     if isinstance(value, Mapping):
-        return {str(k): _json_clean(v) for k, v in value.items()}
+        return {str(k): json_clean(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_json_clean(v) for v in value]
+        return [json_clean(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _json_clean(value.tolist())
+        return json_clean(value.tolist())
     if isinstance(value, bool | np.bool_):
         return bool(value)
     if isinstance(value, int | np.integer):
@@ -143,21 +145,9 @@ def _json_clean(value: Any) -> Any:
 
 
 def versions() -> dict[str, str]:
-    out = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in (
-        "hasa-env",
-        "numpy",
-        "scipy",
-        "pandas",
-        "gymnasium",
-        "statsmodels",
-        "matplotlib",
-        "distributed",
-    ):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = "not installed"
+    names = ("hasa-env", "numpy", "scipy", "pandas", "gymnasium", "statsmodels", "matplotlib",
+             "distributed")  # fmt: skip
+    out = installed_versions({name: name for name in names}) | {"platform": platform.platform()}
     with contextlib.suppress(OSError, subprocess.SubprocessError):
         root = Path(__file__).resolve().parent.parent
         commit = subprocess.run(

@@ -27,21 +27,18 @@ import datetime as _dt
 import json
 import math
 import os
-import platform
 import re
 import secrets
 import stat
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from hasa_env._versions import installed_versions
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
 from hasa_env.sim.setup import RECORDING_COLUMNS
@@ -200,19 +197,9 @@ class RecordingList(list):
 
 # ------------------------------------------------------------------- helpers
 def _versions() -> dict[str, str]:
-    def dist(name: str) -> str:
-        try:
-            return _dist_version(name)
-        except PackageNotFoundError:  # pragma: no cover - source tree without install
-            return "unknown"
-
-    return {
-        "hasa_env": dist("hasa-env"),
-        "gymnasium": gym.__version__,
-        "numpy": np.__version__,
-        "pandas": pd.__version__,
-        "python": platform.python_version(),
-    }
+    return installed_versions(
+        {"hasa_env": "hasa-env", "gymnasium": "gymnasium", "numpy": "numpy", "pandas": "pandas"}
+    )
 
 
 def _now() -> str:
