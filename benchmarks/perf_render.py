@@ -14,6 +14,11 @@ while the simulation runs at 100 Hz in real time. Measured here, headless
 - ``driver_with_physics``: ``driver_window`` plus 100/60 env steps per
   frame (the simulation's share of a frame at 100 Hz and 60 fps): the
   frame rate the whole loop could reach unthrottled;
+- ``participant_with_physics``: the same with a study participant's view
+  (:meth:`hasa_env.render.ViewOptions.participant`: no ghost markings, no
+  HUD, bonnet and dashboard, road and grass bands), what ``hasa-drive
+  study`` draws; ``participant_over_developer`` is its rate over
+  ``driver_with_physics``, measured in the same run;
 - ``top_down_draw``: the top-down view at the same size, for comparison;
 - ``drive_loop``: :class:`hasa_env.session.DriveSession` itself in real time
   (keyboard input, frame cap 60 fps) for a few seconds: the frames it
@@ -50,7 +55,7 @@ import numpy as np
 
 from hasa_env.devices import InputManager, init_pygame_input
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
-from hasa_env.render import TopDownRenderer, make_renderer
+from hasa_env.render import TopDownRenderer, ViewOptions, make_renderer
 from hasa_env.session import DriveSession, DriveSettings
 
 __all__ = ["run", "main", "format_table", "TARGETS", "SIZE"]
@@ -61,6 +66,10 @@ SIM_FREQUENCY = 100.0
 TARGETS: dict[str, tuple[str, float]] = {
     "driver_with_physics": ("driver view + 100 Hz physics, frames/s", TARGET_FPS),
     "driver_window": ("driver view to the window, frames/s", TARGET_FPS),
+    "participant_with_physics": (
+        "participant view (no ghosts/HUD, bonnet, road texture) + 100 Hz physics, frames/s",
+        TARGET_FPS,
+    ),
     "drive_loop": ("hasa-drive loop, frames drawn per s (capped at 60)", 0.95 * TARGET_FPS),
 }
 
@@ -198,22 +207,31 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
     steps_per_frame = SIM_FREQUENCY / TARGET_FPS
     sim = {"owed": 0.0, "info": infos[0]}
 
-    def with_physics(info: dict[str, Any]) -> None:
-        sim["owed"] += steps_per_frame
-        while sim["owed"] >= 1.0:
-            i = sim["info"]
-            steer = (
-                math.atan(2.8 * i["road_curvature"])
-                - 0.05 * i["lateral_offset"]
-                - 0.5 * i["heading"]
-            )
-            _, _, _, _, sim["info"] = env.step([steer, 0.0])
-            sim["owed"] -= 1.0
-        driver.draw(sim["info"], target=window)
-        pygame.display.flip()
+    def with_physics(renderer: Any) -> Callable[[dict[str, Any]], None]:
+        def frame(info: dict[str, Any]) -> None:
+            sim["owed"] += steps_per_frame
+            while sim["owed"] >= 1.0:
+                i = sim["info"]
+                steer = (
+                    math.atan(2.8 * i["road_curvature"])
+                    - 0.05 * i["lateral_offset"]
+                    - 0.5 * i["heading"]
+                )
+                _, _, _, _, sim["info"] = env.step([steer, 0.0])
+                sim["owed"] -= 1.0
+            renderer.draw(sim["info"], target=window)
+            pygame.display.flip()
+
+        return frame
 
     say("driver view + physics")
-    results["driver_with_physics"] = _rate(cycle(with_physics), frames, repeats)
+    results["driver_with_physics"] = _rate(cycle(with_physics(driver)), frames, repeats)
+    participant = make_renderer(
+        setup, "rgb_array", view="driver", options=ViewOptions.participant()
+    )
+    say("participant view + physics")
+    results["participant_with_physics"] = _rate(cycle(with_physics(participant)), frames, repeats)
+    participant.close()
     say("top-down view: draw")
     results["top_down_draw"] = _rate(cycle(top_down.draw), frames, repeats)
     driver.close()
@@ -225,6 +243,10 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
         for key, (_, target) in TARGETS.items()
         if key in results
     }
+    extra = {
+        "participant_over_developer": results["participant_with_physics"]["frames_per_second"]
+        / results["driver_with_physics"]["frames_per_second"]
+    }
     return {
         "size": list(SIZE),
         "target_fps": TARGET_FPS,
@@ -232,6 +254,7 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
         "quick": quick,
         "results": results,
         "ratios_to_target": ratios,
+        "ratios": extra,
         "machine": {
             "python": platform.python_version(),
             "platform": platform.platform(),

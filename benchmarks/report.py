@@ -30,6 +30,7 @@ import pandas as pd
 
 from benchmarks.figures import write_figures
 from benchmarks.protocol import BenchmarkResult
+from benchmarks.protocol.results import json_clean
 from benchmarks.tables import (
     Column,
     fixed,
@@ -49,6 +50,7 @@ CSV_TABLES = {
     "steering": "steering.csv",
     "curved": "curved.csv",
     "estimation": "estimation.csv",
+    "curved_estimation": "curved_estimation.csv",
     "seed_summary": "seed_summary.csv",
     "summary": "summary.csv",
     "runs_steering": "runs_steering.csv",
@@ -96,6 +98,18 @@ _VERDICT_COLUMNS = [
     Column(lambda r: _stability(r, "rank_lateral"), "rank lat. (kept)"),
     Column(lambda r: _stability(r, "rank_steering"), "rank steer. (kept)"),
     Column("free_run_diverged", "free runs diverged"),
+]
+
+_SAFETY_COLUMNS = [
+    Column("model", "Estimator", left=True),
+    Column("kind", "kind", left=True),
+    Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
+    Column(_of("wrong_lane_confident_runs", "estimated_runs"), "confident wrong lane"),
+    Column(_of("undecided_runs", "estimated_runs"), "undecided"),
+    Column(_of("model_mismatch_runs", "estimated_runs"), "model mismatch"),
+    Column(interval(fixed(2), "lateral_nees"), "lat. NEES [95% CI]"),
+    Column(interval(fixed(3), "curved_lateral_rmse"), "curved lat. RMSE (m)"),
+    Column(_of("curved_wrong_lane_confident_runs", "curved_estimated_runs"), "curved conf. wrong"),
 ]
 
 _SEED_COLUMNS = [
@@ -146,15 +160,21 @@ _ESTIMATION_COLUMNS = [
     Column("steps_to_decide_median", "steps to decide", fixed(0)),
     Column(_of("decided_runs", "n_runs"), "decided"),
     Column(_of("true_lane_final_runs", "n_runs"), "true lane at end"),
+    Column(_of("wrong_lane_confident_runs", "n_runs"), "conf. wrong"),
+    Column(_of("undecided_runs", "n_runs"), "undecided"),
+    Column(_of("model_mismatch_runs", "n_runs"), "mismatch"),
+    Column("lateral_nees", "NEES", fixed(2)),
     Column("paper_lateral_rmse_mean", "paper mean (m)", _paper),
     Column("paper_lateral_rmse_std", "paper std (m)", _paper),
 ]
 
 _MEAN_KEYS = ("rmse", "r2", "r2_increments", "rmse_decrease_vs_two_point", "free_run_rmse",
               "rmse_over_paper", "lateral_rmse_mean", "lateral_rmse_std", "lateral_rmse_max",
-              "steps_to_decide_median", "final_true_lane_weight_mean")  # fmt: skip
+              "steps_to_decide_median", "final_true_lane_weight_mean", "lateral_nees",
+              "nis_speed", "nis_camera", "nis_steering")  # fmt: skip
 _SUM_KEYS = ("n_runs", "white_runs", "decided_runs", "true_lane_final_runs", "free_run_diverged",
-             "degenerate_runs")  # fmt: skip
+             "degenerate_runs", "wrong_lane_confident_runs", "undecided_runs",
+             "model_mismatch_runs")  # fmt: skip
 _FIRST_KEYS = ("paper_rmse", "paper_r2", "paper_rmse_decrease", "paper_lateral_rmse_mean",
                "paper_lateral_rmse_std")  # fmt: skip
 
@@ -192,7 +212,7 @@ def _checks_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
         checks = m.get("checks")
         if m.get("error") or not checks:
             continue
-        rows.append({"name": m["name"], "seed": m.get("seed"), **checks})
+        rows.append({"name": m["name"], "kind": m.get("kind"), "seed": m.get("seed"), **checks})
     return rows
 
 
@@ -217,6 +237,17 @@ def _sections(
             "(kept) = overall rank (share of seeds holding it)",
             result.summary,
             _VERDICT_COLUMNS,
+            None,
+        ),
+        (
+            "safety",
+            f"Lane decisions {over} (a safety output): runs that end with more than "
+            f"{float(cfg.get('weight_threshold', 0.95)):g} on a wrong lane, runs left undecided "
+            "or with a model mismatch at the end (estimators.evidence), the lateral NEES "
+            "(mean (y_hat - y)^2 / sigma^2; 1: the reported std is right), and the curved "
+            "track with the road ahead as a known input",
+            result.summary,
+            _SAFETY_COLUMNS,
             None,
         ),
         (
@@ -276,6 +307,17 @@ def _sections(
             "driver",
         )
     )
+    if result.curved_estimation:
+        sections.append(
+            (
+                "curved_estimation",
+                f"Lateral estimation on the curved track, driver {cfg.get('illustrative', 'Ill')}"
+                " (the estimator given the road ahead; the paper has no such table)",
+                pooled(result.curved_estimation),
+                [c for c in _ESTIMATION_COLUMNS if not str(c.key).startswith("paper")],
+                "driver",
+            )
+        )
     return sections
 
 
@@ -302,11 +344,29 @@ def format_tables(result: BenchmarkResult) -> str:
         parts.append(title)
         parts.append(render_text(rows, columns, group) if rows else "(no rows)")
     parts.extend(_findings(result, markdown=False))
+    notes = _model_notes(result)
+    if notes:
+        parts.append("")
+        parts.append("Notes on the models:")
+        parts.extend(f"  {name}: {note}" for name, note in notes)
+    if result.notes:
+        parts.append("")
+        parts.append("Notes on the runs:")
+        parts.extend(f"  {note}" for note in result.notes)
     if result.errors:
         parts.append("")
         parts.append("ERRORS (these models are left out of the tables):")
         parts.extend(f"  {e['message']}" for e in result.errors)
     return "\n".join(parts)
+
+
+def _model_notes(result: BenchmarkResult) -> list[tuple[str, str]]:
+    """(model, note) once per model with a note (e.g. why it has no estimation rows)."""
+    seen: dict[str, str] = {}
+    for m in result.models:
+        if m.get("note") and not m.get("error"):
+            seen.setdefault(str(m["name"]), str(m["note"]))
+    return list(seen.items())
 
 
 def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
@@ -339,7 +399,7 @@ def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
             f"{bullet}baselines: no steering {interval(fixed(3), 'lateral_rmse')(base)} m "
             f"(paper: 0.9), oracle {interval(fixed(3), 'lateral_rmse')(oracle)} m"
         )
-    flagged = [r for r in _checks_rows(result) if r.get("flags")]
+    flagged = [r for r in _checks_rows(result) if r.get("flags") and r.get("kind") != "baseline"]
     if flagged:
         shown = ", ".join(f"{r['name']} seed {r['seed']}: {', '.join(r['flags'])}" for r in flagged)
         lines.append(f"{bullet}flagged fits: {shown}")
@@ -364,7 +424,7 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     lines.append("## Configuration")
     lines.append("")
     lines.append("```json")
-    lines.append(json.dumps(_clean(cfg), indent=2))
+    lines.append(json.dumps(json_clean(cfg), indent=2))
     lines.append("```")
     lines.append("")
     for key, title, rows, columns, _ in _sections(result):
@@ -453,16 +513,6 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     )
     lines.append("")
     return "\n".join(lines)
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 # ----------------------------------------------------------------------- output

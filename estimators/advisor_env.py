@@ -76,21 +76,20 @@ class LaneKeepingAdvisorEnv(gym.Env):
     the human drives.
 
     ## Observation space
-    ``Box(11 + H,)`` float32, H = number of lane hypotheses (default 2: 13 entries),
+    ``Box(15 + H,)`` float32, H = number of lane hypotheses (default 2: 17 entries),
     :func:`estimators.advisor_setup.observation_names`; values saturate at the bounds:
 
-    | index      | entry                        | unit  | what                                          | bounds          |
-    |------------|------------------------------|-------|-----------------------------------------------|-----------------|
-    | 0          | estimate_lateral_offset      | m     | mixture mean of y                             | [-60, 60]       |
-    | 1          | estimate_lateral_offset_std  | m     | mixture std of y                              | [0, 100]        |
-    | 2          | estimate_heading             | rad   | atan2(v_y, v_x) of the mixture mean           | [-pi, pi]       |
-    | 3          | estimate_speed               | m/s   | sqrt(v_x^2 + v_y^2) of the mixture mean       | [0, 200]        |
-    | 4 .. 3+H   | estimate_weight_i            | -     | probability of hypothesis i (lane weights)    | [0, 1]          |
-    | 4+H .. 9+H | sensor_<channel>             | SI    | the six raw sensors of LaneKeepingEnv, at the last sample (IMU: mean over that sample) | as LaneKeepingEnv |
-    | 10+H       | sensor_advisor_steering      | rad   | the human's wheel (road-wheel angle) as the estimator read it | [-(d_max+1), d_max+1] |
-
-    The estimator's decision state is not in the observation yet: its lane weights
-    are (the decision state joins when the estimator reports one).
+    | index        | entry                        | unit  | what                                          | bounds          |
+    |--------------|------------------------------|-------|-----------------------------------------------|-----------------|
+    | 0            | estimate_lateral_offset      | m     | mixture mean of y                             | [-60, 60]       |
+    | 1            | estimate_lateral_offset_std  | m     | mixture std of y                              | [0, 100]        |
+    | 2            | estimate_heading             | rad   | atan2(v_y, v_x) of the mixture mean           | [-pi, pi]       |
+    | 3            | estimate_speed               | m/s   | sqrt(v_x^2 + v_y^2) of the mixture mean       | [0, 200]        |
+    | 4 .. 3+H     | estimate_weight_i            | -     | probability of hypothesis i (lane weights)    | [0, 1]          |
+    | 4+H .. 6+H   | estimate_undecided, estimate_decided, estimate_model_mismatch | - | the estimator's decision state, one-hot (:data:`estimators.evidence.DECISIONS`) | {0, 1} |
+    | 7+H          | estimate_model_error         | -     | the statistic behind "model_mismatch" (running mean normalized steering innovation squared; 1 until the steering channel has data) | [0, 100] |
+    | 8+H .. 13+H  | sensor_<channel>             | SI    | the six raw sensors of LaneKeepingEnv, at the last sample (IMU: mean over that sample) | as LaneKeepingEnv |
+    | 14+H         | sensor_advisor_steering      | rad   | the human's wheel (road-wheel angle) as the estimator read it | [-(d_max+1), d_max+1] |
 
     ## Reward
     The lane-keeping env's, per env step: ``1 - w_y (y / 1.8)^2 - w_d (d_delta /
@@ -110,7 +109,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
     | key                          | unit  | what                                                   |
     |------------------------------|-------|--------------------------------------------------------|
     | LaneKeepingEnv's keys        | SI    | time, true state, bias, raw sensors (``sensor_*``)     |
-    | estimate_* (as estimators.wrappers.estimate_info_keys) | SI | lateral offset and std, lateral and longitudinal velocity, bias, lane_index, weights (H,), mean and std (n,) |
+    | estimate_* (as estimators.wrappers.estimate_info_keys) | SI | lateral offset and std, lateral and longitudinal velocity, bias, lane_index, weights (H,), mean and std (n,), decision (str) and decision_code, model_error, evidence_scale |
     | estimate_heading, estimate_speed | rad, m/s | as in the observation                          |
     | advisor_index                | -     | the human's index in the population (``env.unwrapped.setup.drivers``) |
     | advisor_steering             | rad   | the human's command over the last sample (at reset: the initial steering) |
@@ -354,6 +353,8 @@ class LaneKeepingAdvisorEnv(gym.Env):
                 info[key] = row.copy()
             elif row.dtype.kind == "i":
                 info[key] = int(row)
+            elif row.dtype.kind == "U":
+                info[key] = str(row)
             else:
                 info[key] = float(row)
         info["advisor_index"] = self._advisor

@@ -34,6 +34,7 @@ from estimators.advisor_config import (
     split_config,
 )
 from estimators.base import Estimate, LaneEstimator
+from estimators.evidence import DECISIONS
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances
 from estimators.wrappers import estimate_info_keys
 from hasa_env.drivers import POPULATIONS, population
@@ -82,6 +83,8 @@ def observation_names(num_hypotheses: int) -> tuple[str, ...]:
     return (
         *OBSERVATION_ESTIMATE,
         *(f"estimate_weight_{i}" for i in range(num_hypotheses)),
+        *(f"estimate_{name}" for name in DECISIONS),
+        "estimate_model_error",
         *(f"sensor_{name}" for name in SENSOR_NAMES),
         "sensor_advisor_steering",
     )
@@ -137,8 +140,13 @@ class AdvisorSetup:
         h = self.hypotheses.size
         sensor_lo, sensor_hi = (b.astype(np.float64) for b in self.env.sensor_bounds())
         wheel = self.env.steering_limit + 1.0
-        lo = np.concatenate([[-60.0, 0.0, -math.pi, 0.0], np.zeros(h), sensor_lo, [-wheel]])
-        hi = np.concatenate([[60.0, 100.0, math.pi, 200.0], np.ones(h), sensor_hi, [wheel]])
+        d = len(DECISIONS)
+        lo = np.concatenate(
+            [[-60.0, 0.0, -math.pi, 0.0], np.zeros(h + d), [0.0], sensor_lo, [-wheel]]
+        )
+        hi = np.concatenate(
+            [[60.0, 100.0, math.pi, 200.0], np.ones(h + d), [100.0], sensor_hi, [wheel]]
+        )
         return lo, hi
 
     def observation_space(self) -> spaces.Box:
@@ -241,9 +249,25 @@ def estimate_readout(est: Estimate, hypotheses: np.ndarray) -> dict[str, np.ndar
         match = np.abs(own[:, :, None] - hypotheses[None, None, :]) <= 1e-9
         lanes = np.where(match, weighted, 0.0).sum(axis=1)
     vx, vy = mean[:, 0], mean[:, 2]
-    keys = estimate_info_keys()
-    values = (mean[:, 1], std[:, 1], vy, vx, mean[:, 3], np.argmax(lanes, axis=1), lanes, mean, std)
-    out = dict(zip(keys, values, strict=True))
+    n_runs = w.shape[0]
+    decision = np.broadcast_to(np.asarray(est.decision, dtype=str), (n_runs,))
+    code = np.select([decision == name for name in DECISIONS], range(len(DECISIONS)), -1)
+    values = (
+        mean[:, 1],
+        std[:, 1],
+        vy,
+        vx,
+        mean[:, 3],
+        np.argmax(lanes, axis=1),
+        lanes,
+        mean,
+        std,
+        decision.copy(),
+        code,
+        np.broadcast_to(np.asarray(est.model_error, dtype=np.float64), (n_runs,)).copy(),
+        np.broadcast_to(np.asarray(est.evidence_scale, dtype=np.float64), (n_runs,)).copy(),
+    )
+    out = dict(zip(estimate_info_keys(), values, strict=True))
     out["estimate_heading"] = np.arctan2(vy, vx)
     out["estimate_speed"] = np.hypot(vx, vy)
     return out
@@ -255,6 +279,8 @@ def observation_rows(
     """(R, D) float32 observations: the estimate, the lane weights, the six raw sensors
     (``sensors`` (R, 6)) and the advisor's measured steering ``wheel`` (R,), saturated at
     ``bounds``."""
+    code = readout["estimate_decision_code"]
+    model_error = readout["estimate_model_error"]
     values = np.column_stack(
         [
             readout["estimate_lateral_offset"],
@@ -262,6 +288,8 @@ def observation_rows(
             readout["estimate_heading"],
             readout["estimate_speed"],
             readout["estimate_weights"],
+            *(code == i for i in range(len(DECISIONS))),
+            np.where(np.isnan(model_error), 1.0, model_error),
             sensors,
             wheel,
         ]

@@ -81,7 +81,13 @@ import numpy as np
 
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 
-__all__ = ["ARXStateSpace", "PHYSICAL_STATE_NAMES", "MEASUREMENT_NAMES", "check_road_points"]
+__all__ = [
+    "ARXStateSpace",
+    "PHYSICAL_STATE_NAMES",
+    "MEASUREMENT_NAMES",
+    "check_road_points",
+    "road_point_rows",
+]
 
 PHYSICAL_STATE_NAMES = ("longitudinal_velocity", "lateral_offset", "lateral_velocity", "bias")
 """Names of the first four states (m/s, m, m/s, m)."""
@@ -113,6 +119,19 @@ def check_road_points(road_points: np.ndarray) -> np.ndarray:
             "road_points must be finite with dx_near > 0 and dx_far > 0 (points ahead of the "
             "car, m)"
         )
+    return points
+
+
+def road_point_rows(road_points: np.ndarray | None, n_rows: int) -> np.ndarray | None:
+    """Road points as (n_rows, 4) float64, checked (a (4,) row is shared by all runs), or
+    None (a straight road)."""
+    if road_points is None:
+        return None
+    points = check_road_points(road_points)
+    if points.ndim == 1:
+        return np.broadcast_to(points, (n_rows, 4))
+    if points.shape != (n_rows, 4):
+        raise ValueError(f"road_points must have shape (4,) or ({n_rows}, 4), got {points.shape}")
     return points
 
 

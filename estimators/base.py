@@ -24,6 +24,7 @@ straight road.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -38,6 +39,7 @@ __all__ = [
     "LaneEstimator",
     "inputs_from_info",
     "measurements_from_info",
+    "reset_inputs",
 ]
 
 MEASUREMENT_KEYS = ("sensor_speed", "sensor_camera_lateral", "sensor_steering")
@@ -65,6 +67,17 @@ class Estimate:
         hypotheses: (..., C) camera bias b of each hypothesis (m).
         state_names: names of the n states (first four: longitudinal_velocity,
             lateral_offset, lateral_velocity, bias).
+        decision: (...) the decision state, ``"undecided"``, ``"decided"``
+            or ``"model_mismatch"`` (:mod:`estimators.evidence` states the
+            rule): a str for a single run, an array of str for a batch.
+        model_error: (...) the statistic behind ``"model_mismatch"``: the best
+            hypothesis' running mean normalized steering innovation squared
+            (1: the steering model is as good as the filter assumes; NaN: no
+            steering data yet or no steering model).
+        innovation_autocorrelation: (...) the lag-1 autocorrelation of that
+            hypothesis' normalized steering innovations (NaN: no data).
+        evidence_scale: (...) the factor (>= 1) the steering evidence was
+            divided by at the last step.
         covariance: (..., n, n) mixture covariance
             ``sum_i w_i (P_i + (x_i - mean)(x_i - mean)^T)`` (computed on first access).
     """
@@ -77,6 +90,16 @@ class Estimate:
     most_likely: np.ndarray
     hypotheses: np.ndarray
     state_names: tuple[str, ...]
+    decision: np.ndarray | str = "undecided"
+    model_error: np.ndarray | float = math.nan
+    innovation_autocorrelation: np.ndarray | float = math.nan
+    evidence_scale: np.ndarray | float = 1.0
+
+    @property
+    def decided(self) -> np.ndarray | bool:
+        """True where the decision state is ``"decided"`` (a bool for a single run)."""
+        decided = np.asarray(self.decision) == "decided"
+        return bool(decided) if decided.ndim == 0 else decided
 
     @cached_property
     def covariance(self) -> np.ndarray:
@@ -118,7 +141,17 @@ class Estimate:
             self.most_likely[index],
             self.hypotheses[index],
             self.state_names,
+            _item(self.decision, index, str),
+            _item(self.model_error, index, float),
+            _item(self.innovation_autocorrelation, index, float),
+            _item(self.evidence_scale, index, float),
         )
+
+
+def _item(value: Any, index: int, kind: type) -> Any:
+    """Run ``index`` of a per-run statistic (a scalar is shared by every run)."""
+    array = np.asarray(value)
+    return kind(array[index] if array.ndim else array)
 
 
 @runtime_checkable
@@ -161,6 +194,44 @@ class LaneEstimator(Protocol):
     ) -> Estimate: ...
 
     def estimate(self) -> Estimate: ...
+
+
+def reset_inputs(
+    measurement: np.ndarray,
+    hypotheses: Sequence[float] | np.ndarray,
+    prior: np.ndarray | None = None,
+) -> tuple[np.ndarray, bool, np.ndarray, np.ndarray]:
+    """The checked inputs of a mixture filter's ``reset``: the measurements as (R, 3), whether
+    one run was given (a (3,) measurement), the hypotheses as (R, C) and the log prior (R, C)
+    (uniform by default; -inf for a zero prior).
+
+    Raises:
+        ValueError: naming the shape or value that is wrong.
+    """
+    measurement = np.asarray(measurement, dtype=np.float64)
+    single = measurement.ndim == 1
+    z = measurement.reshape(1, -1) if single else measurement
+    if z.ndim != 2 or z.shape[1] != 3:
+        raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
+    n_runs = z.shape[0]
+    hyp = np.asarray(hypotheses, dtype=np.float64)
+    if hyp.ndim == 1:
+        hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
+    if hyp.ndim != 2 or hyp.shape[0] != n_runs or hyp.shape[1] < 1:
+        raise ValueError(
+            f"hypotheses must have shape (C,) or ({n_runs}, C), got {np.shape(hypotheses)}"
+        )
+    if not np.all(np.isfinite(hyp)):
+        raise ValueError("hypotheses must be finite")
+    n_comp = hyp.shape[1]
+    if prior is None:
+        return z, single, hyp, np.full((n_runs, n_comp), -math.log(n_comp))
+    p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
+    if np.any(~np.isfinite(p)) or np.any(p < 0) or not np.allclose(p.sum(axis=1), 1.0):
+        raise ValueError("prior must be non-negative and sum to 1 over the hypotheses")
+    with np.errstate(divide="ignore"):
+        log_w = np.log(p / p.sum(axis=1, keepdims=True))
+    return z, single, hyp, log_w
 
 
 def measurements_from_info(info: Mapping[str, Any]) -> np.ndarray:

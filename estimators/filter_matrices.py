@@ -398,7 +398,7 @@ class FilterMatrices:
         road_points: np.ndarray | None = None,
         gate: float = math.inf,
         log_weights: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`update_batch` with the outlier gate g of :class:`FilterSettings`.
 
         ``road_points``: (R, 4) road points at this sample (None: straight road).
@@ -412,32 +412,40 @@ class FilterMatrices:
         and the update is done without it (see ``innovation_gate``).
 
         Returns:
-            x(k|k) (B, n), P(k|k) (B, n, n), log N(nu; 0, S) (B,) and the
-            (R, 3) mask of gated channels.
+            x(k|k) (B, n), P(k|k) (B, n, n), log N(nu; 0, S) (B,), the
+            (R, 3) mask of gated channels, and the normalized innovations
+            ``nu_c / sqrt(S_cc)`` (B, 3) of the channels used (NaN: missing
+            or gated).
         """
         points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
         x_post, cov_post, log_lik, innovation, s_diag, distance_sq = self._update(
             x, cov, z, n_comp, all_observed, points_b
         )
         n_runs = z.shape[0]
-        if log_weights is None or math.isinf(gate):
-            return x_post, cov_post, log_lik, np.zeros((n_runs, 3), dtype=bool)
-        # quick exit: the most likely hypothesis explains every channel, its score having no
-        # odds; nu_c^2 / S_cc <= nu^T S^-1 nu (Cauchy-Schwarz), so its distance bounds them all
-        favourite = log_weights.argmax(axis=1)
-        if n_comp > 1:
-            favourite += self._run_offsets(n_runs, n_comp)
-        if distance_sq[favourite].max() <= gate * gate:
-            return x_post, cov_post, log_lik, np.zeros((n_runs, 3), dtype=bool)
-        odds = log_weights.max(axis=1, keepdims=True) - log_weights  # (R, C), >= 0 (inf: pruned)
-        with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
-            score = (innovation * innovation / s_diag).reshape(n_runs, n_comp, 3)
-        score += 2.0 * odds[:, :, None]
-        gated = score.min(axis=1) > gate * gate
-        if gated.any():
-            z = np.where(gated, np.nan, z)
-            x_post, cov_post, log_lik, *_ = self._update(x, cov, z, n_comp, False, points_b)
-        return x_post, cov_post, log_lik, gated
+        gated = np.zeros((n_runs, 3), dtype=bool)
+        if not (log_weights is None or math.isinf(gate)):
+            # quick exit: the most likely hypothesis explains every channel, its score having
+            # no odds; nu_c^2 / S_cc <= nu^T S^-1 nu (Cauchy-Schwarz), so its distance bounds
+            # them all
+            favourite = log_weights.argmax(axis=1)
+            if n_comp > 1:
+                favourite += self._run_offsets(n_runs, n_comp)
+            if not distance_sq[favourite].max() <= gate * gate:  # (NaN: check the channels)
+                odds = log_weights.max(axis=1, keepdims=True) - log_weights  # (R, C), >= 0
+                with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
+                    score = (innovation * innovation / s_diag).reshape(n_runs, n_comp, 3)
+                score += 2.0 * odds[:, :, None]
+                gated = score.min(axis=1) > gate * gate
+                if gated.any():
+                    z = np.where(gated, np.nan, z)
+                    all_observed = False
+                    x_post, cov_post, log_lik, innovation, s_diag, _ = self._update(
+                        x, cov, z, n_comp, False, points_b
+                    )
+        normalized = innovation / np.sqrt(s_diag)
+        if not all_observed:
+            normalized[np.repeat(np.isnan(z), n_comp, axis=0)] = np.nan
+        return x_post, cov_post, log_lik, gated, normalized
 
     def _update(
         self,

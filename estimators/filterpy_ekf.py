@@ -18,8 +18,17 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.special import logsumexp
 
-from estimators.arx_state_space import ARXStateSpace, check_road_points
-from estimators.base import Estimate
+from estimators.arx_state_space import ARXStateSpace, road_point_rows
+from estimators.base import Estimate, reset_inputs
+from estimators.evidence import (
+    DECIDED,
+    EVIDENCE_STATE,
+    UNDECIDED,
+    EvidenceRule,
+    decision_names,
+    initial_evidence_state,
+    weigh_evidence,
+)
 from estimators.filter_matrices import FilterMatrices
 from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
@@ -111,6 +120,7 @@ class FilterpyGMEKF:
         self.state_names = self.model.state_names
         self._filters: list[list[ARXExtendedKalmanFilter | None]] | None = None
         self._single = False
+        self._rule = EvidenceRule.from_settings(settings, self.model.dt)
 
     @property
     def dt(self) -> float:
@@ -131,23 +141,9 @@ class FilterpyGMEKF:
         road_points: np.ndarray | None = None,
     ) -> Estimate:
         """See :meth:`estimators.gm_ekf.GaussianMixtureEKF.reset`."""
-        measurement = np.asarray(measurement, dtype=np.float64)
-        single = measurement.ndim == 1
-        z = np.atleast_2d(measurement)
-        if z.ndim != 2 or z.shape[1] != 3:
-            raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
-        n_runs = z.shape[0]
-        hyp = np.asarray(hypotheses, dtype=np.float64)
-        if hyp.ndim == 1:
-            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
-        n_comp = hyp.shape[1]
-        if prior is None:
-            log_w = np.full((n_runs, n_comp), -math.log(n_comp))
-        else:
-            p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
-            with np.errstate(divide="ignore"):
-                log_w = np.log(p / p.sum(axis=1, keepdims=True))
-        points = _points_rows(road_points, n_runs)
+        z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
+        n_runs, n_comp = hyp.shape
+        points = road_point_rows(road_points, n_runs)
         x0 = self.matrices.initial_state(z, hyp, road_points=points)
         banks = []
         for r in range(n_runs):
@@ -179,6 +175,17 @@ class FilterpyGMEKF:
             self._points, self._slow = points.copy(), slow
             self._gated_count = np.zeros((n_runs, 3), dtype=np.int64)
             self._gated = np.zeros((n_runs, 3), dtype=bool)
+            self._evidence = initial_evidence_state(log_w)
+            self._stats = {
+                "decision": np.where(
+                    log_w.max(axis=1) >= math.log(self.settings.decision_threshold),
+                    DECIDED,
+                    UNDECIDED,
+                ),
+                "model_error": np.full(n_runs, np.nan),
+                "autocorrelation": np.full(n_runs, np.nan),
+                "evidence_scale": np.ones(n_runs),
+            }
             self._last_x = x0.copy()
             self._last_P = np.broadcast_to(
                 self.matrices.initial_covariance, x0.shape + (x0.shape[-1],)
@@ -198,6 +205,16 @@ class FilterpyGMEKF:
                 self._slow[r] = slow[j]
                 self._gated_count[r] = 0
                 self._gated[r] = False
+                for name, value in initial_evidence_state(log_w[j : j + 1]).items():
+                    self._evidence[name][r] = value[0]
+                self._stats["decision"][r] = (
+                    DECIDED
+                    if log_w[j].max() >= math.log(self.settings.decision_threshold)
+                    else UNDECIDED
+                )
+                self._stats["model_error"][r] = np.nan
+                self._stats["autocorrelation"][r] = np.nan
+                self._stats["evidence_scale"][r] = 1.0
                 self._last_x[r] = x0[j]
                 self._last_P[r] = self.matrices.initial_covariance
         return self.estimate()
@@ -223,7 +240,7 @@ class FilterpyGMEKF:
                 if np.asarray(runs).dtype == bool
                 else np.asarray(runs, dtype=np.intp)
             )
-        points = _points_rows(road_points, idx.size)
+        points = road_point_rows(road_points, idx.size)
         for j, r in enumerate(idx):
             self._step_run(
                 int(r), z_all[j], acc_all[j], None if points is None else np.array(points[j])
@@ -294,6 +311,9 @@ class FilterpyGMEKF:
         else:
             self._gated[r] = False
         r_matrix = np.diag(mats.measurement_var[rows])
+        log_lik = np.zeros(log_w.size)
+        score = np.full(log_w.size, np.nan)  # normalized steering innovations
+        steering_row = np.flatnonzero(rows == 2)
         for c, ekf in enumerate(bank):
             if ekf is None:
                 continue
@@ -304,14 +324,21 @@ class FilterpyGMEKF:
                     lambda x: model.measurement(x[:, 0], points)[rows][:, None],
                     R=r_matrix,
                 )
-                log_w[c] += ekf.log_likelihood
+                log_lik[c] = ekf.log_likelihood
+                if steering_row.size:
+                    j = int(steering_row[0])
+                    score[c] = ekf.y[j, 0] / math.sqrt(ekf.S[j, j])
             self._last_x[r, c] = ekf.x[:, 0]  # a hypothesis pruned now stays at this posterior
             self._last_P[r, c] = ekf.P
-        total = logsumexp(log_w)
-        if np.isfinite(total):
-            log_w = log_w - total
-        else:
-            log_w = self._log_w[r].copy()
+        evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
+        new_log_w, evidence, stats = weigh_evidence(
+            self._rule, log_w[None], log_lik[None], score[None], evidence
+        )
+        for name, value in evidence.items():
+            self._evidence[name][r] = value[0]
+        for name, value in stats.items():
+            self._stats[name][r] = value[0]
+        log_w = new_log_w[0]
         threshold = settings.prune_threshold
         if threshold > 0:
             best_index = int(np.argmax(log_w))
@@ -377,13 +404,9 @@ class FilterpyGMEKF:
             np.argmax(self._log_w, axis=1),
             self._hyp.copy(),
             self.state_names,
+            decision_names(self._stats["decision"]),
+            self._stats["model_error"].copy(),
+            self._stats["autocorrelation"].copy(),
+            self._stats["evidence_scale"].copy(),
         )
         return est.run(0) if self._single else est
-
-
-def _points_rows(road_points: np.ndarray | None, n_rows: int) -> np.ndarray | None:
-    """Road points as (n_rows, 4) (a (4,) row shared by all runs), or None (straight road)."""
-    if road_points is None:
-        return None
-    points = check_road_points(road_points)
-    return np.broadcast_to(points, (n_rows, 4)) if points.ndim == 1 else points

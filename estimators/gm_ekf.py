@@ -19,9 +19,19 @@ from estimators.arx_state_space import (
     VX,
     VY,
     ARXStateSpace,
-    check_road_points,
+    road_point_rows,
 )
-from estimators.base import Estimate
+from estimators.base import Estimate, reset_inputs
+from estimators.evidence import (
+    DECIDED,
+    EVIDENCE_STATE,
+    UNDECIDED,
+    EvidenceRule,
+    decision_names,
+    initial_evidence_state,
+    normalize_log_weights,
+    weigh_evidence,
+)
 from estimators.filter_matrices import FilterMatrices
 from estimators.road_geometry import straight_road_points
 from estimators.settings import FilterSettings
@@ -29,7 +39,7 @@ from hasa_env.steering.arx import ARXForm
 
 __all__ = ["FilterSettings", "GaussianMixtureEKF", "FilterMatrices"]
 
-_STEPPED = ("_log_w", "_active", "_steering", "_slow", "_gated_count")
+_STEPPED = ("_log_w", "_active", "_steering", "_slow", "_gated_count", *EVIDENCE_STATE)
 """Per-run arrays of :class:`GaussianMixtureEKF` that a step reads (and may replace)."""
 
 
@@ -157,6 +167,7 @@ class GaussianMixtureEKF:
         ratio = settings.steering_ratio if self.model.has_steering else np.nan
         self._measurement_scale = np.array([1.0, 1.0, ratio])
         self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
+        self._rule = EvidenceRule.from_settings(settings, self.model.dt)
         self._min_speed = settings.min_speed if self.model.has_steering else 0.0
         self._straight_points = straight_road_points(
             self.model.near_distance, self.model.far_distance
@@ -192,6 +203,14 @@ class GaussianMixtureEKF:
         return self._run_view(self._gated)
 
     @property
+    def channel_nis(self) -> np.ndarray:
+        """Normalized innovation squared of each channel [speed, camera, steering] at the
+        last step, averaged over the hypotheses with their weights before the update,
+        ``sum_i w_i nu_ic^2 / S_i,cc``: (R, 3) (a single run: (3,); NaN: channel not used).
+        A consistent filter averages 1 per channel."""
+        return self._run_view(self._channel_nis)
+
+    @property
     def low_speed(self) -> np.ndarray:
         """Runs whose steering channel is off (speed estimate below ``min_speed``):
         (R,) bool (a single run: one bool)."""
@@ -225,31 +244,9 @@ class GaussianMixtureEKF:
         Returns:
             The prior estimate (weights = prior).
         """
-        measurement = np.asarray(measurement, dtype=np.float64)
-        single = measurement.ndim == 1
-        z = measurement.reshape(1, -1) if single else measurement
-        if z.ndim != 2 or z.shape[1] != 3:
-            raise ValueError(f"measurement must have shape (3,) or (R, 3), got {measurement.shape}")
-        n_runs = z.shape[0]
-        hyp = np.asarray(hypotheses, dtype=np.float64)
-        if hyp.ndim == 1:
-            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
-        if hyp.ndim != 2 or hyp.shape[0] != n_runs or hyp.shape[1] < 1:
-            raise ValueError(
-                f"hypotheses must have shape (C,) or ({n_runs}, C), got {np.shape(hypotheses)}"
-            )
-        if not np.all(np.isfinite(hyp)):
-            raise ValueError("hypotheses must be finite")
-        n_comp = hyp.shape[1]
-        if prior is None:
-            log_w = np.full((n_runs, n_comp), -math.log(n_comp))
-        else:
-            p = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_runs, n_comp))
-            if np.any(~np.isfinite(p)) or np.any(p < 0) or not np.allclose(p.sum(axis=1), 1.0):
-                raise ValueError("prior must be non-negative and sum to 1 over the hypotheses")
-            with np.errstate(divide="ignore"):
-                log_w = np.log(p / p.sum(axis=1, keepdims=True))
-        points = _as_points(road_points, n_runs)
+        z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
+        n_runs, n_comp = hyp.shape
+        points = road_point_rows(road_points, n_runs)
         if points is None:
             x = self.matrices.initial_state(z, hyp)
         else:
@@ -268,6 +265,14 @@ class GaussianMixtureEKF:
             "_slow": (z[:, 0] < self._min_speed) & (self._min_speed > 0),
             "_gated": np.zeros((n_runs, 3), dtype=bool),
             "_gated_count": np.zeros((n_runs, 3), dtype=np.int64),
+            **initial_evidence_state(log_w),
+            "_decision": np.where(
+                log_w.max(axis=1) >= math.log(self.settings.decision_threshold), DECIDED, UNDECIDED
+            ),
+            "_model_error": np.full(n_runs, np.nan),
+            "_autocorrelation": np.full(n_runs, np.nan),
+            "_evidence_scale": np.ones(n_runs),
+            "_channel_nis": np.full((n_runs, 3), np.nan),
         }
         if runs is None:
             self._single = single
@@ -325,7 +330,7 @@ class GaussianMixtureEKF:
                     f"({self.num_runs}, 2), got {np.shape(measurement)} and "
                     f"{np.shape(acceleration)}"
                 )
-            points = _as_points(road_points, z.shape[0])
+            points = road_point_rows(road_points, z.shape[0])
             run_state = {name: getattr(self, name) for name in _STEPPED}
             self._x, self._P, new = self._step(
                 self._x, self._P, run_state, self._points, z, acc, points
@@ -337,7 +342,7 @@ class GaussianMixtureEKF:
             idx = self._check_runs(runs, z.shape[0], None)
             if acc.shape != (idx.size, 2) or z.shape != (idx.size, 3):
                 raise ValueError("measurement and acceleration must have one row per selected run")
-            points = _as_points(road_points, idx.size)
+            points = road_point_rows(road_points, idx.size)
             flat = self._flat_index(idx)
             run_state = {name: getattr(self, name)[idx] for name in _STEPPED}
             previous = None if self._points is None else self._points[idx]
@@ -372,6 +377,10 @@ class GaussianMixtureEKF:
                 int(np.argmax(log_w)),
                 self._hyp[0],
                 self.state_names,
+                decision_names(int(self._decision[0])),
+                float(self._model_error[0]),
+                float(self._autocorrelation[0]),
+                float(self._evidence_scale[0]),
             )
         x = self._x.reshape(n_runs, n_comp, n)
         return Estimate(
@@ -383,6 +392,10 @@ class GaussianMixtureEKF:
             np.argmax(self._log_w, axis=1),
             self._hyp,
             self.state_names,
+            decision_names(self._decision),
+            self._model_error,
+            self._autocorrelation,
+            self._evidence_scale,
         )
 
     # ------------------------------------------------------------- internals
@@ -439,7 +452,7 @@ class GaussianMixtureEKF:
         mats = self.matrices
         settings = self.settings
         log_w, active, slow = run["_log_w"], run["_active"], run["_slow"]
-        n_comp = log_w.shape[1]
+        n_runs, n_comp = log_w.shape
         z = z * self._measurement_scale  # steering in model units (NaN without a model)
         all_observed = math.isfinite(z.sum())
         if not all_observed:  # NaN and +-inf are missing
@@ -460,7 +473,7 @@ class GaussianMixtureEKF:
             z = z.copy()
             z[slow, 2] = np.nan
             all_observed = False
-        x_post, cov_post, log_lik, gated = mats.gated_update_batch(
+        x_post, cov_post, log_lik, gated, normalized = mats.gated_update_batch(
             x_pred,
             cov_pred,
             z,
@@ -470,12 +483,19 @@ class GaussianMixtureEKF:
             gate=settings.innovation_gate,
             log_weights=log_w,
         )
-        # ---- weights (log space)
-        new_log_w = log_w + log_lik.reshape(log_w.shape)
+        # ---- weights (log space), through the consistency checks of estimators.evidence
         all_active = active.all()
-        if not all_active:
-            new_log_w = np.where(active, new_log_w, -np.inf)
-        new_log_w = _normalize_log_weights(new_log_w, log_w)
+        normalized = normalized.reshape(n_runs, n_comp, 3)
+        evidence_log_w = log_w if all_active else np.where(active, log_w, -np.inf)
+        new_log_w, evidence, stats = weigh_evidence(
+            self._rule,
+            evidence_log_w,
+            log_lik.reshape(log_w.shape),
+            normalized[:, :, 2],
+            {name: run[name] for name in EVIDENCE_STATE},
+        )
+        clipped = np.clip(normalized, -1e3, 1e3)  # (NaN stays NaN: channel not used)
+        channel_nis = np.einsum("rc,rcm->rm", np.exp(evidence_log_w), clipped * clipped)
         # ---- prune
         if not all_active:
             # pruned earlier: frozen at their last posterior
@@ -495,7 +515,7 @@ class GaussianMixtureEKF:
                 pruned = newly.any(axis=1, keepdims=True)
                 new_log_w = np.where(
                     pruned,
-                    _normalize_log_weights(np.where(new_active, new_log_w, -np.inf), new_log_w),
+                    normalize_log_weights(np.where(new_active, new_log_w, -np.inf), new_log_w),
                     new_log_w,
                 )
         # ---- low speed: steering off below min_speed, memory restarted above it
@@ -521,6 +541,12 @@ class GaussianMixtureEKF:
             "_steering": steering,
             "_slow": new_slow,
             "_gated": gated,
+            **evidence,
+            "_decision": stats["decision"],
+            "_model_error": stats["model_error"],
+            "_autocorrelation": stats["autocorrelation"],
+            "_evidence_scale": stats["evidence_scale"],
+            "_channel_nis": channel_nis,
         }
         if any_gated:
             new["_gated_count"] = run["_gated_count"] + gated
@@ -556,18 +582,6 @@ class GaussianMixtureEKF:
         cov[flat, mem, mem] = self.matrices.initial_covariance[mem, mem]
 
 
-def _as_points(road_points: np.ndarray | None, n_rows: int) -> np.ndarray | None:
-    """Road points as (n_rows, 4) float64 (a (4,) row is shared by all runs), or None."""
-    if road_points is None:
-        return None
-    points = check_road_points(road_points)
-    if points.ndim == 1:
-        return np.broadcast_to(points, (n_rows, 4))
-    if points.shape != (n_rows, 4):
-        raise ValueError(f"road_points must have shape (4,) or ({n_rows}, 4), got {points.shape}")
-    return points
-
-
 def _plausible_acceleration(acc: np.ndarray, limit: float) -> np.ndarray:
     """The IMU input with non-finite entries and entries beyond +-``limit`` (m/s^2) set to NaN."""
     if math.isinf(limit):
@@ -577,13 +591,3 @@ def _plausible_acceleration(acc: np.ndarray, limit: float) -> np.ndarray:
     if np.abs(acc).max() <= limit:  # False with a NaN
         return acc
     return np.where(np.abs(acc) <= limit, acc, np.nan)
-
-
-def _normalize_log_weights(log_w: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """``log_w - logsumexp(log_w)`` per run; a run whose weights all vanished keeps ``fallback``."""
-    total = np.logaddexp.reduce(log_w, axis=1, keepdims=True)  # logsumexp, stable
-    if math.isfinite(total.sum()):
-        return log_w - total
-    ok = np.isfinite(total)
-    with np.errstate(invalid="ignore"):
-        return np.where(ok, log_w - total, fallback)

@@ -22,9 +22,11 @@ import pandas as pd
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
+from estimators.evidence import DECISIONS
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
 from estimators.timing import check_sample_time, recording_sample_time
+from estimators.tuning import steering_residual_std
 from hasa_env.recording.format import Recording
 from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
@@ -78,6 +80,13 @@ class EstimationResult:
             outlier gate rejected at each step (None if it has no gate).
         low_speed: (R, T) steps with the steering channel off below the
             estimator's ``min_speed`` (None if it has no such mode).
+        decision: (R, T) decision state codes (:data:`estimators.evidence.DECISIONS`:
+            0 undecided, 1 decided, 2 model_mismatch; -1 where invalid).
+        model_error: (R, T) the statistic behind ``model_mismatch``
+            (:attr:`estimators.base.Estimate.model_error`).
+        channel_nis: (R, T, 3) normalized innovation squared of each channel
+            [speed, camera, steering] (:attr:`GaussianMixtureEKF.channel_nis`;
+            None if the estimator has none; NaN where not used).
     """
 
     state_names: tuple[str, ...]
@@ -93,6 +102,9 @@ class EstimationResult:
     component_means: np.ndarray | None = None
     gated: np.ndarray | None = None
     low_speed: np.ndarray | None = None
+    decision: np.ndarray | None = None
+    model_error: np.ndarray | None = None
+    channel_nis: np.ndarray | None = None
 
     @property
     def num_runs(self) -> int:
@@ -127,6 +139,44 @@ class EstimationResult:
         steps = self.lengths - 1 if at == -1 else np.minimum(at, self.lengths - 1)
         rows = np.arange(self.num_runs)
         return self._true_component()[rows, self.most_likely[rows, steps]]
+
+    def final_decision(self) -> np.ndarray:
+        """(R,) decision state name at each run's last valid step."""
+        if self.decision is None:
+            raise ValueError("the estimator reported no decision state")
+        rows = np.arange(self.num_runs)
+        return np.asarray(DECISIONS)[self.decision[rows, self.lengths - 1]]
+
+    def wrong_lane_confident(self, threshold: float = 0.95) -> np.ndarray:
+        """(R,) runs that end with more than ``threshold`` weight on a single wrong lane."""
+        rows = np.arange(self.num_runs)
+        final = self.weights[rows, self.lengths - 1]  # (R, C)
+        wrong = np.where(self._true_component(), 0.0, final)
+        return wrong.max(axis=1) > threshold
+
+    def wrong_lane_confident_share(self, threshold: float = 0.95) -> np.ndarray:
+        """(R,) share of each run's valid steps with more than ``threshold`` on a wrong lane."""
+        wrong = np.where(self._true_component()[:, None, :], 0.0, self.weights).max(axis=2)
+        return ((wrong > threshold) & self.valid).sum(axis=1) / self.lengths
+
+    def lateral_nees(self, start: int = 0) -> np.ndarray:
+        """(R,) mean normalized estimation error squared of the lateral offset,
+        ``mean_k (y_hat - y)^2 / sigma_y^2`` over valid steps >= ``start`` (1: the reported
+        std is right on average; much more: overconfident)."""
+        err = self.lateral_error()[:, start:]
+        var = self.std[:, start:, 1] ** 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.nanmean(err * err / var, axis=1)
+
+    def mean_channel_nis(self, start: int = 0) -> np.ndarray:
+        """(R, 3) mean normalized innovation squared per channel [speed, camera,
+        steering] over the steps the channel was used (NaN: never)."""
+        if self.channel_nis is None:
+            raise ValueError("the estimator reported no innovation statistics")
+        nis = np.where(self.valid[:, start:, None], self.channel_nis[:, start:], np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a channel never used: NaN
+            return np.nanmean(nis, axis=1)
 
     def to_frames(self) -> list[pd.DataFrame]:
         """One DataFrame per run: time, ``estimate_<state>`` and ``std_<state>`` of
@@ -256,6 +306,10 @@ def run_estimator(
     components = np.empty((n_runs, n_steps, n_comp, n_states)) if store_components else None
     gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if hasattr(estimator, "last_gated") else None
     low_speed = np.zeros((n_runs, n_steps), dtype=bool) if hasattr(estimator, "low_speed") else None
+    decision = np.full((n_runs, n_steps), -1, dtype=np.int8)
+    model_error = np.full((n_runs, n_steps), np.nan)
+    has_nis = hasattr(estimator, "channel_nis")
+    channel_nis = np.full((n_runs, n_steps, 3), np.nan) if has_nis else None
 
     def store(k: int, e) -> None:  # noqa: ANN001 - an Estimate
         mean[:, k] = e.mean
@@ -273,6 +327,11 @@ def run_estimator(
             gated[:, k] = estimator.last_gated
         if low_speed is not None:
             low_speed[:, k] = estimator.low_speed
+        names = np.asarray(e.decision)
+        decision[:, k] = np.select([names == name for name in DECISIONS], range(len(DECISIONS)), -1)
+        model_error[:, k] = e.model_error
+        if channel_nis is not None and k:
+            channel_nis[:, k] = estimator.channel_nis
 
     store(0, est)
     for k in range(1, n_steps):
@@ -292,6 +351,11 @@ def run_estimator(
         component_means=components,
         gated=None if gated is None else gated & valid[:, :, None],
         low_speed=None if low_speed is None else low_speed & valid,
+        decision=np.where(valid, decision, -1),
+        model_error=np.where(valid, model_error, np.nan),
+        channel_nis=None
+        if channel_nis is None
+        else np.where(valid[:, :, None], channel_nis, np.nan),
     )
 
 
@@ -320,7 +384,10 @@ class EstimatorRun:
 
 
 def estimate_recording(
-    recording: Recording, steering_model: SteeringModelLike, steering_ratio: float = 1.0
+    recording: Recording,
+    steering_model: SteeringModelLike,
+    steering_ratio: float = 1.0,
+    residual_std: float | None = None,
 ) -> EstimatorRun:
     """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
 
@@ -329,15 +396,34 @@ def estimate_recording(
     hypotheses of the recording's config and filter settings from that
     config; the steering model enters through its ARX form, and
     ``steering_ratio`` (model units per recorded road-wheel radian) goes to
-    the filter settings.
+    the filter settings. ``residual_std`` is the steering model's equation-
+    error level (rad, model units; ``FilterSettings.steering_residual_std``);
+    None: the model's one-step residual on this recording's true states
+    (:func:`estimators.tuning.steering_residual_std`): the evidence checks
+    (:mod:`estimators.evidence`) temper evidence whose residuals exceed the
+    level they are given, but cannot recover evidence a level set far too
+    high hides.
     """
     data = recording.data
     cfg = recording.config
     hypotheses = np.asarray(cfg["markings"]["hypotheses"], dtype=np.float64)
+    arx = steering_model.arx()
+    overrides: dict[str, float] = {"steering_ratio": steering_ratio}
+    if arx is not None:
+        level = residual_std
+        if level is None:
+            level = steering_residual_std(
+                arx,
+                data,
+                decision_lag=getattr(steering_model, "decision_lag", 1),
+                steering_ratio=steering_ratio,
+            )
+        overrides["steering_residual_std"] = max(float(level), 1e-9)
     estimator = GaussianMixtureEKF(
-        steering_model.arx(),
-        FilterSettings.from_env_config(cfg, steering_ratio=steering_ratio),
+        arx,
+        FilterSettings.from_env_config(cfg, **overrides),
         dt=recording.dt,
+        decision_lag=getattr(steering_model, "decision_lag", 1),
     )
     result = run_estimator(estimator, data, hypotheses=hypotheses)
     n = len(data)

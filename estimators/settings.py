@@ -4,10 +4,51 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import KW_ONLY, dataclass, fields, replace
+from dataclasses import KW_ONLY, dataclass, replace
 from typing import Any
 
+from hasa_env.validation import Field, schema, validate_fields
+
 __all__ = ["FilterSettings"]
+
+
+def _positive(unit: str = "", infinite: bool = False) -> Field:
+    return Field("number", unit=unit, low=0.0, low_open=True, infinite=infinite)
+
+
+def _non_negative(unit: str = "") -> Field:
+    return Field("number", unit=unit, low=0.0)
+
+
+_SCHEMA = schema(
+    {
+        "speed_noise_std": _positive("m/s"),
+        "camera_noise_std": _positive("m"),
+        "acceleration_noise_std": _non_negative("m/s^2"),
+        "steering_residual_std": _non_negative("rad"),
+        "steering_sensor_std": _non_negative("rad"),
+        "steering_ratio": _positive(),
+        "initial_speed_std": _positive("m/s"),
+        "initial_lateral_std": Field("number", unit="m", low=0.0, optional=True),
+        "initial_lateral_velocity_std": _non_negative("m/s"),
+        "bias_std": _non_negative("m"),
+        "memory_std": _non_negative("rad"),
+        "bias_drift_std": _non_negative("m"),
+        "memory_process_std": _non_negative("rad"),
+        "missing_acceleration_std": _non_negative("m/s^2"),
+        "prune_threshold": Field("number", low=0.0, high=1.0, high_open=True),
+        "innovation_gate": _positive(infinite=True),
+        "min_speed": _non_negative("m/s"),
+        "max_acceleration": _positive("m/s^2", infinite=True),
+        "evidence_checks": Field("bool"),
+        "evidence_window": _positive("s"),
+        "mismatch_model_error": Field("number", low=1.0, low_open=True, infinite=True),
+        "forgetting_time": _positive("s", infinite=True),
+        "decision_threshold": Field("number", low=0.5, high=1.0, high_open=True),
+        "weight_floor": Field("number", low=0.0, high=1e-3),
+    }
+)
+"""What every field of :class:`FilterSettings` allows."""
 
 
 @dataclass(frozen=True)
@@ -39,7 +80,9 @@ class FilterSettings:
         missing_acceleration_std: process noise (m/s^2) used in place of the
             IMU noise when an IMU reading is NaN (the input is then taken as 0).
         prune_threshold: hypotheses whose weight falls below this are pruned
-            (weight 0, state frozen); the most likely one is never pruned.
+            (weight 0, state frozen; irreversible); the most likely one is
+            never pruned. Default 0: no pruning (``weight_floor`` keeps
+            unlikely hypotheses alive instead).
         innovation_gate: outlier gate g on each measurement channel c (speed,
             camera, steering). The channel is missing at this step for every
             hypothesis (never gated per hypothesis: a wrong hypothesis' large
@@ -80,6 +123,23 @@ class FilterSettings:
             ``missing_acceleration_std``). Default 50 m/s^2 (about 5 g):
             several times what tyres can transmit (about 10 m/s^2), so it
             only catches sensor faults. ``math.inf`` turns it off.
+        evidence_checks: temper the steering evidence by its consistency,
+            forget toward the prior, floor the weights and stop on a model
+            mismatch (:mod:`estimators.evidence`, whose docstring states the
+            rule). False: the weights follow paper eq. 19 as written (the
+            decision state is still reported).
+        evidence_window: time constant (s) of the running normalized-
+            innovation statistics (lambda, rho) of the steering channel.
+        mismatch_model_error: lambda (the best hypothesis' running mean
+            normalized steering innovation squared; 1 for a consistent model)
+            above which the model fits no hypothesis: a model mismatch, while
+            which the weights do not move. Default 4: residuals twice the
+            level the filter was given.
+        forgetting_time: time constant (s) with which the log weights return
+            to the prior without fresh evidence (``math.inf``: never).
+        decision_threshold: the weight a hypothesis needs for the run to be
+            ``"decided"``.
+        weight_floor: no weight falls below this (0: no floor).
     """
 
     speed_noise_std: float = 0.05
@@ -96,36 +156,32 @@ class FilterSettings:
     bias_drift_std: float = 0.0
     memory_process_std: float = 0.0
     missing_acceleration_std: float = 3.0
-    prune_threshold: float = 1e-10
+    prune_threshold: float = 0.0
     _: KW_ONLY  # the fields below are keyword-only
     innovation_gate: float = 6.0
     min_speed: float = 3.0
     max_acceleration: float = 50.0
+    evidence_checks: bool = True
+    evidence_window: float = 5.0
+    mismatch_model_error: float = 4.0
+    forgetting_time: float = math.inf
+    decision_threshold: float = 0.95
+    weight_floor: float = 0.0
 
     def __post_init__(self) -> None:
-        may_be_infinite = ("innovation_gate", "max_acceleration")
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if value is None and f.name == "initial_lateral_std":
-                continue
-            if not (isinstance(value, int | float) and not math.isnan(value) and value >= 0):
-                raise ValueError(f"FilterSettings.{f.name} must be a number >= 0, got {value!r}")
-            if math.isinf(value) and f.name not in may_be_infinite:
-                raise ValueError(f"FilterSettings.{f.name} must be finite, got {value!r}")
-        positive = (
-            "speed_noise_std",
-            "camera_noise_std",
-            "steering_ratio",
-            "initial_speed_std",
-            *may_be_infinite,
+        """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and
+        its allowed range) and keep the converted values (numpy scalars become floats)."""
+        validate_fields(
+            self,
+            _SCHEMA,
+            describe=lambda path: f"FilterSettings.{path}",
+            error=lambda path, message: ValueError(message),
         )
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"FilterSettings.{name} must be > 0, got {getattr(self, name)!r}")
         if self.steering_residual_std == 0 and self.steering_sensor_std == 0:
-            raise ValueError("steering_residual_std and steering_sensor_std cannot both be 0")
-        if not self.prune_threshold < 1:
-            raise ValueError(f"prune_threshold must be < 1, got {self.prune_threshold!r}")
+            raise ValueError(
+                "FilterSettings.steering_residual_std and steering_sensor_std cannot both be 0 "
+                "(the steering channel would have no noise)"
+            )
 
     @classmethod
     def with_overrides(

@@ -46,6 +46,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
+from estimators.evidence import DECISIONS
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances
 from estimators.timing import check_sample_time, config_sample_time
@@ -71,7 +72,12 @@ def estimate_info_keys(prefix: str = "estimate_") -> tuple[str, ...]:
     ``<prefix>bias`` (m), ``<prefix>lane_index`` (int, index of the most
     likely of the env's hypotheses), ``<prefix>weights`` (H,) (probability of
     each of the env's H hypotheses), ``<prefix>mean`` (n,) and ``<prefix>std``
-    (n,) (mixture mean and standard deviations of the estimator's n states).
+    (n,) (mixture mean and standard deviations of the estimator's n states),
+    ``<prefix>decision`` (str: ``"undecided"``, ``"decided"`` or
+    ``"model_mismatch"``, :mod:`estimators.evidence`), ``<prefix>decision_code``
+    (int, 0 / 1 / 2 in that order), ``<prefix>model_error`` (the statistic
+    behind a mismatch; NaN before the steering channel has data) and
+    ``<prefix>evidence_scale`` (what the last step's evidence was divided by).
     """
     names = (
         "lateral_offset",
@@ -83,6 +89,10 @@ def estimate_info_keys(prefix: str = "estimate_") -> tuple[str, ...]:
         "weights",
         "mean",
         "std",
+        "decision",
+        "decision_code",
+        "model_error",
+        "evidence_scale",
     )
     return tuple(prefix + name for name in names)
 
@@ -115,6 +125,8 @@ def _estimate_values(est: Estimate, hypotheses: np.ndarray) -> tuple[np.ndarray,
 def _info_values(est: Estimate, hypotheses: np.ndarray, prefix: str) -> dict[str, np.ndarray]:
     mean, std, weights, lane = _estimate_values(est, hypotheses)
     keys = estimate_info_keys(prefix)
+    n_runs = mean.shape[0]
+    decision = np.broadcast_to(np.asarray(est.decision, dtype=str), (n_runs,))
     values = (
         mean[:, 1],
         std[:, 1],
@@ -125,6 +137,10 @@ def _info_values(est: Estimate, hypotheses: np.ndarray, prefix: str) -> dict[str
         weights,
         mean,
         std,
+        decision,
+        np.select([decision == name for name in DECISIONS], range(len(DECISIONS)), -1),
+        np.broadcast_to(np.asarray(est.model_error, dtype=np.float64), (n_runs,)),
+        np.broadcast_to(np.asarray(est.evidence_scale, dtype=np.float64), (n_runs,)),
     )
     return dict(zip(keys, values, strict=True))
 
@@ -288,6 +304,8 @@ class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 info[key] = value.copy()
             elif value.dtype.kind == "i":
                 info[key] = int(value)
+            elif value.dtype.kind == "U":
+                info[key] = str(value)
             else:
                 info[key] = float(value)
         return info

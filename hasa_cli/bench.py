@@ -4,13 +4,25 @@ Usage::
 
     hasa-bench paper [options]                       # the paper's protocol, built-in models
     hasa-bench score my_pkg.my_module:MyModel [...]  # the same, ranking your model(s)
+    hasa-bench score path/to/model.json             # a saved model, with its own parameters
+    hasa-bench paper --recordings STUDY_DIR          # a study's recordings (session files)
     hasa-bench perf [--quick] [--json FILE]          # the performance benchmarks
 
 ``paper`` and ``score`` print the tables and write into ``--out``
 (default ``hasa-bench-results``): ``results.json``, CSV tables,
-``report.md`` and PNG figures. Exit status: 0 success; 1 a user model
-failed (its error names it; every other result is written); 2 invalid
-arguments or data (nothing written).
+``report.md`` and PNG figures. A folder that holds a previous result is only
+replaced with ``--overwrite`` (the new result is written beside it first and
+swapped in when complete). Exit status (:mod:`hasa_cli`): 0 success; 1
+partial: a user model failed, or recordings were skipped or runs left out
+as degenerate (each named on stderr and in results.json; every other result
+is written); 2 invalid arguments or data, a user model that does not
+import, an output folder that exists (nothing run, nothing written); 3 the
+Dask scheduler cannot be reached.
+
+Why this module is long: it is the argument parser and the output of three
+subcommands (paper, score, perf) with their options, each documented at
+the option, plus the mapping of every failure onto one exit status; the
+work itself is in :mod:`benchmarks`.
 """
 
 from __future__ import annotations
@@ -18,7 +30,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 import os
+import secrets
+import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -27,17 +42,30 @@ from typing import Any
 
 from tqdm import tqdm
 
+from benchmarks.executor import SchedulerError, check_scheduler
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
-from benchmarks.protocol.config import DEFAULT_SEEDS
+from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
 from benchmarks.report import format_tables, write_outputs
 from benchmarks.tables import Column, render_text
+from hasa_cli import (
+    EXIT_ENVIRONMENT,
+    EXIT_OK,
+    EXIT_PARTIAL,
+    EXIT_USAGE,
+    add_version,
+    console_script,
+    error,
+    warn,
+)
 
 __all__ = ["main", "build_parser", "perf_rows", "format_perf_table", "PERF_MODULES"]
 
 PERF_MODULES = ("perf_env", "perf_estimators", "perf_render", "perf_advisor")
 """Performance benchmark modules of :mod:`benchmarks` run by ``hasa-bench perf``."""
 
-EXIT_OK, EXIT_MODEL_FAILED, EXIT_USAGE = 0, 1, 2
+PROG = "hasa-bench"
+EXIT_MODEL_FAILED = EXIT_PARTIAL
+"""Exit status when a user model failed (the partial status of every program)."""
 
 
 def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
@@ -73,21 +101,52 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     data.add_argument(
         "--curved-runs",
         type=int,
-        default=1,
+        default=4,
         metavar="N",
-        help="extra curved-track runs of 'Ill' (steering scores; 0: none; default 1)",
+        help="extra curved-track runs of 'Ill' (steering scores and estimation; 0: none; "
+        "default 4)",
+    )
+    data.add_argument(
+        "--stress",
+        action="store_true",
+        help="also score the stress set of bad advisors (benchmarks.stress): no lane "
+        "information, sign-flipped, random stable ARX, unregularized constant-speed fit",
+    )
+    data.add_argument(
+        "--filter",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="a FilterSettings field for every estimator, e.g. forgetting_time=10 "
+        "(repeatable; JSON values: numbers, true/false)",
+    )
+    data.add_argument(
+        "--compare-checks",
+        action="store_true",
+        help="also run every model's estimator without the evidence checks ('<model> (no checks)')",
     )
     noise = parser.add_argument_group("sensor noise (std; default: the env's)")
     noise.add_argument("--speed-noise", type=float, metavar="M/S", help="speedometer (0.05)")
     noise.add_argument("--camera-noise", type=float, metavar="M", help="camera offset (0.05)")
     noise.add_argument("--imu-noise", type=float, metavar="M/S2", help="IMU (0.05)")
     noise.add_argument("--steering-noise", type=float, metavar="RAD", help="steering (1e-4)")
+    parser.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="MODEL",
+        help="also score this steering model: 'package.module:ClassName' (a SteeringModel "
+        "subclass, fitted on the training run like the built-ins) or a saved model file "
+        "(scored with its own parameters); repeatable",
+    )
     rec = parser.add_argument_group("recorded drives instead")
     rec.add_argument(
         "--recordings",
         metavar="DIR",
         help="directory of recordings (hasa_env format); drivers from metadata.driver or "
-        "metadata.participant, else the sub-directory",
+        "metadata.participant, else the sub-directory. A study's directory (session.json "
+        "files of 'hasa-drive study'): its participants' measured runs, practice runs "
+        "excluded, aborted runs reported",
     )
     rec.add_argument(
         "--illustrative",
@@ -100,6 +159,23 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
         default=0,
         metavar="N",
         help="which of its main-track runs trains the models (0)",
+    )
+    rec.add_argument(
+        "--training-file",
+        metavar="FILE",
+        help="the recording that trains the models (instead of --illustrative/--training-run)",
+    )
+    rec.add_argument(
+        "--min-duration",
+        type=_seconds,
+        default=5.0,
+        metavar="S",
+        help="skip recordings shorter than this, each named (default 5 s)",
+    )
+    rec.add_argument(
+        "--allow-incomplete",
+        action="store_true",
+        help="also score recordings whose writer stopped early (crash, failed write)",
     )
     run = parser.add_argument_group("execution and output")
     run.add_argument(
@@ -119,11 +195,40 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
         help="runs per task, vectorized together (48); results are the same on any executor "
         "and worker count, another batch size can change them in the last digits",
     )
+    run.add_argument(
+        "--model-time-limit",
+        type=_time_limit,
+        default=DEFAULT_MODEL_TIME_LIMIT,
+        metavar="S",
+        help="time limit of one call into a user model (import, a fit, a batch of runs), each "
+        "run in its own process so a model that hangs, exits or crashes fails alone "
+        f"(default {DEFAULT_MODEL_TIME_LIMIT:g} s; 0: no limit, user code runs in-process)",
+    )
     run.add_argument("--out", default="hasa-bench-results", metavar="DIR", help="output directory")
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output directory if it holds a previous result",
+    )
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     run.add_argument(
         "--quiet", action="store_true", help="no progress bars or tables (errors only)"
     )
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a duration in s >= 0, got {text!r}")
+    return value
+
+
+def _time_limit(text: str) -> float | None:
+    value = _seconds(text)
+    return None if value == 0 else value
 
 
 def _seed_list(text: str) -> tuple[int, ...]:
@@ -141,10 +246,14 @@ def _seed_list(text: str) -> tuple[int, ...]:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-bench``."""
     parser = argparse.ArgumentParser(
-        prog="hasa-bench",
+        prog=PROG,
         description="The human-as-advisor benchmark (Mai et al.): steering-model prediction "
         "and lane estimation on a synthetic population or recorded drives.",
+        epilog="Exit status: 0 ok, 1 partial (a user model failed, recordings skipped, runs "
+        "left out; each named), 2 usage or input error (nothing written), 3 the Dask "
+        "scheduler cannot be reached.",
     )
+    add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="{paper,score,perf}")
     paper = sub.add_parser(
         "paper",
@@ -159,9 +268,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="score your steering model(s) with the same protocol",
         description="Import each MODEL ('package.module:ClassName', a SteeringModel subclass, "
         "from the working directory or the installed packages), fit it on the training run "
-        "like the built-ins and rank it against them.",
+        "like the built-ins and rank it against them; a saved model file (model.save(...), "
+        "any registered type) is scored with its own parameters.",
     )
-    score.add_argument("models", nargs="+", metavar="MODEL", help="package.module:ClassName")
+    score.add_argument(
+        "models",
+        nargs="+",
+        metavar="MODEL",
+        help="package.module:ClassName or path/to/model.json",
+    )
     _add_protocol_options(score)
     perf = sub.add_parser(
         "perf",
@@ -207,8 +322,29 @@ def _config(args: argparse.Namespace) -> Any:
         recordings=args.recordings,
         illustrative=args.illustrative,
         training_run=args.training_run,
+        training_file=args.training_file,
+        min_duration=args.min_duration,
+        allow_incomplete=args.allow_incomplete,
+        model_time_limit=args.model_time_limit,
         batch_size=args.batch_size,
+        stress=bool(getattr(args, "stress", False)),
+        filter_settings=_filter_settings(getattr(args, "filter", [])),
+        compare_checks=bool(getattr(args, "compare_checks", False)),
     )
+
+
+def _filter_settings(items: list[str]) -> dict[str, Any]:
+    """``["field=value", ...]`` as a dict (values parsed as JSON, else kept as text)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise BenchmarkError(f"--filter expects FIELD=VALUE, got {item!r}")
+        try:
+            out[name.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            out[name.strip()] = text
+    return out
 
 
 class _Progress:
@@ -236,10 +372,68 @@ class _Progress:
             self.bar = None
 
 
+def _check_output(out: Path, overwrite: bool) -> str | None:
+    """What is wrong with writing the results to ``out``, or None (checked before any run)."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: exists and is not a folder"
+    if out.is_dir() and any(out.iterdir()):
+        previous = out / "results.json"
+        try:
+            ours = json.loads(previous.read_text(encoding="utf-8")).get("format")
+        except (OSError, ValueError, AttributeError):
+            ours = None
+        if ours != "hasa_bench.results":
+            return (
+                f"--out {out}: is a folder that holds no hasa-bench result; "
+                "choose another --out (it is never replaced)"
+            )
+        if not overwrite:
+            return f"--out {out}: holds a previous result; --overwrite replaces it, or choose another --out"
+    parent = out.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        probe = parent / f".{out.name}.probe-{secrets.token_hex(4)}"
+        probe.mkdir()
+        probe.rmdir()
+    except OSError as exc:
+        return f"--out {out}: cannot write there ({exc.strerror or exc})"
+    return None
+
+
+def _write_results(result: Any, out: Path, figures: bool) -> dict[str, Path]:
+    """Write into a new folder beside ``out``, then swap it in: a failure leaves ``out`` as it was."""
+    fresh = out.with_name(f".{out.name}.new-{secrets.token_hex(4)}")
+    try:
+        written = write_outputs(result, fresh, figures=figures)
+        old = None
+        if out.exists():
+            old = out.with_name(f".{out.name}.old-{secrets.token_hex(4)}")
+            os.replace(out, old)
+        os.replace(fresh, out)
+    except BaseException:
+        shutil.rmtree(fresh, ignore_errors=True)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return {name: out / path.relative_to(fresh) for name, path in written.items()}
+
+
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     if args.workers is not None and args.workers < 1:
-        print(f"hasa-bench: --workers must be >= 1, got {args.workers}", file=sys.stderr)
+        error(PROG, f"--workers must be >= 1, got {args.workers}")
         return EXIT_USAGE
+    out = Path(args.out)
+    problem = _check_output(out, args.overwrite)
+    if problem is not None:
+        error(PROG, problem)
+        return EXIT_USAGE
+    scheduler = args.scheduler
+    if scheduler is not None:
+        try:
+            scheduler = check_scheduler(scheduler)
+        except SchedulerError as exc:
+            error(PROG, str(exc))
+            return EXIT_USAGE if exc.kind == "address" else EXIT_ENVIRONMENT
     started = time.perf_counter()
     progress = _Progress(args.quiet)
     try:
@@ -248,27 +442,38 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
             config,
             user_models,
             workers=args.workers,
-            scheduler=args.scheduler,
+            scheduler=scheduler,
             progress=progress,
         )
     except BenchmarkError as exc:
         progress.close()
-        print(f"hasa-bench: {exc}", file=sys.stderr)
+        error(PROG, str(exc))
         return EXIT_USAGE
     progress("writing results, tables and figures", 0, 0)
-    written = write_outputs(result, args.out, figures=not args.no_plots)
+    try:
+        written = _write_results(result, out, figures=not args.no_plots)
+    except OSError as exc:
+        progress.close()
+        error(PROG, f"cannot write the results to {out}: {exc}")
+        return EXIT_ENVIRONMENT
     progress.close()
     if not args.quiet:
         print(format_tables(result))
         print()
         print(
-            f"wrote {len(written)} files to {Path(args.out)}/ (results.json, report.md, "
+            f"wrote {len(written)} files to {out}/ (results.json, report.md, "
             f"CSV tables{', figures' if not args.no_plots else ''}); "
             f"{time.perf_counter() - started:.1f} s in all"
         )
-    for error in result.errors:
-        print(f"hasa-bench: error: {error['message']}", file=sys.stderr)
-    return EXIT_MODEL_FAILED if result.errors else EXIT_OK
+    for skip in result.skipped:
+        error(PROG, f"skipped {skip['file']}: {skip['reason']}")
+    for run in result.degenerate:
+        where = run["file"] or f"driver {run['driver']!r} run {run['run']} ({run['track']})"
+        warn(PROG, f"left out of the means: {where}: {run['reason']}")
+    for failure in result.errors:
+        error(PROG, failure["message"])
+    partial = result.errors or result.skipped or result.degenerate
+    return EXIT_PARTIAL if partial else EXIT_OK
 
 
 # -------------------------------------------------------------------------- perf
@@ -320,6 +525,17 @@ def perf_rows(name: str, results: dict[str, Any], module: Any = None) -> list[di
                     "passed": None if ratio is None else bool(ratio >= 1.0),
                 }
             )
+        for key, value in (results.get("ratios") or {}).items():
+            rows.append(
+                {
+                    "benchmark": name,
+                    "measure": f"{key.replace('_', ' ')} (ratio, same run)",
+                    "value": value,
+                    "target": None,
+                    "ratio_to_target": None,
+                    "passed": None,
+                }
+            )
     return rows
 
 
@@ -360,10 +576,10 @@ def _perf(args: argparse.Namespace) -> int:
         wanted = [f"perf_{n.strip().removeprefix('perf_')}" for n in args.only.split(",") if n]
         unknown = [w for w in wanted if w not in PERF_MODULES]
         if unknown:
-            print(
-                f"hasa-bench perf: unknown benchmark(s) {unknown}; "
+            error(
+                f"{PROG} perf",
+                f"unknown benchmark(s) {unknown}; "
                 f"allowed: {', '.join(m.removeprefix('perf_') for m in PERF_MODULES)}",
-                file=sys.stderr,
             )
             return EXIT_USAGE
         names = wanted
@@ -408,19 +624,20 @@ def _perf(args: argparse.Namespace) -> int:
             json.dump({"rows": rows, "benchmarks": everything}, fh, indent=2, default=str)
             fh.write("\n")
     if failed:
-        return 1
+        return EXIT_PARTIAL
     if args.strict and any(r["passed"] is False for r in rows):
-        return 1
+        return EXIT_PARTIAL
     return EXIT_OK
 
 
 # -------------------------------------------------------------------------- main
+@console_script(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-bench`` (returns the exit status)."""
     args = build_parser().parse_args(argv)
     if args.command == "perf":
         return _perf(args)
-    user_models = args.models if args.command == "score" else []
+    user_models = (args.models if args.command == "score" else []) + list(args.model)
     if user_models and os.getcwd() not in sys.path:
         # like other tools that import user code by path: modules in the working directory
         sys.path.insert(0, os.getcwd())

@@ -9,12 +9,18 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
+from collections.abc import Sequence
 
 import gymnasium as gym
 import numpy as np
 
 import hasa_env
+from hasa_cli import EXIT_OK, EXIT_USAGE, add_version, console_script, error
+from hasa_env.sim.config import ConfigError
+
+PROG = "hasa-demo"
 
 
 def _drive(env_id: str, seed: int, seconds: float) -> dict[str, float]:
@@ -47,11 +53,41 @@ def _drive(env_id: str, seed: int, seconds: float) -> dict[str, float]:
     }
 
 
-def demo_main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="hasa-demo", description=__doc__.splitlines()[0])
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--seconds", type=float, default=30.0, help="episode length (s)")
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected an episode length in s > 0, got {text!r}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a seed (an integer >= 0), got {text!r}")
+    return value
+
+
+@console_script(PROG)
+def demo_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``hasa-demo``; returns the exit status (0 ok, 2 a bad argument)."""
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    add_version(parser)
+    parser.add_argument("--seed", type=_seed, default=0, help="episode seed (default 0)")
+    parser.add_argument(
+        "--seconds", type=_seconds, default=30.0, help="episode length in s (> 0; default 30)"
+    )
     args = parser.parse_args(argv)
+    try:
+        gym.make(hasa_env.ENV_IDS[0], config={"time_limit": args.seconds}).close()
+    except ConfigError as exc:
+        error(PROG, f"--seconds: {exc}")
+        return EXIT_USAGE
     print(
         f"hasa-env {hasa_env.__version__}: one {args.seconds:g} s drive per env, seed {args.seed}"
     )
@@ -62,8 +98,8 @@ def demo_main(argv: list[str] | None = None) -> int:
             f"RMS y {r['lateral_rmse_m']:.3f} m  camera bias {r['camera_bias_m']:+.1f} m "
             f"(camera error {r['mean_camera_error_m']:+.2f} m)  {r['steps_per_s']:,.0f} steps/s"
         )
-    return 0
+    return EXIT_OK
 
 
-if __name__ == "__main__":
-    raise SystemExit(demo_main())
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(demo_main())

@@ -3,6 +3,7 @@
 Commands::
 
     hasa-drive --participant P07 [--track straight|curved] [--bias random|B] [--runs 10]
+    hasa-drive study STUDY.toml --participant P07 [--meta KEY=VALUE ...] [--check]
     hasa-drive calibrate [--output FILE]
     hasa-drive synthetic --driver Ill [--population paper] [--participant NAME]
 
@@ -13,6 +14,9 @@ countdown precedes it. Each run is recorded under
 wheel and pedal values in ``run_NNN.inputs.tsv``), every step flushed at
 once (a killed process keeps every completed step). ``--estimator`` runs the
 Gaussian-mixture EKF alongside and shows its lane weights in the HUD.
+
+``hasa-drive study`` (:mod:`hasa_cli.study`) runs one participant's session of
+a study file (``studies/paper.toml``), with a session file that resumes it.
 
 ``hasa-drive synthetic`` drives through the same loop, headless and as fast
 as possible, with a synthetic driver (:mod:`hasa_env.drivers`) turning an SDL
@@ -27,12 +31,16 @@ import argparse
 import os
 import signal
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from estimators.wrappers import estimator_wrapper
-from hasa_cli import EXIT_ENVIRONMENT
+from hasa_cli import EXIT_ENVIRONMENT, EXIT_USAGE, add_version, console_script, error
+from hasa_cli.inputs import estimator_for as _estimator
+from hasa_cli.inputs import joystick_profiles as _joystick_profiles
+from hasa_cli.inputs import start_autocentre as _start_autocentre
+from hasa_cli.study import main as study_main
 from hasa_env.devices.calibration import (
     CalibrationError,
     JoystickCalibration,
@@ -42,14 +50,16 @@ from hasa_env.devices.calibration import (
     user_calibration_path,
 )
 from hasa_env.devices.calibrator import calibrate
-from hasa_env.devices.force_feedback import Autocentre, ForceFeedbackUnavailable
 from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_reason
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
-from hasa_env.session import DriveSession, DriveSettings, VirtualWheelDriver
+from hasa_env.session import (
+    DriveSession,
+    DriveSettings,
+    VirtualWheelDriver,
+)
 from hasa_env.sim.config import ConfigError
-from hasa_env.steering.loading import default_steering_ratio, load_model
 
 __all__ = ["EXIT_NO_SCREEN", "main"]
 
@@ -79,7 +89,7 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
         default=None,
         help="camera bias b in metres for every run, or 'random' (default: drawn per run)",
     )
-    p.add_argument("--runs", type=int, default=10, help="number of runs (default 10)")
+    p.add_argument("--runs", type=int, default=10, help="number of runs (default %(default)s)")
     p.add_argument("--seconds", type=float, default=30.0, help="length of a run in s (default 30)")
     p.add_argument("--speed", type=float, default=15.0, help="initial speed in m/s (default 15)")
     p.add_argument(
@@ -99,30 +109,16 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
     )
 
 
-def _joystick_profiles(path: Path | None, log: Callable[[str], None]) -> list[JoystickCalibration]:
-    profiles: list[JoystickCalibration] = []
-    if path is None and user_calibration_path().exists():
-        path = user_calibration_path()
-    if path is not None:
-        cal = load_calibration(path)
-        if not isinstance(cal, JoystickCalibration):
-            raise CalibrationError(str(path), "device", "must be 'joystick' for --calibration")
-        log(f"hasa-drive: using the calibration {path}")
-        profiles.append(cal)
-    profiles += [shipped_calibration("g29"), shipped_calibration("gamepad")]  # type: ignore[list-item]
-    return profiles
-
-
 def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     reason = no_screen_reason()
     if reason is not None:
-        print(
-            f"hasa-drive: no screen to drive on: {reason}.\n"
+        error(
+            "hasa-drive",
+            f"no screen to drive on: {reason}.\n"
             "hasa-drive shows the road to a human driver and needs a display. Run it in a desktop "
             "session (for a test without one: xvfb-run hasa-drive ...). Headless work: hasa-replay "
             "replays and checks recordings, and 'hasa-drive synthetic' drives a synthetic driver "
             "through a virtual wheel.",
-            file=sys.stderr,
         )
         return EXIT_NO_SCREEN
     try:
@@ -150,23 +146,20 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         profiles = _joystick_profiles(args.calibration, log)
         env_wrapper = None
         if args.estimator is not None:
-            probe = _probe_env(settings)
-            model = load_model(args.estimator, probe.setup.env_step_duration)
-            ratio = default_steering_ratio(args.estimator, fitted=False)
-            env_wrapper = estimator_wrapper(model, ratio)
-            env_wrapper(probe)  # fail now, not after the countdown
+            env_wrapper = _estimator(args.estimator, _probe_env(settings))
     except (ValueError, ConfigError, ImportError, OSError) as exc:
-        print(f"hasa-drive: {exc}", file=sys.stderr)
-        return 2
+        error("hasa-drive", str(exc))
+        return EXIT_USAGE
+    problem = _unwritable(settings.directory)
+    if problem is not None:
+        error("hasa-drive", problem)
+        return EXIT_USAGE
     try:
         pg = init_pygame_input()
         flags = pg.FULLSCREEN if args.fullscreen else 0
         display = pg.display.set_mode((args.width, args.height), flags)
     except Exception as exc:  # noqa: BLE001 - pygame.error and friends: no usable screen
-        print(
-            f"hasa-drive: no screen to drive on: pygame could not open a window ({exc})",
-            file=sys.stderr,
-        )
+        error("hasa-drive", f"no screen to drive on: pygame could not open a window ({exc})")
         return EXIT_NO_SCREEN
     pg.display.set_caption(f"hasa-drive: {settings.participant}")
     inputs = InputManager(keyboard, profiles, use_joystick=not args.keyboard_only, pygame_module=pg)
@@ -198,6 +191,17 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     return 0
 
 
+def _unwritable(directory: Path) -> str | None:
+    """Why recordings cannot be written into ``directory`` (checked before any window opens)."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        return f"cannot write recordings to {directory}: {exc.strerror or exc}"
+    return None
+
+
 def _probe_env(settings: DriveSettings) -> Any:
     return LaneKeepingEnv(config=settings.env_config())
 
@@ -206,26 +210,14 @@ def _raise_exit(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
 
 
-def _start_autocentre(inputs: InputManager, strength: float, log: Callable[[str], None]) -> Any:
-    inputs.poll()
-    if inputs.active is None:
-        log("hasa-drive: --autocentre: no wheel connected; driving without force feedback")
-        return None
-    try:
-        return Autocentre(inputs.active.name, strength)
-    except ForceFeedbackUnavailable as exc:
-        log(f"hasa-drive: --autocentre: {exc}")
-        return None
-
-
 def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
     if args.driver not in drivers:
-        print(
-            f"hasa-drive: unknown driver {args.driver!r}; this population has {', '.join(drivers)}",
-            file=sys.stderr,
+        error(
+            "hasa-drive",
+            f"unknown driver {args.driver!r}; this population has {', '.join(drivers)}",
         )
-        return 2
+        return EXIT_USAGE
     params = drivers[args.driver]
     participant = (
         args.participant or f"synthetic-{args.population}-{args.population_seed}-{args.driver}"
@@ -246,15 +238,19 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         )
         settings.env_config()
     except (ValueError, ConfigError) as exc:
-        print(f"hasa-drive: {exc}", file=sys.stderr)
-        return 2
+        error("hasa-drive", str(exc))
+        return EXIT_USAGE
+    problem = _unwritable(settings.directory)
+    if problem is not None:
+        error("hasa-drive", problem)
+        return EXIT_USAGE
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     pg = init_pygame_input()
     try:
         wheel = VirtualJoystick.g29()
     except VirtualJoystickUnavailable as exc:
-        print(f"hasa-drive: cannot create the virtual wheel: {exc}", file=sys.stderr)
-        return 1
+        error("hasa-drive", f"cannot create the virtual wheel: {exc}")
+        return EXIT_ENVIRONMENT
     g29 = shipped_calibration("g29")
     assert isinstance(g29, JoystickCalibration)
     profile = JoystickCalibration(**{**_fields(g29), "match_names": (wheel.name,)})
@@ -290,6 +286,7 @@ def _fields(cal: JoystickCalibration) -> dict[str, Any]:
     return {k: getattr(cal, k) for k in cal.__dataclass_fields__ if k != "device"}
 
 
+@console_script("hasa-drive")
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-drive`` (see the module docstring)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -299,6 +296,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             prog="hasa-drive calibrate",
             description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
         )
+        add_version(p)
         p.add_argument("--output", type=Path, default=user_calibration_path(), help="file to write")
         p.add_argument(
             "--wheel-range", type=float, default=900.0, help="lock-to-lock range in degrees"
@@ -316,6 +314,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             steering_ratio=args.steering_ratio,
             timeout=args.timeout,
         )
+    if argv and argv[0] == "study":
+        return study_main(argv[1:])
     if argv and argv[0] == "synthetic":
         p = argparse.ArgumentParser(
             prog="hasa-drive synthetic",
@@ -323,20 +323,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             "virtual G29 "
             "(headless; the recordings are labelled synthetic).",
         )
+        add_version(p)
         _add_session_arguments(p, participant_required=False)
         p.add_argument(
             "--driver", default="Ill", help="driver name in the population (default Ill)"
         )
         p.add_argument("--population", default="paper", help="population name (default paper)")
         p.add_argument("--population-seed", type=int, default=0, help="population seed (default 0)")
-        p.set_defaults(runs=1)
+        p.set_defaults(runs=1)  # the help shows it: "(default %(default)s)"
         return _synthetic(p.parse_args(argv[1:]), log)
     p = argparse.ArgumentParser(
         prog="hasa-drive",
         description="Drive the lane-keeping env with a wheel (G29), a joystick or the keyboard; "
         "record each run. "
-        "Subcommands: 'hasa-drive calibrate', 'hasa-drive synthetic' (see their --help).",
+        "Subcommands: 'hasa-drive study', 'hasa-drive calibrate', 'hasa-drive synthetic' "
+        "(see their --help).",
+        epilog="Exit status: 0 ok, 1 fewer runs than asked, 2 usage or input error, "
+        "3 no screen or no virtual wheel.",
     )
+    add_version(p)
     _add_session_arguments(p, participant_required=True)
     p.add_argument(
         "--countdown", type=float, default=3.0, help="countdown before each run in s (default 3)"
@@ -361,7 +366,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         metavar="MODEL",
         help="run the Gaussian-mixture EKF alongside; show its lane-hypothesis weights in the HUD "
-        "(steering model: two-point, generalized (default) or a saved model file)",
+        "(steering model: two-point, generalized (default), a saved model file or "
+        "package.module:Class)",
     )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)

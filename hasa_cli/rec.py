@@ -6,9 +6,10 @@ Commands::
     hasa-rec convert SRC [-o OUT]        CSV recording(s) -> Parquet (needs pyarrow)
     hasa-rec export-minari DIR NAME      a folder of recordings -> Minari dataset NAME
 
-Exit status: 0 success; 1 some input was invalid (reported on stderr by file
-name, line and column; ``convert`` and ``export-minari`` still process the
-valid ones); 2 usage errors, a missing optional dependency, or nothing to do.
+Exit status (:mod:`hasa_cli`): 0 success; 1 partial: some input was invalid
+(each named on stderr by file, line and column) or a target existed, the
+valid ones were processed; 2 usage errors or nothing to do (no input is
+valid); 3 a missing optional dependency (pyarrow, minari).
 """
 
 from __future__ import annotations
@@ -19,22 +20,32 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from hasa_env.recording import RecordingError, RecordingWarning, load_recording, load_recordings
+from hasa_cli import (
+    EXIT_ENVIRONMENT,
+    EXIT_OK,
+    EXIT_PARTIAL,
+    EXIT_USAGE,
+    add_version,
+    console_script,
+    error,
+)
+from hasa_env.recording import Recording, RecordingError, RecordingWarning, load_recordings
 from hasa_env.recording.export import export_minari
 from hasa_env.recording.parquet import require_pyarrow, to_parquet
+from hasa_env.recording.reader import load_any
 from hasa_env.recording.summary import summarize
 
 __all__ = ["main"]
 
-EXIT_OK, EXIT_INVALID, EXIT_USAGE = 0, 1, 2
+PROG = "hasa-rec"
 
 
 def _err(message: str) -> None:
-    print(message, file=sys.stderr)
+    error(PROG, message)
 
 
 def _info(args: argparse.Namespace) -> int:
-    status = EXIT_OK
+    failed = 0
     for i, name in enumerate(args.files):
         if i:
             print()
@@ -43,60 +54,97 @@ def _info(args: argparse.Namespace) -> int:
         except RecordingError as exc:
             print(f"file           {name}")
             print("valid          NO")
-            _err(f"error: {exc}")
-            status = EXIT_INVALID
+            _err(str(exc))
+            failed += 1
             continue
         except ImportError as exc:
-            _err(f"error: {exc}")
-            return EXIT_USAGE
+            _err(f"{name}: {exc}")
+            return EXIT_ENVIRONMENT
         print("\n".join(summary.lines()))
-    return status
+    if not failed:
+        return EXIT_OK
+    return EXIT_USAGE if failed == len(args.files) else EXIT_PARTIAL
+
+
+def _targets(
+    src: Path, out: Path | None
+) -> tuple[list[tuple[Recording, Path]], list[RecordingError]]:
+    """(recording, Parquet file) pairs to write, and the recordings that did not load."""
+    if src.is_dir():
+        if out is not None and out.exists() and not out.is_dir():
+            raise ValueError(f"-o {out}: exists and is not a folder (converting a folder)")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RecordingWarning)
+            recordings = load_recordings(src)
+        pairs = [
+            (rec, (out or rec.path.parent) / rec.path.with_suffix(".parquet").name)
+            for rec in recordings
+            if rec.path is not None
+        ]
+        return pairs, list(recordings.errors)
+    if not src.exists() and not src.with_suffix(".json").exists():
+        raise ValueError(f"{src}: no such file or directory")
+    try:
+        rec = load_any(src)
+    except RecordingError as exc:
+        return [], [exc]
+    assert rec.path is not None
+    name = rec.path.with_suffix(".parquet").name
+    if out is None:
+        target = rec.path.with_suffix(".parquet")
+    elif out.is_dir():
+        target = out / name
+    elif out.suffix == ".parquet":
+        target = out
+    elif out.exists():
+        raise ValueError(f"-o {out}: exists and is neither a folder nor a .parquet file")
+    else:
+        target = out / name
+    if target.resolve() == rec.path.resolve():
+        raise ValueError(f"-o {out}: is the recording itself")
+    return [(rec, target)], []
 
 
 def _convert(args: argparse.Namespace) -> int:
     try:
         require_pyarrow()
     except ImportError as exc:
-        _err(f"error: {exc}")
-        return EXIT_USAGE
+        _err(str(exc))
+        return EXIT_ENVIRONMENT
     src = Path(args.source)
     out = Path(args.output) if args.output else None
-    errors: list[RecordingError] = []
-    if src.is_dir():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RecordingWarning)
-            recordings = load_recordings(src)
-        errors.extend(recordings.errors)
-        if not recordings and not errors:
-            _err(f"error: no recordings (*.csv with a .json sidecar) in {src}")
-            return EXIT_USAGE
-        targets = [
-            (rec, (out / rec.path.with_suffix(".parquet").name) if out else None)
-            for rec in recordings
-        ]
-    else:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RecordingWarning)
-                rec = load_recording(src)
-        except RecordingError as exc:
-            _err(f"error: {exc}")
-            return EXIT_INVALID
-        if out is not None and (out.is_dir() or out.suffix != ".parquet"):
-            out = out / rec.path.with_suffix(".parquet").name
-        targets = [(rec, out)]
+    try:
+        targets, errors = _targets(src, out)
+    except ValueError as exc:
+        _err(str(exc))
+        return EXIT_USAGE
+    if not targets and not errors:
+        _err(f"no recordings (*.csv with a .json sidecar) in {src}")
+        return EXIT_USAGE
+    problems = [str(e) for e in errors]
+    written = 0
     for rec, target in targets:
-        written = to_parquet(rec, target)
-        print(f"{rec.path} -> {written} ({rec.steps} steps)")
-    for exc in errors:
-        _err(f"skipped corrupt recording: {exc}")
-    return EXIT_INVALID if errors else EXIT_OK
+        if target.exists() and not args.overwrite:
+            problems.append(f"{target} exists; --overwrite replaces it")
+            continue
+        try:
+            path = to_parquet(rec, target, overwrite=True)
+        except OSError as exc:
+            problems.append(f"{target}: cannot write: {exc}")
+            continue
+        written += 1
+        print(f"{rec.path} -> {path} ({rec.steps} steps)")
+    for problem in problems:
+        _err(f"skipped: {problem}")
+    if not problems:
+        return EXIT_OK
+    return EXIT_PARTIAL if written else EXIT_USAGE
 
 
 def _export(args: argparse.Namespace) -> int:
     root = Path(args.directory)
     if not root.is_dir():
-        _err(f"error: recordings folder {str(root)!r} does not exist")
+        _err(f"recordings folder {str(root)!r} does not exist")
         return EXIT_USAGE
     try:
         with warnings.catch_warnings():
@@ -112,10 +160,10 @@ def _export(args: argparse.Namespace) -> int:
                 description=args.description,
             )
     except ImportError as exc:
-        _err(f"error: {exc}")
-        return EXIT_USAGE
-    except ValueError as exc:
-        _err(f"error: {exc}")
+        _err(str(exc))
+        return EXIT_ENVIRONMENT
+    except (ValueError, OSError) as exc:
+        _err(str(exc))
         return EXIT_USAGE
     steps = result.dataset.total_steps
     print(
@@ -135,14 +183,18 @@ def _export(args: argparse.Namespace) -> int:
         print(f"note: {path} ended without termination or truncation; last step marked truncated")
     for path, reason in result.skipped:
         _err(f"skipped {path}: {reason}")
-    return EXIT_INVALID if result.skipped else EXIT_OK
+    return EXIT_PARTIAL if result.skipped else EXIT_OK
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``hasa-rec``; returns the exit status."""
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasa-rec``."""
     parser = argparse.ArgumentParser(
-        prog="hasa-rec", description="Inspect, convert and export hasa_env recordings."
+        prog=PROG,
+        description="Inspect, convert and export hasa_env recordings.",
+        epilog="Exit status: 0 ok, 1 some inputs failed (each named), 2 usage or input error, "
+        "3 a missing optional package.",
     )
+    add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True)
 
     p_info = sub.add_parser("info", help="summarise and validate recordings")
@@ -157,6 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="OUT",
         help="output file (single recording) or folder (default: next to each CSV)",
     )
+    p_conv.add_argument("--overwrite", action="store_true", help="replace existing .parquet files")
     p_conv.set_defaults(func=_convert)
 
     p_exp = sub.add_parser(
@@ -185,10 +238,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     p_exp.add_argument("--author", default=None)
     p_exp.add_argument("--description", default=None)
     p_exp.set_defaults(func=_export)
+    return parser
 
-    args = parser.parse_args(argv)
+
+@console_script(PROG)
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``hasa-rec``; returns the exit status."""
+    args = build_parser().parse_args(argv)
     return args.func(args)
 
 
 if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
+    sys.exit(main())

@@ -11,8 +11,11 @@ recording in a directory and its subdirectories) it:
 2. optionally (``--model``) scores a steering model's prediction of the
    recorded steering (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the
    increments, Ljung-Box p) -- a paper preset (``two-point``,
-   ``generalized``), a saved model file, or, with ``--fit``, the model fitted
-   on the first recording and scored on all of them (the paper's protocol);
+   ``generalized``), a saved model file (any registered type, user types
+   included), a user model ``package.module:ClassName`` (imported from the
+   working directory or the installed packages), or, with ``--fit``, the
+   model fitted on the first recording and scored on all of them (the
+   paper's protocol);
 3. optionally (``--estimator``) runs the Gaussian-mixture EKF with that
    steering model over the recorded sensors and prints its lateral RMSE, the
    final weight of the true lane hypothesis and when it was first trusted
@@ -22,19 +25,36 @@ recording in a directory and its subdirectories) it:
    and a video (``--video FILE.mp4``) if ``imageio`` with ffmpeg is
    installed (skipped with a message otherwise).
 
-Exit status: 0 if every recording replays as recorded, 1 if any diverges,
-2 if a recording could not be loaded or an argument is wrong.
+Paths may be recording CSVs (or their sidecars), Parquet files written by
+``hasa-rec convert``, or folders (searched recursively).
+
+Exit status (:mod:`hasa_cli`): 0 if every recording loads and replays as
+recorded; 1 (partial) if any diverges or could not be loaded or analysed
+(each named on stderr, the rest done); 2 for a wrong argument or when no
+recording loads; 3 when ``--video`` needs imageio (or its ffmpeg plugin)
+and it is not installed.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from estimators.offline import EstimatorRun, estimate_recording
+from hasa_cli import (
+    EXIT_ENVIRONMENT,
+    EXIT_OK,
+    EXIT_PARTIAL,
+    EXIT_USAGE,
+    add_version,
+    console_script,
+    error,
+)
 from hasa_env.recording import check_replay
 from hasa_env.recording.reader import load_paths
 from hasa_env.render.frames import write_frames
@@ -60,14 +80,34 @@ def _fmt(value: float) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
+PROG = "hasa-replay"
+_FFMPEG_SUFFIXES = (".mp4", ".mkv", ".avi", ".mov", ".webm", ".m4v", ".mpeg", ".mpg", ".wmv")
+
+
+def _video_unavailable(video: Path) -> str | None:
+    """Why ``--video`` cannot be written on this machine, or None."""
+    if importlib.util.find_spec("imageio") is None:
+        return "--video needs imageio: pip install imageio imageio-ffmpeg"
+    if (
+        video.suffix.lower() in _FFMPEG_SUFFIXES
+        and importlib.util.find_spec("imageio_ffmpeg") is None
+    ):
+        return f"--video {video.name} needs imageio's ffmpeg plugin: pip install imageio-ffmpeg"
+    return None
+
+
+@console_script(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-replay`` (see the module docstring)."""
     p = argparse.ArgumentParser(
-        prog="hasa-replay",
+        prog=PROG,
         description="Replay recordings headlessly, check that they reproduce, "
         "score a steering model "
         "and the estimator on them, render frames.",
+        epilog="Exit status: 0 ok, 1 some recordings diverged or failed (each named), "
+        "2 usage error or nothing loaded, 3 a missing optional package (--video).",
     )
+    add_version(p)
     p.add_argument(
         "paths", nargs="+", help="recording CSV files or directories (searched recursively)"
     )
@@ -80,7 +120,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument(
         "--model",
         default=None,
-        help="score a steering model: 'two-point', 'generalized' (paper presets) or a model file",
+        help="score a steering model: 'two-point', 'generalized' (paper presets), a saved model "
+        "file, or 'package.module:ClassName' (a SteeringModel subclass; with --fit if it has "
+        "no parameters)",
     )
     p.add_argument(
         "--fit", action="store_true", help="fit --model on the first recording, score on all"
@@ -119,19 +161,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.frame_every < 1:
         p.error("--frame-every must be >= 1")
     if args.fit and args.model is None:
-        p.error("--fit needs --model (two-point or generalized)")
+        p.error(
+            "--fit needs --model (two-point, generalized, a model file or package.module:Class)"
+        )
+    if not (math.isfinite(args.atol) and args.atol >= 0):
+        p.error(f"--atol must be a finite tolerance >= 0, got {args.atol!r}")
+    if args.video is not None:
+        missing = _video_unavailable(args.video)
+        if missing is not None:
+            error(PROG, missing)
+            return EXIT_ENVIRONMENT
 
     recordings = load_paths(args.paths)
     problems = [str(e) for e in recordings.errors]
     for msg in problems:
-        print(f"hasa-replay: cannot load: {msg}", file=sys.stderr)
+        error(PROG, f"cannot load: {msg}")
     if not recordings:
-        print("hasa-replay: no recordings to replay", file=sys.stderr)
-        return 2
+        error(PROG, "no recordings to replay")
+        return EXIT_USAGE
 
     diverged = 0
     for rec in recordings:
-        label = "synthetic" if rec.meta.get("metadata", {}).get("synthetic") else "recorded"
+        label = "synthetic" if (rec.meta.get("metadata") or {}).get("synthetic") else "recorded"
         complete = "" if rec.complete else " (incomplete: its writer stopped early)"
         try:
             check = check_replay(rec, args.atol)
@@ -145,11 +196,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     model = None
     if args.model is not None or args.estimator:
         spec = args.model or "generalized"
+        if ":" in spec and os.getcwd() not in sys.path:
+            sys.path.insert(0, os.getcwd())  # user models in the working directory
         try:
             model = load_model(spec, recordings[0].dt)
         except (ValueError, OSError) as exc:
-            print(f"hasa-replay: {exc}", file=sys.stderr)
-            return 2
+            error(PROG, str(exc))
+            return EXIT_USAGE
+        if not model.is_fitted and not args.fit:
+            error(
+                PROG,
+                f"model {spec!r} has no parameters: add --fit to fit it on the first "
+                "recording, or give a saved model file (model.save('model.json'))",
+            )
+            return EXIT_USAGE
         road = recordings[0].road
         if args.steering is not None:
             model.steering_signal = args.steering
@@ -176,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 result = estimate_recording(rec, model, ratio)
             except ValueError as exc:  # e.g. sampled at another rate than the model
-                print(f"hasa-replay: {rec.path}: cannot run the estimator: {exc}", file=sys.stderr)
+                error(PROG, f"{rec.path}: cannot run the estimator: {exc}")
                 problems.append(str(exc))
                 continue
             runs[i] = result
@@ -201,22 +261,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             video = args.video
             if video is not None and len(recordings) > 1:
                 video = video.with_name(f"{video.stem}_{Path(rec.path).stem}{video.suffix}")
-            written = write_frames(
-                rec,
-                frames_dir,
-                every=args.frame_every,
-                view=args.view,
-                size=args.size,
-                show_points=args.show_points,
-                weights=runs[i].weights if i in runs else None,
-                video=video,
-            )
+            try:
+                written = write_frames(
+                    rec,
+                    frames_dir,
+                    every=args.frame_every,
+                    view=args.view,
+                    size=args.size,
+                    show_points=args.show_points,
+                    weights=runs[i].weights if i in runs else None,
+                    video=video,
+                )
+            except OSError as exc:  # a read-only or full output folder
+                error(PROG, f"{rec.path}: cannot write frames: {exc}")
+                problems.append(str(exc))
+                continue
             if written:
                 print(f"{rec.path}: wrote {len(written)} frames to {frames_dir}")
-    if problems:
-        return 2
-    return 1 if diverged else 0
+    return EXIT_PARTIAL if problems or diverged else EXIT_OK
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -34,8 +34,8 @@ def _same_step(vector_out, single_out, i: int) -> None:
     assert np.array_equal(obs[i], o)
     assert (reward[i], terminated[i], truncated[i]) == (r, te, tr)
     assert set(inf) == set(ADVISOR_INFO_KEYS)
-    for key, value in inf.items():
-        assert np.array_equal(np.asarray(info[key][i]), np.asarray(value)), key
+    for key, value in inf.items():  # NaN (e.g. no model-error statistic yet) equals NaN
+        np.testing.assert_array_equal(np.asarray(info[key][i]), np.asarray(value), err_msg=key)
 
 
 def test_registered_by_entry_point_strings_without_importing_estimators_at_import():
@@ -64,7 +64,7 @@ def test_spaces_and_the_same_info_keys_at_reset_and_step():
     env = gym.make(ID, config={"action_repeat": 4})
     assert env.action_space.shape == (1,)
     names = observation_names(2)
-    assert env.observation_space.shape == (len(names),) == (13,)
+    assert env.observation_space.shape == (len(names),) == (17,)
     obs, info = env.reset(seed=1)
     assert list(info) == list(ADVISOR_INFO_KEYS)
     assert obs.dtype == np.float32 and env.observation_space.contains(obs)
@@ -82,6 +82,13 @@ def test_spaces_and_the_same_info_keys_at_reset_and_step():
         step_info["sensor_camera_lateral"]
     )
     assert obs[-1] == np.float32(step_info["sensor_advisor_steering"])
+    # the decision state, one-hot, and its statistic
+    decision = [
+        obs[names.index(f"estimate_{d}")] for d in ("undecided", "decided", "model_mismatch")
+    ]
+    assert sorted(decision) == [0.0, 0.0, 1.0]
+    assert decision.index(1.0) == step_info["estimate_decision_code"]
+    assert step_info["estimate_decision"] in ("undecided", "decided", "model_mismatch")
     full = gym.make(ID, config={"action": {"steering_only": False, "type": "physical"}})
     assert full.action_space.shape == (2,)
 

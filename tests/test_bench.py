@@ -12,6 +12,7 @@ import json
 import math
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -161,8 +162,9 @@ def test_results_json_structure(outputs) -> None:
     drivers = ["Ill", "1", "2"]
     models = ["two_point", "generalized", "near_far_pd"]
     steering = doc["steering"]
+    with_baseline = ["two_point", "generalized", "road_blind", "near_far_pd"]
     assert [(r["driver"], r["model"]) for r in steering] == [
-        (d, m) for d in drivers for m in models
+        (d, m) for d in drivers for m in with_baseline
     ]
     for row in steering:
         for key in ("rmse", "r2", "r2_increments"):
@@ -177,9 +179,20 @@ def test_results_json_structure(outputs) -> None:
     for row in estimation:
         assert row["lateral_rmse_mean"] >= 0 and row["lateral_rmse_std"] >= 0
         assert row["n_runs"] == 2
-    assert [(r["driver"], r["model"]) for r in doc["curved"]] == [("Ill", m) for m in models]
-    assert len(doc["runs_steering"]) == (6 + 1) * 3
-    assert len(doc["runs_estimation"]) == 6 * 5
+    assert [(r["driver"], r["model"]) for r in doc["curved"]] == [("Ill", m) for m in with_baseline]
+    assert len(doc["runs_steering"]) == (6 + 1) * 4
+    main_rows = [r for r in doc["runs_estimation"] if r["track"] == "straight"]
+    curved_rows = [r for r in doc["runs_estimation"] if r["track"] == "curved"]
+    assert len(main_rows) == 6 * 5 and len(curved_rows) == 1 * 5
+    assert [(r["driver"], r["model"]) for r in doc["curved_estimation"]] == [
+        ("Ill", m) for m in expected
+    ]
+    for row in doc["runs_estimation"]:  # the safety metrics of every run
+        assert row["final_decision"] in ("undecided", "decided", "model_mismatch")
+        assert isinstance(row["wrong_lane_confident"], bool)
+        assert row["lateral_nees"] >= 0
+    assert {"wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs",
+            "lateral_nees", "curved_lateral_rmse"} <= set(doc["summary"][0])  # fmt: skip
     assert doc["errors"] == []
     # the paper's values sit beside ours
     ill = {r["model"]: r for r in steering if r["driver"] == "Ill"}
@@ -274,10 +287,25 @@ def test_load_user_model_errors(user_module: str) -> None:
     assert model.name == "near_far_pd" and not model.is_fitted
 
 
+def test_a_model_that_cannot_be_used_stops_the_bench_before_any_run(
+    user_module: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "results.json").write_text('{"format": "hasa_bench.results"}')
+    specs = ["no_such_module_xyz:Model", f"{user_module}:NotAModel", f"{user_module}:NearFarPD"]
+    started = time.perf_counter()
+    code = main(["score", *specs, *SMALL_ARGS, "--out", str(out), "--overwrite", "--quiet"])
+    assert code == 2 and time.perf_counter() - started < 10  # no run was generated
+    err = capsys.readouterr().err
+    assert err.startswith("hasa-bench: error: 2 of 3 user model(s) cannot be used")
+    assert "no_such_module_xyz" in err and "(import)" in err and "NotAModel" in err
+    assert "(interface)" in err and "near_far_pd" not in err
+    assert (out / "results.json").read_text() == '{"format": "hasa_bench.results"}'
+
+
 def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: Path) -> None:
     specs = [
-        "no_such_module_xyz:Model",
-        f"{user_module}:NotAModel",
         f"{user_module}:NaNModel",
         f"{user_module}:FitRaises",
         f"{user_module}:NearFarPD",
@@ -299,22 +327,21 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["executor"]["tasks"] == 2  # the NaN model failed in worker processes
     errors = {e["model"]: e for e in doc["errors"]}
-    assert set(errors) == {"no_such_module_xyz:Model", f"{user_module}:NotAModel", "nan_model",
-                           "fit_raises"}  # fmt: skip
-    assert errors["no_such_module_xyz:Model"]["stage"] == "import"
-    assert "no_such_module_xyz" in errors["no_such_module_xyz:Model"]["message"]
-    assert errors[f"{user_module}:NotAModel"]["stage"] == "interface"
+    assert set(errors) == {"nan_model", "fit_raises"}
     assert errors["nan_model"]["stage"] == "predict"
     assert "'nan_model'" in errors["nan_model"]["message"]
     assert "NaN" in errors["nan_model"]["message"]
     assert errors["fit_raises"]["stage"] == "fit"
     assert "cannot fit this" in errors["fit_raises"]["message"]
     scored = {r["model"] for r in doc["steering"]}
-    assert scored == {"two_point", "generalized", "near_far_pd", "no_arx"}
+    assert scored == {"two_point", "generalized", "road_blind", "near_far_pd", "no_arx"}
     estimated = {"two_point", "generalized", "near_far_pd", "no_steering", "oracle"}
     assert {r["model"] for r in doc["estimation"]} == estimated
     no_arx = next(m for m in doc["models"] if m["name"] == "no_arx")
     assert no_arx["arx"] is False and "not an ARX model" in no_arx["note"]
+    assert "no rows in the lateral-estimation table" in no_arx["note"]  # and why
+    report = (tmp_path / "report.md").read_text()
+    assert "it has no rows in the lateral-estimation table" in report
     ranks = {r["model"]: (r["rank_steering"], r["rank_lateral"]) for r in doc["summary"]}
     assert ranks["no_arx"][0] is not None and ranks["no_arx"][1] is None
     assert all(r["driver"] in ("Ill", "1", "2") for r in doc["steering"])
@@ -327,7 +354,7 @@ def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     doc = result.to_json_dict()
     assert doc["config"]["seeds"] == [3, 4]
     assert {r["seed"] for r in doc["steering"]} == {3, 4} == {r["seed"] for r in doc["estimation"]}
-    assert len(doc["models"]) == 2 * 3  # every model fitted on each seed's own training run
+    assert len(doc["models"]) == 2 * 4  # every model fitted on each seed's own training run
     per_seed = [r for r in doc["seed_summary"] if r["model"] == "generalized"]
     assert [r["seed"] for r in per_seed] == [3, 4]
     summary = {r["model"]: r for r in doc["summary"]}
@@ -338,10 +365,32 @@ def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     half = 12.706 * np.std(values, ddof=1) / np.sqrt(2)  # Student t, 1 degree of freedom
     assert gen["lateral_rmse_ci_high"] - gen["lateral_rmse"] == pytest.approx(half, rel=1e-3)
     for row in summary.values():
-        if row["kind"] != "baseline":
+        if row["kind"] in ("builtin", "user") and row["lateral_rmse"] is not None:
             assert row["rank_lateral_stability"] in (0.0, 0.5, 1.0)
     text = format_tables(result)
     assert "Verdict over 2 population seeds [3, 4]" in text and "95% CI" in text
+
+
+def test_stress_set_and_unchecked_estimators_are_scored() -> None:
+    config = ProtocolConfig(**(SMALL | {"curved_runs": 0}), stress=True, compare_checks=True)
+    result = run_protocol(config, workers=1)
+    summary = {r["model"]: r for r in result.summary}
+    stress = ["stress_no_lane_info", "stress_sign_flipped", "stress_random_arx",
+              "stress_unregularized"]  # fmt: skip
+    for name in stress:
+        assert summary[name]["kind"] == "stress"
+        assert summary[f"{name} (no checks)"]["kind"] == "unchecked"
+        assert summary[name]["rank_lateral"] is None  # not ranked against real models
+    assert summary["generalized (no checks)"]["estimated_runs"] == 6
+    # the constant-speed least-squares fit is the collinear one of issue 10
+    fit = next(m for m in result.models if m["name"] == "stress_unregularized")
+    assert fit["checks"]["ridge_lambda"] == 0.0
+    assert fit["checks"]["condition_number"] > 1e6 and "ill_conditioned" in fit["checks"]["flags"]
+    # no lane information: the filter stays at the prior and says so
+    rows = [r for r in result.runs_estimation if r["model"] == "stress_no_lane_info"]
+    assert all(r["final_decision"] == "undecided" and not r["wrong_lane_confident"] for r in rows)
+    text = format_tables(result)
+    assert "Lane decisions" in text and "stress_sign_flipped (no checks)" in text
 
 
 # --------------------------------------------------------------- determinism
@@ -424,7 +473,7 @@ def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) 
 def replace_recordings(config: ProtocolConfig, folder: Path) -> ProtocolConfig:
     from dataclasses import replace
 
-    return replace(config, recordings=str(folder))
+    return replace(config, recordings=str(folder), min_duration=1.0)  # 3 s runs
 
 
 def test_recordings_errors(tmp_path: Path) -> None:
@@ -514,16 +563,19 @@ def test_perf_rows_read_every_benchmark_layout() -> None:
     render_like = {
         "ratios_to_target": {"driver_draw": 2.5},
         "results": {"driver_draw": {"frames_per_second": 150.0}},
+        "ratios": {"participant_over_developer": 0.9},
     }
     rows = (
         perf_rows("perf_env", env_like)
         + perf_rows("perf_estimators", est_like)
         + perf_rows("perf_render", render_like, Render)
     )
-    assert [r["passed"] for r in rows] == [True, None, False, None, True]
+    assert [r["passed"] for r in rows] == [True, None, False, None, True, None]
     assert rows[0]["ratio_to_target"] == pytest.approx(1.5)
     assert rows[3]["measure"] == "filterpy over ours 8" and rows[3]["target"] is None
     assert rows[4]["value"] == 150.0 and rows[4]["target"] == 60.0
+    assert rows[5]["measure"] == "participant over developer (ratio, same run)"
+    assert rows[5]["value"] == 0.9 and rows[5]["target"] is None
     table = format_perf_table(rows)
     assert "FAIL" in table and "PASS" in table and "2.50x" in table
 

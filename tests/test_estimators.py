@@ -107,16 +107,28 @@ def test_one_component_matches_filterpy_over_a_whole_run(runs, lag):
     assert np.all(np.isfinite(fast[-1].mean))
 
 
-def test_mixture_matches_filterpy_with_pruning(runs):
+@pytest.mark.parametrize("checks", [True, False])
+def test_mixture_matches_filterpy_with_floor_or_pruning(runs, checks):
+    # with the evidence checks the wrong lane's weight rests on the floor; without them
+    # (the paper's eq. 19 as written) an explicit prune_threshold prunes it
+    options = {"evidence_checks": checks, "prune_threshold": 0.0 if checks else 1e-10}
     frame = with_dropouts(runs[0][1])
-    fast = filter_run(make_ekf(), frame, steps=800)
+    fast = filter_run(make_ekf(**options), frame, steps=800)
     ref = filter_run(
-        FilterpyGMEKF(PAPER, steering_ratio=RATIO, steering_residual_std=1e-3), frame, steps=800
+        FilterpyGMEKF(PAPER, steering_ratio=RATIO, steering_residual_std=1e-3, **options),
+        frame,
+        steps=800,
     )
     for a, b in zip(fast, ref, strict=True):
         np.testing.assert_allclose(a.weights, b.weights, rtol=0, atol=1e-9)
         np.testing.assert_allclose(a.mean, b.mean, rtol=0, atol=1e-9)
-    assert fast[-1].weights[1] == 0.0  # the wrong lane was pruned
+        assert a.decision == b.decision
+        np.testing.assert_allclose(a.model_error, b.model_error, rtol=1e-9)
+    if checks:
+        assert fast[-1].weights[1] == pytest.approx(1e-12, rel=1e-6)  # floored, not pruned
+        assert fast[-1].decision == "decided"
+    else:
+        assert fast[-1].weights[1] == 0.0  # pruned
 
 
 def test_vectorized_path_equals_per_run_path(runs):
@@ -253,16 +265,22 @@ def test_single_hypothesis_and_oracle_baselines(runs):
         OracleEKF().reset(np.array([15.0, 0.0, 0.0]), HYPOTHESES)
 
 
-def test_any_number_of_hypotheses_and_pruning(runs):
+def test_any_number_of_hypotheses_floored_or_pruned(runs):
     hyps = [3.6, 1.8, 0.0, -1.8, -3.6]
     res = run_estimator(make_ekf(), runs[1], hypotheses=hyps)
     assert res.weights.shape[-1] == 5
     assert np.all(res.most_likely[:, -1] == 3)  # b = -1.8 is true
-    assert np.count_nonzero(res.weights[:, -1]) == 4  # the others are pruned to exactly 0
-    kept = run_estimator(make_ekf(prune_threshold=0.0), runs[1], hypotheses=hyps)
-    np.testing.assert_allclose(kept.lateral_rmse(), res.lateral_rmse(), rtol=1e-3)
+    others = np.delete(res.weights[:, -1], 3, axis=1)
+    assert np.all(others < 1e-12)  # never pruned: their filters run on, log weights finite
+    assert np.all(np.isfinite(res.weights)) and np.all(res.final_decision() == "decided")
+    floored = run_estimator(make_ekf(weight_floor=1e-12), runs[1], hypotheses=hyps)
+    np.testing.assert_allclose(np.delete(floored.weights[:, -1], 3, axis=1), 1e-12, rtol=1e-6)
+    pruned = run_estimator(make_ekf(prune_threshold=1e-10), runs[1], hypotheses=hyps)
+    assert np.count_nonzero(pruned.weights[:, -1]) == 4  # the others are pruned to exactly 0
+    np.testing.assert_allclose(pruned.lateral_rmse(), res.lateral_rmse(), rtol=1e-3)
     # log-space weights: evidence far beyond float range stays finite and ordered
-    out = filter_run(make_ekf(prune_threshold=0.0), runs[1][0], hyps, steps=400)
+    # (the paper's eq. 19 without the floor and forgetting of the evidence checks)
+    out = filter_run(make_ekf(evidence_checks=False), runs[1][0], hyps, steps=400)
     log_w = out[-1].log_weights
     assert np.all(np.isfinite(log_w)) and log_w.min() < -1000 and np.argmax(log_w) == 3
 

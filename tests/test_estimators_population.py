@@ -51,8 +51,9 @@ def results() -> dict[int, dict[str, np.ndarray]]:
 def test_mixture_picks_the_true_lane_whichever_is_true(results):
     for bias_index, r in results.items():
         assert r["picked"].all(), bias_index
-        # decided within the first 0.1 s and never doubted afterwards
-        assert np.all(r["true_weight"][:, 10:] > 0.99), bias_index
+        # decided within 2 s and never doubted afterwards (the tempered evidence of
+        # estimators.evidence: measured 0.02-1.22 s; the raw eq. 19 decides within 0.04 s)
+        assert np.all(r["true_weight"][:, 200:] > 0.99), bias_index
 
 
 def test_mean_lateral_rmse_below_a_quarter_metre_for_every_driver(results):

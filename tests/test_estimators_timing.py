@@ -98,7 +98,7 @@ def test_wrappers_name_the_rates_the_same_way():
 
 def test_hasa_replay_refuses_instead_of_estimating(slow_recording, tmp_path, capsys):
     save_runs([slow_recording], tmp_path)
-    assert replay_main([str(tmp_path), "--estimator"]) == 2
+    assert replay_main([str(tmp_path), "--estimator"]) == 1  # replayed; the estimator refused
     out, err = capsys.readouterr()
     assert "estimator:" not in out  # no estimate printed
     assert "cannot run the estimator" in err

@@ -88,8 +88,9 @@ def test_info_flags_an_incomplete_recording(tmp_path, capsys):
 def test_info_missing_sidecar(tmp_path, capsys):
     path = record(tmp_path, 1, steps=3)
     path.with_suffix(".json").unlink()
-    assert main(["info", str(path)]) == 1
-    assert "missing sidecar" in capsys.readouterr().err
+    assert main(["info", str(path)]) == 2  # nothing valid: an input error
+    err = capsys.readouterr().err
+    assert err.startswith("hasa-rec: error: ") and "missing sidecar" in err
 
 
 # ------------------------------------------------------------------ convert
@@ -130,7 +131,7 @@ def test_convert_errors(tmp_path, capsys, monkeypatch):
     pytest.importorskip("pyarrow")
     bad = record(tmp_path, 1, steps=3)
     corrupt(bad, 3)
-    assert main(["convert", str(bad)]) == 1
+    assert main(["convert", str(bad)]) == 2  # the only input is invalid
     assert "line 3" in capsys.readouterr().err
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -143,9 +144,9 @@ def test_convert_errors(tmp_path, capsys, monkeypatch):
     pq.write_table(pa.table({"a": [1, 2]}), not_ours)
     with pytest.raises(RecordingError, match="not a hasa_env recording"):
         read_parquet(not_ours)
-    assert main(["info", str(not_ours)]) == 1
+    assert main(["info", str(not_ours)]) == 2
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
-    assert main(["convert", str(tmp_path)]) == 2
+    assert main(["convert", str(tmp_path)]) == 3  # the machine lacks pyarrow
     assert "pip install 'hasa-env[parquet]'" in capsys.readouterr().err
 
 

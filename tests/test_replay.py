@@ -113,16 +113,15 @@ def test_hasa_replay_writes_frames_with_road_and_ghost_markings(tmp_path, capsys
 
 def test_hasa_replay_video_is_optional(tmp_path, capsys):
     video = tmp_path / "drive.gif"
-    assert (
-        main([str(SAMPLE), "--video", str(video), "--frame-every", "1500", "--size", "128x72"]) == 0
-    )
-    out = capsys.readouterr().out
+    code = main([str(SAMPLE), "--video", str(video), "--frame-every", "1500", "--size", "128x72"])
+    captured = capsys.readouterr()
     try:
         import imageio  # noqa: F401
-    except ImportError:
-        assert "no video" in out and not video.exists()
+    except ImportError:  # said at once, before any work, as an environment problem
+        assert code == 3 and not video.exists() and captured.out == ""
+        assert captured.err.startswith("hasa-replay: error: --video needs imageio")
     else:  # pragma: no cover - imageio is not a dependency
-        assert video.exists()
+        assert code == 0 and video.exists()
 
 
 def test_hasa_replay_scores_a_fitted_steering_model(capsys):
@@ -173,3 +172,20 @@ def test_paper_presets_are_scored_in_steering_wheel_units(capsys):
     # the paper's generalized coefficients describe the steering-wheel angle (ratio 15)
     assert r2([]) > 0.5
     assert r2(["--steering-ratio", "1"]) < 0.0
+
+
+def test_replay_accepts_every_start_that_reset_accepts(tmp_path):
+    """Replay passes row 0 as reset options within reset's own limits (+-30 m, +-pi/2 rad)."""
+    import gymnasium as gym
+
+    from hasa_env.recording import RecordingWrapper, check_replay, load_recording
+
+    config = {"road": {"lanes_left": 5, "lane_width": 6.0}, "time_limit": 0.5}
+    env = RecordingWrapper(gym.make("hasa_env/LaneKeeping-v0", config=config), tmp_path)
+    env.reset(seed=4, options={"lateral_offset": 21.5, "heading": 1.3})
+    for _ in range(50):
+        env.step(np.zeros(2, dtype=np.float32))
+    env.close()
+    rec = load_recording(env.path)
+    assert rec.data["lateral_offset"].iloc[0] == 21.5 and rec.data["heading"].iloc[0] == 1.3
+    assert check_replay(rec).matches

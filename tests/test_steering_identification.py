@@ -13,6 +13,7 @@ from hasa_env.drivers import DriverParams, ModelDriver, SpeedProfile, SyntheticD
 from hasa_env.steering import (
     ARXForm,
     GeneralizedModel,
+    IdentifiabilityWarning,
     StabilityWarning,
     SteeringFitWarning,
     TwoPointModel,
@@ -40,6 +41,24 @@ def test_a_constant_speed_run_is_ill_conditioned_for_least_squares(constant_spee
     assert checks.ridge_lambda == 0.0
     assert checks.condition_number > 1e6 and "ill_conditioned" in checks.flags
     assert not checks.ok
+
+
+def test_a_constant_speed_run_flags_collinear_features_and_a_ramp_does_not(constant_speed_run):
+    model = GeneralizedModel(steering_signal="applied")
+    with pytest.warns(IdentifiabilityWarning, match="do not tell .*lateral_velocity"):
+        held = model.fit(constant_speed_run)
+    checks = held.fit_result.checks
+    assert "collinear_features" in checks.flags
+    assert checks.feature_collinearity["lateral_velocity"] < 1e-4
+    assert set(checks.feature_collinearity) == {"delta", "phi", "omega", "lateral_velocity"}
+    ramp = SpeedProfile(target_speed=40.0, ramp_rate=2.0, start_time=2.0)
+    driver = SyntheticDriver(DriverParams.from_loop(1.0, 0.7, 0.3, noise_std=8e-4, speed=ramp))
+    run = run_driver(driver, runs=1, seed=3, options={"bias_index": 0})[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SteeringFitWarning)
+        ramped = model.fit(run).fit_result.checks
+    assert "collinear_features" not in ramped.flags
+    assert min(ramped.feature_collinearity.values()) > 1e-3
 
 
 def test_a_constant_speed_run_gives_a_stable_regularized_fit(constant_speed_run):

@@ -17,6 +17,7 @@ from hasa_env.render.common import (
     ROAD_COLOUR,
     HumanWindow,
     resolve_weights,
+    surface_to_array,
 )
 from hasa_env.render.driver_view import (
     FAR_POINT_COLOUR,
@@ -228,3 +229,58 @@ def test_env_render_honours_the_render_view_config():
     env.reset(seed=0)
     frame = env.render()
     assert _mask(frame, SKY_COLOUR)[:60].mean() > 0.5
+
+
+def test_participant_view_hides_ghosts_and_hud_and_adds_bonnet_and_road_texture():
+    from hasa_env.render import ViewOptions
+    from hasa_env.render.driver_view import BONNET_COLOUR, GRASS_BAND_COLOUR, ROAD_BAND_COLOUR
+
+    setup, info = _info({"render": {"width": 640, "height": 360}}, bias_index=1)
+    info = {**info, "estimate_weights": [0.25, 0.75]}
+    developer = DriverViewRenderer(setup, "rgb_array").render(info)
+    view = DriverViewRenderer(setup, "rgb_array", options=ViewOptions.participant())
+    frame = view.render(info)
+    # the developer's view has the ghost markings, the HUD panel and the weight bars
+    assert _mask(developer, GHOST_FADED_COLOUR).sum() > 300
+    assert _mask(developer, HYPOTHESIS_COLOURS[1], tol=0).sum() > 50
+    # the participant's: none of them; the top-left corner is plain sky
+    assert _mask(frame, GHOST_FADED_COLOUR).sum() == 0
+    assert _mask(frame, HYPOTHESIS_COLOURS[1], tol=0).sum() == 0
+    assert _mask(frame[:60, :200], SKY_COLOUR).all()
+    # a bonnet at the bottom centre, where the road is in the developer's view
+    assert _mask(frame[-40:-30, 280:360], BONNET_COLOUR).all()
+    assert _mask(developer[-40:-30, 280:360], BONNET_COLOUR).sum() == 0
+    # lighter bands on the road and the grass, which move as the car drives on
+    road_bands = _mask(frame, ROAD_BAND_COLOUR)
+    assert road_bands.sum() > 1000 and _mask(frame, GRASS_BAND_COLOUR).sum() > 1000
+    later = view.render({**info, "station": info["station"] + 2.0})
+    assert not np.array_equal(_mask(later, ROAD_BAND_COLOUR), road_bands)
+    # messages (instructions, countdown) are still drawn without a HUD
+    with_message = surface_to_array(view.draw(info, message="3\nrun 1 of 10"))
+    assert not np.array_equal(with_message, frame)
+
+
+def test_view_options_choose_hud_items_and_refuse_unknown_ones():
+    import pygame
+
+    from hasa_env.render import ViewOptions
+    from hasa_env.render.common import Hud
+
+    hud = Hud(pygame, 360, 30.0, items=("speed",))
+    assert hud.lines({"time": 1.0, "speed": 15.0, "steering": 0.01}) == [
+        "speed 15.00 m/s  ( 54.0 km/h)"
+    ]
+    assert ViewOptions.from_dict({"hud": ["time", "weights"]}).hud == ("time", "weights")
+    with pytest.raises(ValueError, match="unknown item 'clock'; allowed: time, speed"):
+        ViewOptions(hud=("clock",))
+    with pytest.raises(ValueError, match="unknown view option 'ghost'; allowed: ghosts"):
+        ViewOptions.from_dict({"ghost": False})
+    with pytest.raises(ValueError, match="'bonnet' must be true or false"):
+        ViewOptions(bonnet="yes")  # type: ignore[arg-type]
+    # the top-down view honours the ghost option too
+    setup, info = _info({"render": {"width": 320, "height": 240}})
+    from hasa_env.render.common import GHOST_COLOUR
+
+    shown = TopDownRenderer(setup, "rgb_array").render(info)
+    hidden = TopDownRenderer(setup, "rgb_array", options=ViewOptions(ghosts=False)).render(info)
+    assert _mask(shown, GHOST_COLOUR, 0).sum() > 0 and _mask(hidden, GHOST_COLOUR, 0).sum() == 0

@@ -18,6 +18,7 @@ def test_render_benchmark_reports_every_measurement():
         "driver_rgb_array",
         "driver_window",
         "driver_with_physics",
+        "participant_with_physics",
         "top_down_draw",
         "drive_loop",
     }
@@ -31,5 +32,11 @@ def test_render_benchmark_reports_every_measurement():
     loop = report["results"]["drive_loop"]
     assert loop["sim_seconds"] == pytest.approx(1.5) and loop["frames"] > 1
     assert set(report["ratios_to_target"]) == set(perf_render.TARGETS)
+    assert "participant_with_physics" in perf_render.TARGETS
+    same_run = report["ratios"]["participant_over_developer"]
+    assert same_run == pytest.approx(
+        report["results"]["participant_with_physics"]["frames_per_second"]
+        / report["results"]["driver_with_physics"]["frames_per_second"]
+    )
     table = perf_render.format_table(report)
     assert "driver_with_physics" in table and "target" in table

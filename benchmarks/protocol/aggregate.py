@@ -18,14 +18,17 @@ Three levels, all with pandas ``groupby``:
    is the share of seeds on which a model holds its overall rank (the rank
    of its mean over seeds).
 
-Degenerate runs (a non-finite score, e.g. a recording too short to score)
-are counted per row (``degenerate_runs``) and left out of the means.
+Degenerate runs are counted per row (``degenerate_runs``), left out of the
+means and of ``n_runs``: a run whose rows carry a ``degenerate`` reason
+(:func:`benchmarks.protocol.tasks.degenerate_reason`: too short, steering
+that does not vary, a car that stands; the same runs for every model), and
+a row whose score is not finite.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -81,9 +84,27 @@ def _finite_std(values: pd.Series) -> float:
     return float(arr.std(ddof=1)) if arr.size > 1 else float("nan")
 
 
-def _count_degenerate(values: pd.Series) -> int:
-    arr = pd.to_numeric(values, errors="coerce").to_numpy(dtype=np.float64)
-    return int(np.sum(~np.isfinite(arr)))
+def _without_degenerate(frame: pd.DataFrame, key: str, columns: Sequence[str]) -> pd.DataFrame:
+    """``frame`` with a bool ``_degenerate`` column (a ``degenerate`` reason, or a non-finite
+    ``key``) and, in those rows, NaN in ``columns``: left out of every mean and count."""
+    values = pd.to_numeric(frame[key], errors="coerce").to_numpy(dtype=np.float64)
+    flagged = ~np.isfinite(values)
+    if "degenerate" in frame:
+        flagged |= frame["degenerate"].notna().to_numpy()
+    frame = frame.copy()
+    frame["_degenerate"] = flagged
+    for column in columns:
+        if column in frame:
+            frame[column] = frame[column].astype(object).where(~flagged, None)
+    return frame
+
+
+def _kept(flags: pd.Series) -> int:
+    return int((~flags.astype(bool)).sum())
+
+
+def _count(flags: pd.Series) -> int:
+    return int(flags.astype(bool).sum())
 
 
 def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[dict]:
@@ -93,20 +114,34 @@ def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) ->
         return []
     frame = _frame(rows)
     frame = frame[frame["model"].isin(models)]
+    scored = ("n", "rmse", "r2", "r2_increments", "ljung_box_p", "free_run_rmse",
+              "free_run_diverged")  # fmt: skip
+    frame = _without_degenerate(frame, "rmse", scored)
     grouped = frame.groupby(_GROUP, sort=False, dropna=False)
     table = grouped.agg(
-        n_runs=("rmse", "size"),
-        n_samples=("n", "sum"),
+        n_runs=("_degenerate", _kept),
+        n_samples=("n", lambda n: int(pd.to_numeric(n).fillna(0).sum())),
         rmse=("rmse", _finite_mean),
         rmse_std=("rmse", _finite_std),
         r2=("r2", _finite_mean),
         r2_increments=("r2_increments", _finite_mean),
-        degenerate_runs=("rmse", _count_degenerate),
+        degenerate_runs=("_degenerate", _count),
         ljung_box_p_median=(
             "ljung_box_p",
-            lambda p: float(np.nanmedian(p)) if np.isfinite(p.astype(float)).any() else None,
+            lambda p: (
+                float(np.nanmedian(p.astype(float))) if np.isfinite(p.astype(float)).any() else None
+            ),
         ),
         white_runs=("ljung_box_p", lambda p: int(np.sum(p.astype(float) > 0.05))),
+        **(
+            {
+                "sdlp": ("sdlp", _finite_mean),
+                "max_abs_lateral_offset": ("max_abs_lateral_offset", "max"),
+                "left_road_runs": ("left_road", lambda v: int(v.astype(bool).sum())),
+            }
+            if "sdlp" in frame
+            else {}
+        ),
     ).reset_index()
     free = frame[frame["free_run_diverged"].notna()] if "free_run_diverged" in frame else None
     if free is not None and len(free):
@@ -180,23 +215,41 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
     if not rows:
         return []
     frame = _frame(rows)
+    frame = _without_degenerate(
+        frame, "lateral_rmse",
+        ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight"),
+    )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (
         frame.groupby(_GROUP, sort=False, dropna=False)
         .agg(
-            n_runs=("lateral_rmse", "size"),
+            n_runs=("_degenerate", _kept),
             lateral_rmse_mean=("lateral_rmse", _finite_mean),
             lateral_rmse_std=("lateral_rmse", _finite_std),
-            lateral_rmse_max=("lateral_rmse", lambda v: float(np.nanmax(v)) if len(v) else None),
-            degenerate_runs=("lateral_rmse", _count_degenerate),
+            lateral_rmse_max=(
+                "lateral_rmse",
+                lambda v: float(np.nanmax(v.astype(float))) if v.notna().any() else None,
+            ),
+            degenerate_runs=("_degenerate", _count),
             steps_to_decide_median=(
                 "steps",
                 lambda v: float(v.median()) if v.notna().any() else None,
             ),
             steps_to_decide_max=("steps", lambda v: float(v.max()) if v.notna().any() else None),
             decided_runs=("steps", lambda v: int(v.notna().sum())),
-            true_lane_final_runs=("true_lane_final", lambda v: int(v.astype(bool).sum())),
+            true_lane_final_runs=("true_lane_final", lambda v: int((v == True).sum())),  # noqa: E712
             final_true_lane_weight_mean=("final_true_lane_weight", _finite_mean),
+            wrong_lane_confident_runs=(
+                "wrong_lane_confident",
+                lambda v: int(v.astype(bool).sum()),
+            ),
+            wrong_lane_confident_share=("wrong_lane_confident_share", _finite_mean),
+            undecided_runs=("final_decision", lambda v: int((v == "undecided").sum())),
+            model_mismatch_runs=("final_decision", lambda v: int((v == "model_mismatch").sum())),
+            lateral_nees=("lateral_nees", _finite_mean),
+            nis_speed=("nis_speed", _finite_mean),
+            nis_camera=("nis_camera", _finite_mean),
+            nis_steering=("nis_steering", _finite_mean),
         )
         .reset_index()
     )
@@ -218,31 +271,53 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
     return _records(table)
 
 
-def _kind(name: str) -> str:
+def _kind(name: str, kinds: Mapping[str, str] | None = None) -> str:
+    if kinds and name in kinds:
+        return kinds[name]
     if name in BUILTIN_MODELS:
         return "builtin"
     return "baseline" if name in BASELINES else "user"
 
 
+_RANKED_KINDS = ("builtin", "user")
+"""The kinds of models ranked against each other (not baselines, stress models, or the
+models' estimators without the evidence checks)."""
+
+_SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs")
+
+
 def summarize_seeds(
-    steering: Sequence[dict], estimation: Sequence[dict], models: Sequence[str]
+    steering: Sequence[dict],
+    estimation: Sequence[dict],
+    models: Sequence[str],
+    kinds: Mapping[str, str] | None = None,
+    curved_estimation: Sequence[dict] = (),
 ) -> list[dict[str, Any]]:
-    """Per (seed, model): means over drivers; the models' ranks on that seed."""
+    """Per (seed, model): means over drivers; the models' ranks on that seed; the
+    safety counts (runs ending confidently in a wrong lane, undecided, with a model
+    mismatch) and the mixture's consistency (lateral NEES, steering NIS); the lateral
+    RMSE on the curved track."""
     names = list(models) + [b for b in BASELINES if b not in models]
     s = pd.DataFrame(list(steering)) if steering else pd.DataFrame(columns=["seed", "model"])
     e = pd.DataFrame(list(estimation)) if estimation else pd.DataFrame(columns=["seed", "model"])
+    c = (
+        pd.DataFrame(list(curved_estimation))
+        if curved_estimation
+        else pd.DataFrame(columns=["seed", "model"])
+    )
     seeds = list(dict.fromkeys([*s.get("seed", []), *e.get("seed", [])]))
     rows = []
     for seed in seeds:
         for name in names:
             ss = s[(s["seed"].astype(object) == seed) & (s["model"] == name)] if len(s) else s
             ee = e[(e["seed"].astype(object) == seed) & (e["model"] == name)] if len(e) else e
+            cc = c[(c["seed"].astype(object) == seed) & (c["model"] == name)] if len(c) else c
             if not len(ss) and not len(ee):
                 continue
             row: dict[str, Any] = {
                 "seed": seed,
                 "model": name,
-                "kind": _kind(name),
+                "kind": _kind(name, kinds),
                 "drivers": int((ss if len(ss) else ee)["driver"].nunique()),
                 "rmse": _finite_mean(ss["rmse"]) if len(ss) else None,
                 "r2_increments": _finite_mean(ss["r2_increments"]) if len(ss) else None,
@@ -260,14 +335,27 @@ def summarize_seeds(
                 "lateral_rmse": _finite_mean(ee["lateral_rmse_mean"]) if len(ee) else None,
                 "decided_runs": int(ee["decided_runs"].sum()) if len(ee) else None,
                 "estimated_runs": int(ee["n_runs"].sum()) if len(ee) else None,
+                "lateral_nees": _finite_mean(ee["lateral_nees"]) if len(ee) else None,
+                "nis_steering": _finite_mean(ee["nis_steering"]) if len(ee) else None,
+                "curved_lateral_rmse": _finite_mean(cc["lateral_rmse_mean"]) if len(cc) else None,
+                "curved_estimated_runs": int(cc["n_runs"].sum()) if len(cc) else None,
+                "degenerate_runs": int(
+                    max(
+                        ss["degenerate_runs"].sum() if len(ss) else 0,
+                        ee["degenerate_runs"].sum() if len(ee) else 0,
+                    )
+                ),
             }
+            for key in _SAFETY_COUNTS:
+                row[key] = int(ee[key].sum()) if len(ee) else None
+                row[f"curved_{key}"] = int(cc[key].sum()) if len(cc) else None
             rows.append(row)
     table = pd.DataFrame(rows)
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
         table[rank_key] = None
         if not len(table):
             continue
-        ranked = table[(table["kind"] != "baseline") & table[key].notna()]
+        ranked = table[table["kind"].isin(_RANKED_KINDS) & table[key].notna()]
         ranks = ranked.groupby("seed")[key].rank(method="min")
         table.loc[ranks.index, rank_key] = ranks.astype(int)
     return _records(table)
@@ -290,10 +378,14 @@ def confidence_interval(values: Sequence[float], level: float = 0.95) -> tuple[f
 
 
 _VERDICT_KEYS = ("rmse", "r2_increments", "rmse_decrease_vs_two_point", "lateral_rmse",
-                 "rmse_over_paper_median")  # fmt: skip
+                 "rmse_over_paper_median", "curved_lateral_rmse", "lateral_nees")  # fmt: skip
 
 
-def verdict(seed_rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[dict[str, Any]]:
+def verdict(
+    seed_rows: Sequence[dict[str, Any]],
+    models: Sequence[str],
+    kinds: Mapping[str, str] | None = None,
+) -> list[dict[str, Any]]:
     """Per model over seeds: means with 95 % intervals (see the module docstring), ranks,
     rank stability, decisions and free-run divergences in all."""
     frame = pd.DataFrame(list(seed_rows))
@@ -307,7 +399,7 @@ def verdict(seed_rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[
             continue
         row: dict[str, Any] = {
             "model": name,
-            "kind": _kind(name),
+            "kind": _kind(name, kinds),
             "seeds": int(part["seed"].nunique()),
             "drivers": int(part["drivers"].max()),
             "runs": int(part["runs"].sum()),
@@ -317,7 +409,10 @@ def verdict(seed_rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[
             row[key] = mean
             row[f"{key}_ci_low"] = low
             row[f"{key}_ci_high"] = high
-        for key in ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged"):
+        counts = ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged",
+                  "degenerate_runs", "curved_estimated_runs", *_SAFETY_COUNTS,
+                  *(f"curved_{k}" for k in _SAFETY_COUNTS))  # fmt: skip
+        for key in counts:
             values = pd.to_numeric(part[key], errors="coerce")
             row[key] = int(values.sum()) if values.notna().any() else None
         rows.append(row)
@@ -325,7 +420,7 @@ def verdict(seed_rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
         table[rank_key] = None
         table[f"{rank_key}_stability"] = None
-        ranked = table[(table["kind"] != "baseline") & table[key].notna()]
+        ranked = table[table["kind"].isin(_RANKED_KINDS) & table[key].notna()]
         if not len(ranked):
             continue
         overall = ranked[key].rank(method="min").astype(int)

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
 from hasa_env.sim.config import deep_merge
 from hasa_env.validation import ABSENT, Field, schema, validate_fields
@@ -14,10 +15,13 @@ from hasa_env.validation import ABSENT, Field, schema, validate_fields
 __all__ = [
     "BASELINES",
     "BUILTIN_MODELS",
+    "DEFAULT_MODEL_TIME_LIMIT",
     "DEFAULT_SEEDS",
     "ILLUSTRATIVE",
     "BenchmarkError",
     "ProtocolConfig",
+    "STEERING_BASELINE",
+    "UNCHECKED_SUFFIX",
 ]
 
 
@@ -27,9 +31,20 @@ BUILTIN_MODELS = ("two_point", "generalized")
 BASELINES = ("no_steering", "oracle")
 """Names of the estimation baselines in the results."""
 
+STEERING_BASELINE = "road_blind"
+"""The steering baseline: an AR(2) model of the steering's own past, fitted like the others,
+blind to the road (:class:`GeneralizedModel` with na = 2 and no bearing or v_y terms). A
+steering model's one-step score means something only beside it."""
+
+UNCHECKED_SUFFIX = " (no checks)"
+"""Appended to a model's name for its estimator without the evidence checks
+(``compare_checks``; :mod:`estimators.evidence`)."""
+
 ILLUSTRATIVE = "Ill"
 DEFAULT_SEEDS = (0, 1, 2, 3, 4)
 """Population seeds of the default protocol."""
+DEFAULT_MODEL_TIME_LIMIT = 600.0
+"""Default time limit (s) of one call into a user model: import, one fit, one batch scored."""
 _ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
 _NOISE_UNITS = {"speed": "m/s", "camera": "m", "camera_heading": "rad", "imu": "m/s^2",
                 "steering": "rad"}  # fmt: skip
@@ -77,6 +92,23 @@ _SCHEMA = schema(
             "number", doc="Length of the error-over-time figure.", unit="s", low=0.0,
             low_open=True,
         ),
+        "stress": Field("bool", doc="Also score the stress set of bad advisors."),
+        "estimate": Field("bool", doc="Run the lane estimation (table 2)."),
+        "filter_settings": Field(
+            "mapping", doc="FilterSettings fields for every estimator.", each=Field("json")
+        ),
+        "compare_checks": Field("bool", doc="Also run the estimators without the evidence checks."),
+        "min_duration": Field(
+            "number", doc="Shortest recording that is scored.", unit="s", low=0.0
+        ),
+        "allow_incomplete": Field("bool", doc="Score recordings whose writer stopped early."),
+        "training_file": Field(
+            "string", doc="The recording that trains the models.", optional=True, non_empty=True
+        ),
+        "model_time_limit": Field(
+            "number", doc="Time limit of one call into a user model (null: none, in-process).",
+            unit="s", low=0.0, low_open=True, optional=True,
+        ),
     }
 )  # fmt: skip
 
@@ -99,7 +131,8 @@ class ProtocolConfig:
         duration: length of each run (s).
         track: the main track, "straight" or "curved".
         curved_runs: extra runs of the illustrative driver on the curved
-            track (steering scores only; 0: none).
+            track (steering scores and estimation with the road ahead as a
+            known input; 0: none).
         noise: sensor noise std overrides {speed (m/s), camera (m),
             camera_heading (rad), imu (m/s^2), steering (rad)}.
         recordings: a directory of recordings (hasa_env recording format) to
@@ -117,6 +150,30 @@ class ProtocolConfig:
         acf_lags: lags of the residual autocorrelation plot.
         weight_threshold: the true-lane weight that counts as "decided".
         error_window: seconds of the lateral-error-over-time figure.
+        stress: also score the stress set of bad advisors
+            (:mod:`benchmarks.stress`) on the same runs.
+        compare_checks: also run every model's estimator without the
+            evidence checks (``FilterSettings.evidence_checks=False``), named
+            ``"<model> (no checks)"``: what the checks cost or buy.
+        estimate: run the lane estimation (paper table 2); False: steering
+            scores and driving statistics only (the population calibration,
+            :mod:`benchmarks.calibration`).
+        filter_settings: fields of :class:`estimators.settings.FilterSettings`
+            for every estimator (e.g. ``{"forgetting_time": 10.0}``), over the
+            run's sensor noise; the steering residual level stays the fitted
+            model's.
+        min_duration: recordings shorter than this (s) are skipped, each
+            named with its reason (a crash or an early stop is no run to
+            train on or to score).
+        allow_incomplete: also use recordings whose writer stopped before
+            finalizing them (a crash, a failed write); skipped by default.
+        training_file: the recording that trains the models (recordings;
+            overrides ``illustrative`` and ``training_run``).
+        model_time_limit: the longest one call into a user model may take (s):
+            importing it, one fit, scoring one batch of runs; each call runs
+            isolated in its own process, so a model that hangs, exits or
+            crashes fails alone (:func:`benchmarks.protocol.models.run_isolated`).
+            None: no limit, user code runs in the benchmark's processes.
     """
 
     population: str = "paper"
@@ -126,7 +183,7 @@ class ProtocolConfig:
     ill_runs: int | None = None
     duration: float = 30.0
     track: str = "straight"
-    curved_runs: int = 1
+    curved_runs: int = 4
     noise: Mapping[str, float] = field(default_factory=dict)
     recordings: str | None = None
     illustrative: str | None = None
@@ -136,6 +193,14 @@ class ProtocolConfig:
     acf_lags: int = 50
     weight_threshold: float = 0.95
     error_window: float = 5.0
+    stress: bool = False
+    compare_checks: bool = False
+    estimate: bool = True
+    filter_settings: Mapping[str, Any] = field(default_factory=dict)
+    min_duration: float = 5.0
+    allow_incomplete: bool = False
+    training_file: str | None = None
+    model_time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT
 
     def __post_init__(self) -> None:
         """Validate every setting (shared validator) and keep the converted values.
@@ -143,8 +208,9 @@ class ProtocolConfig:
         Raises:
             BenchmarkError: naming the setting and its allowed range.
         """
-        if isinstance(self.recordings, os.PathLike):
-            object.__setattr__(self, "recordings", os.fspath(self.recordings))
+        for name in ("recordings", "training_file"):
+            if isinstance(getattr(self, name), os.PathLike):
+                object.__setattr__(self, name, os.fspath(getattr(self, name)))
         validate_fields(
             self,
             _SCHEMA,
@@ -152,6 +218,11 @@ class ProtocolConfig:
             error=lambda path, message: BenchmarkError(message),
         )
         object.__setattr__(self, "seeds", tuple(self.seeds))
+        object.__setattr__(self, "filter_settings", dict(self.filter_settings))
+        try:
+            FilterSettings(**self.filter_settings)
+        except (TypeError, ValueError) as exc:
+            raise BenchmarkError(f"protocol setting 'filter_settings': {exc}") from None
         if self.recordings is None and self.training_run >= self.illustrative_runs:
             raise BenchmarkError(
                 f"protocol setting 'training_run' = {self.training_run} needs at least "

@@ -1,26 +1,56 @@
-"""The steering models a benchmark scores: user-model loading, fitting on the training run."""
+"""The steering models a benchmark scores: user-model loading, fitting on the training run,
+and the isolation of user code.
+
+Isolation (:func:`run_isolated`): with a time limit (``ProtocolConfig.model_time_limit``,
+600 s by default) every call into a user model -- importing it, fitting it on one
+training run, scoring it on one batch of runs -- runs in a child process forked for
+it. A call that takes longer than the limit is stopped; ``sys.exit``, ``os._exit``,
+a segmentation fault or any exception inside it ends that model (a
+:class:`ModelError`), never the benchmark, and whatever the model does to the data it
+is given stays in its own process. Built-in models and baselines run in the calling
+process (trusted, and forking for them would cost time). Without a limit
+(``None``) user code runs in the calling process too: faster, but a model that
+hangs or exits takes the benchmark with it. Where processes cannot be forked
+(Windows, or a daemonic Dask worker: set ``distributed.worker.daemon: false``)
+user code runs in the calling process, guarded against exceptions and
+``SystemExit`` only.
+"""
 
 from __future__ import annotations
 
 import copy
-import importlib
 import math
+import multiprocessing
 import pickle
-import traceback
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
-from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, BenchmarkError
+from benchmarks.protocol.config import (
+    BASELINES,
+    BUILTIN_MODELS,
+    DEFAULT_MODEL_TIME_LIMIT,
+    STEERING_BASELINE,
+    BenchmarkError,
+)
+from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.tuning import steering_residual_std
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
+from hasa_env.steering.loading import (
+    ModelLoadError,
+    describe_exception,
+    import_model,
+    load_model,
+    model_spec_kind,
+)
+from hasa_env.steering.model_file import ModelFileError
 
 __all__ = [
+    "DEFAULT_MODEL_TIME_LIMIT",
     "Candidate",
     "FittedModel",
     "ModelError",
@@ -28,6 +58,8 @@ __all__ = [
     "fit_models",
     "load_models",
     "load_user_model",
+    "private_copy",
+    "run_isolated",
 ]
 
 
@@ -55,81 +87,148 @@ class ModelError(Exception):
 
 
 def load_user_model(spec: str) -> Any:
-    """Import ``"package.module:Name"`` and return an unfitted steering model.
+    """The steering model a user names: ``"package.module:Name"`` or a saved model file.
 
     ``Name`` may be a :class:`hasa_env.steering.SteeringModel` subclass
     (instantiated without arguments), an instance of one, or a function
-    returning one.
+    returning one; a model file (``model.save("m.json")``, any registered
+    type, user types included) gives a fitted model
+    (:func:`hasa_env.steering.loading.load_model`). A model whose
+    ``regressors`` and ``design()`` disagree is refused.
 
     Raises:
         ModelError: naming ``spec``, with stage "import" (module or attribute
-            not found, or the module raised) or "interface" (not a steering model).
+            not found, or the module raised; a model file that cannot be
+            read) or "interface" (not a steering model, or its regressors
+            and design disagree).
     """
-
-    if not isinstance(spec, str) or spec.count(":") != 1 or not all(spec.split(":")):
-        raise ModelError(
-            str(spec),
-            "import",
-            "expected 'package.module:ClassName' (a module path, a colon, a name in the module)",
-        )
-    module_name, attribute = spec.split(":")
     try:
-        module = importlib.import_module(module_name)
-    except Exception as exc:  # noqa: BLE001 - any error in the user's module
-        raise ModelError(
-            spec, "import", f"cannot import module {module_name!r}: {describe(exc)}"
-        ) from None
-    obj: Any = module
-    for part in attribute.split("."):
-        try:
-            obj = getattr(obj, part)
-        except AttributeError:
-            raise ModelError(
-                spec, "import", f"module {module_name!r} has no attribute {attribute!r}"
-            ) from None
-    hint = (
-        "a steering model must subclass hasa_env.steering.SteeringModel "
-        "(see its docstring and examples/custom_steering_model.py)"
-    )
-    if isinstance(obj, SteeringModel):
-        model = obj
-    elif isinstance(obj, type):
-        if not issubclass(obj, SteeringModel):
-            raise ModelError(
-                spec, "interface", f"{obj.__qualname__} is not a SteeringModel; {hint}"
-            )
-        try:
-            model = obj()
-        except TypeError as exc:
-            raise ModelError(
-                spec, "interface", f"cannot create {obj.__qualname__}(): {describe(exc)}"
-            ) from None
-        except Exception as exc:  # noqa: BLE001
-            raise ModelError(
-                spec, "interface", f"{obj.__qualname__}() raised {describe(exc)}"
-            ) from None
-    elif callable(obj):
-        try:
-            model = obj()
-        except Exception as exc:  # noqa: BLE001
-            raise ModelError(spec, "interface", f"{attribute}() raised {describe(exc)}") from None
-        if not isinstance(model, SteeringModel):
-            raise ModelError(
-                spec, "interface", f"{attribute}() returned {type(model).__name__}; {hint}"
-            )
-    else:
-        raise ModelError(spec, "interface", f"{attribute} is a {type(obj).__name__}; {hint}")
+        kind = model_spec_kind(spec) if isinstance(spec, str) else "import"
+        if kind == "preset":
+            raise ModelLoadError(
+                spec, "import", "the paper's presets are the built-in models already; name a "
+                "user model ('package.module:ClassName' or a saved model file)"
+            )  # fmt: skip
+        return load_model(spec) if kind == "file" else _checked(import_model(spec), spec)
+    except ModelLoadError as exc:
+        raise ModelError(str(spec), exc.stage, exc.detail) from None
+    except ModelFileError as exc:
+        raise ModelError(str(spec), "import", str(exc)) from None
+
+
+def _checked(model: Any, spec: str) -> Any:
+    try:
+        model.check_regressors()
+    except ValueError as exc:
+        raise ModelLoadError(spec, "interface", str(exc)) from None
     return model
 
 
-def describe(exc: BaseException) -> str:
-    """``Type: message (file:line)`` of an exception, the line being its innermost frame."""
-    text = f"{type(exc).__name__}: {exc}"
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<")]
-    if frames:
-        last = frames[-1]
-        text += f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
-    return text
+describe = describe_exception
+"""``Type: message (at file:line in function)`` of an exception (its innermost frame)."""
+
+
+def private_copy(frame: pd.DataFrame) -> pd.DataFrame:
+    """A deep copy of a run frame (values and ``attrs``) for one model to do with as it likes."""
+    out = frame.copy(deep=True)
+    out.attrs = copy.deepcopy(frame.attrs)
+    return out
+
+
+def _fork_context() -> Any:
+    """The multiprocessing "fork" context, or None where user code cannot be isolated."""
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return None
+    if multiprocessing.current_process().daemon:  # e.g. a Dask worker under a nanny
+        return None
+    return multiprocessing.get_context("fork")
+
+
+def _guarded(func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str) -> Any:
+    """``func(*args)``; any exception and ``SystemExit`` become this model's ModelError."""
+    try:
+        return func(*args)
+    except ModelError:
+        raise
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - SystemExit in user code is its failure
+        raise ModelError(model, stage, f"raised {describe(exc)}") from None
+
+
+def _child(
+    conn: Any, func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str
+) -> None:
+    try:
+        outcome: tuple[str, Any] = ("ok", _guarded(func, args, model, stage))
+    except ModelError as exc:
+        outcome = ("error", exc)
+    except KeyboardInterrupt:
+        outcome = ("error", ModelError(model, stage, "interrupted"))
+    try:
+        conn.send(outcome)
+    except Exception as exc:  # noqa: BLE001 - an unpicklable result
+        conn.send(
+            ("error", ModelError(model, stage, f"its result cannot be sent back: {describe(exc)}"))
+        )
+    conn.close()
+
+
+def run_isolated(
+    func: Callable[..., Any],
+    args: tuple[Any, ...],
+    *,
+    model: str,
+    stage: str,
+    time_limit: float | None,
+) -> Any:
+    """``func(*args)`` for user model ``model``, isolated (see the module docstring).
+
+    With ``time_limit`` (s) the call runs in a forked child process and its
+    result (picklable) comes back through a pipe; without one, or where
+    processes cannot be forked, it runs here, guarded.
+
+    Raises:
+        ModelError: ``func`` raised (or raised ModelError itself), called
+            ``sys.exit``/``os._exit``, crashed, or ran out of time.
+    """
+    context = _fork_context() if time_limit is not None else None
+    if context is None:
+        return _guarded(func, args, model, stage)
+    receive, send = context.Pipe(duplex=False)
+    process = context.Process(
+        target=_child, args=(send, func, args, model, stage), name=f"hasa-bench {model} {stage}"
+    )
+    process.daemon = True
+    process.start()
+    send.close()
+    try:
+        if not receive.poll(time_limit):
+            process.kill()
+            raise ModelError(
+                model, stage, f"took longer than the time limit of {time_limit:g} s and was stopped"
+            )
+        try:
+            status, value = receive.recv()
+        except (EOFError, OSError, pickle.UnpicklingError):
+            process.join(5.0)
+            code = process.exitcode
+            how = f"signal {-code}" if code is not None and code < 0 else f"exit status {code}"
+            raise ModelError(
+                model,
+                stage,
+                f"its process ended without a result ({how}: os._exit, a crash or "
+                "the system's out-of-memory killer)",
+            ) from None
+    finally:
+        receive.close()
+        process.join(5.0)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    if status == "error":
+        raise value
+    return value
 
 
 @dataclass(frozen=True)
@@ -155,29 +254,68 @@ class Candidate:
 
     Attributes:
         name: the name in the results; kind: "builtin" or "user";
-        spec: the user's import path (None for built-ins); model: the unfitted model.
+        spec: the user's import path or model file (None for built-ins);
+        model: the model, unfitted unless ``fixed``;
+        fixed: a saved model file's fitted model, scored with its own parameters
+            (not refitted on the training run).
     """
 
     name: str
     kind: str
     spec: str | None
     model: Any
+    fixed: bool = False
 
 
-def load_models(user_specs: Sequence[str], errors: list[ModelError]) -> list[Candidate]:
-    """The built-in models and every user model that loads (failures go to ``errors``).
+def _check_user_model(spec: str) -> str:
+    """Import and create the model (in a child process when isolated); its class name."""
+    model = load_user_model(spec)
+    try:
+        pickle.dumps(model)
+    except Exception as exc:  # noqa: BLE001
+        raise ModelError(
+            spec, "interface", f"the model cannot be pickled for the workers: {describe(exc)}"
+        ) from None
+    return type(model).__qualname__
+
+
+def load_models(
+    user_specs: Sequence[str],
+    errors: list[ModelError],
+    *,
+    time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
+    stress: bool = False,
+) -> list[Candidate]:
+    """The built-in models, every user model that loads (failures go to ``errors``)
+    and, with ``stress``, the stress set (:mod:`benchmarks.stress`, kind "stress").
 
     Done before any run is generated, so a model that does not import costs
-    nothing and is reported at once.
+    nothing and is reported at once. With a ``time_limit`` each user model is
+    first imported and created in a child process (:func:`run_isolated`), so
+    a module that hangs, exits or crashes while importing is reported, not
+    fatal; only then is it imported here.
     """
     candidates = [
         Candidate("two_point", "builtin", None, TwoPointModel()),
         Candidate("generalized", "builtin", None, GeneralizedModel()),
+        Candidate(
+            STEERING_BASELINE,
+            "baseline",
+            None,
+            GeneralizedModel(2, 0, 0, 0, name=STEERING_BASELINE),
+        ),
     ]
-    used = set(BUILTIN_MODELS) | set(BASELINES)
+    if stress:
+        candidates += [Candidate(name, "stress", None, model) for name, model in stress_models()]
+    used = set(BUILTIN_MODELS) | set(BASELINES) | set(STRESS_MODELS) | {STEERING_BASELINE}
     for spec in user_specs:
         try:
-            model = load_user_model(spec)
+            if time_limit is not None:
+                run_isolated(
+                    _check_user_model, (spec,), model=str(spec), stage="import",
+                    time_limit=time_limit,
+                )  # fmt: skip
+            model = _guarded(load_user_model, (spec,), str(spec), "import")
         except ModelError as exc:
             errors.append(exc)
             continue
@@ -185,7 +323,8 @@ def load_models(user_specs: Sequence[str], errors: list[ModelError]) -> list[Can
         if name in used:
             name = spec if spec not in used else f"{spec}#{len(used)}"
         used.add(name)
-        candidates.append(Candidate(name, "user", spec, model))
+        fixed = model_spec_kind(spec) == "file" and model.is_fitted
+        candidates.append(Candidate(name, "user", spec, model, fixed))
     return candidates
 
 
@@ -196,9 +335,16 @@ def fit_models(
     *,
     seed: int | None = None,
     sensor_std: float = 0.0,
+    constant_speed_train: pd.DataFrame | None = None,
+    time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
     """Fit every candidate on one training run (a seed's); the fitted models and their
-    descriptions (parameters, training statistics, the fit's checks)."""
+    descriptions (parameters, training statistics, the fit's checks).
+
+    A stress model that trains on a constant-speed run (``training =
+    "constant_speed"``) gets ``constant_speed_train``; its filter's residual
+    level still comes from ``train``. A user model gets its own copy of the
+    training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`)."""
     dt = steering_features(train).attrs.get("dt", 0.01)
     fitted: list[FittedModel] = []
     infos: list[dict[str, Any]] = []
@@ -206,12 +352,25 @@ def fit_models(
         name, kind = candidate.name, candidate.kind
         info: dict[str, Any] = {"name": name, "kind": kind, "spec": candidate.spec, "seed": seed}
         model = copy.deepcopy(candidate.model)
-        if kind == "builtin" and abs(model.dt - dt) > 1e-12:
+        if kind in ("builtin", "baseline") and abs(model.dt - dt) > 1e-12:
             model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
+        own = train
+        if getattr(model, "training", "") == "constant_speed":
+            if constant_speed_train is None:
+                raise BenchmarkError(f"stress model {name!r} needs a constant-speed training run")
+            own = constant_speed_train
         try:
-            model_fitted, info_fit = _fit_one(name, model, train, sensor_std)
+            if kind != "user":
+                model_fitted, info_fit = _fit_one(
+                    name, model, own, sensor_std, candidate.fixed, residual_on=train
+                )
+            else:
+                model_fitted, info_fit = run_isolated(
+                    _fit_one, (name, model, private_copy(train), sensor_std, candidate.fixed),
+                    model=name, stage="fit", time_limit=time_limit,
+                )  # fmt: skip
         except ModelError as exc:
-            if kind == "builtin":
+            if kind in ("builtin", "stress", "baseline"):
                 raise BenchmarkError(f"the built-in {exc}") from None
             errors.append(exc)
             info["error"] = str(exc)
@@ -219,19 +378,30 @@ def fit_models(
             continue
         info.update(info_fit)
         info["error"] = None
-        fitted.append(FittedModel(name, kind, model_fitted, info_fit["filter_residual_std"]))
+        # the road-blind baseline is a steering reference only: it has no lane information
+        residual = None if kind == "baseline" else info_fit["filter_residual_std"]
+        fitted.append(FittedModel(name, kind, model_fitted, residual))
         infos.append(info)
     return fitted, infos
 
 
 def _fit_one(
-    name: str, model: Any, train: pd.DataFrame, sensor_std: float
+    name: str,
+    model: Any,
+    train: pd.DataFrame,
+    sensor_std: float,
+    fixed: bool = False,
+    residual_on: pd.DataFrame | None = None,
 ) -> tuple[Any, dict[str, Any]]:
-    """Fit one model on the training run; its description; ModelError if it fails."""
+    """Fit one model on the training run (a ``fixed`` one keeps its parameters); its
+    description; ModelError if it fails. The filter's residual level is measured on
+    ``residual_on`` (default ``train``)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SteeringFitWarning)
         try:
-            if type(model).fit is SteeringModel.fit:  # the project's fit: ridge + checks
+            if fixed:
+                fitted = model
+            elif type(model).fit is SteeringModel.fit:  # the project's fit: ridge + checks
                 fitted = model.fit(train, sensor_std=sensor_std)
             else:
                 fitted = model.fit(train)
@@ -259,6 +429,7 @@ def _fit_one(
         "identifiability": None,
         "checks": None,
         "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
+        "refitted": not fixed,
     }
     if result is not None:
         info["training"] = {
@@ -284,7 +455,9 @@ def _fit_one(
     residual = None
     if arx is not None:
         try:
-            residual = steering_residual_std(arx, train, decision_lag=fitted.decision_lag)
+            residual = steering_residual_std(
+                arx, train if residual_on is None else residual_on, decision_lag=fitted.decision_lag
+            )
         except Exception as exc:  # noqa: BLE001
             raise ModelError(
                 name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
@@ -293,6 +466,19 @@ def _fit_one(
             raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
     info["arx"] = arx is not None
     info["filter_residual_std"] = residual
+    notes = []
+    if fixed:
+        notes.append(
+            "a saved model file: scored with the parameters of its file, not refitted on the "
+            "training run"
+        )
     if arx is None:
-        info["note"] = "not an ARX model: scored on steering only (the estimator needs arx())"
+        notes.append(
+            "not an ARX model (its arx() returns None): scored on steering prediction only, so "
+            "it has no rows in the lateral-estimation table (paper table 2): the "
+            "Gaussian-mixture EKF builds its state from the model's ARX form; implement arx() "
+            "(README 'Write a steering model') to have it estimated"
+        )
+    if notes:
+        info["note"] = "; ".join(notes)
     return fitted, info

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -12,10 +11,19 @@ from typing import Any
 import pandas as pd
 
 from benchmarks.protocol.config import _ENV_IDS, ILLUSTRATIVE, BenchmarkError, ProtocolConfig
-from hasa_env.drivers import SyntheticDriver, population, run_drivers, run_seeds
-from hasa_env.recording import load_recording
+from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
+from hasa_env.recording import Recording, load_paths
+from hasa_env.recording.reader import load_any
+from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
-__all__ = ["RunRef", "chunks", "load_frames", "recording_plan", "synthetic_plan"]
+__all__ = [
+    "RunRef",
+    "chunks",
+    "load_frames",
+    "quality_problem",
+    "recording_plan",
+    "synthetic_plan",
+]
 
 
 @dataclass(frozen=True)
@@ -87,57 +95,221 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> dict[str, Any]:
     }
 
 
+def quality_problem(rec: Recording, config: ProtocolConfig) -> str | None:
+    """Why a recording is not scored (``config``'s quality gates), or None.
+
+    Gates: complete (unless ``allow_incomplete``: its writer stopped before
+    finalizing it, a crash or a failed write), and at least ``min_duration``
+    long (a run that left the road or was stopped early is named as such).
+    """
+    duration = float(rec.data["time"].iloc[-1])
+    if not rec.complete and not config.allow_incomplete:
+        return (
+            f"incomplete: its writer stopped after {duration:.2f} s without finalizing it "
+            "(a crash or a failed write); --allow-incomplete scores it anyway"
+        )
+    if duration < config.min_duration:
+        last = rec.data.iloc[-1]
+        how = (
+            "left the road after"
+            if bool(last["terminated"])
+            else "was stopped after"
+            if rec.meta.get("end_reason") == "stopped"
+            else "lasts"
+        )
+        return (
+            f"{how} {duration:.2f} s, shorter than the minimum of {config.min_duration:g} s "
+            "(--min-duration)"
+        )
+    return None
+
+
+def _driver_of(rec: Recording, root: Path) -> str:
+    metadata = rec.meta.get("metadata") or {}
+    driver = metadata.get("driver") or metadata.get("participant")
+    if isinstance(driver, str) and driver:
+        return driver
+    assert rec.path is not None
+    relative = rec.path.parent.relative_to(root)
+    return relative.parts[0] if relative.parts else "driver"
+
+
+def _study_sessions(root: Path) -> tuple[dict[Path, str], set[Path], dict[str, Any], list[str]]:
+    """What the study session files under ``root`` say (``hasa-drive study``).
+
+    Returns (measured recording -> participant, recordings to leave out (practice
+    runs, aborted attempts, files the session does not list), per-participant
+    details, notes). A session file that cannot be read is named in the notes and its
+    folder's recordings are read like any others.
+    """
+    measured: dict[Path, str] = {}
+    excluded: set[Path] = set()
+    details: dict[str, Any] = {}
+    notes: list[str] = []
+    for path in find_session_files(root):
+        try:
+            session = SessionFile.open(path)
+        except SessionError as exc:
+            notes.append(f"skipped the session file {exc}")
+            continue
+        folder = path.parent
+        who = session.participant
+        listed: set[Path] = set()
+        practice = aborted = 0
+        for attempt in session.attempts:
+            if not attempt.get("file"):
+                continue
+            csv = (folder / attempt["file"]).resolve()
+            listed.add(csv)
+            if attempt["status"] == "completed" and attempt["block"] == "measured":
+                measured[csv] = who
+                continue
+            excluded.add(csv)
+            if attempt["block"] == "practice":
+                practice += 1
+            if attempt["status"] != "completed":
+                aborted += 1
+                notes.append(
+                    f"aborted run not analysed: {who} {attempt['block']} run "
+                    f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
+                    f"{attempt['steps']} steps): {folder / attempt['file']}"
+                )
+        unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
+        excluded |= unlisted
+        summary = session.summary()
+        details[who] = {
+            "session_file": str(path),
+            "study": session.doc["study"]["name"],
+            "participant_metadata": session.doc["participant"]["metadata"],
+            "session_state": summary["state"],
+            "measured_runs": summary["measured_completed"],
+            "measured_scheduled": summary["measured_scheduled"],
+            "practice_runs_excluded": practice,
+            "aborted_runs": aborted,
+        }
+        text = (
+            f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
+            f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
+            f"{practice} practice run(s) left out, {aborted} aborted"
+        )
+        if unlisted:
+            text += f", {len(unlisted)} recording(s) the session file does not list left out"
+        notes.append(text)
+    return measured, excluded, details, notes
+
+
 def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
-    """The runs of a folder of recordings (one recording per run)."""
+    """The runs of a folder of recordings (one recording per run).
+
+    Every file is loaded and checked first (:func:`hasa_env.recording.load_paths`);
+    a file that does not load or fails a quality gate (:func:`quality_problem`)
+    is skipped and listed, with its reason, in the plan's ``skipped``
+    (``{"file", "reason"}``). Curved-track recordings of every driver are
+    scored on steering (the curved table); recordings of a track the protocol
+    does not score are listed in the notes.
+
+    Folders with a study session file (``session.json`` of ``hasa-drive
+    study``) contribute their completed measured runs only: practice runs and
+    aborted attempts are left out and reported in the notes, and the drivers
+    are the sessions' participants, with their metadata.
+    """
     root = Path(config.recordings or "")
     if not root.is_dir():
         raise BenchmarkError(f"recordings directory {str(root)!r} does not exist")
+    loaded = load_paths([root])
+    skipped = [
+        {"file": str(e.path) if e.path is not None else str(root), "reason": e.reason or str(e)}
+        for e in loaded.errors
+        if not (e.path == root and not loaded)  # "no recordings here" is said below
+    ]
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
-    skipped: list[str] = []
-    for csv in sorted(root.rglob("*.csv")):
-        sidecar = csv.with_suffix(".json")
-        try:
-            meta = json.loads(sidecar.read_text(encoding="utf-8"))
-            track = str(meta["config"]["track"])
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            skipped.append(f"{csv}: no readable sidecar with config.track ({type(exc).__name__})")
+    training_file = Path(config.training_file).resolve() if config.training_file else None
+    training: tuple[str, str] | None = None
+    session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
+    for rec in loaded:
+        assert rec.path is not None
+        if rec.path.resolve() in session_excluded:
             continue
-        metadata = meta.get("metadata") or {}
-        driver = metadata.get("driver") or metadata.get("participant")
-        if not driver:
-            relative = csv.parent.relative_to(root)
-            driver = relative.parts[0] if relative.parts else "driver"
-        found[(str(driver), track)].append(csv)
+        problem = quality_problem(rec, config)
+        if problem is not None:
+            if training_file is not None and rec.path.resolve() == training_file:
+                raise BenchmarkError(f"the training file {rec.path} is not usable: {problem}")
+            skipped.append({"file": str(rec.path), "reason": problem})
+            continue
+        driver = session_runs.get(rec.path.resolve()) or _driver_of(rec, root)
+        track = str(rec.config["track"])
+        found[(driver, track)].append(rec.path)
+        if training_file is not None and rec.path.resolve() == training_file:
+            training = (driver, track)
     if not found:
+        if skipped:
+            raise BenchmarkError(
+                f"no usable recordings in {str(root)!r}: all {len(skipped)} were skipped:\n"
+                + "\n".join(f"  {s['file']}: {s['reason']}" for s in skipped)
+            )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
     names = sorted({d for d, _ in found})
     illustrative = config.illustrative or (ILLUSTRATIVE if ILLUSTRATIVE in names else names[0])
+    training_index = config.training_run
+    if config.training_file is not None:
+        if training is None:
+            where = "" if training_file is None else f" ({training_file})"
+            raise BenchmarkError(
+                f"the training file {config.training_file!r}{where} is not one of the "
+                f"recordings in {str(root)!r}"
+            )
+        if training[1] != config.track:
+            raise BenchmarkError(
+                f"the training file {config.training_file!r} is on the {training[1]} track; "
+                f"the protocol trains on the main track ({config.track})"
+            )
+        illustrative = training[0]
+        paths = [p.resolve() for p in found[training]]
+        training_index = paths.index(training_file)
     if illustrative not in names:
         raise BenchmarkError(
-            f"illustrative driver {illustrative!r} has no recordings in {str(root)!r}; "
+            f"illustrative driver {illustrative!r} has no usable recordings in {str(root)!r}; "
             f"drivers: {', '.join(names)}"
         )
     order = [illustrative] + [n for n in names if n != illustrative]
+    other_track = "curved" if config.track != "curved" else None
     main, curved, drivers = [], [], []
     for name in order:
         main_paths = found.get((name, config.track), [])
         main += [RunRef(name, config.track, i, path=str(p)) for i, p in enumerate(main_paths)]
-        curved_paths = found.get((name, "curved"), []) if config.track != "curved" else []
-        if name == illustrative:
-            curved += [RunRef(name, "curved", i, path=str(p)) for i, p in enumerate(curved_paths)]
+        curved_paths = found.get((name, other_track), []) if other_track else []
+        curved += [RunRef(name, "curved", i, path=str(p)) for i, p in enumerate(curved_paths)]
         drivers.append(
             {
                 "seed": None,
                 "driver": name,
                 "runs": len(main_paths),
-                "curved_runs": len(curved_paths) if name == illustrative else 0,
+                "curved_runs": len(curved_paths),
                 "recordings": [str(p) for p in main_paths + list(curved_paths)],
+                **({"study_session": session_details[name]} if name in session_details else {}),
             }
         )
     notes = [f"recordings: {len(main) + len(curved)} runs of {len(names)} drivers from {root}"]
-    notes += [f"skipped {s}" for s in skipped]
+    unused = sum(
+        len(paths)
+        for (_, track), paths in found.items()
+        if track not in (config.track, other_track)
+    )
+    if unused:
+        notes.append(
+            f"{unused} recording(s) on another track than {config.track!r} not scored "
+            "(--track chooses the main track)"
+        )
+    notes += session_notes
+    notes += [f"skipped {s['file']}: {s['reason']}" for s in skipped]
+    train_ref = next(
+        (r for r in main if r.driver == illustrative and r.index == training_index), None
+    )
+    if train_ref is not None:
+        notes.append(f"the models are trained on {train_ref.path} (driver {illustrative!r})")
     return {
         "illustrative": illustrative,
+        "training_run": training_index,
         "main": main,
         "curved": curved,
         "params": {},
@@ -145,7 +317,19 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
         "drivers": drivers,
         "driver_order": order,
         "notes": notes,
+        "skipped": skipped,
     }
+
+
+def constant_speed_run(
+    training: RunRef, track: str, env_config: Mapping[str, Any], params: Mapping[str, Any]
+) -> pd.DataFrame:
+    """The training run driven again at constant speed (the driver holds its start speed;
+    same seeds): the closed-loop data that make plain least squares collinear (the
+    stress set's ``stress_unregularized``, :mod:`benchmarks.stress`)."""
+    driver = params[training.driver]
+    held = driver.with_speed(SpeedProfile.hold(driver.speed.max_lateral_acceleration))
+    return load_frames([training], track, env_config, {training.driver: held})[0]
 
 
 def load_frames(
@@ -160,7 +344,7 @@ def load_frames(
     if runs[0].path is not None:
         frames = []
         for ref in runs:
-            rec = load_recording(ref.path)
+            rec = load_any(ref.path)
             frame = rec.data
             frame.attrs = {
                 "config": rec.meta["config"],

@@ -9,13 +9,13 @@ import platform
 import subprocess
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from benchmarks import paper_values
+from hasa_env._versions import installed_versions
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = ["BenchmarkResult", "versions"]
@@ -39,6 +39,7 @@ class BenchmarkResult:
         steering: rows per (seed, driver, model), main track (paper table 1).
         curved: rows per (seed, driver, model) on the curved track.
         estimation: rows per (seed, driver, model) incl. the baselines (paper table 2).
+        curved_estimation: the same on the curved track.
         seed_summary: per (seed, model), means over drivers and the ranks.
         summary: per model, the verdict over seeds: means with 95 % confidence
             intervals, ranks and their stability
@@ -48,6 +49,12 @@ class BenchmarkResult:
         drivers: the drivers (synthetic parameters or recording files).
         plots: data of the figures (not written to results.json).
         timing: wall-clock seconds per phase; executor: how tasks ran.
+        notes: what the reader should know (files used, tracks not scored, ...).
+        skipped: the recordings that were not used, ``{"file", "reason"}`` each
+            (a file that does not load, or fails a quality gate).
+        degenerate: the runs left out of every mean, ``{"seed", "driver",
+            "track", "run", "file", "reason"}`` each
+            (:func:`benchmarks.protocol.tasks.degenerate_reason`).
     """
 
     config: dict[str, Any]
@@ -55,6 +62,7 @@ class BenchmarkResult:
     steering: list[dict[str, Any]]
     curved: list[dict[str, Any]]
     estimation: list[dict[str, Any]]
+    curved_estimation: list[dict[str, Any]]
     seed_summary: list[dict[str, Any]]
     summary: list[dict[str, Any]]
     runs_steering: list[dict[str, Any]]
@@ -66,6 +74,8 @@ class BenchmarkResult:
     executor: dict[str, Any]
     versions: dict[str, str]
     notes: list[str] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+    degenerate: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def model_names(self) -> list[str]:
@@ -86,11 +96,14 @@ class BenchmarkResult:
             "steering": self.steering,
             "curved": self.curved,
             "estimation": self.estimation,
+            "curved_estimation": self.curved_estimation,
             "seed_summary": self.seed_summary,
             "summary": self.summary,
             "runs_steering": self.runs_steering,
             "runs_estimation": self.runs_estimation,
             "errors": self.errors,
+            "skipped": self.skipped,
+            "degenerate": self.degenerate,
             "notes": self.notes,
             "paper": {
                 "table_1": {
@@ -110,16 +123,18 @@ class BenchmarkResult:
                 "no_steering_lateral_rmse": paper_values.NO_STEERING_LATERAL_RMSE,
             },
         }
-        return _json_clean(doc)
+        return json_clean(doc)
 
 
-def _json_clean(value: Any) -> Any:
+def json_clean(value: Any) -> Any:
+    """``value`` as plain JSON data: numpy scalars and arrays as Python values, NaN and
+    infinities as None."""
     if isinstance(value, Mapping):
-        return {str(k): _json_clean(v) for k, v in value.items()}
+        return {str(k): json_clean(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_json_clean(v) for v in value]
+        return [json_clean(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _json_clean(value.tolist())
+        return json_clean(value.tolist())
     if isinstance(value, bool | np.bool_):
         return bool(value)
     if isinstance(value, int | np.integer):
@@ -130,21 +145,9 @@ def _json_clean(value: Any) -> Any:
 
 
 def versions() -> dict[str, str]:
-    out = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in (
-        "hasa-env",
-        "numpy",
-        "scipy",
-        "pandas",
-        "gymnasium",
-        "statsmodels",
-        "matplotlib",
-        "distributed",
-    ):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = "not installed"
+    names = ("hasa-env", "numpy", "scipy", "pandas", "gymnasium", "statsmodels", "matplotlib",
+             "distributed")  # fmt: skip
+    out = installed_versions({name: name for name in names}) | {"platform": platform.platform()}
     with contextlib.suppress(OSError, subprocess.SubprocessError):
         root = Path(__file__).resolve().parent.parent
         commit = subprocess.run(

@@ -27,7 +27,14 @@
    ``no_steering`` (speed + camera + IMU: the lanes cannot be told apart) and
    ``oracle`` (the same filter told the true bias). Per run: RMSE of the
    mixture's lateral-offset estimate (m) over the whole run, and the steps
-   until the weight of the true lane exceeds 0.95 for good.
+   until the weight of the true lane exceeds 0.95 for good; the decision
+   state at the end, whether it ended with more than 0.95 on a wrong lane
+   (``wrong_lane_confident``), the lateral NEES and each channel's NIS
+   (docs/design.md §9.8). The curved-track runs get the same rows, the
+   estimator given the road ahead (:mod:`estimators.road_geometry`).
+   With ``stress`` the stress set of bad advisors (:mod:`benchmarks.stress`)
+   is scored too; with ``compare_checks`` every model's estimator also runs
+   without the evidence checks (:mod:`estimators.evidence`).
 
 Runs are grouped into tasks of ``batch_size`` consecutive runs (the
 vectorized driver runner and the estimator batched over the task's runs;
@@ -63,9 +70,21 @@ from benchmarks.protocol.aggregate import (
     summarize_seeds,
     verdict,
 )
-from benchmarks.protocol.config import BASELINES, BenchmarkError, ProtocolConfig
+from benchmarks.protocol.config import (
+    BASELINES,
+    UNCHECKED_SUFFIX,
+    BenchmarkError,
+    ProtocolConfig,
+)
 from benchmarks.protocol.models import FittedModel, ModelError, describe, fit_models, load_models
-from benchmarks.protocol.plan import RunRef, chunks, load_frames, recording_plan, synthetic_plan
+from benchmarks.protocol.plan import (
+    RunRef,
+    chunks,
+    constant_speed_run,
+    load_frames,
+    recording_plan,
+    synthetic_plan,
+)
 from benchmarks.protocol.plots import plot_data
 from benchmarks.protocol.results import BenchmarkResult, versions
 from benchmarks.protocol.tasks import ChunkResult, ChunkTask, run_chunk
@@ -107,9 +126,18 @@ def run_protocol(
     start = time.perf_counter()
     errors: list[ModelError] = []
     notes: list[str] = []
+    skipped: list[dict[str, str]] = []
+    paths: dict[tuple[int | None, str, str, int], str] = {}
 
-    # 0. every model loads before any run is generated
-    candidates = load_models(user_models, errors)
+    # 0. every model loads before any run is generated: one that does not is an input error
+    candidates = load_models(
+        user_models, errors, time_limit=config.model_time_limit, stress=config.stress
+    )
+    if errors:
+        raise BenchmarkError(
+            f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
+            "run:\n" + "\n".join(f"  {e}" for e in errors)
+        )
 
     # 1.-2. per seed: the runs, the training run, the fits
     tasks: list[ChunkTask] = []
@@ -124,14 +152,15 @@ def run_protocol(
         illustrative = plan["illustrative"]
         main_runs: list[RunRef] = plan["main"]
         curved_runs: list[RunRef] = plan["curved"]
+        training_index = plan.get("training_run", config.training_run)
         training = next(
-            (r for r in main_runs if r.driver == illustrative and r.index == config.training_run),
+            (r for r in main_runs if r.driver == illustrative and r.index == training_index),
             None,
         )
         where = "" if seed is None else f" (seed {seed})"
         if training is None:
             raise BenchmarkError(
-                f"no run {config.training_run} of the illustrative driver {illustrative!r} on "
+                f"no run {training_index} of the illustrative driver {illustrative!r} on "
                 f"the {config.track} track to train on{where}"
             )
         validation = [r for r in main_runs if r is not training]
@@ -146,7 +175,21 @@ def run_protocol(
         train_frame = load_frames([training], config.track, plan["env_config"], plan["params"])[0]
         t0 = time.perf_counter()
         sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
-        fitted, info = fit_models(train_frame, candidates, errors, seed=seed, sensor_std=sensor_std)
+        constant_speed = (
+            constant_speed_run(training, config.track, plan["env_config"], plan["params"])
+            if config.stress and seed is not None
+            else None
+        )
+        fitted, info = fit_models(
+            train_frame,
+            candidates,
+            errors,
+            seed=seed,
+            sensor_std=sensor_std,
+            constant_speed_train=constant_speed,
+            time_limit=config.model_time_limit,
+        )
+        skipped += plan.get("skipped", [])
         t_fit += time.perf_counter() - t0
         fitted_by_seed[seed] = fitted
         model_info += info
@@ -168,15 +211,19 @@ def run_protocol(
             "error_window": config.error_window,
             "trace_runs": frozenset(trace_runs) if is_first else frozenset(),
             "detail_driver": illustrative if is_first else "",
+            "compare_checks": config.compare_checks,
+            "filter_settings": dict(config.filter_settings),
+            "time_limit": config.model_time_limit,
         }
         tasks += [
-            ChunkTask(runs=tuple(chunk), track="curved", estimate=False, **common)
+            ChunkTask(runs=tuple(chunk), track="curved", estimate=config.estimate, **common)
             for chunk in chunks(curved_runs, config.batch_size)
         ]
         tasks += [
-            ChunkTask(runs=tuple(chunk), track=config.track, estimate=True, **common)
+            ChunkTask(runs=tuple(chunk), track=config.track, estimate=config.estimate, **common)
             for chunk in chunks(validation, config.batch_size)
         ]
+        paths.update({r.key: r.path for r in validation + curved_runs if r.path is not None})
     timing["fit"] = t_fit
 
     # 3. every seed's tasks at once
@@ -216,7 +263,13 @@ def run_protocol(
             info["error"] = str(failed[info["name"]])
     names = [c.name for c in candidates]
     ok_models = [n for n in names if n not in failed]
-    order = _row_order(seeds, first["plan"]["driver_order"], ok_models + list(BASELINES))
+    kinds = {c.name: c.kind for c in candidates}
+    estimators = list(ok_models)
+    if config.compare_checks:
+        unchecked = [f"{n}{UNCHECKED_SUFFIX}" for n in ok_models]
+        kinds |= {u: "unchecked" for u in unchecked}
+        estimators += unchecked
+    order = _row_order(seeds, first["plan"]["driver_order"], estimators + list(BASELINES))
     runs_steering = sorted(
         (row for c in chunk_results for row in c.steering if row["model"] not in failed), key=order
     )
@@ -232,9 +285,14 @@ def run_protocol(
         if config.track != "curved"
         else []
     )
-    estimation_rows = aggregate_estimation(runs_estimation)
-    seed_summary = summarize_seeds(steering_rows, estimation_rows, ok_models)
-    summary = verdict(seed_summary, ok_models)
+    estimation_all = aggregate_estimation(runs_estimation)
+    estimation_rows = [r for r in estimation_all if r["track"] == config.track]
+    curved_estimation_rows = [r for r in estimation_all if r["track"] != config.track]
+    degenerate = _degenerate_runs(runs_steering + runs_estimation, paths)
+    seed_summary = summarize_seeds(
+        steering_rows, estimation_rows, estimators, kinds, curved_estimation_rows
+    )
+    summary = verdict(seed_summary, estimators, kinds)
     plots = plot_data(
         [c for c in chunk_results if c.traces or c.acf or c.early_errors],
         fitted_by_seed[seeds[0]],
@@ -261,6 +319,7 @@ def run_protocol(
         steering=steering_rows,
         curved=curved_rows,
         estimation=estimation_rows,
+        curved_estimation=curved_estimation_rows,
         seed_summary=seed_summary,
         summary=summary,
         runs_steering=runs_steering,
@@ -272,7 +331,25 @@ def run_protocol(
         executor=executor,
         versions=versions(),
         notes=notes,
+        skipped=skipped,
+        degenerate=degenerate,
     )
+
+
+def _degenerate_runs(
+    rows: Sequence[dict[str, Any]], paths: dict[tuple[int | None, str, str, int], str]
+) -> list[dict[str, Any]]:
+    """One entry per run left out of the means as degenerate (its key, file and reason)."""
+    seen: dict[tuple[int | None, str, str, int], dict[str, Any]] = {}
+    for row in rows:
+        reason = row.get("degenerate")
+        key = (row.get("seed"), row["driver"], row["track"], row["run"])
+        if reason and key not in seen:
+            seen[key] = {
+                "seed": key[0], "driver": key[1], "track": key[2], "run": key[3],
+                "file": paths.get(key), "reason": reason,
+            }  # fmt: skip
+    return list(seen.values())
 
 
 def _row_order(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -13,14 +14,61 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from benchmarks.protocol.models import FittedModel, ModelError, describe
+from benchmarks.protocol.config import UNCHECKED_SUFFIX
+from benchmarks.protocol.models import (
+    FittedModel,
+    ModelError,
+    describe,
+    private_copy,
+    run_isolated,
+)
 from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.offline import run_estimator
 from hasa_env.steering import residual_diagnostics, score_runs
 
-__all__ = ["ChunkResult", "ChunkTask", "run_chunk"]
+__all__ = [
+    "STANDSTILL_SPEED",
+    "STEADY_STEERING_STD",
+    "ChunkResult",
+    "ChunkTask",
+    "degenerate_reason",
+    "run_chunk",
+]
+
+STEADY_STEERING_STD = 1e-6
+"""Steering std (rad) below which a run is degenerate: R^2 divides by the steering's
+variance, so a run that hardly steers gives numbers like R^2 = -2e27 that would swamp
+any mean. 1e-6 rad is far below the resolution of any steering sensor (a G29 step is
+about 1.6e-5 rad at the road wheel)."""
+
+STANDSTILL_SPEED = 1.0
+"""Median speed (m/s) below which a run is degenerate: a car that stands does not keep a
+lane, and the steering models' bearings describe driving (a standing synthetic run
+scores R^2 of the increments near -2e4)."""
+
+MIN_SCORED_SAMPLES = 3
+"""Fewest samples a run needs to be scored (fewer: degenerate)."""
+
+
+def degenerate_reason(frame: pd.DataFrame) -> str | None:
+    """Why a run cannot be scored fairly (the same for every model), or None.
+
+    Degenerate runs are reported (their rows carry the reason in ``degenerate``)
+    and left out of every mean, for every model alike.
+    """
+    steering = frame["steering"].to_numpy(dtype=np.float64)
+    speed = frame["speed"].to_numpy(dtype=np.float64)
+    if len(frame) < MIN_SCORED_SAMPLES + 1:
+        return f"too short to score ({len(frame) - 1} steps)"
+    spread = float(np.std(steering))
+    if not spread >= STEADY_STEERING_STD:
+        return f"the steering barely varies (std {spread:.2g} rad < {STEADY_STEERING_STD:g} rad)"
+    median = float(np.median(speed))
+    if not median >= STANDSTILL_SPEED:
+        return f"the car stands (median speed {median:.2g} m/s < {STANDSTILL_SPEED:g} m/s)"
+    return None
 
 
 @dataclass(frozen=True)
@@ -40,6 +88,10 @@ class ChunkTask:
     error_window: float
     trace_runs: frozenset[tuple[int | None, str, str, int]]
     detail_driver: str
+    compare_checks: bool = False
+    filter_settings: Mapping[str, Any] = field(default_factory=dict)
+    time_limit: float | None = None
+    """Time limit (s) of scoring this batch with one user model, isolated (None: in-process)."""
 
 
 @dataclass
@@ -61,36 +113,104 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     Per run and model: steering scores (and, for the illustrative driver,
     residual autocorrelations); per run and estimator (main track only):
     lateral RMSE, steps to decide the lane, and the first seconds of lateral
-    error. A user model that fails is reported in ``failures``.
+    error. A user model scores its own copy of the runs, isolated
+    (:func:`benchmarks.protocol.models.run_isolated`, with ``task.time_limit``);
+    one that fails is reported in ``failures``.
     """
     start = time.process_time()
     frames = load_frames(task.runs, task.track, task.env_config, task.driver_params)
     out = ChunkResult()
-    failed: set[str] = set()
-    predictions: dict[str, list[np.ndarray]] = {}
+    predictions: dict[str, dict[int, np.ndarray]] = {}
     for fm in task.models:
-        try:
-            predictions[fm.name] = _score_model(fm, task, frames, out)
-        except ModelError as exc:
-            if fm.kind == "builtin":
+        if fm.kind != "user":  # the project's own models run in-process
+            try:
+                part, traced = _model_part(fm, task, frames)
+            except ModelError as exc:
                 raise RuntimeError(str(exc)) from None
-            out.failures.append(exc)
-            failed.add(fm.name)
-            out.steering = [r for r in out.steering if r["model"] != fm.name]
-    for ref, frame in zip(task.runs, frames, strict=True):
+        else:
+            try:
+                part, traced = run_isolated(
+                    _user_model_part, (fm, task, frames), model=fm.name, stage="score",
+                    time_limit=task.time_limit,
+                )  # fmt: skip
+            except ModelError as exc:
+                out.failures.append(exc)
+                continue
+        _merge(out, part)
+        predictions[fm.name] = traced
+    for i, (ref, frame) in enumerate(zip(task.runs, frames, strict=True)):
         if ref.key in task.trace_runs:
             trace = out.traces.setdefault(ref.key, {})
             trace["time"] = frame["time"].to_numpy()
             trace["steering"] = frame["steering"].to_numpy()
-            trace["predictions"] = {
-                name: preds[task.runs.index(ref)]
-                for name, preds in predictions.items()
-                if name not in failed
-            }
+            trace["predictions"] = {name: preds[i] for name, preds in predictions.items()}
     if task.estimate:
-        _estimate(task, frames, failed, out)
+        for name, make in (
+            ("no_steering", lambda s: NoSteeringEKF(s)),
+            ("oracle", lambda s: OracleEKF(None, s)),
+        ):
+            _estimate_model(task, frames, name, "baseline", make, out)
+    reasons = {
+        ref.key: degenerate_reason(frame) for ref, frame in zip(task.runs, frames, strict=True)
+    }
+    for row in out.steering + out.estimation:
+        row["degenerate"] = reasons[(row["seed"], row["driver"], row["track"], row["run"])]
     out.seconds = time.process_time() - start
     return out
+
+
+def _user_model_part(
+    fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame]
+) -> tuple[ChunkResult, dict[int, np.ndarray]]:
+    """:func:`_model_part` on the model's own copy of the runs (whatever it does to them)."""
+    return _model_part(fm, task, [private_copy(frame) for frame in frames])
+
+
+def _model_part(
+    fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame]
+) -> tuple[ChunkResult, dict[int, np.ndarray]]:
+    """One model on a batch: its steering rows and, on the main track, its estimation rows;
+    plus its predictions of the runs whose traces are plotted (by run index)."""
+    part = ChunkResult()
+    preds = _score_model(fm, task, frames, part)
+    if task.estimate and fm.residual_std is not None:
+
+        def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
+            return GaussianMixtureEKF(
+                fm.model.arx(),
+                replace(
+                    settings,
+                    steering_residual_std=max(fm.residual_std, 1e-9),
+                    evidence_checks=checks,
+                ),
+                decision_lag=fm.model.decision_lag,
+            )
+
+        _estimate_model(task, frames, fm.name, fm.kind, make, part)
+        if task.compare_checks:  # the same filter without the evidence checks
+            _estimate_model(
+                task,
+                frames,
+                f"{fm.name}{UNCHECKED_SUFFIX}",
+                fm.kind,
+                lambda s, make=make: make(s, checks=False),
+                part,
+            )
+    traced = {i: preds[i] for i, ref in enumerate(task.runs) if ref.key in task.trace_runs}
+    return part, traced
+
+
+def _merge(out: ChunkResult, part: ChunkResult) -> None:
+    out.steering += part.steering
+    out.estimation += part.estimation
+    for name, values in part.acf.items():
+        out.acf.setdefault(name, []).extend(values)
+    for name, values in part.early_errors.items():
+        out.early_errors.setdefault(name, []).extend(values)
+    for key, trace in part.traces.items():
+        into = out.traces.setdefault(key, {})
+        into.setdefault("estimates", {}).update(trace.get("estimates", {}))
+        into.update({k: v for k, v in trace.items() if k != "estimates"})
 
 
 def _warm_mask(features: pd.DataFrame, model: Any) -> np.ndarray:
@@ -147,6 +267,7 @@ def _score_model(
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
         row = scores.iloc[0]
+        lateral = frame["lateral_offset"].to_numpy(dtype=np.float64)
         out.steering.append(
             {
                 "seed": ref.seed,
@@ -161,6 +282,10 @@ def _score_model(
                 "n": int(row["n"]),
                 "free_run_rmse": float(row["free_run_rmse"]) if free_run else None,
                 "free_run_diverged": bool(row["free_run_diverged"]) if free_run else None,
+                # how the driver drove this run (the same for every model)
+                "sdlp": float(np.std(lateral)),
+                "max_abs_lateral_offset": float(np.max(np.abs(lateral))),
+                "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
             }
         )
         if task.estimate and ref.driver == task.detail_driver:
@@ -194,55 +319,46 @@ def _settle_steps(true_weight: np.ndarray, valid: np.ndarray, threshold: float) 
     return steps
 
 
-def _estimate(
-    task: ChunkTask, frames: Sequence[pd.DataFrame], failed: set[str], out: ChunkResult
+def _estimate_model(
+    task: ChunkTask,
+    frames: Sequence[pd.DataFrame],
+    name: str,
+    kind: str,
+    make: Callable[[Any], Any],
+    out: ChunkResult,
 ) -> None:
-
+    """Run one estimator (``make(settings)``) over the batch, in groups of runs that share
+    the filter's settings; its rows go to ``out``. A user model's filter that raises or
+    loses its estimate is its ModelError."""
     groups: dict[str, list[int]] = defaultdict(list)
     for i, frame in enumerate(frames):
         groups[_filter_key(frame)].append(i)
-    estimators: list[tuple[str, str, Callable[[Any], Any]]] = []
-    for fm in task.models:
-        if fm.residual_std is None or fm.name in failed:
-            continue
-
-        def make(settings: Any, fm: FittedModel = fm) -> Any:
-            return GaussianMixtureEKF(
-                fm.model.arx(),
-                replace(settings, steering_residual_std=max(fm.residual_std, 1e-9)),
-                decision_lag=fm.model.decision_lag,
+    rows: list[dict[str, Any]] = []
+    scratch = ChunkResult()  # its early errors and traces, kept only if the estimator works
+    try:
+        for indices in groups.values():
+            group = [frames[i] for i in indices]
+            settings = FilterSettings.from_env_config(
+                group[0].attrs["config"], **task.filter_settings
             )
-
-        estimators.append((fm.name, fm.kind, make))
-    estimators.append(("no_steering", "baseline", lambda s: NoSteeringEKF(s)))
-    estimators.append(("oracle", "baseline", lambda s: OracleEKF(None, s)))
-    for name, kind, make in estimators:
-        rows: list[dict[str, Any]] = []
-        try:
-            for indices in groups.values():
-                group = [frames[i] for i in indices]
-                settings = FilterSettings.from_env_config(group[0].attrs["config"])
-                result = run_estimator(make(settings), group)
-                rows += _estimation_rows(task, indices, result, name, out)
-        except ModelError:
+            result = run_estimator(make(settings), group)
+            rows += _estimation_rows(task, indices, result, name, scratch)
+    except ModelError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        if kind not in ("user", "stress"):
             raise
-        except Exception as exc:  # noqa: BLE001
-            if kind != "user":
-                raise
-            out.failures.append(ModelError(name, "estimate", f"the filter raised {describe(exc)}"))
-            continue
-        bad = [r for r in rows if not math.isfinite(r["lateral_rmse"])]
-        if bad and kind == "user":
-            out.failures.append(
-                ModelError(
-                    name,
-                    "estimate",
-                    f"the filter's lateral estimate became NaN or inf on {len(bad)} run(s), "
-                    f"e.g. driver {bad[0]['driver']!r} run {bad[0]['run']}",
-                )
-            )
-            continue
-        out.estimation += rows
+        raise ModelError(name, "estimate", f"the filter raised {describe(exc)}") from None
+    bad = [r for r in rows if not math.isfinite(r["lateral_rmse"])]
+    if bad and kind in ("user", "stress"):
+        raise ModelError(
+            name,
+            "estimate",
+            f"the filter's lateral estimate became NaN or inf on {len(bad)} run(s), "
+            f"e.g. driver {bad[0]['driver']!r} run {bad[0]['run']}",
+        )
+    out.estimation += rows
+    _merge(out, scratch)
 
 
 def _estimation_rows(
@@ -257,6 +373,18 @@ def _estimation_rows(
     final_true = result.picked_true_lane()
     last = result.lengths - 1
     final_weight = true_weight[np.arange(len(refs)), last]
+    final_decision = result.final_decision()
+    wrong_confident = result.wrong_lane_confident(task.weight_threshold)
+    wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
+    nees = result.lateral_nees()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
+        model_error = np.nanmedian(result.model_error, axis=1)
+    nis = (
+        result.mean_channel_nis()
+        if result.channel_nis is not None
+        else np.full((len(refs), 3), np.nan)
+    )
     n_window = int(round(task.error_window / float(np.nanmedian(np.diff(result.time[0]))))) + 1
     rows = []
     for j, ref in enumerate(refs):
@@ -271,6 +399,14 @@ def _estimation_rows(
                 "steps_to_decide": None if not np.isfinite(steps[j]) else int(steps[j]),
                 "true_lane_final": bool(final_true[j]),
                 "final_true_lane_weight": float(final_weight[j]),
+                "final_decision": str(final_decision[j]),
+                "wrong_lane_confident": bool(wrong_confident[j]),
+                "wrong_lane_confident_share": float(wrong_share[j]),
+                "lateral_nees": float(nees[j]),
+                "model_error_median": float(model_error[j]),
+                "nis_speed": float(nis[j, 0]),
+                "nis_camera": float(nis[j, 1]),
+                "nis_steering": float(nis[j, 2]),
                 "bias": float(bias0[j]),
             }
         )

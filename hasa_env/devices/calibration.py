@@ -32,9 +32,9 @@ is still reached. Readings beyond ``left``/``right``/``full`` saturate.
     {
       "format": "hasa_env input calibration", "version": 1,
       "device": "keyboard", "name": "keyboard",
-      "max_road_wheel_angle_deg": 3.0, # steering angle held keys ramp to (deg, road wheel)
-      "ramp_time": 0.5,                # s from 0 to the full angle while a key is held
-      "return_time_constant": 0.25,    # s, exponential decay to 0 when released
+      "max_road_wheel_angle_deg": 1.5, # steering angle held keys ramp to (deg, road wheel)
+      "ramp_time": 0.8,                # s from 0 to the full angle while a key is held
+      "return_time_constant": 0.15,    # s, exponential decay to 0 when released
       "acceleration": 2.0, "deceleration": 5.0,   # m/s^2 while up / down is held
       "keys": {"left": ["left", "a"], "right": ["right", "d"],
                "throttle": ["up", "w"], "brake": ["down", "s"]}
@@ -244,6 +244,9 @@ class JoystickCalibration:
 class KeyboardCalibration:
     """Keyboard steering: held keys ramp the road-wheel angle; released, it decays to 0.
 
+    The defaults (1.5 deg in 0.8 s, 0.15 s return) were tuned with a model of a
+    person pressing keys (:mod:`hasa_env.session.keyboard_person`, docs/design.md §11).
+
     Attributes:
         max_road_wheel_angle_deg: angle (deg, road wheel) a held key ramps to.
         ramp_time: s from 0 to the full angle.
@@ -253,9 +256,9 @@ class KeyboardCalibration:
     """
 
     name: str = "keyboard"
-    max_road_wheel_angle_deg: float = 3.0
-    ramp_time: float = 0.5
-    return_time_constant: float = 0.25
+    max_road_wheel_angle_deg: float = 1.5
+    ramp_time: float = 0.8
+    return_time_constant: float = 0.15
     acceleration: float = 2.0
     deceleration: float = 5.0
     keys: Mapping[str, tuple[str, ...]] = field(

@@ -7,10 +7,13 @@ and writes the calibration file (:mod:`hasa_env.devices.calibration`).
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -213,6 +216,43 @@ def _round_calibration(cal: JoystickCalibration) -> JoystickCalibration:
     )
 
 
+STOP_SIGNALS = tuple(
+    getattr(signal, name)
+    for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
+    if hasattr(signal, name)
+)
+"""Signals that stop the calibration dialogue (Ctrl-C, kill, a closed terminal, Ctrl-\\)."""
+
+
+class _Stopped(Exception):
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Iterator[None]:
+    """Turn :data:`STOP_SIGNALS` into :class:`_Stopped` while the dialogue waits.
+
+    SDL (which pygame starts) takes SIGINT and SIGTERM for itself and turns
+    them into a QUIT event, so without this a wait loop that only polls for a
+    joystick would ignore Ctrl-C and ``kill`` until it times out.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Stopped(signum)
+
+    previous = {sig: signal.signal(sig, stop) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+
 def calibrate(
     output: Path,
     *,
@@ -222,17 +262,46 @@ def calibrate(
     log: Callable[[str], None] = print,
     pygame_module: Any = None,
 ) -> int:
-    """Run the calibration dialogue on the first joystick found; write ``output``; exit code."""
+    """Run the calibration dialogue on the first joystick found; write ``output``; exit code.
+
+    Every wait (for a joystick, for each step) ends on Escape, a QUIT event,
+    Ctrl-C, SIGTERM, SIGHUP or SIGQUIT (nothing is written; exit code 1, or
+    128 + the signal's number), or after ``timeout`` s.
+    """
     if no_screen_reason() is not None:
         os.environ["SDL_VIDEODRIVER"] = (
             "dummy"  # the terminal is enough; pygame's event queue needs video
         )
     pg = pygame_module if pygame_module is not None else init_pygame_input()
+    try:
+        with _stop_on_signals():
+            return _dialogue(output, wheel_range_deg, steering_ratio, timeout, log, pg)
+    except _Stopped as stop:
+        log(f"hasa-drive calibrate: stopped by {stop}; nothing written")
+        return 128 + stop.signum
+
+
+def _quit(events: Sequence[Any], pg: Any) -> bool:
+    return any(e.type == pg.QUIT or (e.type == pg.KEYDOWN and e.key == pg.K_ESCAPE) for e in events)
+
+
+def _dialogue(
+    output: Path,
+    wheel_range_deg: float,
+    steering_ratio: float,
+    timeout: float,
+    log: Callable[[str], None],
+    pg: Any,
+) -> int:
     deadline = time.monotonic() + timeout
     joystick = None
     log("hasa-drive calibrate: waiting for a joystick or wheel (plug it in now) ...")
     while joystick is None:
-        for e in pg.event.get():
+        events = pg.event.get()
+        if _quit(events, pg):
+            log("hasa-drive calibrate: cancelled; nothing written")
+            return 1
+        for e in events:
             if e.type == pg.JOYDEVICEADDED:
                 joystick = pg.joystick.Joystick(e.device_index)
                 break
@@ -255,9 +324,7 @@ def calibrate(
         ):
             log("hasa-drive calibrate: the device was unplugged; nothing written")
             return 1
-        if any(e.type == pg.KEYDOWN and e.key == pg.K_ESCAPE for e in events) or any(
-            e.type == pg.QUIT for e in events
-        ):
+        if _quit(events, pg):
             log("hasa-drive calibrate: cancelled; nothing written")
             return 1
         before = cal.step

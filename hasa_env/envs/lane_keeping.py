@@ -19,6 +19,7 @@ from hasa_env.sim.dynamics import (
 from hasa_env.sim.setup import (
     INFO_KEYS,
     build_setup,
+    check_reset_options,
     draw_episode,
     draw_noise_block,
     info_values,
@@ -127,12 +128,16 @@ class LaneKeepingEnv(gym.Env):
         }
         self._renderer = None
         self._state: VehicleState | None = None
+        self._ended = False  # the episode ended (terminated or truncated) without a reset since
+        self._warned_ended = False
 
     # ------------------------------------------------------------------ API
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
+        options = check_reset_options(options, self.setup)  # refused: nothing reseeded or drawn
         super().reset(seed=seed)
+        self._ended = self._warned_ended = False
         state, index, bias, block, phases = draw_episode(self.np_random, self.setup, options)
         self._phases = phases
         self._state = state
@@ -153,6 +158,12 @@ class LaneKeepingEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         setup = self.setup
         steer, acc = physical_action(setup, action)
+        if self._ended and not self._warned_ended:
+            gym.logger.warn(
+                "step() called after the episode ended (terminated or truncated) without "
+                "reset(): the car drives on past its end; call reset() to start a new episode"
+            )
+            self._warned_ended = True
         outcome = env_step(
             self._state,
             self._velocity,
@@ -170,6 +181,7 @@ class LaneKeepingEnv(gym.Env):
         self._finish_sample(outcome.imu, self._curvature(outcome.state.station))
         terminated = bool(outcome.off_road)
         truncated = self._sim_step >= setup.max_sim_steps
+        self._ended = self._ended or terminated or truncated
         reward = outcome.reward
         if self.render_mode == "human":
             self.render()

@@ -31,8 +31,8 @@ from hasa_env.sim.dynamics import (
 )
 from hasa_env.sim.setup import (
     INFO_KEYS,
-    RESET_OPTIONS,
     build_setup,
+    check_reset_options,
     draw_episode,
     draw_noise_block,
     info_values,
@@ -113,6 +113,13 @@ class LaneKeepingVectorEnv(VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         n = self.num_envs
+        # everything is checked before any state or generator changes: a refused reset
+        # leaves the env as it was (no zero state, no draw)
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(
+                f"reset options must be a mapping (dict) or None, got {type(options).__name__} "
+                f"{options!r:.60}"
+            )
         options = dict(options or {})
         mask = options.pop("reset_mask", None)
         if mask is not None:
@@ -129,19 +136,21 @@ class LaneKeepingVectorEnv(VectorEnv):
                 )
         if seed is None:
             seeds: list[int | None] = [None] * n
-        elif isinstance(seed, int | np.integer):
+        elif isinstance(seed, int | np.integer) and not isinstance(seed, bool):
             seeds = [int(seed) + i for i in range(n)]
         else:
             seeds = list(seed)
             if len(seeds) != n:
                 raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
-        idx = self._arange if mask is None else np.flatnonzero(mask)
-        # validate the options before touching any state
-        for key in options:
-            if key not in RESET_OPTIONS:
+        for i, s in enumerate(seeds):
+            if s is not None and (
+                isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0
+            ):
                 raise ValueError(
-                    f"unknown reset option {key!r}; allowed: {', '.join(RESET_OPTIONS)}, reset_mask"
+                    f"reset(seed=...): seed {i} must be an integer >= 0 or None, got {s!r}"
                 )
+        idx = self._arange if mask is None else np.flatnonzero(mask)
+        options = check_reset_options(options, self.setup)
         for i in idx.tolist():
             if seeds[i] is not None:
                 self._rngs[i] = np.random.default_rng(seeds[i])

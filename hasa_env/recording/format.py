@@ -22,23 +22,23 @@ re-simulating: :mod:`hasa_env.recording.replay`.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import math
 import os
-import platform
 import re
+import secrets
+import stat
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from hasa_env._versions import installed_versions
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
 from hasa_env.sim.setup import RECORDING_COLUMNS
@@ -197,19 +197,9 @@ class RecordingList(list):
 
 # ------------------------------------------------------------------- helpers
 def _versions() -> dict[str, str]:
-    def dist(name: str) -> str:
-        try:
-            return _dist_version(name)
-        except PackageNotFoundError:  # pragma: no cover - source tree without install
-            return "unknown"
-
-    return {
-        "hasa_env": dist("hasa-env"),
-        "gymnasium": gym.__version__,
-        "numpy": np.__version__,
-        "pandas": pd.__version__,
-        "python": platform.python_version(),
-    }
+    return installed_versions(
+        {"hasa_env": "hasa-env", "gymnasium": "gymnasium", "numpy": "numpy", "pandas": "pandas"}
+    )
 
 
 def _now() -> str:
@@ -230,15 +220,76 @@ def _to_json(obj: Any) -> str:
     return json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
 
 
+def _new_temporary(path: Path) -> tuple[int, Path]:
+    """A new, randomly named file next to ``path`` (``O_CREAT | O_EXCL``, mode 0o666 & ~umask).
+
+    ``O_EXCL`` never opens an existing file, so a pre-placed file or symlink
+    at a predictable ``<name>.tmp`` is neither followed nor overwritten.
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary file name next to {path}")
+
+
 def _write_atomic(path: Path, text: str, fsync: bool = True) -> None:
-    """Write ``text`` to ``path`` via a temporary file and ``os.replace``."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
-        f.write(text)
-        f.flush()
-        if fsync:
-            os.fsync(f.fileno())
-    os.replace(tmp, path)
+    """Write ``text`` to ``path`` via a new temporary file (:func:`_new_temporary`) and
+    ``os.replace``; on any failure the temporary file is removed and ``path`` is left as it
+    was."""
+    fd, tmp = _new_temporary(path)
+    try:
+        with open(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+            f.flush()
+            if fsync:
+                os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+MAX_FILE_BYTES = 2**31
+"""Largest recording file read (2 GiB; a 30 s drive at 100 Hz is about 1.3 MB)."""
+
+
+def _read_regular(path: Path, what: str) -> str:
+    """The text of ``path`` if it is a regular file, read without blocking on a FIFO or device.
+
+    Raises:
+        FileNotFoundError: no such file.
+        OSError, UnicodeDecodeError: unreadable (the message says why, e.g. a FIFO).
+    """
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise OSError(f"{what} is {_file_kind(info.st_mode)}, not a regular file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise OSError(f"{what} is {info.st_size} bytes, more than the {MAX_FILE_BYTES} read")
+    except BaseException:
+        os.close(fd)
+        raise
+    with open(fd, "rb") as f:
+        data = f.read()
+    return data.decode("utf-8")
+
+
+def _file_kind(mode: int) -> str:
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "a special file"
 
 
 def _format_value(column: str, value: Any) -> str:
@@ -310,7 +361,23 @@ def _check_seed(seed: Any, what: str) -> int:
 
 
 # ------------------------------------------------------------------- parsing
-def _parse_float(text: str) -> float:
+MAX_MAGNITUDE = 1e6
+"""Largest |value| of a float cell (in its column's unit) except ``time`` and ``station``.
+
+No quantity of a lane-keeping drive comes near it (the road is at most about
+50 m wide, speeds are at most 150 m/s, sensor noise std at most 50); a larger
+finite value (``1e308``) is corruption, and would overflow to inf or NaN in
+any mean of squares downstream."""
+
+MAX_MAGNITUDE_LONG = 1e10
+"""Largest |value| of ``time`` (s) and ``station`` (m): a 1e6 s episode at 150 m/s is 1.5e8 m."""
+
+_LONG_COLUMNS = frozenset({"time", "station"})
+
+
+def _parse_float(text: str, limit: float = math.inf) -> float:
+    if not text.isascii():
+        raise ValueError(f"not a number: {text!r} (only ASCII digits are numbers here)")
     try:
         value = float(text)
     except ValueError:
@@ -319,12 +386,22 @@ def _parse_float(text: str) -> float:
         raise ValueError(f"non-finite value {text!r} (NaN and infinities are not allowed)")
     if "_" in text or text != text.strip():
         raise ValueError(f"not a plain number: {text!r}")
+    if abs(value) > limit:
+        raise ValueError(
+            f"implausible value {text!r}: |value| must be at most {limit:g} in this column's unit"
+        )
     return value
+
+
+def _magnitude_limit(column: str) -> float:
+    return MAX_MAGNITUDE_LONG if column in _LONG_COLUMNS else MAX_MAGNITUDE
 
 
 def _parse_int(text: str) -> int:
     if not _INT_RE.fullmatch(text):
         raise ValueError(f"not an integer: {text!r}")
+    if len(text.lstrip("+-")) > 18:
+        raise ValueError(f"integer {text[:40]!r} out of range: at most 18 digits")
     return int(text)
 
 
@@ -342,7 +419,8 @@ def _parser(column: str):  # noqa: ANN202
         return _parse_int
     if column in _BOOL_COLUMNS:
         return _parse_bool
-    return _parse_float
+    limit = _magnitude_limit(column)
+    return lambda text: _parse_float(text, limit)
 
 
 def _check_header(names: list[str], source: Path | str) -> None:
@@ -429,7 +507,8 @@ def _check_table(
     if bad.size:
         i = int(bad[0])
         raise RecordingError(
-            f"time = {time[i]!r} s does not match step {i}: expected {expected[i]!r} s "
+            f"time = {float(time[i])!r} s does not match step {i}: expected "
+            f"{float(expected[i])!r} s "
             f"(step x {dt_step!r} s per env step, from the config's sim_frequency and "
             "action_repeat)",
             source,
@@ -503,7 +582,7 @@ def _validate_meta(meta: Any, source: Path) -> dict[str, Any]:
 
 def _read_sidecar(path: Path) -> dict[str, Any]:
     try:
-        text = path.read_text(encoding="utf-8")
+        text = _read_regular(path, "the sidecar")
     except FileNotFoundError:
         raise RecordingError("missing sidecar (the JSON file next to the CSV)", path) from None
     except (OSError, UnicodeDecodeError) as exc:

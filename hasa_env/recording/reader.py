@@ -4,10 +4,15 @@ the files and name the file, line and column of every problem.
 
 from __future__ import annotations
 
+import json
 import os
+import stat
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from hasa_env.recording.format import (
     Recording,
@@ -15,13 +20,26 @@ from hasa_env.recording.format import (
     RecordingList,
     RecordingWarning,
     _check_table,
+    _file_kind,
     _frame,
+    _magnitude_limit,
     _parse_lines,
     _paths,
+    _read_regular,
     _read_sidecar,
+    _validate_meta,
 )
+from hasa_env.sim.setup import RECORDING_COLUMNS
 
-__all__ = ["load_paths", "load_recording", "load_recordings"]
+__all__ = [
+    "PARQUET_METADATA_KEY",
+    "load_any",
+    "load_paths",
+    "load_recording",
+    "load_recordings",
+    "read_parquet",
+    "require_pyarrow",
+]
 
 
 def load_recording(path: str | os.PathLike[str]) -> Recording:
@@ -41,11 +59,36 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     Raises:
         RecordingError: naming the file, the line (1 = header) and the column.
     """
-    csv_path, json_path = _paths(path)
-    meta = _read_sidecar(json_path)
     try:
-        with open(csv_path, encoding="utf-8", newline="") as f:
-            text = f.read()
+        return _load_recording(path)
+    except RecordingError:
+        raise
+    except (ValueError, TypeError, KeyError, AttributeError, OverflowError, RecursionError) as exc:
+        # the checks above name every problem they know; anything else a file can
+        # cause is still this file's error, never a crash of the caller's batch
+        raise RecordingError(
+            f"invalid recording ({type(exc).__name__}: {exc})", _paths(path)[0]
+        ) from exc
+
+
+def _load_recording(path: str | os.PathLike[str]) -> Recording:
+    csv_path, json_path = _paths(path)
+    if not os.path.lexists(csv_path) and not os.path.lexists(json_path):
+        raise RecordingError(
+            f"no such recording (neither it nor {json_path.name} exists)", csv_path
+        )
+    try:
+        meta = _read_sidecar(json_path)
+    except RecordingError as exc:
+        if exc.reason.startswith("missing sidecar") and _is_started_episode(csv_path):
+            raise RecordingError(
+                "incomplete: its recorder stopped while starting the episode (no sidecar yet, "
+                "at most the reset row written); nothing of it can be used",
+                csv_path,
+            ) from None
+        raise
+    try:
+        text = _read_regular(csv_path, "the CSV")
     except FileNotFoundError:
         raise RecordingError("missing CSV file (the sidecar exists)", csv_path) from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -54,6 +97,13 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     notes: list[str] = []
     if lines[-1] == "":
         lines.pop()
+    elif meta["complete"] and len(lines) > 1:
+        raise RecordingError(
+            "the last line has no final newline: the file was cut inside it (a complete "
+            "recording ends with a newline)",
+            csv_path,
+            len(lines),
+        )
     elif not meta["complete"]:
         partial = lines.pop()
         note = (
@@ -89,6 +139,26 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(frame, meta, csv_path, notes)
 
 
+def _other_document(path: Path) -> bool:
+    """A JSON file that says it is something else than a recording's sidecar (a study's
+    session file, a calibration, a model file: its ``format`` names another document)."""
+    try:
+        doc = json.loads(_read_regular(path, "the file"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    fmt = doc.get("format") if isinstance(doc, dict) else None
+    return isinstance(fmt, str) and fmt != "hasa_env recording"
+
+
+def _is_started_episode(csv_path: Path) -> bool:
+    """A CSV that a recorder had only begun: empty, or at most the header and row 0."""
+    try:
+        text = _read_regular(csv_path, "the CSV")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return text.count("\n") <= 2 and (not text or text.startswith(RECORDING_COLUMNS[0] + ","))
+
+
 def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) -> RecordingList:
     """Load every recording (``*.csv`` with its ``.json`` sidecar) in ``directory``, sorted by name.
 
@@ -96,7 +166,9 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
     is reported with a :class:`RecordingWarning` naming the file, line and
     column, and collected in the result's ``errors`` list
     (:class:`RecordingError` objects; ``error.path`` is the file). A sidecar
-    without its CSV counts as corrupt too. With ``strict=True`` a
+    without its CSV counts as corrupt too; a JSON file whose ``format`` names
+    another kind of document (a study's session file, a calibration) is not
+    a recording and is left alone. With ``strict=True`` a
     :class:`RecordingError` listing every corrupt file is raised instead
     (its ``loaded`` attribute holds the recordings that did load).
     """
@@ -115,7 +187,7 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
             errors.append(exc)
     stems = {p.stem for p in csvs}
     for side in sorted(root.glob("*.json")):
-        if side.stem not in stems:
+        if side.stem not in stems and not _other_document(side):
             errors.append(RecordingError("sidecar without its CSV file", side.with_suffix(".csv")))
     result = RecordingList(good, errors)
     if errors and strict:
@@ -135,38 +207,174 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
 def load_paths(paths: Sequence[str | os.PathLike[str]]) -> RecordingList:
     """Load the recordings named by ``paths`` (files, or directories searched recursively), quietly.
 
-    The one loader of the command-line tools and the benchmark: every file
-    that cannot be loaded is collected, not raised, so one bad file never
-    stops a batch.
+    The one loader of the command-line tools: every file that cannot be
+    loaded is collected, not raised, so one bad file never stops a batch. A
+    file may be a recording's CSV (or its sidecar) or a Parquet file written
+    by :func:`hasa_env.recording.parquet.to_parquet`; a directory contributes
+    every CSV recording in it and below, and every ``*.parquet`` that has no
+    CSV of the same name beside it (a converted copy is not loaded twice).
 
     Returns:
         A :class:`RecordingList`: the loaded recordings in path order; its
         ``errors`` hold one :class:`RecordingError` per file (or path) that
-        could not be loaded, naming it.
+        could not be loaded, naming it (a path that does not exist, a folder
+        without recordings, a corrupt file).
     """
     recordings: list[Recording] = []
     problems: list[RecordingError] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            dirs = sorted(
-                {p.parent for p in path.rglob("*.csv")} | {p.parent for p in path.rglob("*.json")}
-            )
-            if not dirs:
+            found = sorted(path.rglob("*.csv")) + sorted(path.rglob("*.json"))
+            parquets = [
+                p for p in sorted(path.rglob("*.parquet")) if not p.with_suffix(".csv").exists()
+            ]
+            if not found and not parquets:
                 problems.append(
-                    RecordingError("no recordings (no *.csv files) here or below", path)
+                    RecordingError(
+                        "no recordings (no *.csv or *.parquet files) here or below", path
+                    )
                 )
-            for d in dirs:
+            for d in sorted({p.parent for p in found}):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RecordingWarning)
                     loaded = load_recordings(d)
                 recordings.extend(loaded)
                 problems.extend(loaded.errors)
+            for p in parquets:
+                try:
+                    recordings.append(read_parquet(p))
+                except (RecordingError, ImportError) as exc:
+                    problems.append(_as_recording_error(exc, p))
+        elif not os.path.lexists(path) and not any(map(os.path.lexists, _paths(path))):
+            problems.append(RecordingError("no such file or directory", path))
         else:
             try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RecordingWarning)
-                    recordings.append(load_recording(path))
-            except RecordingError as exc:
-                problems.append(exc)
+                recordings.append(load_any(path))
+            except (RecordingError, ImportError) as exc:
+                problems.append(_as_recording_error(exc, path))
     return RecordingList(recordings, problems)
+
+
+def _as_recording_error(exc: Exception, path: Path) -> RecordingError:
+    if isinstance(exc, RecordingError):
+        return exc
+    return RecordingError(str(exc), path)
+
+
+def load_any(path: str | os.PathLike[str]) -> Recording:
+    """Load one recording, quietly: a CSV recording (or its sidecar) or a Parquet file.
+
+    Raises:
+        RecordingError: corrupt (file, line and column named).
+        ImportError: a ``.parquet`` file without pyarrow installed.
+    """
+    p = Path(path)
+    if p.suffix == ".parquet":
+        return read_parquet(p)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RecordingWarning)
+        return load_recording(p)
+
+
+# -------------------------------------------------------------------- Parquet
+PARQUET_METADATA_KEY = b"hasa_env.recording"
+"""Key of the sidecar JSON in a converted Parquet file's schema metadata."""
+
+
+def require_pyarrow() -> Any:
+    """Import and return ``pyarrow.parquet``, or raise ImportError saying how to install it."""
+    try:
+        import pyarrow.parquet as pq  # optional extra 'parquet'
+    except ImportError as exc:
+        raise ImportError(
+            "pyarrow is not installed; install the Parquet extra: pip install 'hasa-env[parquet]'"
+        ) from exc
+    return pq
+
+
+def read_parquet(path: str | os.PathLike[str]) -> Recording:
+    """Read a recording written by :func:`hasa_env.recording.parquet.to_parquet` (validated
+    like a CSV recording).
+
+    Raises:
+        ImportError: pyarrow is not installed.
+        RecordingError: not a hasa_env recording, or invalid columns or values.
+    """
+    pq = require_pyarrow()
+    import pyarrow as pa  # optional extra 'parquet'
+
+    path = Path(path)
+    try:
+        _check_regular(path, "the Parquet file")
+        table = pq.read_table(path)
+    except FileNotFoundError:
+        raise RecordingError("no such Parquet file", path) from None
+    except (OSError, ValueError, pa.lib.ArrowException) as exc:  # ArrowInvalid is a ValueError
+        raise RecordingError(f"unreadable Parquet file: {exc}", path) from None
+    raw = (table.schema.metadata or {}).get(PARQUET_METADATA_KEY)
+    if raw is None:
+        raise RecordingError(
+            "not a hasa_env recording: no 'hasa_env.recording' sidecar in the Parquet metadata",
+            path,
+        )
+    try:
+        decoded = json.loads(raw.decode("utf-8"))
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError too
+        raise RecordingError(f"sidecar metadata is not valid JSON: {exc}", path) from None
+    meta = _validate_meta(decoded, path)
+    names = list(table.column_names)
+    if names != list(RECORDING_COLUMNS):
+        missing = [c for c in RECORDING_COLUMNS if c not in names]
+        extra = [c for c in names if c not in RECORDING_COLUMNS]
+        raise RecordingError(
+            f"columns differ from the schema (missing {missing}, unknown {extra})",
+            path,
+            column=(missing or extra or [None])[0],
+        )
+    try:
+        frame = table.to_pandas()
+    except (ValueError, TypeError, pa.lib.ArrowException) as exc:
+        raise RecordingError(f"unreadable Parquet columns: {exc}", path) from None
+    for column in RECORDING_COLUMNS:
+        expected = (
+            np.int64
+            if column in ("step", "bias_index")
+            else (np.bool_ if column in ("terminated", "truncated") else np.float64)
+        )
+        if frame[column].dtype != expected:
+            raise RecordingError(
+                f"dtype {frame[column].dtype} instead of {np.dtype(expected)}", path, column=column
+            )
+        if expected is np.float64:
+            values = frame[column].to_numpy()
+            limit = _magnitude_limit(column)
+            bad = np.flatnonzero(~(np.abs(values) <= limit))
+            if bad.size:
+                raise RecordingError(
+                    f"row {int(bad[0])}: {float(values[bad[0]])!r} is not a finite value of at "
+                    f"most {limit:g} in magnitude",
+                    path,
+                    column=column,
+                )
+    if not len(frame):
+        raise RecordingError("no rows (row 0, the reset state, is required)", path)
+    try:
+        _check_table(frame, meta["config"], path, 0)
+    except RecordingError as exc:  # rows, not lines, in a Parquet file
+        raise RecordingError(f"row {exc.line}: {exc.reason}", path, column=exc.column) from None
+    if meta["complete"] and meta.get("steps") != len(frame) - 1:
+        raise RecordingError(
+            f"sidecar says steps = {meta.get('steps')!r} but the file has {len(frame) - 1} rows "
+            "after row 0",
+            path,
+            column="steps",
+        )
+    return Recording(frame, meta, path)
+
+
+def _check_regular(path: Path, what: str) -> None:
+    """Raise OSError unless ``path`` is a regular file (a FIFO would block the reader)."""
+    info = os.stat(path)
+    if not stat.S_ISREG(info.st_mode):
+        raise OSError(f"{what} is {_file_kind(info.st_mode)}, not a regular file")

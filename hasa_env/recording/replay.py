@@ -15,7 +15,13 @@ import pandas as pd
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording.format import Recording, _frame
 from hasa_env.sim.config import deep_merge
-from hasa_env.sim.setup import RECORDING_COLUMNS, RESET_OPTIONS, recording_row
+from hasa_env.sim.setup import (
+    RECORDING_COLUMNS,
+    RESET_HEADING_LIMIT,
+    RESET_LATERAL_LIMIT,
+    RESET_OPTIONS,
+    recording_row,
+)
 
 __all__ = ["ReplayCheck", "check_replay", "compare_recordings", "replay", "replay_actions"]
 
@@ -49,8 +55,8 @@ def _replay_options(
     else:
         options["bias"] = float(row0["bias"])
     limits = {
-        "lateral_offset": (-10.0, 10.0),
-        "heading": (-1.0, 1.0),
+        "lateral_offset": (-RESET_LATERAL_LIMIT, RESET_LATERAL_LIMIT),
+        "heading": (-RESET_HEADING_LIMIT, RESET_HEADING_LIMIT),
         "speed": (0.0, config["vehicle"]["max_speed"]),
         "steering": (-config["action"]["max_steering"], config["action"]["max_steering"]),
     }

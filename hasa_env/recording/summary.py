@@ -5,19 +5,14 @@ from __future__ import annotations
 import json
 import math
 import os
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hasa_env.recording.format import (
-    Recording,
-    RecordingWarning,
-)
-from hasa_env.recording.parquet import read_parquet
-from hasa_env.recording.reader import load_recording
+from hasa_env.recording.format import Recording
+from hasa_env.recording.reader import load_any
 
 __all__ = ["RecordingSummary", "summarize"]
 
@@ -78,15 +73,6 @@ class RecordingSummary:
         return out
 
 
-def _load_any(path: str | os.PathLike[str]) -> Recording:
-    p = Path(path)
-    if p.suffix == ".parquet":
-        return read_parquet(p)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RecordingWarning)
-        return load_recording(p)
-
-
 def summarize(path: str | os.PathLike[str] | Recording) -> RecordingSummary:
     """Load, validate and summarise a recording (CSV + sidecar, or a converted Parquet file).
 
@@ -96,7 +82,7 @@ def summarize(path: str | os.PathLike[str] | Recording) -> RecordingSummary:
     Raises:
         RecordingError: the recording is corrupt (file, line and column named).
     """
-    rec = path if isinstance(path, Recording) else _load_any(path)
+    rec = path if isinstance(path, Recording) else load_any(path)
     data = rec.data
     config = rec.config
     env_step = config["action_repeat"] / config["sim_frequency"]

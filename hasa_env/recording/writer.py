@@ -13,11 +13,12 @@ being written when the process died (it has no final newline).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -39,6 +40,7 @@ from hasa_env.recording.format import (
     _format_row,
     _format_value,
     _frame,
+    _magnitude_limit,
     _now,
     _parse_float,
     _parse_lines,
@@ -77,8 +79,12 @@ class RecordingWrapper(gym.Wrapper):
     episode.
 
     If ``env.step`` raises (e.g. a NaN action), nothing is written for that
-    step and the exception propagates; the episode stays open. An exception
-    while writing leaves every row written before it on disk.
+    step and the exception propagates; the episode stays open. If writing a
+    row fails (a full disk, an I/O error), the file is cut back to the last
+    complete row, so it loads as an incomplete recording of every row written
+    before, and :class:`RecordingError` is raised naming the file and the
+    OS error; from then on ``step`` refuses (without stepping the env) until
+    ``reset`` starts a new recording.
 
     Args:
         env: a ``LaneKeepingEnv``, possibly wrapped (e.g. by ``gym.make``).
@@ -127,7 +133,9 @@ class RecordingWrapper(gym.Wrapper):
         self._seed_rng: np.random.Generator | None = None
         if seed is not None:
             self._init_seed_sequence(_check_seed(seed, "seed"))
-        self._file: TextIO | None = None
+        self._fd: int | None = None
+        self._offset = 0
+        self._write_error: RecordingError | None = None
         self._sidecar: dict[str, Any] | None = None
         self._sidecar_path: Path | None = None
         self._rows = 0
@@ -146,7 +154,7 @@ class RecordingWrapper(gym.Wrapper):
     @property
     def recording(self) -> bool:
         """True while an episode is being recorded."""
-        return self._file is not None
+        return self._fd is not None
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -172,8 +180,14 @@ class RecordingWrapper(gym.Wrapper):
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        if self._write_error is not None:
+            raise RecordingError(
+                f"not recording since a write failed ({self._write_error.reason}); "
+                f"rows 0..{self._rows - 1} are on disk; call reset() to start a new recording",
+                self.path,
+            )
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if self._file is None:
+        if self._fd is None:
             if self.paths and not self._warned_after_end:
                 gym.logger.warn(
                     "RecordingWrapper: step() after the episode ended is not recorded; call reset()"
@@ -209,15 +223,18 @@ class RecordingWrapper(gym.Wrapper):
         self, seed: int, source: str, reset_options: dict[str, Any] | None, info: Mapping[str, Any]
     ) -> None:
         index = self._next_index()
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
         while True:
             csv_path = self.directory / f"{self.prefix}_{index:03d}.csv"
             try:
-                f = open(csv_path, "x", encoding="utf-8", newline="\n")  # noqa: SIM115
+                fd = os.open(csv_path, flags, 0o666)
             except FileExistsError:
                 index += 1
                 continue
             break
-        self._file = f
+        self._fd = fd
+        self._offset = 0
+        self._write_error = None
         self._rows = 0
         self._warned_after_end = False
         self.paths.append(csv_path)
@@ -233,34 +250,74 @@ class RecordingWrapper(gym.Wrapper):
             metadata=self.recording_metadata,
         )
         self._sidecar = sidecar
-        _write_atomic(self._sidecar_path, _to_json(sidecar))
-        f.write(_HEADER)
-        self._write(recording_row(0, info, 0.0, False, False))
+        try:
+            # header and row 0 in one write, then the sidecar: a process killed in between
+            # leaves a CSV of at most its reset row and no sidecar, which the loader names
+            # as an episode that was being started (nothing of it had been returned yet)
+            self._write_text(_HEADER + _format_row(recording_row(0, info, 0.0, False, False)),
+                             "the header and row 0")  # fmt: skip
+            self._rows = 1
+            _write_atomic(self._sidecar_path, _to_json(sidecar))
+        except (OSError, RecordingError):
+            # nothing of this episode is recorded: leave no half-made recording behind
+            fd, self._fd = self._fd, None
+            self._write_error = None
+            if fd is not None:
+                os.close(fd)
+            for path in (csv_path, self._sidecar_path):
+                with contextlib.suppress(OSError):
+                    path.unlink()
+            self.paths.pop()
+            raise
 
     def _write(self, row: Sequence[Any]) -> None:
-        assert self._file is not None
         try:
             text = _format_row(row)
         except (TypeError, ValueError) as exc:  # pragma: no cover - env info is always valid
             raise RecordingError(f"row {self._rows}: {exc}", self.path) from exc
-        self._file.write(text)
-        self._file.flush()
-        if self.fsync:
-            os.fsync(self._file.fileno())
+        self._write_text(text, f"row {self._rows}")
         self._rows += 1
 
+    def _write_text(self, text: str, what: str) -> None:
+        """Write ``text`` whole at the end of the CSV, or cut the file back and stop recording."""
+        assert self._fd is not None
+        data = text.encode("utf-8")
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(self._fd, view) :]
+            if self.fsync:
+                os.fsync(self._fd)
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # drop a partly written row
+                os.ftruncate(self._fd, self._offset)
+            self._write_error = RecordingError(f"writing {what} failed: {exc}", self.path)
+            fd, self._fd = self._fd, None
+            with contextlib.suppress(OSError):
+                os.close(fd)
+            raise self._write_error from exc
+        self._offset += len(data)
+
     def _finalize(self, reason: str) -> None:
-        f, self._file = self._file, None
-        if f is None:
+        self._write_error = None
+        fd, self._fd = self._fd, None
+        if fd is None:
             return
         try:
-            f.close()
+            os.close(fd)
         finally:
             assert self._sidecar is not None and self._sidecar_path is not None
             self._sidecar.update(
                 complete=True, steps=self._rows - 1, end_reason=reason, finished=_now()
             )
-            _write_atomic(self._sidecar_path, _to_json(self._sidecar))
+            try:
+                _write_atomic(self._sidecar_path, _to_json(self._sidecar))
+            except OSError as exc:  # the sidecar on disk still says "complete": false
+                raise RecordingError(
+                    f"finalizing the sidecar failed ({exc}); the recording stays incomplete "
+                    f"with rows 0..{self._rows - 1}",
+                    self._sidecar_path,
+                ) from exc
 
 
 # -------------------------------------------------------------------- saving
@@ -319,7 +376,7 @@ def save_recording(
             try:
                 text = _format_value(c, value)
                 if c not in _INT_COLUMNS and c not in _BOOL_COLUMNS:
-                    _parse_float(text)
+                    _parse_float(text, _magnitude_limit(c))
             except (TypeError, ValueError) as exc:
                 raise RecordingError(f"row {i}: {exc}", source, column=c) from None
             parts.append(text)

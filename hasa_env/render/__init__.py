@@ -8,8 +8,11 @@ Two views exist, chosen with ``config["render"]["view"]`` (see
 - ``"driver"`` (:class:`~hasa_env.render.driver_view.DriverViewRenderer`):
   the first-person perspective of the road ahead.
 
-Both draw the HUD of :mod:`hasa_env.render.common`. Importing this package
-does not import pygame; the renderers do when they are created.
+Both draw the HUD of :mod:`hasa_env.render.common`;
+:class:`~hasa_env.render.options.ViewOptions` says what they show (ghost
+markings, HUD items, and in the driver's view a bonnet and road texture:
+:meth:`ViewOptions.participant` is a study participant's view). Importing
+this package does not import pygame; the renderers do when they are created.
 """
 
 from __future__ import annotations
@@ -26,15 +29,18 @@ from hasa_env.render.common import (
     surface_to_array,
 )
 from hasa_env.render.driver_view import DriverViewRenderer
+from hasa_env.render.options import HUD_ITEMS, ViewOptions
 from hasa_env.render.top_down import TopDownRenderer
 
 __all__ = [
     "DriverViewRenderer",
     "GHOST_COLOUR",
+    "HUD_ITEMS",
     "HYPOTHESIS_COLOURS",
     "Hud",
     "HumanWindow",
     "TopDownRenderer",
+    "ViewOptions",
     "WeightSource",
     "make_renderer",
     "resolve_weights",
@@ -49,18 +55,22 @@ def make_renderer(
     view: str | None = None,
     weights: WeightSource = None,
     steering_ratio: float | None = None,
+    options: ViewOptions | None = None,
 ) -> Any:
     """The renderer of ``view`` (default ``setup.config["render"]["view"]``) for an env set-up.
 
-    Returns a :class:`TopDownRenderer` or a :class:`DriverViewRenderer`;
+    ``options`` (:class:`ViewOptions`, default: everything shown) says what it
+    draws. Returns a :class:`TopDownRenderer` or a :class:`DriverViewRenderer`;
     both have ``draw(info, weights, message, target)``, ``render(info, weights)``
     and ``close()``.
     """
     view = setup.config["render"]["view"] if view is None else view
     if view == "top_down":
-        return TopDownRenderer(setup, render_mode, weights=weights, steering_ratio=steering_ratio)
+        return TopDownRenderer(
+            setup, render_mode, weights=weights, steering_ratio=steering_ratio, options=options
+        )
     if view == "driver":
         return DriverViewRenderer(
-            setup, render_mode, weights=weights, steering_ratio=steering_ratio
+            setup, render_mode, weights=weights, steering_ratio=steering_ratio, options=options
         )
     raise ValueError(f"unknown view {view!r}; allowed: 'top_down', 'driver'")

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from hasa_env.render.options import HUD_ITEMS
+
 __all__ = [
     "Hud",
     "HumanWindow",
@@ -125,6 +127,8 @@ class Hud:
         time_limit: episode length (s) shown after the time, or None.
         steering_ratio: steering-wheel angle / road-wheel angle; when given, the
             steering line also shows the steering-wheel angle.
+        items: which items to show (:data:`hasa_env.render.options.HUD_ITEMS`: ``time``,
+            ``speed``, ``steering``, ``weights``); empty: no panel, only messages.
     """
 
     def __init__(
@@ -133,8 +137,10 @@ class Hud:
         height: int,
         time_limit: float | None = None,
         steering_ratio: float | None = None,
+        items: Sequence[str] = HUD_ITEMS,
     ) -> None:
         self._pg = pygame_module
+        self.items = tuple(items)
         self._pg.font.init()
         self.font = self._pg.font.Font(None, max(16, height // 26))
         self.big_font = self._pg.font.Font(None, max(32, height // 6))
@@ -143,19 +149,21 @@ class Hud:
         self._panel_cache: dict[tuple[int, int], Any] = {}
 
     def lines(self, info: Mapping[str, Any]) -> list[str]:
-        """The text lines of the HUD (without weights)."""
-        t = float(info["time"])
-        limit = f" / {self.time_limit:.0f}" if self.time_limit else ""
-        v = float(info["speed"])
-        delta_deg = math.degrees(float(info["steering"]))
-        steer = f"steering {delta_deg:+6.2f} deg (road wheel)"
-        if self.steering_ratio:
-            steer += f"  {delta_deg * self.steering_ratio:+6.1f} deg (wheel)"
-        return [
-            f"time {t:6.2f}{limit} s",
-            f"speed {v:5.2f} m/s  ({v * 3.6:5.1f} km/h)",
-            steer,
-        ]
+        """The text lines of the HUD's items (without weights)."""
+        out = []
+        if "time" in self.items:
+            limit = f" / {self.time_limit:.0f}" if self.time_limit else ""
+            out.append(f"time {float(info['time']):6.2f}{limit} s")
+        if "speed" in self.items:
+            v = float(info["speed"])
+            out.append(f"speed {v:5.2f} m/s  ({v * 3.6:5.1f} km/h)")
+        if "steering" in self.items:
+            delta_deg = math.degrees(float(info["steering"]))
+            steer = f"steering {delta_deg:+6.2f} deg (road wheel)"
+            if self.steering_ratio:
+                steer += f"  {delta_deg * self.steering_ratio:+6.1f} deg (wheel)"
+            out.append(steer)
+        return out
 
     def _panel(self, width: int, height: int) -> Any:
         key = (width, height)
@@ -174,9 +182,19 @@ class Hud:
         message: str | None = None,
         hypotheses: Sequence[float] = (),
     ) -> None:
-        """Draw the HUD onto ``surface`` (top-left panel; message centred)."""
+        """Draw the HUD onto ``surface`` (top-left panel; message centred).
+
+        ``weights`` are drawn only when the ``weights`` item is shown; with no
+        item to show there is no panel, and ``message`` is still drawn.
+        """
         pg = self._pg
+        if "weights" not in self.items:
+            weights = None
         texts = [self.font.render(s, True, HUD_TEXT_COLOUR) for s in self.lines(info)]
+        if not texts and not weights:
+            if message:
+                self.draw_message(surface, message)
+            return
         line_h = self.font.get_linesize()
         bar_w = max(80, surface.get_width() // 8)
         label_w = 0

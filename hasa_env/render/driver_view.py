@@ -11,6 +11,12 @@ two-point steering model (filled for the true lane, rings for the ghost
 lanes). The HUD (:class:`hasa_env.render.common.Hud`) shows time, speed,
 steering angle and, when an estimator runs alongside, the hypothesis weights.
 
+:class:`hasa_env.render.options.ViewOptions` chooses what is drawn; a study
+participant's view (:meth:`ViewOptions.participant`) hides the ghost
+markings and the HUD and adds a bonnet and dashboard silhouette and
+transverse bands on the road and the grass that stream past at the car's
+speed (``hasa-bench perf`` measures it against the 60 fps target).
+
 Camera model: a pinhole camera at the driver's eye, ``EYE_FORWARD`` m ahead
 of the rear axle on the car's centre line, ``render.eye_height`` m above the
 road, looking along the car's heading with a horizontal field of view
@@ -42,6 +48,7 @@ from hasa_env.render.common import (
     resolve_weights,
     surface_to_array,
 )
+from hasa_env.render.options import ViewOptions
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 
 __all__ = [
@@ -84,6 +91,21 @@ POST_SPACING = 50.0
 """Roadside posts every this many metres (m)."""
 POINT_RADIUS = 0.12
 """Radius (m) of the near / far point discs."""
+ROAD_BAND_PERIOD = 8.0
+"""Road texture: a lighter band 4 m long every 8 m of road."""
+ROAD_BAND_COLOUR = (101, 101, 107)
+GRASS_BAND_PERIOD = 20.0
+"""Grass texture: a lighter band 10 m long every 20 m."""
+GRASS_BAND_COLOUR = (58, 134, 64)
+GRASS_BAND_HALF_WIDTH = 40.0
+"""The grass bands reach this far (m) either side of the lane centre."""
+TEXTURE_DISTANCE = 120.0
+"""Road and grass bands are drawn up to this distance ahead (m)."""
+BONNET_DISTANCE = 4.0
+"""The bonnet's edge hides the road closer than this (m ahead of the eye, at the view's centre)."""
+BONNET_COLOUR = (32, 34, 40)
+BONNET_EDGE_COLOUR = (70, 74, 84)
+DASHBOARD_COLOUR = (16, 16, 19)
 
 
 class DriverViewRenderer:
@@ -97,6 +119,8 @@ class DriverViewRenderer:
         steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
         size: frame (width, height) in pixels; default ``render.width``/``height``.
         show_points: draw the near and far points; default ``render.show_points``.
+        options: what to draw (:class:`~hasa_env.render.options.ViewOptions`);
+            default: everything (ghost markings, full HUD), no bonnet or texture.
     """
 
     def __init__(
@@ -108,6 +132,7 @@ class DriverViewRenderer:
         steering_ratio: float | None = None,
         size: tuple[int, int] | None = None,
         show_points: bool | None = None,
+        options: ViewOptions | None = None,
     ) -> None:
         if render_mode not in ("rgb_array", "human"):
             raise ValueError(f"render_mode must be 'rgb_array' or 'human', got {render_mode!r}")
@@ -128,11 +153,15 @@ class DriverViewRenderer:
         self.focal = 0.5 * self.width / math.tan(0.5 * self.field_of_view)
         self.horizon = HORIZON_FRACTION * self.height
         self.weights = weights
+        self.options = options if options is not None else ViewOptions()
         self.surface = pygame.Surface((self.width, self.height))
-        self.hud = Hud(pygame, self.height, setup.config["time_limit"], steering_ratio)
+        self.hud = Hud(
+            pygame, self.height, setup.config["time_limit"], steering_ratio, self.options.hud
+        )
         self._window = HumanWindow(
             pygame, (self.width, self.height), self.fps, "hasa-env: driver's view"
         )
+        self._bonnet = self._bonnet_surface() if self.options.bonnet else None
         road_cfg = setup.config["road"]
         lane = setup.road.lane_width
         self.right_edge = -lane / 2 - road_cfg["lanes_right"] * lane
@@ -143,6 +172,9 @@ class DriverViewRenderer:
             -b + side * lane for b in setup.hypotheses if b != 0.0 for side in (-0.5, 0.5)
         ]
         self.ghost_centres = [-b for b in setup.hypotheses if b != 0.0]
+        if not self.options.ghosts:
+            self.ghost_lines, self.ghost_centres = [], []
+        self._road_centre = 0.5 * (self.right_edge + self.left_edge)
         # distances ahead of the car's station at which the continuous lines are sampled:
         # dense near the car, where perspective magnifies
         self._distances = np.geomspace(1.0, VIEW_DISTANCE, 64)
@@ -221,12 +253,15 @@ class DriverViewRenderer:
         colour: tuple[int, int, int],
         width: float,
         camera: tuple[float, float, float, float],
+        near: float = 1.0,
+        far: float = 160.0,
     ) -> None:
-        """Dashes ``[k P, k P + P/2]`` (m of station) of the lines at lateral ``offsets`` (m)."""
+        """Dashes ``[k P, k P + P/2]`` (m of station) of the lines at lateral ``offsets`` (m),
+        from ``near`` to ``far`` m ahead of the car's station."""
         if not offsets:
             return
         pg = self._pg
-        start, end = station + 1.0, station + min(VIEW_DISTANCE, 160.0)
+        start, end = station + near, station + min(VIEW_DISTANCE, far)
         first = math.floor(start / period)
         ks = np.arange(first, math.ceil(end / period))
         a = np.maximum(ks * period, start)
@@ -286,10 +321,19 @@ class DriverViewRenderer:
         surf.fill(FAR_GRASS_COLOUR, (0, horizon, w, max(1, h // 60)))
         camera = self._camera(info)
         station = float(info["station"])
+        texture = self.options.road_texture
+        # bands start just beyond the eye (EYE_FORWARD + NEAR_CLIP ahead of the station)
+        near = EYE_FORWARD + NEAR_CLIP + 0.2
+        if texture:
+            self._dashes(station, GRASS_BAND_PERIOD, [self._road_centre], GRASS_BAND_COLOUR,
+                         2.0 * GRASS_BAND_HALF_WIDTH, camera, near, TEXTURE_DISTANCE)  # fmt: skip
         poses = self._poses(station + self._distances)
         road = self._strip(poses, self.right_edge, self.left_edge, camera)
         if road is not None:
             pg.draw.polygon(surf, ROAD_COLOUR, road)
+        if texture:
+            self._dashes(station, ROAD_BAND_PERIOD, [self._road_centre], ROAD_BAND_COLOUR,
+                         self.left_edge - self.right_edge, camera, near, TEXTURE_DISTANCE)  # fmt: skip
         ghost_w = 0.7 * MARKING_WIDTH
         self._dashes(
             station, GHOST_DASH_PERIOD, self.ghost_lines, GHOST_FADED_COLOUR, ghost_w, camera
@@ -304,11 +348,37 @@ class DriverViewRenderer:
         self._draw_posts(station, camera)
         if self.show_points:
             self._draw_points(station, camera)
+        if self._bonnet is not None:
+            surf.blit(self._bonnet, (0, self.height - self._bonnet.get_height()))
         shown = resolve_weights(
             self.weights if weights is None else weights, info, self.setup.hypotheses
         )
         self.hud.draw(surf, info, shown, message, self.setup.hypotheses)
         return surf
+
+    def _bonnet_surface(self) -> Any:
+        """The bonnet and dashboard silhouette (drawn once, blitted every frame).
+
+        The bonnet's edge is an arc: at the view's centre it sits where the
+        road ``BONNET_DISTANCE`` m ahead of the eye appears, and it falls off
+        towards the sides like a rounded bonnet; a dark dashboard strip runs
+        along the bottom.
+        """
+        pg = self._pg
+        w, h = self.width, self.height
+        edge = self.horizon + self.focal * self.eye_height / BONNET_DISTANCE
+        top = int(min(max(edge, self.horizon + 0.05 * h), 0.95 * h))
+        surface = pg.Surface((w, h - top), pg.SRCALPHA)
+        surface.fill((0, 0, 0, 0))
+        drop = 0.09 * h  # the bonnet's edge is this much lower at the frame's sides
+        xs = np.linspace(0.0, w, 33)
+        ys = drop * ((xs - 0.5 * w) / (0.5 * w)) ** 2
+        outline = [(float(x), float(y)) for x, y in zip(xs, ys, strict=True)]
+        pg.draw.polygon(surface, BONNET_COLOUR, outline + [(w, h - top), (0, h - top)])
+        pg.draw.lines(surface, BONNET_EDGE_COLOUR, False, outline, max(2, h // 240))
+        dash = max(8, h // 14)
+        surface.fill(DASHBOARD_COLOUR, (0, h - top - dash, w, dash))
+        return surface
 
     def _draw_posts(self, station: float, camera: tuple[float, float, float, float]) -> None:
         ks = np.arange(

@@ -26,6 +26,7 @@ from hasa_env.render.common import (
     resolve_weights,
     surface_to_array,
 )
+from hasa_env.render.options import ViewOptions
 
 __all__ = ["TopDownRenderer"]
 
@@ -38,6 +39,8 @@ class TopDownRenderer:
         render_mode: ``"rgb_array"`` or ``"human"``.
         weights: where the HUD takes hypothesis weights from (see :data:`WeightSource`).
         steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
+        options: what to draw (:class:`~hasa_env.render.options.ViewOptions`: ghost
+            markings, HUD items; the bonnet and road texture belong to the driver's view).
     """
 
     def __init__(
@@ -47,6 +50,7 @@ class TopDownRenderer:
         *,
         weights: WeightSource = None,
         steering_ratio: float | None = None,
+        options: ViewOptions | None = None,
     ) -> None:
         os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
         import pygame  # pygame: loaded only when drawing, never on headless paths
@@ -59,9 +63,12 @@ class TopDownRenderer:
         self.ppm = float(rc["pixels_per_metre"])
         self.fps = int(rc["fps"])
         self.weights = weights
+        self.options = options if options is not None else ViewOptions()
         pygame.font.init()
         self.surface = pygame.Surface((self.width, self.height))
-        self.hud = Hud(pygame, self.height, setup.config["time_limit"], steering_ratio)
+        self.hud = Hud(
+            pygame, self.height, setup.config["time_limit"], steering_ratio, self.options.hud
+        )
         self._window = HumanWindow(
             pygame, (self.width, self.height), self.fps, "hasa-env lane keeping"
         )
@@ -135,7 +142,7 @@ class TopDownRenderer:
             else:
                 self._dashed(pts, stations, MARKING_COLOUR, line_w)
         # ghost markings where each non-zero hypothesis puts the lane (camera reads y + b)
-        for b in setup.hypotheses:
+        for b in setup.hypotheses if self.options.ghosts else ():
             if b == 0.0:
                 continue
             for side in (-0.5, 0.5):

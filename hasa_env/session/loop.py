@@ -16,6 +16,15 @@ the simulation clock; nothing is recorded while paused. Without
 ``realtime`` the same loop runs headless and as fast as possible, with a
 scripted driver turning a virtual wheel (:class:`hasa_env.session.scripted.VirtualWheelDriver`).
 The command line is ``hasa-drive`` (:mod:`hasa_cli.drive`).
+
+Besides :meth:`DriveSession.run` (the plain session of ``hasa-drive``),
+:meth:`DriveSession.show` (a message screen until the driver confirms) and
+:meth:`DriveSession.drive` (one :class:`RunSpec`: its seed, start state,
+bias and file prefix) are the pieces a study session
+(:mod:`hasa_env.session.study_session`) is made of. A ``status`` callback
+lets the experimenter follow a run (run, time, speed, estimator weights) in
+the terminal while the participant's window stays clean
+(:class:`hasa_env.render.ViewOptions`).
 """
 
 from __future__ import annotations
@@ -23,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -39,11 +48,15 @@ from hasa_env.recording.raw_inputs import (
     raw_inputs_path,
 )
 from hasa_env.recording.writer import RecordingWrapper
-from hasa_env.render import make_renderer
+from hasa_env.render import ViewOptions, make_renderer
 from hasa_env.session.settings import DriveSettings
 from hasa_env.sim.config import deep_merge, make_config
 
-__all__ = ["DriveSession", "RunResult", "MAX_CATCH_UP"]
+__all__ = ["DriveSession", "MAX_CATCH_UP", "RunResult", "RunSpec", "WAITING_STATES"]
+
+WAITING_STATES = ("idle", "between_runs", "break", "end")
+CONFIRM_HINT = "Press a wheel button or SPACE to start."
+"""States in which the session shows a message and waits for the driver to confirm."""
 
 MAX_CATCH_UP = 0.25
 """Seconds of simulation the real-time loop runs at most to catch up after a stall."""
@@ -51,11 +64,38 @@ MAX_CATCH_UP = 0.25
 
 @dataclass
 class RunResult:
-    """What one run produced."""
+    """What one run produced.
+
+    ``end_reason``: ``"truncated"`` (the run's full length), ``"terminated"``
+    (the car left the road) or ``"stopped"`` (the driver quit, or an error).
+    """
 
     path: Path
     steps: int
     end_reason: str
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run to drive (:meth:`DriveSession.drive`).
+
+    Attributes:
+        index: 0-based index of the run in its session (unique; a scripted
+            driver re-seeds when it changes).
+        seed: the env seed.
+        reset_options: ``reset`` options (start state, bias).
+        prefix: recording file prefix: the run goes to ``<prefix>_NNN.csv``, NNN
+            the first number not used yet (nothing is overwritten).
+        label: shown under the countdown (``"run 3 of 10"``) and in the status.
+        metadata: extra sidecar metadata, deep-merged over the session's.
+    """
+
+    index: int
+    seed: int
+    reset_options: Mapping[str, Any]
+    prefix: str = "run"
+    label: str = ""
+    metadata: Mapping[str, Any] = field(default_factory=dict)
 
 
 class DriveSession:
@@ -82,6 +122,14 @@ class DriveSession:
         log: where messages go (default ``print``).
         max_idle_iterations: without ``realtime``, give up (RuntimeError) after
             this many iterations without a step (a scripted drive stuck in a pause).
+        view_options: what the window shows (:class:`hasa_env.render.ViewOptions`;
+            default: everything, the developer's view).
+        status: called with the session every ``status_every`` s of driving
+            (simulated time) and whenever its state changes: the
+            experimenter's status line.
+        status_every: see ``status`` (s).
+        on_recording: called with the path of each run's recording as soon as
+            the file exists (a study's session file notes it before the run).
     """
 
     def __init__(
@@ -101,6 +149,10 @@ class DriveSession:
         env_wrapper: Callable[[Any], Any] | None = None,
         log: Callable[[str], None] = print,
         max_idle_iterations: int = 100_000,
+        view_options: ViewOptions | None = None,
+        status: Callable[[DriveSession], None] | None = None,
+        status_every: float = 0.5,
+        on_recording: Callable[[Path], None] | None = None,
     ) -> None:
         self.settings = settings
         self.inputs = inputs
@@ -114,6 +166,12 @@ class DriveSession:
         self.env_wrapper = env_wrapper
         self.log = log
         self.max_idle_iterations = max_idle_iterations
+        self.view_options = view_options if view_options is not None else ViewOptions()
+        self.status = status
+        self.status_every = float(status_every)
+        self.on_recording = on_recording
+        self._status_state: str | None = None
+        self._status_step = 0
         self.config = settings.env_config()
         self._preview_env = LaneKeepingEnv(config=self.config)
         self.setup = self._preview_env.setup
@@ -129,7 +187,9 @@ class DriveSession:
             self.config = make_config(self.config)
             self._preview_env = LaneKeepingEnv(config=self.config)
             self.setup = self._preview_env.setup
-            self.renderer = make_renderer(self.setup, "rgb_array", view=view)
+            self.renderer = make_renderer(
+                self.setup, "rgb_array", view=view, options=self.view_options
+            )
         self.state = "idle"
         """One of ``idle``, ``countdown``, ``driving``, ``paused``, ``between_runs``, ``quit``."""
         self.message: str | None = None
@@ -137,6 +197,8 @@ class DriveSession:
         self.run_index = -1
         """0-based index of the current run."""
         self.run_seed: int | None = None
+        self.run_label = ""
+        """The current run's label (:attr:`RunSpec.label`)."""
         self.steps = 0
         """Env steps taken in the current run."""
         self.results: list[RunResult] = []
@@ -155,9 +217,43 @@ class DriveSession:
         )
         return [int(state[2 * i]) << 21 ^ int(state[2 * i + 1]) for i in range(self.settings.runs)]
 
+    def run_spec(self, run_index: int, seeds: Sequence[int] | None = None) -> RunSpec:
+        """Run ``run_index`` of a plain session (:meth:`run`): its seed, the settings' start."""
+        seeds = self.run_seeds() if seeds is None else seeds
+        return RunSpec(
+            index=run_index,
+            seed=int(seeds[run_index]),
+            reset_options=self.settings.reset_options(),
+            label=f"run {run_index + 1} of {self.settings.runs}",
+        )
+
+    def preview(self, seed: int, options: Mapping[str, Any]) -> dict[str, Any]:
+        """The ``info`` at the start of a run (the road shown behind a message screen)."""
+        _, info = self._preview_env.reset(seed=int(seed), options=dict(options))
+        self.info = info
+        return info
+
+    def poll_devices(self) -> None:
+        """Handle pending input events now (e.g. joysticks plugged in before the session)."""
+        self._handle(self.inputs.poll())
+
     def _call_hook(self) -> None:
         if self.hook is not None:
             self.hook(self)
+
+    def _report(self, force: bool = False) -> None:
+        """Call ``status`` when the state changed, or every ``status_every`` s of driving."""
+        if self.status is None:
+            return
+        every = max(1, int(round(self.status_every / self.dt)))
+        if (
+            force
+            or self.state != self._status_state
+            or (self.state == "driving" and self.steps - self._status_step >= every)
+        ):
+            self._status_state = self.state
+            self._status_step = self.steps
+            self.status(self)
 
     def _draw(self, info: Mapping[str, Any] | None, message: str | None = None) -> None:
         if self.display is None or self.renderer is None or info is None:
@@ -188,8 +284,8 @@ class DriveSession:
                 self.log(f"hasa-drive: {n.message}")
             elif n.kind == "connected":
                 self.log(f"hasa-drive: {n.message}")
-                if self.state in ("idle", "between_runs"):
-                    self.message = f"{n.message}\nPress a wheel button or SPACE to start."
+                if self.state in WAITING_STATES:  # the screen's text stays, under the notice
+                    self.message = f"{n.message}\n{self.message or CONFIRM_HINT}"
                 elif self.state == "driving" and self.steps > 0:
                     self.state = "paused"
                     self.message = f"{n.message}\nPress a wheel button or SPACE to drive on."
@@ -206,7 +302,7 @@ class DriveSession:
             elif n.kind == "confirm":
                 if self.state == "paused":
                     self._resume()
-                elif self.state in ("idle", "between_runs"):
+                elif self.state in WAITING_STATES:
                     self.state = "confirmed"
 
     def _resume(self) -> None:
@@ -218,17 +314,62 @@ class DriveSession:
     def _idle(self) -> None:
         self._call_hook()
         self._handle(self.inputs.poll())
+        self._report()
 
-    def _wait_for_confirm(self, info: Mapping[str, Any], message: str, state: str) -> bool:
-        """Show ``message`` until the driver confirms (True) or quits (False)."""
+    def _wait_for_confirm(
+        self, info: Mapping[str, Any], message: str, state: str, min_seconds: float = 0.0
+    ) -> bool:
+        """Show ``message`` until the driver confirms (True) or quits (False).
+
+        A confirmation within ``min_seconds`` (a break's minimum length) is ignored.
+        """
         if not self.realtime:
+            if self.state != "quit":
+                self.state, self.message = state, message
+                self._call_hook()
+                self._report()
             return self.state != "quit"
         self.state, self.message = state, message
-        while self.state == state:
+        shown = time.perf_counter()
+        while True:
             self._idle()
-            self._draw(info, self.message)
+            if self.state == "confirmed" and time.perf_counter() - shown < min_seconds:
+                self.state = state  # too early: the break goes on
+            if self.state != state:
+                break
+            left = min_seconds - (time.perf_counter() - shown)
+            text = self.message or message
+            if left > 0:
+                text += f"\n(you can go on in {math.ceil(left):d} s)"
+            self._draw(info, text)
             self._tick()
         return self.state != "quit"
+
+    def show(
+        self,
+        message: str,
+        *,
+        state: str = "idle",
+        info: Mapping[str, Any] | None = None,
+        min_seconds: float = 0.0,
+    ) -> bool:
+        """Show ``message`` over the road until the driver confirms; False if they quit.
+
+        ``state`` is one of :data:`WAITING_STATES` (instructions before a block:
+        ``"idle"``; between runs; a ``"break"``; the ``"end"`` screen). The road
+        behind is ``info`` (default: the start of the next run). Without
+        ``realtime`` it returns at once.
+        """
+        if state not in WAITING_STATES:
+            raise ValueError(f"state must be one of {', '.join(WAITING_STATES)}, got {state!r}")
+        if info is None:
+            info = self.info
+        if info is None:
+            _, info = self._preview_env.reset(
+                seed=self.run_seeds()[0], options=self.settings.reset_options()
+            )
+            self.info = info
+        return self._wait_for_confirm(info, message, state, min_seconds)
 
     def _countdown(self, info: Mapping[str, Any]) -> bool:
         if not self.realtime or self.settings.countdown <= 0:
@@ -240,9 +381,7 @@ class DriveSession:
             if left <= 0:
                 break
             self._idle()
-            self._draw(
-                info, f"{math.ceil(left):d}\nrun {self.run_index + 1} of {self.settings.runs}"
-            )
+            self._draw(info, f"{math.ceil(left):d}\n{self.run_label}")
             self._tick()
         if self.state == "paused":  # the wheel went away during the countdown
             ok = self._wait_for_confirm(info, self.message or "paused", "paused")
@@ -250,9 +389,18 @@ class DriveSession:
         return self.state != "quit"
 
     # -------------------------------------------------------------- runs
+    def input_description(self) -> dict[str, Any]:
+        """The input devices in use: active source, joystick profiles, keyboard calibration."""
+        inputs = self.inputs
+        return {
+            "source_at_start": inputs.source_name,
+            "joystick_profiles": [p.to_dict() | {"source": p.source} for p in inputs.profiles],
+            "keyboard": inputs.keyboard.calibration.to_dict()
+            | {"source": inputs.keyboard.calibration.source},
+        }
+
     def _run_metadata(self, run_index: int, seed: int) -> dict[str, Any]:
         s = self.settings
-        inputs = self.inputs
         meta: dict[str, Any] = {
             "tool": "hasa-drive",
             "participant": s.participant,
@@ -265,12 +413,11 @@ class DriveSession:
                 "speed": s.speed,
                 "lateral_offset": s.lateral_offset,
                 "bias": "random" if s.bias is None else s.bias,
+                "speed_control": s.speed_control,
+                "min_speed": s.min_speed,
             },
             "input": {
-                "source_at_start": inputs.source_name,
-                "joystick_profiles": [p.to_dict() | {"source": p.source} for p in inputs.profiles],
-                "keyboard": inputs.keyboard.calibration.to_dict()
-                | {"source": inputs.keyboard.calibration.source},
+                **self.input_description(),
                 "raw_inputs": {
                     "file": f"<recording stem>{RAW_INPUTS_SUFFIX}",
                     "columns": list(RAW_INPUT_HEADER),
@@ -279,6 +426,7 @@ class DriveSession:
             },
             "realtime": self.realtime,
             "synthetic": False,
+            "view": self.view_options.to_dict(),
         }
         return deep_merge(meta, self.metadata)
 
@@ -298,15 +446,10 @@ class DriveSession:
         if not self._wait_for_confirm(preview, intro, "idle"):
             return self.results
         for r in range(s.runs):
-            self.run_index = r
-            self.run_seed = seeds[r]
-            _, preview = self._preview_env.reset(seed=seeds[r], options=s.reset_options())
-            self.info = preview
-            if not self._countdown(preview):
+            result = self.drive(self.run_spec(r, seeds))
+            if self.state == "quit" and result is None:
                 break
-            result = self._drive_run(r, seeds[r])
             if result is not None:
-                self.results.append(result)
                 self.log(
                     f"hasa-drive: run {r + 1}/{s.runs}: {result.steps} steps, "
                     f"{result.end_reason} -> {result.path}"
@@ -327,8 +470,24 @@ class DriveSession:
                     break
         return self.results
 
-    def _drive_run(self, run_index: int, seed: int) -> RunResult | None:
+    def drive(self, spec: RunSpec) -> RunResult | None:
+        """Count down and drive one run; what it recorded (None: quit before it started).
+
+        The result is also appended to :attr:`results`. Afterwards ``state`` is
+        ``"between_runs"``, or ``"quit"`` if the driver stopped the session.
+        """
+        self.run_index = spec.index
+        self.run_seed = spec.seed
+        self.run_label = spec.label
+        _, preview = self._preview_env.reset(seed=spec.seed, options=dict(spec.reset_options))
+        self.info = preview
+        if not self._countdown(preview):
+            return None
+        return self._drive_run(spec)
+
+    def _drive_run(self, spec: RunSpec) -> RunResult | None:
         s = self.settings
+        run_index, seed = spec.index, spec.seed
         env: Any = LaneKeepingEnv(config=self.config)
         if self.env_wrapper is not None:
             env = self.env_wrapper(env)
@@ -338,8 +497,8 @@ class DriveSession:
         recorder = RecordingWrapper(
             env,
             s.directory,
-            prefix="run",
-            metadata=self._run_metadata(run_index, seed),
+            prefix=spec.prefix,
+            metadata=deep_merge(self._run_metadata(run_index, seed), dict(spec.metadata)),
             env_id=env_id,
             fsync=s.fsync,
         )
@@ -347,9 +506,11 @@ class DriveSession:
         end_reason = "stopped"
         self.steps = 0
         try:
-            _, info = recorder.reset(seed=seed, options=s.reset_options())
+            _, info = recorder.reset(seed=seed, options=dict(spec.reset_options))
             self.info = info
             assert recorder.path is not None
+            if self.on_recording is not None:
+                self.on_recording(recorder.path)
             raw = RawInputWriter(raw_inputs_path(recorder.path), fsync=s.fsync)
             self.state, self.message = "driving", None
             wall0 = time.perf_counter()
@@ -388,10 +549,15 @@ class DriveSession:
                     if self.state != "driving":
                         break
                     reading = self.inputs.read(self.dt)
-                    _, _, terminated, truncated, info = recorder.step(reading.action())
+                    acceleration = s.applied_acceleration(
+                        reading.acceleration, float(self.info["speed"]), self.dt
+                    )
+                    action = [reading.road_wheel_angle, acceleration]
+                    _, _, terminated, truncated, info = recorder.step(action)
                     self.steps += 1
                     self.info = info
                     raw.write(self.steps, info["time"], time.perf_counter() - wall0, reading)
+                    self._report()
                     idle = 0
                     if terminated or truncated:
                         end_reason = "terminated" if terminated else "truncated"
@@ -418,7 +584,10 @@ class DriveSession:
             return None
         if self.state != "quit":
             self.state = "between_runs"
-        return RunResult(recorder.path, self.steps, end_reason)
+        result = RunResult(recorder.path, self.steps, end_reason)
+        self.results.append(result)
+        self._report(force=True)
+        return result
 
     def close(self) -> None:
         self._preview_env.close()

@@ -1,15 +1,17 @@
-"""Scripted driving: a synthetic driver turns a virtual wheel inside the drive loop."""
+"""Scripted driving: a synthetic driver turns a virtual wheel inside the drive loop, and
+presses its button to go on through a study's screens."""
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
 
 from hasa_env.devices.calibration import JoystickCalibration
-from hasa_env.session.loop import DriveSession
+from hasa_env.session.loop import WAITING_STATES, DriveSession
 
-__all__ = ["VirtualWheelDriver"]
+__all__ = ["VirtualWheelDriver", "WheelButtonPresser"]
 
 
 class VirtualWheelDriver:
@@ -67,3 +69,46 @@ class VirtualWheelDriver:
         else:
             self.wheel.set_axis(cal.throttle.axis, cal.throttle.raw_for_travel(throttle))
             self.wheel.set_axis(cal.brake.axis, cal.brake.raw_for_travel(brake))
+
+
+class WheelButtonPresser:
+    """A session hook: a scripted participant presses a virtual wheel's button to go on.
+
+    Whenever the session waits for a confirmation (:data:`WAITING_STATES`:
+    instructions, between runs, a break, the end screen), the button is
+    pressed ``after`` s (wall clock) into the wait and released at the next
+    call; while the wait goes on (a break shorter than its minimum ignores
+    the press) it is pressed again every ``after`` s. The press goes through
+    SDL and pygame's events like a real wheel's.
+
+    Args:
+        wheel: the virtual joystick (:class:`hasa_env.devices.virtual.VirtualJoystick`).
+        button: which button.
+        after: seconds of waiting before each press.
+    """
+
+    def __init__(self, wheel: Any, button: int = 0, after: float = 0.3) -> None:
+        self.wheel = wheel
+        self.button = int(button)
+        self.after = float(after)
+        self.presses = 0
+        """Presses made so far."""
+        self._since: float | None = None
+        self._pressed = False
+
+    def __call__(self, session: DriveSession) -> None:
+        if self._pressed:
+            self.wheel.set_button(self.button, False)
+            self._pressed = False
+            return
+        if session.state not in WAITING_STATES or not getattr(self.wheel, "attached", True):
+            self._since = None
+            return
+        now = time.perf_counter()
+        if self._since is None:
+            self._since = now
+        elif now - self._since >= self.after:
+            self.wheel.set_button(self.button, True)
+            self._pressed = True
+            self.presses += 1
+            self._since = now

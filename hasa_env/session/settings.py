@@ -41,6 +41,14 @@ _SCHEMA = schema(
         "countdown": Field("number", doc="Countdown before each run.", unit="s", low=0.0),
         "config": Field("mapping", doc="Extra env configuration.", each=ANY_JSON),
         "fsync": Field("bool", doc="Also fsync every recorded row."),
+        "speed_control": Field(
+            "choice", doc="'free': the pedals (or keys) set the speed; 'constant': they do "
+            "nothing and the car keeps its speed.", choices=("free", "constant"),
+        ),
+        "min_speed": Field(
+            "number", doc="No stopping: the brake cannot take the car below this speed (0: it "
+            "can stop).", unit="m/s", low=0.0, high=150.0,
+        ),
     }
 )  # fmt: skip
 
@@ -64,6 +72,10 @@ class DriveSettings:
         countdown: seconds of countdown before each run (real time only).
         config: extra env configuration deep-merged onto the defaults.
         fsync: also fsync every recorded row (survives power loss).
+        speed_control: ``"free"`` (default): throttle and brake set the speed;
+            ``"constant"``: the car keeps its initial speed whatever the pedals do.
+        min_speed: "no stopping" (m/s): the brake cannot take the car below this
+            speed; the recorded action is the acceleration applied (0: no limit).
     """
 
     participant: str
@@ -78,6 +90,8 @@ class DriveSettings:
     countdown: float = 3.0
     config: Mapping[str, Any] = field(default_factory=dict)
     fsync: bool = False
+    speed_control: str = "free"
+    min_speed: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every setting (shared validator) and keep the converted values.
@@ -114,6 +128,17 @@ class DriveSettings:
             options["bias"] = float(self.bias)
         return options
 
+    def applied_acceleration(self, acceleration: float, speed: float, dt: float) -> float:
+        """The acceleration (m/s^2) applied over a step of ``dt`` s for the one commanded at
+        ``speed`` (m/s): zero with ``speed_control = "constant"``; with ``min_speed``, a
+        braking command is reduced so the step ends no slower than ``min_speed``."""
+        if self.speed_control == "constant":
+            return 0.0
+        if acceleration < 0.0 and self.min_speed > 0.0:
+            return min(0.0, max(acceleration, (self.min_speed - speed) / dt))
+        return acceleration
+
     @property
     def directory(self) -> Path:
+        """Where this participant's recordings go: ``output / participant``."""
         return self.output / self.participant

@@ -22,6 +22,7 @@ from hasa_env.sim.config import make_config
 from hasa_env.sim.disturbance import Disturbance
 from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, SENSOR_NAMES, VehicleParams, VehicleState
 from hasa_env.sim.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
+from hasa_env.validation import ABSENT, Field, schema, validate
 
 __all__ = [
     "EnvSetup",
@@ -29,8 +30,12 @@ __all__ = [
     "RECORDING_COLUMNS",
     "recording_row",
     "STATE_NAMES",
+    "RESET_BIAS_LIMIT",
+    "RESET_HEADING_LIMIT",
+    "RESET_LATERAL_LIMIT",
     "RESET_OPTIONS",
     "build_setup",
+    "check_reset_options",
     "draw_episode",
 ]
 
@@ -249,17 +254,52 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
     )
 
 
-def _finite_option(options: Mapping[str, Any], key: str, low: float, high: float) -> float:
-    value = options[key]
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"reset option '{key}' must be a number, got {value!r}") from None
-    if not (low <= value <= high):
-        raise ValueError(
-            f"reset option '{key}' = {value!r} is out of range: allowed [{low:g}, {high:g}]"
-        )
-    return value
+RESET_LATERAL_LIMIT = 30.0
+"""Largest |lateral_offset| (m) a reset option may set."""
+
+RESET_HEADING_LIMIT = 0.5 * math.pi
+"""Largest |heading| (rad) a reset option may set."""
+
+RESET_BIAS_LIMIT = 20.0
+"""Largest |bias| (m) a reset option may set (the range of ``markings.hypotheses``)."""
+
+
+def check_reset_options(options: Any, setup: EnvSetup) -> dict[str, Any]:
+    """The reset options, validated and converted (shared validator), before anything is drawn.
+
+    ``options`` is None or a mapping of :data:`RESET_OPTIONS` keys: ``bias``
+    (m, within +-20), ``bias_index`` (0 .. number of hypotheses - 1),
+    ``lateral_offset`` (m, +-30), ``heading`` (rad, +-pi/2), ``speed`` (m/s,
+    0 .. ``vehicle.max_speed``), ``steering`` (rad, within the steering limit).
+
+    Raises:
+        ValueError: naming the option and its allowed range (or that the
+            options are not a mapping); nothing has been drawn or changed.
+    """
+    limit = setup.steering_limit
+    spec = schema(
+        {
+            "bias": Field("number", ABSENT, unit="m", low=-RESET_BIAS_LIMIT, high=RESET_BIAS_LIMIT),
+            "bias_index": Field(
+                "integer", ABSENT, low=0, high=len(setup.hypotheses) - 1,
+                hint="one per markings.hypotheses",
+            ),
+            "lateral_offset": Field(
+                "number", ABSENT, unit="m", low=-RESET_LATERAL_LIMIT, high=RESET_LATERAL_LIMIT
+            ),
+            "heading": Field(
+                "number", ABSENT, unit="rad", low=-RESET_HEADING_LIMIT, high=RESET_HEADING_LIMIT
+            ),
+            "speed": Field("number", ABSENT, unit="m/s", low=0.0, high=setup.params.max_speed),
+            "steering": Field("number", ABSENT, unit="rad", low=-limit, high=limit),
+        }
+    )  # fmt: skip
+    return validate(
+        {} if options is None else options,
+        spec,
+        describe=lambda path: f"reset option '{path}'" if path else "reset options",
+        error=lambda path, message: ValueError(message),
+    )
 
 
 def draw_episode(
@@ -272,12 +312,7 @@ def draw_episode(
     normals for the initial-state randomisation, the first noise block, then
     (only with a disturbance) one uniform phase per disturbance sine.
     """
-    options = dict(options or {})
-    unknown = [k for k in options if k not in RESET_OPTIONS]
-    if unknown:
-        raise ValueError(
-            f"unknown reset option {unknown[0]!r}; allowed: {', '.join(RESET_OPTIONS)}"
-        )
+    options = check_reset_options(options, setup)  # before any draw: a refused reset draws nothing
     u = float(rng.random())
     jitter = rng.standard_normal(3)
     block = draw_noise_block(rng, setup)
@@ -285,19 +320,10 @@ def draw_episode(
     index = next((i for i, c in enumerate(cum) if u < c), len(cum) - 1)
     bias = setup.hypotheses[index]
     if "bias_index" in options:
-        idx = options["bias_index"]
-        if (
-            isinstance(idx, bool)
-            or not isinstance(idx, int | np.integer)
-            or not 0 <= idx < len(setup.hypotheses)
-        ):
-            raise ValueError(
-                f"reset option 'bias_index' = {idx!r} is out of range: allowed integers "
-                f"0..{len(setup.hypotheses) - 1} (one per markings.hypotheses)"
-            )
-        index, bias = int(idx), setup.hypotheses[int(idx)]
+        index = options["bias_index"]
+        bias = setup.hypotheses[index]
     if "bias" in options:
-        bias = _finite_option(options, "bias", -20.0, 20.0)
+        bias = options["bias"]
         matches = [i for i, h in enumerate(setup.hypotheses) if h == bias]
         index = matches[0] if matches else -1
     init = setup.config["initial_state"]
@@ -306,14 +332,10 @@ def draw_episode(
     v = init["speed"] + init["speed_std"] * float(jitter[2])
     v = min(max(v, 0.0), setup.params.max_speed)
     delta = init["steering"]
-    if "lateral_offset" in options:
-        y = _finite_option(options, "lateral_offset", -30.0, 30.0)
-    if "heading" in options:
-        th = _finite_option(options, "heading", -0.5 * math.pi, 0.5 * math.pi)
-    if "speed" in options:
-        v = _finite_option(options, "speed", 0.0, setup.params.max_speed)
-    if "steering" in options:
-        delta = _finite_option(options, "steering", -setup.steering_limit, setup.steering_limit)
+    y = options.get("lateral_offset", y)
+    th = options.get("heading", th)
+    v = options.get("speed", v)
+    delta = options.get("steering", delta)
     phases: list[float] = []
     if setup.disturbance is not None:
         phases = rng.uniform(0.0, 2.0 * math.pi, setup.disturbance.n_phases).tolist()
@@ -371,7 +393,13 @@ def _action_array(action: Any, expected: tuple[int, ...]) -> np.ndarray:
     )
     if isinstance(action, np.ma.MaskedArray):
         raise ValueError(f"{what} must be a plain array of numbers, got a masked array")
-    raw = np.asarray(action)
+    try:
+        raw = np.asarray(action)
+    except (ValueError, TypeError, OverflowError):  # ragged lists, mixed str/bytes, ...
+        raise ValueError(
+            f"{what} must be an array of real numbers of shape {expected} ({layout}), got "
+            f"{type(action).__name__} {action!r:.80}"
+        ) from None
     if raw.dtype.kind not in "iuf":
         raise ValueError(
             f"{what} must be real numbers (int or float), got dtype {raw.dtype} ({action!r:.80})"

@@ -90,11 +90,17 @@ __all__ = [
     "MODEL_FILE_FORMAT",
     "MODEL_TYPES",
     "Design",
+    "ModelDefinitionError",
     "ModelFileError",
     "Regressor",
     "SteeringModel",
     "lagged",
 ]
+
+
+class ModelDefinitionError(ValueError):
+    """A steering model whose definition contradicts itself, e.g. its ``regressors``
+    do not list what its ``design()`` uses; the message names the model and the mismatch."""
 
 
 class SteeringModel(ABC):
@@ -253,6 +259,106 @@ class SteeringModel(ABC):
         """Largest lag of any regressor (samples)."""
         return max((r.lag for r in self.regressors), default=0)
 
+    def check_regressors(self) -> None:
+        """Check that :attr:`regressors` lists exactly the features and lags :meth:`design` uses.
+
+        ``regressors`` is what the rest of the project trusts: the fit's
+        identifiability checks, the estimator's memory and the model file all
+        read it, so a model whose design uses other features or lags would be
+        fitted and ranked on a wrong description. The check perturbs each
+        feature of :data:`FEATURE_NAMES` at one sample of a synthetic features
+        frame and sees which rows of the design's offset and matrix change:
+        a change ``l`` rows later is a use of that feature at lag ``l``. It
+        also checks that the design has one column per parameter. A model
+        whose ``design`` raises ``NotImplementedError`` (one that is not
+        linear in its parameters) is not checked. ``fit`` and
+        :func:`hasa_env.steering.loading.load_model` call it.
+
+        Raises:
+            ModelDefinitionError: naming the model and each mismatch.
+        """
+        label = f"{type(self).__name__} (model_type {self.model_type!r})"
+        declared: dict[str, set[int]] = {}
+        for r in self.regressors:
+            declared.setdefault(r.feature, set()).add(int(r.lag))
+        reach = self.max_lag + 8  # uses up to this many samples beyond the declared lags show
+        n = 2 * reach + 10
+        j = reach + 4  # the perturbed sample
+        rng = np.random.default_rng(20240615)
+        scales = {"delta": 0.02, "phi": 0.05, "omega": 0.05, "lateral_velocity": 0.3}
+        columns = {f: scales.get(f, 1.0) * rng.standard_normal(n) for f in FEATURE_NAMES}
+        columns["speed"] = 15.0 + rng.standard_normal(n)
+        base = pd.DataFrame(columns)
+        base.attrs = {
+            "near_distance": self.near_distance,
+            "far_distance": self.far_distance,
+            "decision_lag": self.decision_lag,
+            "steering": "sensor_steering" if self.steering_signal == "measured" else "steering",
+            "dt": self.dt,
+        }
+
+        def design_of(frame: pd.DataFrame) -> Design | None:
+            try:
+                return self.design(frame)
+            except NotImplementedError:
+                return None
+            except Exception as exc:
+                raise ModelDefinitionError(
+                    f"{label}: design() raised {type(exc).__name__}: {exc} on a features frame "
+                    f"with the columns {list(FEATURE_NAMES)}"
+                ) from exc
+
+        reference = design_of(base)
+        if reference is None:
+            return
+        names = self.parameter_names
+        if reference.matrix.shape[1] != len(names):
+            raise ModelDefinitionError(
+                f"{label}: design() returns {reference.matrix.shape[1]} columns for the "
+                f"{len(names)} parameters {list(names)}; it needs one column per parameter, "
+                "in parameter_names order"
+            )
+
+        def changed(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            same = (a == b) | (np.isnan(a) & np.isnan(b))
+            return ~same if same.ndim == 1 else ~same.all(axis=1)
+
+        problems = []
+        for feature in FEATURE_NAMES:
+            used: set[int] = set()
+            for step in (0.37, -0.61):
+                frame = base.copy()
+                frame.loc[j, feature] += step * scales.get(feature, 1.0) + 1e-3
+                other = design_of(frame)
+                assert other is not None
+                rows = np.flatnonzero(
+                    changed(reference.offset, other.offset)
+                    | changed(reference.matrix, other.matrix)
+                )
+                used |= {int(r) - j for r in rows}
+            wanted = declared.get(feature, set())
+
+            def show(lags: set[int], feature: str = feature) -> str:
+                return ", ".join(
+                    str(Regressor(feature, lag)) if lag >= 0 else f"{feature}(k+{-lag})"
+                    for lag in sorted(lags)
+                )
+
+            if used - wanted:
+                problems.append(
+                    f"design() uses {show(used - wanted)}, which regressors does not list"
+                )
+            if wanted - used:
+                problems.append(
+                    f"regressors lists {show(wanted - used)}, which design() does not use"
+                )
+        if problems:
+            raise ModelDefinitionError(
+                f"{label}: regressors and design() disagree: " + "; ".join(problems) + ". "
+                "regressors must list exactly the features and lags design() reads (the fit's "
+                "checks, the estimator and the model file rely on it)"
+            )
+
     def common_kwargs(self) -> dict[str, Any]:
         """Constructor keywords shared by every model (distances, dt, lag, name)."""
         return {
@@ -391,13 +497,25 @@ class SteeringModel(ABC):
         unidentifiable fit warns (docs/design.md §6.5). ``options``: those of
         :func:`hasa_env.steering.fitting.fit_model` (``ridge``, ``folds``,
         ``sensor_std``, ...).
+
+        Raises:
+            ModelDefinitionError: the model's regressors and design disagree
+                (:meth:`check_regressors`).
         """
+        self.check_regressors()
         return fit_model(self, runs, road=road, **options)  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:
-        """The model as a JSON-able dict (see :meth:`from_dict` for the fields)."""
-        return {
+        """The model as a JSON-able dict (see :meth:`from_dict` for the fields).
+
+        ``class`` names the model's class (``"package.module:ClassName"``) so
+        that :func:`hasa_env.steering.loading.load_model_file` can import a
+        user type's module; it is left out for a class defined in ``__main__``
+        (a script), which no other program can import.
+        """
+        cls = type(self)
+        document: dict[str, Any] = {
             "format": MODEL_FILE_FORMAT,
             "format_version": MODEL_FILE_VERSION,
             "type": self.model_type,
@@ -414,6 +532,9 @@ class SteeringModel(ABC):
             "parameters": self.parameters,
             "standard_errors": self.standard_errors,
         }
+        if cls.__module__ != "__main__" and "<locals>" not in cls.__qualname__:
+            document["class"] = f"{cls.__module__}:{cls.__qualname__}"
+        return document
 
     def to_json(self, indent: int | None = 2) -> str:
         """The model as JSON text (floats written exactly)."""

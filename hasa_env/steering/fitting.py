@@ -95,8 +95,18 @@ class FitChecks:
             (:class:`~hasa_env.steering.identifiability.IdentifiabilityReport.ok`);
             None for a model without an ARX form.
         lane_snr: the report's lane SNR (steering-sensor noise included).
+        feature_collinearity: per feature of the model's regressors (all its
+            lags together), ``1 - R^2`` of its columns regressed on the other
+            features' columns of the standardized training design: how much of
+            it the training data let the fit tell apart from the rest (lags of
+            one feature are collinear by nature and are not compared).
         flags: ``"unstable"``, ``"unidentifiable"``, ``"ill_conditioned"`` (condition
-            number above :data:`ILL_CONDITIONED` and no ridge penalty).
+            number above :data:`ILL_CONDITIONED` and no ridge penalty),
+            ``"collinear_features"`` (a feature's ``1 - R^2`` below
+            :data:`COLLINEAR`: the training data do not separate it from the
+            others, so its coefficients, and what the model predicts where the
+            features vary differently, e.g. at other speeds, are not
+            identified).
     """
 
     condition_number: float
@@ -109,6 +119,7 @@ class FitChecks:
     identifiable: bool | None
     lane_snr: float
     flags: tuple[str, ...]
+    feature_collinearity: dict[str, float] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -127,8 +138,35 @@ class FitChecks:
             "stable": self.stable,
             "identifiable": self.identifiable,
             "lane_snr": self.lane_snr,
+            "feature_collinearity": dict(self.feature_collinearity),
             "flags": list(self.flags),
         }
+
+
+COLLINEAR = 1e-4
+"""``1 - R^2`` of a feature on the others below which the fit flags ``collinear_features``.
+Measured on the paper protocol's training runs (docs/design.md §6.5): a run at constant
+speed leaves phi, Omega and v_y each explained by the others to 1 - R^2 = 2e-7 to 6e-6; a run
+whose speed ramps to 45 m/s, to 8e-3 to 3e-2."""
+
+
+def feature_collinearity(matrix: np.ndarray, features: Sequence[str]) -> dict[str, float]:
+    """``1 - R^2`` of each feature's columns on the other features' columns (see
+    :class:`FitChecks`); a model with one feature gets an empty dict."""
+    if matrix.shape[0] == 0 or len(set(features)) < 2:
+        return {}
+    scale = np.sqrt(np.mean(matrix * matrix, axis=0))
+    Z = matrix / np.where(scale > 0, scale, 1.0)
+    out = {}
+    for feature in dict.fromkeys(features):
+        own = [i for i, f in enumerate(features) if f == feature]
+        others = [i for i, f in enumerate(features) if f != feature]
+        target, basis = Z[:, own], Z[:, others]
+        coefficients, *_ = np.linalg.lstsq(basis, target, rcond=None)
+        residual = target - basis @ coefficients
+        total = float(np.sum(target * target))
+        out[feature] = float(np.sum(residual * residual) / total) if total > 0 else 0.0
+    return out
 
 
 def _stable(model: SteeringModel, solution: LinearSolution) -> bool:
@@ -146,6 +184,7 @@ def _checks(
     report: IdentifiabilityReport | None,
     condition_number: float,
     cv_lambda: float,
+    collinearity: dict[str, float] | None = None,
 ) -> FitChecks:
     arx = fitted.arx()
     poles: tuple[complex, ...] = ()
@@ -163,6 +202,9 @@ def _checks(
         flags.append("unidentifiable")
     if condition_number > ILL_CONDITIONED and solution.ridge_lambda == 0:
         flags.append("ill_conditioned")
+    collinearity = dict(collinearity or {})
+    if any(v < COLLINEAR for v in collinearity.values()):
+        flags.append("collinear_features")
     return FitChecks(
         condition_number=condition_number,
         ridge_lambda=solution.ridge_lambda,
@@ -174,6 +216,7 @@ def _checks(
         identifiable=None if report is None else report.ok,
         lane_snr=float("nan") if report is None else report.lane_snr,
         flags=tuple(flags),
+        feature_collinearity=collinearity,
     )
 
 
@@ -374,13 +417,30 @@ def fit_model(
         residual_std=math.sqrt(solution.sigma2),
         sensor_std=sensor_std,
     )
-    checks = _checks(fitted, solution, report, condition, cv_lambda)
+    try:
+        regressor_features = [r.feature for r in model.regressors]
+    except Exception:  # noqa: BLE001 - a user model's regressors need not match its design
+        regressor_features = []
+    collinearity = (
+        feature_collinearity(X, regressor_features) if len(regressor_features) == p else {}
+    )
+    checks = _checks(fitted, solution, report, condition, cv_lambda, collinearity)
     result = replace(result, identifiability=report, checks=checks)
     fitted.fit_result = result
     if warn:
         if report is not None and not report.ok:
             warnings.warn(
                 f"{model.name} fit: {report.message}", IdentifiabilityWarning, stacklevel=3
+            )
+        collinear = {k: v for k, v in checks.feature_collinearity.items() if v < COLLINEAR}
+        if collinear:
+            shown = ", ".join(f"{k} (1 - R^2 = {v:.1e})" for k, v in collinear.items())
+            warnings.warn(
+                f"{model.name} fit: the training data do not tell {shown} apart from the "
+                "other features: their coefficients are not identified, and predictions where "
+                "the features vary differently (e.g. at other speeds) are extrapolations",
+                IdentifiabilityWarning,
+                stacklevel=3,
             )
         if checks.stable is False:
             warnings.warn(

@@ -1,10 +1,20 @@
-"""Steering models by name or file: what the command-line tools accept as ``--model``.
+"""Steering models by name, file or import path: what the command-line tools accept as ``--model``.
 
-:func:`load_model` takes ``"two-point"`` / ``"generalized"`` (the paper's
-presets, :meth:`TwoPointModel.paper`, :meth:`GeneralizedModel.paper`), the
-path of a saved model file (:meth:`SteeringModel.load`) or
-``"package.module:Name"`` (a model, a model class or a function returning one). The paper's presets
-describe the steering-WHEEL angle of its G29 (docs/design.md §5): in a
+:func:`load_model` takes
+
+- ``"two-point"`` / ``"generalized"``: the paper's presets
+  (:meth:`TwoPointModel.paper`, :meth:`GeneralizedModel.paper`);
+- the path of a saved model file (``model.save("m.json")``, any registered
+  model type, user types included: a file names its class in ``"class"``,
+  e.g. ``"my_pkg.models:NearFarPD"``, and :func:`load_model_file` imports
+  that module when the type is not registered yet);
+- ``"package.module:Name"``: a :class:`SteeringModel` subclass (created
+  without arguments), an instance of one, or a function returning one
+  (:func:`import_model`).
+
+Every model it returns has passed :meth:`SteeringModel.check_regressors`
+(its ``regressors`` list what its ``design()`` uses). The paper's presets
+describe the steering-WHEEL angle of its G29 (docs/design.md §5.8): in a
 recording, which holds road-wheel angles, they apply with a steering ratio of
 15 (:func:`default_steering_ratio`, :func:`in_model_units`).
 """
@@ -12,19 +22,31 @@ recording, which holds road-wheel angles, they apply with a steering ratio of
 from __future__ import annotations
 
 import importlib
+import json
 import os
+import re
+import traceback
+from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from hasa_env.steering.base import SteeringModel
+from hasa_env.steering.model_file import MODEL_TYPES, ModelFileError
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 
 __all__ = [
+    "MODEL_SPEC_FORMS",
     "PAPER_PRESETS",
     "PAPER_STEERING_RATIO",
+    "ModelLoadError",
     "default_steering_ratio",
+    "describe_exception",
+    "import_model",
     "in_model_units",
     "load_model",
+    "load_model_file",
+    "model_spec_kind",
 ]
 
 PAPER_PRESETS = ("two-point", "generalized")
@@ -33,12 +55,187 @@ PAPER_STEERING_RATIO = 15.0
 G29's steering-wheel angle (docs/design.md §5: the generalized preset centres the car at
 15-45 m/s only with a steering ratio of 15)."""
 
+MODEL_SPEC_FORMS = (
+    "'two-point' or 'generalized' (the paper's presets), the path of a saved model file "
+    "(model.save('model.json')), or 'package.module:ClassName' (a SteeringModel subclass)"
+)
+"""What a model spec may be, for messages."""
+
+_IMPORT_PATH = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*")
+_HINT = (
+    "a steering model must subclass hasa_env.steering.SteeringModel "
+    "(README 'Write a steering model', examples/custom_steering_model.py)"
+)
+
+
+class ModelLoadError(ValueError):
+    """A model spec that does not give a usable steering model.
+
+    Attributes:
+        spec: what was asked for; stage: ``"import"`` (module or attribute not
+        found, or the module raised), ``"interface"`` (not a steering model, or
+        its definition contradicts itself) or ``"file"`` (a model file);
+        detail: what went wrong.
+    """
+
+    def __init__(self, spec: str, stage: str, detail: str) -> None:
+        self.spec, self.stage, self.detail = spec, stage, detail
+        super().__init__(f"model {spec!r}: {detail}")
+
+    def __reduce__(self) -> tuple[Any, tuple[str, str, str]]:
+        return (type(self), (self.spec, self.stage, self.detail))
+
+
+def describe_exception(exc: BaseException) -> str:
+    """``Type: message (at file:line in function)``, the line being the innermost frame's."""
+    text = f"{type(exc).__name__}: {exc}"
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<")]
+    if frames:
+        last = frames[-1]
+        text += f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
+    return text
+
+
+def model_spec_kind(spec: str) -> str:
+    """``"preset"``, ``"file"`` or ``"import"``: which form of :data:`MODEL_SPEC_FORMS` ``spec`` is.
+
+    A spec is a file if that path exists or it ends in ``.json``; an import
+    path if it reads ``package.module:Name``.
+
+    Raises:
+        ModelLoadError: it is none of them.
+    """
+    if spec in PAPER_PRESETS:
+        return "preset"
+    if os.path.exists(spec) or spec.lower().endswith(".json"):
+        return "file"
+    if _IMPORT_PATH.fullmatch(spec):
+        return "import"
+    raise ModelLoadError(spec, "import", f"unknown model; use {MODEL_SPEC_FORMS}")
+
+
+def import_model(spec: str) -> SteeringModel:
+    """The steering model ``"package.module:Name"`` names (not checked, maybe unfitted).
+
+    ``Name`` (dots allowed for nested attributes) may be a
+    :class:`SteeringModel` subclass (created without arguments), an instance
+    of one, or a function returning one. The module is imported from the
+    installed packages and ``sys.path`` (the command-line tools add the
+    working directory).
+
+    Raises:
+        ModelLoadError: stage ``"import"`` or ``"interface"``, naming ``spec``.
+    """
+    if not isinstance(spec, str) or not _IMPORT_PATH.fullmatch(spec):
+        raise ModelLoadError(
+            str(spec),
+            "import",
+            "expected 'package.module:ClassName' (a module path, a colon, a name in the module)",
+        )
+    module_name, attribute = spec.split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # noqa: BLE001 - any error in the user's module
+        raise ModelLoadError(
+            spec, "import", f"cannot import module {module_name!r}: {describe_exception(exc)}"
+        ) from None
+    obj: Any = module
+    for part in attribute.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ModelLoadError(
+                spec, "import", f"module {module_name!r} has no attribute {attribute!r}"
+            ) from None
+    if isinstance(obj, SteeringModel):
+        return obj
+    if isinstance(obj, type):
+        if not issubclass(obj, SteeringModel):
+            raise ModelLoadError(
+                spec, "interface", f"{obj.__qualname__} is not a SteeringModel; {_HINT}"
+            )
+        try:
+            return obj()
+        except TypeError as exc:
+            raise ModelLoadError(
+                spec,
+                "interface",
+                f"cannot create {obj.__qualname__}() without arguments: {describe_exception(exc)}",
+            ) from None
+        except Exception as exc:  # noqa: BLE001
+            raise ModelLoadError(
+                spec, "interface", f"{obj.__qualname__}() raised {describe_exception(exc)}"
+            ) from None
+    if callable(obj):
+        try:
+            model = obj()
+        except Exception as exc:  # noqa: BLE001
+            raise ModelLoadError(
+                spec, "interface", f"{attribute}() raised {describe_exception(exc)}"
+            ) from None
+        if not isinstance(model, SteeringModel):
+            raise ModelLoadError(
+                spec, "interface", f"{attribute}() returned {type(model).__name__}; {_HINT}"
+            )
+        return model
+    raise ModelLoadError(spec, "interface", f"{attribute} is a {type(obj).__name__}; {_HINT}")
+
+
+def load_model_file(path: str | os.PathLike[str]) -> SteeringModel:
+    """Read a saved model file of any registered type (user types included).
+
+    If the file's ``"type"`` is not registered yet and the file names its
+    class (``"class": "package.module:ClassName"``, written by
+    :meth:`SteeringModel.save`), that module is imported first, which
+    registers the type. Only the module is imported; nothing in the file is
+    executed.
+
+    Raises:
+        ModelFileError: the file cannot be read or is invalid (naming the
+            file and the field), or its class's module does not register the type.
+    """
+    source = os.fspath(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ModelFileError(f"{source}: no such model file") from None
+    except IsADirectoryError:
+        raise ModelFileError(f"{source}: is a directory, not a model file") from None
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(f"{source}: not a UTF-8 text file ({exc.reason})") from None
+    try:
+        document = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(
+            f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
+    if isinstance(document, dict):
+        model_type, cls = document.get("type"), document.get("class")
+        if isinstance(model_type, str) and model_type not in MODEL_TYPES and isinstance(cls, str):
+            module_name = cls.split(":")[0]
+            try:
+                importlib.import_module(module_name)
+            except Exception as exc:  # noqa: BLE001 - any error in the user's module
+                raise ModelFileError(
+                    f"{source}: model type {model_type!r} is not registered and its class's "
+                    f"module {module_name!r} (field 'class' = {cls!r}) cannot be imported: "
+                    f"{describe_exception(exc)}"
+                ) from None
+            if model_type not in MODEL_TYPES:
+                raise ModelFileError(
+                    f"{source}: importing {module_name!r} (field 'class' = {cls!r}) did not "
+                    f"register the model type {model_type!r}; registered: "
+                    f"{', '.join(sorted(MODEL_TYPES))}"
+                )
+    return SteeringModel.from_json(document, source)
+
 
 def default_steering_ratio(spec: str, fitted: bool) -> float:
     """Steering ratio (model units per recorded road-wheel radian) for a model given by ``spec``.
 
     The paper's presets (not refitted) work in steering-wheel units: 15; a model
-    fitted on recordings, or loaded from a file, is taken to work in road-wheel units: 1.
+    fitted on recordings, loaded from a file or imported is taken to work in
+    road-wheel units: 1.
     """
     return PAPER_STEERING_RATIO if spec in PAPER_PRESETS and not fitted else 1.0
 
@@ -54,46 +251,25 @@ def in_model_units(frame: pd.DataFrame, steering_ratio: float) -> pd.DataFrame:
 
 
 def load_model(spec: str, dt: float = 0.01) -> SteeringModel:
-    """A steering model: ``two-point`` / ``generalized`` (paper presets), a saved model file,
-    or ``package.module:Name``.
+    """A steering model from any form of :data:`MODEL_SPEC_FORMS`, checked.
 
     ``dt`` (s) is the sample time the two-point preset is built for (its
     integral term depends on it); the generalized preset's coefficients
-    belong to Ts = 0.01 s whatever ``dt`` is, and a file carries its own.
+    belong to Ts = 0.01 s whatever ``dt`` is, and a file or an imported model
+    carries its own. An imported model may be unfitted (``model.is_fitted``).
+
+    Raises:
+        ModelLoadError: an unknown spec, a module or class that does not
+            give a steering model, or one whose regressors and design
+            disagree (:meth:`SteeringModel.check_regressors`).
+        ModelFileError: a model file that cannot be read (naming the field).
     """
-    if spec == "two-point":
-        return TwoPointModel.paper(dt=dt)
-    if spec == "generalized":
-        return GeneralizedModel.paper()
-    if os.path.exists(spec):
-        return SteeringModel.load(spec)
-    if spec.count(":") == 1 and all(spec.split(":")):
-        return _import_model(spec)
-    raise ValueError(
-        f"unknown model {spec!r}: use 'two-point', 'generalized', the path of a saved model file "
-        "or 'package.module:Name'"
-    )
-
-
-def _import_model(spec: str) -> SteeringModel:
-    """The model named by ``"package.module:Name"``: a :class:`SteeringModel` instance, a
-    subclass (created without arguments) or a function returning one."""
-    module_name, attribute = spec.split(":")
+    kind = model_spec_kind(spec)
+    if kind == "preset":
+        return TwoPointModel.paper(dt=dt) if spec == "two-point" else GeneralizedModel.paper()
+    model = load_model_file(spec) if kind == "file" else import_model(spec)
     try:
-        obj = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise ValueError(f"model {spec!r}: cannot import module {module_name!r} ({exc})") from None
-    for part in attribute.split("."):
-        if not hasattr(obj, part):
-            raise ValueError(f"model {spec!r}: module {module_name!r} has no {attribute!r}")
-        obj = getattr(obj, part)
-    if isinstance(obj, type) and issubclass(obj, SteeringModel):
-        obj = obj()
-    elif callable(obj) and not isinstance(obj, SteeringModel):
-        obj = obj()
-    if not isinstance(obj, SteeringModel):
-        raise ValueError(
-            f"model {spec!r} is a {type(obj).__name__}, not a hasa_env.steering.SteeringModel "
-            "(see examples/custom_steering_model.py)"
-        )
-    return obj
+        model.check_regressors()
+    except ValueError as exc:
+        raise ModelLoadError(spec, "interface", str(exc)) from None
+    return model

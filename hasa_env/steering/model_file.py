@@ -7,13 +7,17 @@ object with ``format`` (= ``"hasa_env.steering_model"``), ``format_version``
 ``model_type`` in :data:`MODEL_TYPES` when it is defined), ``name``, ``dt``
 (s), ``features`` (near/far distances in m, decision lag, the regressors),
 ``structure`` (the model's keyword arguments, e.g. its orders),
-``parameters`` and ``standard_errors``. :func:`model_from_dict` validates
-every field through the shared validator (:mod:`hasa_env.validation`) and
-names the file, the field and the allowed values.
+``parameters``, ``standard_errors`` and, optionally, ``class``
+(``"package.module:ClassName"``, so that
+:func:`hasa_env.steering.loading.load_model_file` can import a user type's
+module). :func:`model_from_dict` validates every field through the shared
+validator (:mod:`hasa_env.validation`) and names the file, the field and the
+allowed values.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -66,16 +70,32 @@ _STANDARD_ERRORS = Field(
 )  # fmt: skip
 
 
-def _schema() -> Field:
-    """The fields of a model file; the allowed ``type`` values are the types registered now."""
+CLASS_PATH = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*")
+"""What the ``class`` field holds: ``package.module:ClassName``."""
+
+
+def _schema(cls: str | None = None) -> Field:
+    """The fields of a model file; the allowed ``type`` values are the types registered now
+    (``cls``: the file's ``class`` field, named in the hint of an unregistered type)."""
+    where = f" ({cls})" if cls else ""
     return schema(
         {
             "format": Field("choice", choices=(MODEL_FILE_FORMAT,)),
             "format_version": version(MODEL_FILE_VERSION, default=MODEL_FILE_VERSION),
+            "class": Field(
+                "string",
+                None,
+                "The model's class, for importing a user type's module.",
+                optional=True,
+                pattern=CLASS_PATH,
+                pattern_doc="package.module:ClassName",
+            ),  # fmt: skip
             "type": Field(
                 "choice",
                 choices=tuple(sorted(MODEL_TYPES)),
-                hint="a custom model's class must be defined (imported) before loading its file",
+                hint=f"a custom model's class{where} must be defined (imported) before loading "
+                "its file; hasa_env.steering.loading.load_model_file imports the module its "
+                "'class' field names",
             ),
             "name": Field("string", None, "Label of the model (default: its type)."),
             "dt": Field(
@@ -109,9 +129,10 @@ def model_from_dict(
     def fail(path: str, message: str) -> ModelFileError:
         return ModelFileError(f"{source}: {message}")
 
+    cls = document.get("class") if isinstance(document, Mapping) else None
     doc = validate(
         document,
-        _schema(),
+        _schema(cls if isinstance(cls, str) else None),
         describe=lambda path: f"field '{path}'" if path else "the document",
         error=fail,
     )

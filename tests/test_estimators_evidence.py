@@ -1,0 +1,148 @@
+"""The evidence checks of the mixture filter (estimators.evidence; docs/design.md §8.11)."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from estimators.evidence import (
+    DECIDED,
+    DECISIONS,
+    MODEL_MISMATCH,
+    UNDECIDED,
+    EvidenceRule,
+    initial_evidence_state,
+    weigh_evidence,
+)
+from estimators.settings import FilterSettings
+from estimators.wrappers import EstimatorInfoWrapper, estimate_info_keys
+from hasa_env.steering import GeneralizedModel
+
+DT = 0.01
+
+
+def _rule(**overrides) -> EvidenceRule:
+    return EvidenceRule.from_settings(FilterSettings(**overrides), DT)
+
+
+def _run(rule, log_lik, score, prior=(0.5, 0.5)):
+    """Weights over T steps of a single two-hypothesis run: log_lik, score (T, 2)."""
+    log_w = np.log(np.asarray(prior, dtype=np.float64))[None]
+    state = initial_evidence_state(log_w)
+    weights, decisions, scales = [], [], []
+    for k in range(len(log_lik)):
+        log_w, state, stats = weigh_evidence(rule, log_w, log_lik[k][None], score[k][None], state)
+        weights.append(np.exp(log_w[0]))
+        decisions.append(int(stats["decision"][0]))
+        scales.append(float(stats["evidence_scale"][0]))
+    return np.array(weights), np.array(decisions), np.array(scales)
+
+
+def _ar1(rng, n, rho):
+    e = rng.standard_normal(n)
+    out = np.empty(n)
+    out[0] = e[0]
+    for k in range(1, n):
+        out[k] = rho * out[k - 1] + math.sqrt(1 - rho * rho) * e[k]
+    return out
+
+
+def test_autocorrelated_uninformative_innovations_do_not_decide_a_lane():
+    # both hypotheses see the same AR(1) innovation (rho 0.95) plus a small, slowly
+    # wandering difference with no sign: the raw eq. 19 piles it up into a verdict
+    rng = np.random.default_rng(1)
+    n = 3000
+    u = _ar1(rng, n, 0.95)
+    wander = 0.3 * _ar1(rng, n, 0.999)
+    score = np.stack([u, u + wander], axis=1)
+    log_lik = -0.5 * score * score
+    raw, _, _ = _run(_rule(evidence_checks=False), log_lik, score)
+    checked, decisions, scales = _run(_rule(), log_lik, score)
+    assert raw[-1].max() > 0.999  # teeth: without the checks it ends "sure"
+    assert checked[-1].max() < 0.95 and decisions[-1] == UNDECIDED
+    assert np.median(scales[500:]) > 10  # (1 + 0.95) / (1 - 0.95) = 39
+
+
+def test_consistent_evidence_decides_at_the_raw_rate():
+    # white innovations, the true hypothesis' consistent, the wrong one's offset by 0.5 sigma
+    rng = np.random.default_rng(2)
+    n = 1000
+    u = rng.standard_normal(n)
+    score = np.stack([u, u + 0.5], axis=1)
+    log_lik = -0.5 * score * score
+    checked, decisions, scales = _run(_rule(), log_lik, score)
+    assert np.median(scales[500:]) < 1.3  # (early, rho's estimate is noisy)
+    assert decisions[-1] == DECIDED and checked[-1, 0] > 0.999
+
+
+def test_a_model_mismatch_freezes_the_weights():
+    rng = np.random.default_rng(3)
+    n = 1500
+    u = rng.standard_normal(n)
+    good = np.stack([u, u + 0.5], axis=1)
+    # then a model that fits neither hypothesis (lambda about 100) and favours the wrong one
+    bad = 10.0 * np.stack([u + 0.5, u], axis=1)
+    score = np.concatenate([good, bad])
+    log_lik = -0.5 * score * score
+    weights, decisions, _ = _run(_rule(), log_lik, score)
+    assert decisions[n - 1] == DECIDED and weights[n - 1, 0] > 0.999
+    assert decisions[-1] == MODEL_MISMATCH
+    assert weights[-1, 0] > 0.99  # the evidence gathered while the model fitted stays
+    raw, _, _ = _run(_rule(evidence_checks=False), log_lik, score)
+    assert raw[-1, 1] > 0.99  # teeth: eq. 19 follows the bad model to the wrong lane
+
+
+def test_a_model_that_never_fits_leaves_the_weights_at_the_prior():
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal(2000)
+    score = 5.0 * np.stack([u, u + 0.3], axis=1)  # lambda about 25 on both
+    weights, decisions, _ = _run(_rule(), -0.5 * score * score, score)
+    assert decisions[-1] == MODEL_MISMATCH
+    assert abs(weights[-1, 0] - 0.5) < 0.2  # (only the first window's evidence entered)
+
+
+def test_a_wrong_early_decision_is_reversible():
+    # first 3 s favour hypothesis 1, then 20 s of evidence for hypothesis 0
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal(2300)
+    score = np.where(np.arange(2300)[:, None] < 300, [[1.0, 0.0]], [[0.0, 1.0]])
+    score = score + u[:, None]
+    log_lik = -0.5 * score * score
+    weights, _, _ = _run(_rule(), log_lik, score)  # nothing is pruned: it comes back
+    assert weights[299, 1] > 0.999 and weights[-1, 0] > 0.999
+    floored, _, _ = _run(_rule(weight_floor=1e-12, forgetting_time=20.0), log_lik, score)
+    assert floored[299, 1] > 0.999 and floored[-1, 0] > 0.999
+    assert floored.min() >= 1e-12 * 0.999  # the floor
+    back = np.argmax(weights[300:, 0] > 0.5)
+    assert np.argmax(floored[300:, 0] > 0.5) < back  # the floor shortens the way back
+
+
+def test_missing_steering_does_not_move_the_statistics():
+    log_w = np.log(np.array([[0.5, 0.5]]))
+    state = initial_evidence_state(log_w)
+    new_log_w, new_state, stats = weigh_evidence(
+        _rule(), log_w, np.zeros((1, 2)), np.full((1, 2), np.nan), state
+    )
+    assert new_state["_evidence_weight"][0] == 0.0 and np.isnan(stats["model_error"][0])
+    np.testing.assert_allclose(new_log_w, log_w)
+
+
+@pytest.mark.slow
+def test_the_wrappers_report_the_decision_state():
+    arx = GeneralizedModel.paper().arx()
+    from estimators.gm_ekf import GaussianMixtureEKF
+
+    env = EstimatorInfoWrapper(
+        gym.make("hasa_env/LaneKeeping-v0"), GaussianMixtureEKF(arx, steering_ratio=1.0)
+    )
+    _, info = env.reset(seed=0)
+    assert set(estimate_info_keys()) <= set(info)
+    assert info["estimate_decision"] in DECISIONS
+    assert info["estimate_decision_code"] == DECISIONS.index(info["estimate_decision"])
+    for _ in range(200):
+        _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    assert isinstance(info["estimate_decision"], str)
+    assert info["estimate_evidence_scale"] >= 1.0

@@ -1,0 +1,340 @@
+"""Study files, schedules, session files and the study session (headless, virtual wheel)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _input_helpers import virtual_or_skip
+
+from hasa_env.devices import InputManager, JoystickCalibration
+from hasa_env.devices.calibration import shipped_calibration
+from hasa_env.devices.virtual import VirtualJoystick
+from hasa_env.drivers import SyntheticDriver, population
+from hasa_env.recording import load_recording
+from hasa_env.session import (
+    DriveSettings,
+    SessionError,
+    SessionFile,
+    Study,
+    StudyError,
+    StudySession,
+    VirtualWheelDriver,
+)
+from hasa_env.session.study import participant_slot, williams_square
+
+PAPER = Path(__file__).resolve().parents[1] / "studies" / "paper.toml"
+
+
+def small(**sections) -> Study:
+    doc = {
+        "study": {"name": "small", "seed": 3},
+        "runs": {"seconds": 1.0, "countdown": 0.0},
+        "practice": {"runs": 1},
+        "measured": {"runs": 4},
+    }
+    for key, value in sections.items():
+        doc[key] = {**doc.get(key, {}), **value}
+    return Study.from_dict(doc)
+
+
+def write(tmp_path: Path, text: str, name: str = "study.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+# ------------------------------------------------------------------ study files
+def test_the_paper_study_is_the_papers_protocol():
+    study = Study.load(PAPER)
+    doc = study.document
+    assert doc["measured"]["runs"] == 10 and doc["runs"]["seconds"] == 30.0
+    assert doc["runs"]["speed"] == 15.0 and doc["runs"]["lateral_offset"] == -0.5
+    assert doc["runs"]["speed_control"] == "free" and doc["runs"]["min_speed"] > 0  # no stopping
+    assert study.hypotheses == [0.0, -1.8]  # two lane hypotheses 1.8 m apart
+    assert study.view_options.ghosts is False and study.view_options.hud == ()
+    config = study.env_config("straight")
+    assert config["time_limit"] == 30.0 and config["track"] == "straight"
+    runs = study.schedule_for("P07", None, study.seed)
+    measured = [r for r in runs if r.block == "measured"]
+    assert len(measured) == 10 and Counter(r.bias for r in measured) == {0.0: 5, -1.8: 5}
+    assert all(r.track == "straight" for r in runs)
+    options = study.reset_options(measured[0])
+    assert options == {"lateral_offset": -0.5, "heading": 0.0, "speed": 15.0, "steering": 0.0,
+                       "bias": measured[0].bias}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("seconds = 30.0", "seconds = -3.0",
+         r"study.toml, line \d+: key 'runs.seconds' = -3.0 is out of range: allowed \(0, 3600\] s"),
+        ('kind = "latin_square"', 'kind = "latin"',
+         r"line \d+: key 'schedule.kind' = 'latin' is not allowed: one of 'latin_square'"),
+        ("break_every = 5", "break_evry = 5",
+         r"unknown key 'measured.break_evry' \(allowed keys here: break_every, break_seconds"),
+        ("markings.hypotheses = [0.0, -1.8]", "markings.hypotheses = [0.0, -31.8]",
+         r"line \d+: in \[env\]: config key 'markings.hypotheses\[1\]' = -31.8 is out of range"),
+        ("[participant.age_band]", "[participant.name]",
+         r"participant field 'name' would identify the participant"),
+        ("min_speed = 10.0", "min_speed = 20.0",
+         r"'runs.min_speed' = 20 m/s is above the start speed runs.speed = 15 m/s"),
+        ("break_every = 5", "break_every = 5 5", r"not valid TOML: .*\(at line \d+, column \d+\)"),
+        ("[env]", "[env]\ntrack = 'curved'", r"'env.track' is set by practice.track"),
+        ('hud = []', 'hud = ["clock"]', r"key 'view.hud' has the unknown item 'clock'"),
+    ],
+)  # fmt: skip
+def test_bad_study_files_name_file_line_key_and_range(tmp_path, old, new, message):
+    text = PAPER.read_text()
+    assert old in text
+    path = write(tmp_path, text.replace(old, new, 1))
+    with pytest.raises(StudyError, match=message):
+        Study.load(path)
+
+
+def test_the_line_named_is_the_keys_line(tmp_path):
+    text = PAPER.read_text().replace("seconds = 30.0", "seconds = -3.0")
+    line = next(i for i, t in enumerate(text.splitlines(), 1) if t.startswith("seconds = -3"))
+    with pytest.raises(StudyError, match=rf"study.toml, line {line}: key 'runs.seconds'"):
+        Study.load(write(tmp_path, text))
+
+
+def test_json_study_files_and_missing_files(tmp_path):
+    path = write(tmp_path, json.dumps({"study": {"name": "j", "seed": 1}}), "s.json")
+    study = Study.load(path)
+    assert study.document["measured"]["runs"] == 10 and study.sha256
+    with pytest.raises(StudyError, match=r"s2.json, line 1: not valid JSON"):
+        Study.load(write(tmp_path, "{nope", "s2.json"))
+    with pytest.raises(StudyError, match="no such study file"):
+        Study.load(tmp_path / "missing.toml")
+    with pytest.raises(StudyError, match=r"key 'study.name' must be a string .*letters, digits"):
+        Study.from_dict({"study": {"name": "../x"}})
+    with pytest.raises(StudyError, match="key 'study' is missing"):
+        Study.from_dict({})
+
+
+def test_participant_metadata_is_checked():
+    study = Study.load(PAPER)
+    answers = study.check_metadata({"age_band": "25-34", "licence_years": "12",
+                                    "simulator_experience": "none"})  # fmt: skip
+    assert answers == {"age_band": "25-34", "licence_years": 12, "simulator_experience": "none"}
+    with pytest.raises(StudyError, match=r"'age_band' = '30' is not allowed: one of '18-24'"):
+        study.check_metadata({**answers, "age_band": "30"})
+    with pytest.raises(
+        StudyError, match=r"'licence_years' = 90 is out of range: allowed \[0, 80\]"
+    ):
+        study.check_metadata({**answers, "licence_years": "90"})
+    with pytest.raises(StudyError, match="'licence_years' must be an integer, got '1.5'"):
+        study.check_metadata({**answers, "licence_years": "1.5"})
+    with pytest.raises(StudyError, match="participant field 'age_band' is required"):
+        study.check_metadata({"licence_years": 3, "simulator_experience": "some"})
+    with pytest.raises(StudyError, match="unknown participant field 'name'"):
+        study.check_metadata({**answers, "name": "Ann"})
+    (field,) = [f for f in study.participant_fields if f.key == "licence_years"]
+    assert field.question() == "Years since the driving licence (an integer in [0, 80] years): "
+
+
+# -------------------------------------------------------------------- schedules
+def test_williams_squares_are_balanced():
+    for n in (2, 3, 4, 5):
+        rows = williams_square(n)
+        assert len(rows) == (n if n % 2 == 0 else 2 * n)
+        assert all(sorted(r) == list(range(n)) for r in rows)  # each row a permutation
+        for position in range(n):  # each treatment equally often at each position
+            assert len(set(Counter(r[position] for r in rows).values())) == 1
+        pairs = Counter((r[i], r[i + 1]) for r in rows for i in range(n - 1))
+        assert len(pairs) == n * (n - 1) and len(set(pairs.values())) == 1  # carry-over
+
+
+def test_schedules_balance_biases_within_and_across_participants():
+    study = small(measured={"runs": 4})
+    first = [r.bias for r in study.schedule_for("P01", None, 3) if r.block == "measured"]
+    second = [r.bias for r in study.schedule_for("P02", None, 3) if r.block == "measured"]
+    assert first == [0.0, -1.8, 0.0, -1.8] and second == [-1.8, 0.0, -1.8, 0.0]
+    assert participant_slot("P07") == 7 and participant_slot("anon") is None
+    with pytest.raises(StudyError, match="needs the participant's number: .* --slot N"):
+        study.schedule_for("anon", None, 3)
+    assert study.schedule_for("anon", 2, 3)[1].bias == -1.8
+    counter = small(schedule={"kind": "counterbalanced"}, measured={"runs": 6})
+    for who in ("P01", "P02", "P03"):
+        biases = [r.bias for r in counter.schedule_for(who, None, 3) if r.block == "measured"]
+        assert Counter(biases) == {0.0: 3, -1.8: 3}
+    random = small(schedule={"kind": "random"}, measured={"runs": 20})
+    drawn = [r.bias for r in random.schedule_for("x", None, 3)]
+    assert drawn == [r.bias for r in random.schedule_for("x", None, 3)]  # reproducible
+    assert drawn != [r.bias for r in random.schedule_for("y", None, 3)]
+    fixed = small(schedule={"kind": "fixed", "order": [-1.8, -1.8, 0.0, 0.0]})
+    assert [r.bias for r in fixed.schedule_for("x", None, 3)][1:] == [-1.8, -1.8, 0.0, 0.0]
+    with pytest.raises(StudyError, match=r"'schedule.order' has 2 biases for measured.runs = 4"):
+        small(schedule={"kind": "fixed", "order": [0.0, 0.0]})
+    with pytest.raises(StudyError, match=r"'schedule.order\[0\]' = -1 is not allowed: one of"):
+        small(schedule={"kind": "fixed", "order": [-1.0, 0.0, 0.0, 0.0]})
+
+
+def test_run_seeds_depend_on_study_seed_participant_and_position():
+    study = small()
+    a = study.schedule_for("P01", None, 3)
+    assert [r.seed for r in a] == [r.seed for r in study.schedule_for("P01", None, 3)]
+    assert len({r.seed for r in a}) == len(a)
+    assert a[0].seed != study.schedule_for("P02", None, 3)[0].seed
+    assert a[0].seed != study.schedule_for("P01", None, 4)[0].seed
+    assert [r.prefix for r in a] == ["practice_01"] + [f"measured_0{i}" for i in range(1, 5)]
+
+
+def test_no_stopping_and_constant_speed():
+    free = DriveSettings(participant="p", min_speed=10.0)
+    assert free.applied_acceleration(-5.0, 15.0, 0.01) == -5.0
+    assert free.applied_acceleration(-5.0, 10.02, 0.01) == pytest.approx(-2.0)  # stops at 10
+    assert free.applied_acceleration(-5.0, 10.0, 0.01) == 0.0
+    assert free.applied_acceleration(2.0, 9.0, 0.01) == 2.0  # throttle is free below too
+    constant = DriveSettings(participant="p", speed_control="constant")
+    assert constant.applied_acceleration(3.0, 15.0, 0.01) == 0.0
+    with pytest.raises(ValueError, match="'speed_control' = 'cruise' is not allowed"):
+        DriveSettings(participant="p", speed_control="cruise")
+
+
+# ------------------------------------------------------------------ session file
+def test_session_file_recovery_and_lock(tmp_path):
+    study = small()
+    schedule = study.schedule_for("P01", None, 3)
+    record = SessionFile.create(tmp_path / "P01", study, "P01", 1, {}, 3, schedule)
+    with pytest.raises(SessionError, match="a session file exists already"):
+        SessionFile.create(tmp_path / "P01", study, "P01", 1, {}, 3, schedule)
+    a = record.start_attempt(schedule[0], "keyboard")
+    record.finish_attempt(a, "truncated", 100)
+    b = record.start_attempt(schedule[1], "keyboard")
+    assert [r.position for r in record.remaining()] == [2, 3, 4, 5]
+    again = SessionFile.open(record.path)  # as a new process finds it after a kill
+    (marked,) = again.recover()
+    assert marked["status"] == "aborted" and marked["end_reason"] == "interrupted"
+    assert [r.position for r in again.remaining()] == [2, 3, 4, 5]  # repeat_aborted
+    again.doc["study"]["spec"]["runs"]["repeat_aborted"] = False
+    assert [r.position for r in again.remaining()] == [3, 4, 5]  # or go on after it
+    assert b["position"] == 2
+    # the lock: a live process holds it, a dead one's is taken over
+    lock = again.lock_path
+    lock.write_text("1 otherhost\n")  # pid 1 is alive
+    with pytest.raises(SessionError, match=r"another program \(process 1\) is running"):
+        again.acquire()
+    lock.write_text(f"{2**22 + 12345} gone\n")
+    again.acquire()
+    assert lock.read_text().split()[0] == str(os.getpid())
+    again.release()
+    assert not lock.exists()
+    record.path.write_text('{"format": "hasa_env.study_session", "format_version": 2}')
+    with pytest.raises(SessionError, match="field 'format_version' = 2 is not allowed"):
+        SessionFile.open(record.path)
+
+
+# ------------------------------------------------------------- study sessions
+def _wheel_session(tmp_path, pg, study, participant="P01", hook_extra=None, **kw):
+    wheel = virtual_or_skip(VirtualJoystick.g29)
+    g29 = shipped_calibration("g29")
+    fields = {k: getattr(g29, k) for k in g29.__dataclass_fields__ if k != "device"}
+    profile = JoystickCalibration(**{**fields, "match_names": (wheel.name,)})
+    inputs = InputManager(profiles=[profile], pygame_module=pg)
+    params = {p.name: p for p in population("paper", seed=0)}["2"]
+    driver = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
+
+    def hook(session):
+        driver(session)
+        if hook_extra is not None:
+            hook_extra(session)
+
+    session = StudySession(study, participant, inputs, output=tmp_path, realtime=False,
+                           hook=hook, log=lambda m: None, **kw)  # fmt: skip
+    return session, wheel
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_a_stopped_session_resumes_at_the_next_run_and_overwrites_nothing(tmp_path, pg):
+    study = small(runs={"seconds": 1.0, "min_speed": 14.9})
+    stop = {"done": False}
+
+    def escape_in_measured_run_2(session):
+        if (not stop["done"] and session.state == "driving" and session.run_index == 2
+                and session.steps == 40):  # fmt: skip
+            pg.event.post(pg.event.Event(pg.KEYDOWN, key=pg.K_ESCAPE, mod=0))
+            stop["done"] = True
+
+    session, wheel = _wheel_session(tmp_path, pg, study, hook_extra=escape_in_measured_run_2)
+    try:
+        outcome = session.run()
+    finally:
+        session.close()
+        wheel.detach()
+    assert outcome.state == "quit" and not outcome.resumed
+    folder = tmp_path / "P01"
+    kept = {p.name: _digest(p) for p in folder.iterdir() if p.suffix in (".csv", ".json", ".tsv")
+            and p.name != "session.json"}  # fmt: skip
+    assert "measured_02_000.csv" in kept
+    stopped = load_recording(folder / "measured_02_000.csv")
+    assert stopped.steps == 40 and stopped.meta["end_reason"] == "stopped"
+    meta = stopped.meta["metadata"]
+    assert meta["study"]["block"] == "measured" and meta["study"]["number"] == 2
+    assert meta["view"]["ghosts"] is False and meta["participant"] == "P01"
+    assert stopped.meta["reset_options"]["bias"] == meta["study"]["bias"] == -1.8
+
+    session, wheel = _wheel_session(tmp_path, pg, study)
+    try:
+        resumed = session.run()
+    finally:
+        session.close()
+        wheel.detach()
+    assert resumed.state == "complete" and resumed.resumed
+    assert [r.path.name for r in resumed.results] == [
+        "measured_02_001.csv", "measured_03_000.csv", "measured_04_000.csv"]  # fmt: skip
+    for name, digest in kept.items():  # nothing recorded before was touched
+        assert _digest(folder / name) == digest, name
+    doc = json.loads((folder / "session.json").read_text())
+    statuses = [(a["block"], a["number"], a["attempt"], a["status"], a["end_reason"])
+                for a in doc["attempts"]]  # fmt: skip
+    assert statuses == [
+        ("practice", 1, 0, "completed", "truncated"),
+        ("measured", 1, 0, "completed", "truncated"),
+        ("measured", 2, 0, "aborted", "stopped"),
+        ("measured", 2, 1, "completed", "truncated"),
+        ("measured", 3, 0, "completed", "truncated"),
+        ("measured", 4, 0, "completed", "truncated"),
+    ]
+    assert doc["state"] == "complete" and [s["ended"] for s in doc["sessions"]] == [
+        "quit",
+        "complete",
+    ]
+    assert doc["sessions"][0]["devices"]["source_at_start"].startswith("joystick:")
+    assert doc["sessions"][1]["resumed"] is True
+    # the repeated run is the same run: same seed, same bias, same start
+    again = load_recording(folder / "measured_02_001.csv")
+    assert again.meta["seed"] == stopped.meta["seed"] and again.steps == 100
+    # no stopping: the brake never took the car below min_speed
+    speeds = np.concatenate([load_recording(folder / a["file"]).data["speed"].to_numpy()
+                             for a in doc["attempts"]])  # fmt: skip
+    assert speeds.min() >= 14.9 - 1e-9
+    assert not (folder / "session.lock").exists()
+
+
+def test_a_changed_study_file_does_not_resume(tmp_path, pg):
+    path = write(tmp_path, '[study]\nname = "s"\nseed = 1\n[runs]\nseconds = 0.2\n'
+                 "countdown = 0.0\n[measured]\nruns = 1\n")  # fmt: skip
+    session, wheel = _wheel_session(tmp_path, pg, Study.load(path))
+    try:
+        assert session.run().state == "complete"
+        path.write_text(path.read_text().replace("seconds = 0.2", "seconds = 0.3"))
+        changed = StudySession(Study.load(path), "P01", session.inputs, output=tmp_path,
+                               realtime=False, log=lambda m: None)  # fmt: skip
+        with pytest.raises(SessionError, match="the study file changed since this session"):
+            changed.run()
+        other = StudySession(Study.load(path), "P02", session.inputs, output=tmp_path,
+                             realtime=False, log=lambda m: None)  # fmt: skip
+        assert other.open()[1] is False  # another participant starts afresh
+    finally:
+        session.close()
+        wheel.detach()

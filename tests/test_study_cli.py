@@ -1,0 +1,202 @@
+"""``hasa-drive study`` end to end: a scripted study (virtual G29, synthetic participants),
+a session killed with SIGKILL and resumed, then ``hasa-bench paper --recordings`` on it;
+under a real X window (Xvfb) where available."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hasa_cli.bench import main as bench_main
+from hasa_cli.drive import EXIT_NO_SCREEN
+from hasa_cli.drive import main as drive_main
+from hasa_cli.study import StatusLine
+from hasa_env.recording import load_recording
+
+STUDY = """
+format_version = 1
+[study]
+name = "scripted"
+seed = 11
+[participant.age_band]
+choices = ["18-24", "25-34"]
+[runs]
+seconds = {seconds}
+countdown = 0.2
+min_speed = 12.0
+[practice]
+runs = 1
+[measured]
+runs = 3
+break_every = 2
+break_seconds = 0.3
+[schedule]
+kind = "latin_square"
+[env]
+markings.hypotheses = [0.0, -1.8]
+"""
+HEADLESS = {**os.environ, "SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}
+
+
+def _study(tmp_path: Path, seconds: float) -> Path:
+    path = tmp_path / "study.toml"
+    path.write_text(STUDY.format(seconds=seconds))
+    return path
+
+
+def _digests(folder: Path) -> dict[str, str]:
+    return {
+        p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in folder.iterdir()
+        if p.name not in ("session.json", "session.lock")
+    }
+
+
+def _command(study: Path, out: Path, participant: str, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "hasa_cli.drive", "study", str(study), "--participant",
+            participant, "--output", str(out), "--synthetic", "2", "--meta", "age_band=25-34",
+            *extra]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_a_killed_study_resumes_at_the_next_run_and_the_benchmark_reads_it(tmp_path, capsys):
+    study = _study(tmp_path, seconds=4.0)
+    out = tmp_path / "rec"
+    folder = out / "P01"
+    proc = subprocess.Popen(_command(study, out, "P01"), env=HEADLESS,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+    target = folder / "measured_02_000.csv"
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            if target.exists() and target.stat().st_size > 30_000:  # about 100 rows
+                break
+            if proc.poll() is not None:
+                pytest.fail(f"the study ended early: {proc.stderr.read().decode()}")
+            time.sleep(0.02)
+        else:
+            pytest.fail("measured run 2 never started")
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    before = _digests(folder)
+    doc = json.loads((folder / "session.json").read_text())
+    assert doc["attempts"][-1]["status"] == "started"  # the kill left it mid-run
+    assert doc["attempts"][-1]["file"] == "measured_02_000.csv"
+    # resume: the same command
+    done = subprocess.run(_command(study, out, "P01"), env=HEADLESS, capture_output=True,
+                          text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "measured run 2 (attempt 0) was interrupted after" in done.stdout
+    assert "resuming P01 at measured run 2" in done.stdout
+    for name, digest in before.items():  # nothing lost or overwritten
+        assert hashlib.sha256((folder / name).read_bytes()).hexdigest() == digest, name
+    killed = load_recording(target)
+    assert not killed.complete and 50 < killed.steps < 400
+    doc = json.loads((folder / "session.json").read_text())
+    attempts = [(a["block"], a["number"], a["attempt"], a["status"], a["end_reason"], a["file"])
+                for a in doc["attempts"]]  # fmt: skip
+    assert attempts == [
+        ("practice", 1, 0, "completed", "truncated", "practice_01_000.csv"),
+        ("measured", 1, 0, "completed", "truncated", "measured_01_000.csv"),
+        ("measured", 2, 0, "aborted", "interrupted", "measured_02_000.csv"),
+        ("measured", 2, 1, "completed", "truncated", "measured_02_001.csv"),
+        ("measured", 3, 0, "completed", "truncated", "measured_03_000.csv"),
+    ]
+    assert doc["attempts"][2]["steps"] == killed.steps  # counted from what the file kept
+    assert doc["state"] == "complete" and doc["participant"]["metadata"] == {"age_band": "25-34"}
+    assert [s["ended"] for s in doc["sessions"]] == ["interrupted", "complete"]
+    assert load_recording(folder / "measured_01_000.csv").meta["metadata"]["synthetic"] is True
+    # a second participant, in this process
+    assert drive_main(["study", str(study), "--participant", "P02", "--output", str(out),
+                       "--synthetic", "3", "--meta", "age_band=18-24"]) == 0  # fmt: skip
+    capsys.readouterr()
+    # the benchmark on the study: participants, measured runs only, the aborted one reported
+    report = tmp_path / "bench"
+    code = bench_main(["paper", "--recordings", str(out), "--out", str(report), "--no-plots",
+                       "--workers", "1", "--min-duration", "1"])  # fmt: skip
+    text = capsys.readouterr().out
+    assert code == 0
+    result = json.loads((report / "results.json").read_text())
+    drivers = {d["driver"]: d for d in result["drivers"]}
+    assert set(drivers) == {"P01", "P02"}
+    assert drivers["P01"]["runs"] == 3 and drivers["P02"]["runs"] == 3  # no practice runs
+    assert drivers["P01"]["study_session"]["aborted_runs"] == 1
+    assert drivers["P01"]["study_session"]["practice_runs_excluded"] == 1
+    assert drivers["P02"]["study_session"]["participant_metadata"] == {"age_band": "18-24"}
+    analysed = sorted(Path(p).name for p in drivers["P01"]["recordings"])
+    assert analysed == ["measured_01_000.csv", "measured_02_001.csv", "measured_03_000.csv"]
+    assert any("aborted run not analysed: P01 measured run 2 attempt 0 (interrupted" in n
+               for n in result["notes"])  # fmt: skip
+    assert "aborted run not analysed" in text  # also in the printed report
+    estimated = {r["driver"] for r in result["estimation"]}
+    assert estimated == {"P01", "P02"}  # the paper's table 2 for the study's participants
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs Xvfb (xvfb-run)")
+def test_a_scripted_study_in_a_real_x_window(tmp_path):
+    """Under Xvfb: a real window, real time, every screen confirmed with the wheel's button."""
+    study = _study(tmp_path, seconds=0.5)
+    out = tmp_path / "rec"
+    env = {k: v for k, v in os.environ.items() if k != "SDL_VIDEODRIVER"}
+    env["SDL_AUDIODRIVER"] = "dummy"
+    start = time.monotonic()
+    done = subprocess.run(
+        ["xvfb-run", "-a", "-s", "-screen 0 1280x720x24",
+         *_command(study, out, "P05", "--realtime", "--width", "640", "--height", "360")],
+        env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    wall = time.monotonic() - start
+    assert done.returncode == 0, done.stderr
+    doc = json.loads((out / "P05" / "session.json").read_text())
+    assert doc["state"] == "complete" and len(doc["attempts"]) == 4
+    # four runs of 0.5 s, each after a 0.2 s countdown, and a break of at least 0.3 s
+    assert wall >= 4 * (0.5 + 0.2) + 0.3
+    rec = load_recording(out / "P05" / "measured_01_000.csv")
+    assert rec.complete and rec.steps == 50 and rec.meta["metadata"]["realtime"] is True
+
+
+def test_study_check_prints_the_schedule_and_bad_input_exits_2(tmp_path, capsys):
+    study = _study(tmp_path, seconds=1.0)
+    assert drive_main(["study", str(study), "--participant", "P02", "--check"]) == 0
+    shown = capsys.readouterr().out
+    assert "measured   1  straight  b = -1.80 m" in shown  # P02 starts with the other lane
+    bad = tmp_path / "bad.toml"
+    bad.write_text(study.read_text().replace("seconds = 1.0", "seconds = 0"))
+    assert drive_main(["study", str(bad), "--participant", "P02", "--check"]) == 2
+    assert "bad.toml, line 9: key 'runs.seconds' = 0 is out of range" in capsys.readouterr().err
+    args = ["study", str(study), "--participant", "P02", "--output", str(tmp_path), "--synthetic"]
+    assert drive_main([*args, "2", "--meta", "age_band=99"]) == 2
+    assert "'age_band' = '99' is not allowed: one of '18-24', '25-34'" in capsys.readouterr().err
+    assert drive_main([*args, "2"]) == 2  # no terminal to ask in: the answer is required
+    assert "participant field 'age_band' is required" in capsys.readouterr().err
+    assert drive_main(["study", str(study), "--participant", "P02", "--output", str(tmp_path)],
+                      ) == EXIT_NO_SCREEN  # fmt: skip
+    assert "no screen to drive on" in capsys.readouterr().err
+    assert not (tmp_path / "P02").exists()
+
+
+def test_the_status_line_shows_run_bias_time_speed_and_weights(tmp_path, capsys):
+    study = _study(tmp_path, seconds=0.3)
+    out = tmp_path / "rec"
+    code = drive_main(["study", str(study), "--participant", "P01", "--output", str(out),
+                       "--synthetic", "2", "--meta", "age_band=18-24", "--estimator"])  # fmt: skip
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    driving = [line for line in lines if " | t " in line]
+    assert driving and driving[0].startswith("P01 | practice run 1/1 | true b +0.00 m | t ")
+    assert any("measured run 1/3 | true b +0.00 m" in line for line in driving)
+    assert all(" | v " in line and " | y " in line and "weights +0.0: " in line
+               for line in driving)  # fmt: skip
+    assert any(line.endswith("| break") for line in lines)
+    assert StatusLine().tty is False  # captured: plain lines, no carriage returns
