@@ -34,15 +34,15 @@ estimator.steering_ratio        model units per road-wheel radian; null: 15 for 
 estimator.steering_residual_std the model's residual std (rad, model units); null: the
                                 fit's, else FilterSettings' 2e-3 (null)
 estimator.outlier_gate          gate outlying measurements (FilterSettings.innovation_gate
-                                6); off by default here, see docs/design.md §12.4 (false)
+                                6); off by default here, see docs/design.md §12.5 (false)
 estimator.settings              further FilterSettings fields by name ({})
 ==============================  ==========================================================
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
 the true state driving and the human advising, its estimate is the best of the four
 (lateral RMSE 0.035 m over six 30 s episodes, true lane always found; fitted
-generalized 0.13 m; two-point preset 0.38 m; fitted two-point ended on the wrong lane
-in two of six), and with the human driving 0.078 m (``docs/design.md §12``).
+generalized 0.145 m; fitted two-point 0.39 m; two-point preset 0.77 m), and with the
+human driving 0.057 m (docs/design.md §12.4, ``examples/advisor_estimators.py``).
 """
 
 from __future__ import annotations
@@ -174,9 +174,9 @@ _OWN = schema(
             "outlier_gate": Field(
                 "bool",
                 False,
-                "Gate outliers (FilterSettings.innovation_gate 6, docs/design.md §12.4); off "
-                "in this task: a policy driving hard makes the camera look like an outlier, "
-                "the gate then drops it for good and the estimate runs away.",
+                "Gate outlying measurements (FilterSettings.innovation_gate, 6); off in this "
+                "task: under a learning policy's driving the gate can drop the camera for good "
+                "and the estimate runs away (docs/design.md §12.5).",
             ),
             "settings": Field(
                 "mapping",
