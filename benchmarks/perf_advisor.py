@@ -21,7 +21,7 @@ plain single env.
 
 Usage::
 
-    python -m benchmarks.perf_advisor            # about a minute on 2 cores
+    python -m benchmarks.perf_advisor            # about 20 s on 2 cores
     python -m benchmarks.perf_advisor --quick    # seconds, rough numbers
     hasa-bench perf --only advisor
 """

@@ -9,13 +9,14 @@ samples whose steering reading the estimator gated as an outlier.
 
 ``--policy aggressive``: instead, twelve episodes of a jerky, high-gain lane keeper at
 10 Hz that throws the wheel +-0.15 rad at random for the first 6 s (as a policy still
-learning does); ``--no-gate`` turns the estimator's outlier gate off.
+learning does); ``--gate`` turns the estimator's outlier gate on (the task's default: off,
+docs/design.md §12.5).
 
 Usage::
 
     python examples/advisor_estimators.py                        # the four models, car drives
     python examples/advisor_estimators.py --drives human --models generalized,fit:generalized
-    python examples/advisor_estimators.py --policy aggressive --models generalized [--no-gate]
+    python examples/advisor_estimators.py --policy aggressive --models generalized [--gate]
 """
 
 from __future__ import annotations
@@ -83,13 +84,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--models", default="generalized,fit:generalized,two-point,fit:two-point")
     parser.add_argument("--drives", choices=("car", "human"), default="car")
     parser.add_argument("--policy", choices=("lane-keeper", "aggressive"), default="lane-keeper")
-    parser.add_argument("--no-gate", action="store_true", help="the outlier gate off")
+    parser.add_argument("--gate", action="store_true", help="the outlier gate on")
     parser.add_argument("--episodes", type=int, default=None, help="default 6 (aggressive: 12)")
     args = parser.parse_args(argv)
     episodes = args.episodes or (6 if args.policy == "lane-keeper" else 12)
     print(f"{'model':<18} {'lateral RMSE (m)':>17} {'true lane':>10} {'gated steering':>15}")
     for model in args.models.split(","):
-        rmse, true_lane, gated = score(model, args.drives, episodes, args.policy, not args.no_gate)
+        rmse, true_lane, gated = score(model, args.drives, episodes, args.policy, args.gate)
         print(f"{model:<18} {rmse:>17.3f} {true_lane:>6}/{episodes:<3} {gated:>15}")
     return 0
 
