@@ -100,7 +100,7 @@ def test_a_model_mismatch_freezes_the_weights():
 def test_a_model_that_never_fits_leaves_the_weights_at_the_prior():
     rng = np.random.default_rng(5)
     u = rng.standard_normal(2000)
-    score = 5.0 * np.stack([u, u + 0.3], axis=1)  # lambda about 25 on both
+    score = 8.0 * np.stack([u, u + 0.3], axis=1)  # lambda about 64 on both (threshold 9)
     weights, decisions, _ = _run(_rule(), -0.5 * score * score, score)
     assert decisions[-1] == MODEL_MISMATCH
     assert abs(weights[-1, 0] - 0.5) < 0.2  # (only the first window's evidence entered)
