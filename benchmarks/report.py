@@ -246,7 +246,7 @@ def _sections(
             "or with a model mismatch at the end (estimators.evidence), the lateral NEES "
             "(mean (y_hat - y)^2 / sigma^2; 1: the reported std is right), and the curved "
             "track with the road ahead as a known input",
-            result.summary,
+            [r for r in result.summary if r.get("estimated_runs")],
             _SAFETY_COLUMNS,
             None,
         ),

@@ -120,12 +120,12 @@ MIN_CHECKED_SAMPLES = 2.0
 
 
 def chi2_upper_ratio(samples: np.ndarray) -> np.ndarray:
-    """``chi2_0.999(nu) / nu`` for ``nu`` effective samples (Wilson-Hilferty; inf for nu <= 0):
+    """``chi2_0.999(nu) / nu`` for ``nu`` effective samples (Wilson-Hilferty; NaN for nu = 0,
+    so that no test passes without data):
     how far above its true value a mean of nu squared standard normals may lie by chance."""
-    nu = np.maximum(np.asarray(samples, dtype=np.float64), 1e-12)
-    h = 2.0 / (9.0 * nu)
-    ratio = (1.0 - h + MISMATCH_QUANTILE_Z * np.sqrt(h)) ** 3
-    return np.where(np.asarray(samples) > 0, ratio, np.inf)
+    h = 2.0 / (9.0 * np.asarray(samples, dtype=np.float64))  # inf for nu = 0
+    ratio = 1.0 - h + MISMATCH_QUANTILE_Z * np.sqrt(h)
+    return ratio * ratio * ratio
 
 
 EVIDENCE_STATE = (
@@ -151,6 +151,10 @@ class EvidenceRule:
     decision_threshold: float
     log_floor: float
 
+    @property
+    def log_decision_threshold(self) -> float:
+        return math.log(self.decision_threshold)
+
     @classmethod
     def from_settings(cls, settings: FilterSettings, dt: float) -> EvidenceRule:
         """The rule of ``settings`` at sample time ``dt`` (s)."""
@@ -172,7 +176,7 @@ def initial_evidence_state(log_prior: np.ndarray) -> dict[str, np.ndarray]:
         "_evidence_weight_sq": np.zeros(n_runs),
         "_nis": np.zeros((n_runs, n_comp)),
         "_lag_product": np.zeros((n_runs, n_comp)),
-        "_last_score": np.full((n_runs, n_comp), np.nan),
+        "_last_score": np.zeros((n_runs, n_comp)),  # 0: no previous innovation
         "_log_prior": log_prior.copy(),
         "_verified_log_w": log_prior.copy(),
     }
@@ -183,15 +187,13 @@ def statistics(state: dict[str, np.ndarray], active: np.ndarray) -> tuple[np.nda
     weight = state["_evidence_weight"]
     nis = state["_nis"]
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = nis / weight[:, None]
-        ratio = np.where(active, ratio, np.nan)
-        has = weight > 0
-        best = np.argmin(np.where(np.isnan(ratio), np.inf, ratio), axis=1)
+        masked = nis if active.all() else np.where(active, nis, np.inf)
+        best = np.argmin(masked, axis=1)
         rows = np.arange(nis.shape[0])
-        model_error = np.where(has, ratio[rows, best], np.nan)
-        rho = state["_lag_product"][rows, best] / nis[rows, best]
-        autocorrelation = np.where(has & (nis[rows, best] > 0), rho, np.nan)
-    return model_error, autocorrelation
+        best_nis = nis[rows, best]
+        model_error = best_nis / weight  # NaN (0 / 0) before any data
+        rho = state["_lag_product"][rows, best] / best_nis
+    return model_error, rho
 
 
 def weigh_evidence(
@@ -217,67 +219,171 @@ def weigh_evidence(
         ``decision`` (int codes), ``model_error`` (lambda),
         ``autocorrelation`` (rho) and ``evidence_scale`` (tau).
     """
+    if log_w.shape[0] == 1 and rule.enabled and rule.forgetting == 0:
+        return _weigh_one(rule, log_w, log_lik, score, state)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        return _weigh(rule, log_w, log_lik, score, state)
+
+
+def _weigh_one(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    log_lik: np.ndarray,
+    score: np.ndarray,
+    state: dict[str, np.ndarray],
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`_weigh` for one run, in Python floats (the same arithmetic in the same order:
+    a single car's filter step spends most of its time in numpy's per-call overhead on
+    arrays of two numbers; ``tests/test_estimators_evidence.py`` checks the two agree)."""
     alpha = rule.alpha
     keep = 1.0 - alpha
-    active = np.isfinite(log_w)  # pruned (or zero-prior) hypotheses do not count
-    # the steering channel was used in this run (missing, gated and low-speed steps: NaN)
-    used = ~np.isnan(np.where(active, score, 0.0)).any(axis=1) & active.any(axis=1)
+    lw = log_w[0].tolist()
+    n_comp = len(lw)
+    active = [math.isfinite(v) for v in lw]
+    u = [
+        (min(max(s, -1e3), 1e3) if a else 0.0)
+        for s, a in zip(score[0].tolist(), active, strict=True)
+    ]
+    used = not any(math.isnan(v) for v in u)
+    weight = float(state["_evidence_weight"][0])
+    weight_sq = float(state["_evidence_weight_sq"][0])
+    nis = state["_nis"][0].tolist()
+    lag = state["_lag_product"][0].tolist()
+    last = state["_last_score"][0].tolist()
+    if used:
+        weight = keep * weight + alpha
+        weight_sq = (keep * keep) * weight_sq + alpha * alpha
+        nis = [keep * n + alpha * (v * v) for n, v in zip(nis, u, strict=True)]
+        lag = [keep * g + alpha * (v * p) for g, v, p in zip(lag, u, last, strict=True)]
+    else:
+        u = [0.0] * n_comp
+    candidates = [(n, i) for i, (n, a) in enumerate(zip(nis, active, strict=True)) if a]
+    best = min(candidates)[1] if candidates else 0
+    best_nis = nis[best]
+    model_error = best_nis / weight if weight > 0 else math.nan
+    rho = lag[best] / best_nis if best_nis != 0 else math.nan
+    rho_plus = 0.0 if math.isnan(rho) else min(max(rho, 0.0), MAX_AUTOCORRELATION)
+    inflation = (1.0 + rho_plus) / (1.0 - rho_plus)
+    samples = weight * weight / (weight_sq * inflation) if weight_sq > 0 else 0.0
+    if samples > 0:
+        h = 2.0 / (9.0 * samples)
+        ratio = 1.0 - h + MISMATCH_QUANTILE_Z * math.sqrt(h)
+        mismatch = model_error > rule.mismatch_model_error * (ratio * ratio * ratio)
+    else:
+        mismatch = False
+    scale = (1.0 if math.isnan(model_error) else max(model_error, 1.0)) * inflation
+    new_state = dict(state)
+    new_state["_evidence_weight"] = np.array([weight])
+    new_state["_evidence_weight_sq"] = np.array([weight_sq])
+    new_state["_nis"] = np.array([nis])
+    new_state["_lag_product"] = np.array([lag])
+    new_state["_last_score"] = np.array([u])
+    if mismatch:
+        new_log_w = state["_verified_log_w"]
+    else:
+        increment = (log_lik[0] / scale).tolist()
+        raw = [w + d if a else -math.inf for w, d, a in zip(lw, increment, active, strict=True)]
+        new_log_w = normalize_log_weights(np.array([raw]), log_w)
+        if math.isfinite(rule.log_floor):
+            floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
+            new_log_w = normalize_log_weights(floored, new_log_w)
+        if samples >= MIN_CHECKED_SAMPLES:
+            new_state["_verified_log_w"] = new_log_w
+    if mismatch:
+        decision = MODEL_MISMATCH
+    else:
+        decision = (
+            DECIDED if max(new_log_w[0].tolist()) >= rule.log_decision_threshold else UNDECIDED
+        )
+    stats = {
+        "decision": np.array([decision]),
+        "model_error": np.array([model_error]),
+        "autocorrelation": np.array([rho]),
+        "evidence_scale": np.array([scale]),
+    }
+    return new_log_w, new_state, stats
+
+
+def _weigh(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    log_lik: np.ndarray,
+    score: np.ndarray,
+    state: dict[str, np.ndarray],
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    alpha = rule.alpha
+    keep = 1.0 - alpha
+    all_active = math.isfinite(log_w.sum())  # pruned (or zero-prior) hypotheses do not count
+    active = None if all_active else np.isfinite(log_w)
     weight, weight_sq = state["_evidence_weight"], state["_evidence_weight_sq"]
     nis, lag = state["_nis"], state["_lag_product"]
-    last = state["_last_score"]
-    if used.any():
-        # a normalized innovation beyond 1e3 is as inconsistent as it gets (no overflow)
-        u = np.clip(np.where(used[:, None] & active, score, 0.0), -1e3, 1e3)
-        rows = used[:, None] & active
-        weight = np.where(used, keep * weight + alpha, weight)
-        weight_sq = np.where(used, keep * keep * weight_sq + alpha * alpha, weight_sq)
-        nis = np.where(rows, keep * nis + alpha * u * u, nis)
-        previous = np.where(np.isnan(last), 0.0, last)
-        lag = np.where(rows, keep * lag + alpha * u * previous, lag)
-        new_last = np.where(rows, u, np.nan)
+    # a normalized innovation beyond 1e3 is as inconsistent as it gets (no overflow)
+    u = np.minimum(np.maximum(score if active is None else np.where(active, score, 0.0), -1e3), 1e3)
+    if math.isfinite(u.sum()):  # the steering channel was used in every run (the common case)
+        weight = keep * weight + alpha
+        weight_sq = (keep * keep) * weight_sq + alpha * alpha
+        nis = keep * nis + alpha * (u * u)
+        lag = keep * lag + alpha * (u * state["_last_score"])
     else:
-        new_last = np.full_like(last, np.nan)
+        used = ~np.isnan(u).any(axis=1)  # missing, gated and low-speed steps: NaN
+        rows = used[:, None] if active is None else used[:, None] & active
+        u = np.where(rows, u, 0.0)  # 0 where not used: the next lag product is 0 (a gap)
+        weight = np.where(used, keep * weight + alpha, weight)
+        weight_sq = np.where(used, (keep * keep) * weight_sq + alpha * alpha, weight_sq)
+        nis = np.where(rows, keep * nis + alpha * (u * u), nis)
+        lag = np.where(rows, keep * lag + alpha * (u * state["_last_score"]), lag)
     new_state = dict(state)
-    new_state.update(
-        {
-            "_evidence_weight": weight,
-            "_evidence_weight_sq": weight_sq,
-            "_nis": nis,
-            "_lag_product": lag,
-            "_last_score": new_last,
-        }
-    )
-    model_error, rho = statistics(new_state, active)
-    rho_plus = np.clip(np.nan_to_num(rho, nan=0.0), 0.0, MAX_AUTOCORRELATION)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        # effective number of independent squared innovations behind lambda
-        samples = np.where(weight_sq > 0, weight * weight / weight_sq, 0.0)
-        samples = samples * (1.0 - rho_plus) / (1.0 + rho_plus)
-        mismatch = model_error > rule.mismatch_model_error * chi2_upper_ratio(samples)
-    checked = ~mismatch & (samples >= MIN_CHECKED_SAMPLES)
-    scale = np.maximum(1.0, np.nan_to_num(model_error, nan=1.0)) * (1.0 + rho_plus)
-    scale /= 1.0 - rho_plus
+    new_state["_evidence_weight"] = weight
+    new_state["_evidence_weight_sq"] = weight_sq
+    new_state["_nis"] = nis
+    new_state["_lag_product"] = lag
+    new_state["_last_score"] = u
+    # lambda and rho of the best-fitting active hypothesis (NaN before any data)
+    best = np.argmin(nis if active is None else np.where(active, nis, np.inf), axis=1)
+    rows_index = np.arange(nis.shape[0])
+    best_nis = nis[rows_index, best]
+    model_error = best_nis / weight
+    rho = lag[rows_index, best] / best_nis
+    rho_plus = np.minimum(np.fmax(rho, 0.0), MAX_AUTOCORRELATION)  # (NaN: 0)
+    inflation = (1.0 + rho_plus) / (1.0 - rho_plus)
+    # effective number of independent squared innovations behind lambda (0 before any data)
+    samples = weight * weight / (weight_sq * inflation)
+    mismatch = model_error > rule.mismatch_model_error * chi2_upper_ratio(samples)
+    scale = np.fmax(model_error, 1.0) * inflation  # (NaN lambda: 1)
+    any_mismatch = bool(mismatch.any())
     if rule.enabled:
-        increment = np.where(mismatch[:, None], 0.0, log_lik / scale[:, None])
+        increment = log_lik / scale[:, None]
+        if any_mismatch:
+            increment = np.where(mismatch[:, None], 0.0, increment)
         new_log_w = log_w + increment
-        beta = np.where(mismatch, 0.0, rule.forgetting)[:, None]
         if rule.forgetting > 0:
-            with np.errstate(invalid="ignore"):
-                forgotten = (1.0 - beta) * new_log_w + beta * state["_log_prior"]
-            new_log_w = np.where(active, forgotten, -np.inf)
+            beta = np.where(mismatch, 0.0, rule.forgetting)[:, None]
+            forgotten = (1.0 - beta) * new_log_w + beta * state["_log_prior"]
+            new_log_w = forgotten if active is None else np.where(active, forgotten, -np.inf)
         new_log_w = normalize_log_weights(new_log_w, log_w)
         if math.isfinite(rule.log_floor):
-            floored = np.where(active, np.maximum(new_log_w, rule.log_floor), -np.inf)
+            floored = np.maximum(new_log_w, rule.log_floor)
+            floored = floored if active is None else np.where(active, floored, -np.inf)
             new_log_w = normalize_log_weights(floored, new_log_w)
-        verified = state["_verified_log_w"]
-        if mismatch.any():
-            new_log_w = np.where(mismatch[:, None], verified, new_log_w)
-        if checked.any():
-            new_state["_verified_log_w"] = np.where(checked[:, None], new_log_w, verified)
+        if any_mismatch:
+            new_log_w = np.where(mismatch[:, None], state["_verified_log_w"], new_log_w)
+        checked = samples >= MIN_CHECKED_SAMPLES
+        if any_mismatch:
+            checked &= ~mismatch
+        if checked.all():
+            new_state["_verified_log_w"] = new_log_w
+        elif checked.any():
+            new_state["_verified_log_w"] = np.where(
+                checked[:, None], new_log_w, state["_verified_log_w"]
+            )
     else:
-        new_log_w = normalize_log_weights(np.where(active, log_w + log_lik, -np.inf), log_w)
-    decided = new_log_w.max(axis=1) >= math.log(rule.decision_threshold)
-    decision = np.where(mismatch, MODEL_MISMATCH, np.where(decided, DECIDED, UNDECIDED))
+        raw = log_w + log_lik
+        new_log_w = normalize_log_weights(
+            raw if active is None else np.where(active, raw, -np.inf), log_w
+        )
+    decision = np.where(new_log_w.max(axis=1) >= rule.log_decision_threshold, DECIDED, UNDECIDED)
+    if any_mismatch:
+        decision = np.where(mismatch, MODEL_MISMATCH, decision)
     stats = {
         "decision": decision,
         "model_error": model_error,

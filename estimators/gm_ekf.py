@@ -208,7 +208,9 @@ class GaussianMixtureEKF:
         last step, averaged over the hypotheses with their weights before the update,
         ``sum_i w_i nu_ic^2 / S_i,cc``: (R, 3) (a single run: (3,); NaN: channel not used).
         A consistent filter averages 1 per channel."""
-        return self._run_view(self._channel_nis)
+        clipped = np.minimum(np.maximum(self._normalized_innovation, -1e3), 1e3)  # (NaN stays)
+        nis = np.einsum("rc,rcm->rm", np.exp(self._innovation_log_w), clipped * clipped)
+        return nis[0] if self._single else nis
 
     @property
     def low_speed(self) -> np.ndarray:
@@ -272,7 +274,8 @@ class GaussianMixtureEKF:
             "_model_error": np.full(n_runs, np.nan),
             "_autocorrelation": np.full(n_runs, np.nan),
             "_evidence_scale": np.ones(n_runs),
-            "_channel_nis": np.full((n_runs, 3), np.nan),
+            "_innovation_log_w": log_w.copy(),
+            "_normalized_innovation": np.full((n_runs, n_comp, 3), np.nan),
         }
         if runs is None:
             self._single = single
@@ -494,8 +497,6 @@ class GaussianMixtureEKF:
             normalized[:, :, 2],
             {name: run[name] for name in EVIDENCE_STATE},
         )
-        clipped = np.clip(normalized, -1e3, 1e3)  # (NaN stays NaN: channel not used)
-        channel_nis = np.einsum("rc,rcm->rm", np.exp(evidence_log_w), clipped * clipped)
         # ---- prune
         if not all_active:
             # pruned earlier: frozen at their last posterior
@@ -546,7 +547,8 @@ class GaussianMixtureEKF:
             "_model_error": stats["model_error"],
             "_autocorrelation": stats["autocorrelation"],
             "_evidence_scale": stats["evidence_scale"],
-            "_channel_nis": channel_nis,
+            "_innovation_log_w": evidence_log_w,  # for channel_nis, computed when asked
+            "_normalized_innovation": normalized,
         }
         if any_gated:
             new["_gated_count"] = run["_gated_count"] + gated

@@ -7,6 +7,8 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from estimators.evidence import (
     DECIDED,
@@ -98,7 +100,7 @@ def test_a_model_mismatch_freezes_the_weights():
 def test_a_model_that_never_fits_leaves_the_weights_at_the_prior():
     rng = np.random.default_rng(5)
     u = rng.standard_normal(2000)
-    score = 5.0 * np.stack([u, u + 0.3], axis=1)  # lambda about 25 on both
+    score = 8.0 * np.stack([u, u + 0.3], axis=1)  # lambda about 64 on both (threshold 9)
     weights, decisions, _ = _run(_rule(), -0.5 * score * score, score)
     assert decisions[-1] == MODEL_MISMATCH
     assert abs(weights[-1, 0] - 0.5) < 0.2  # (only the first window's evidence entered)
@@ -146,3 +148,38 @@ def test_the_wrappers_report_the_decision_state():
         _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     assert isinstance(info["estimate_decision"], str)
     assert info["estimate_evidence_scale"] >= 1.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(-50, 5),  # log-likelihood of hypothesis 0
+            st.floats(-50, 5),
+            st.one_of(st.floats(-20, 20), st.just(math.nan)),  # normalized innovation 0
+            st.floats(-20, 20),
+        ),
+        min_size=1,
+        max_size=300,
+    ),
+    st.sampled_from([(0.5, 0.5), (0.99, 0.01), (1.0, 0.0)]),
+)
+def test_the_single_run_path_equals_the_batched_one(steps, prior):
+    from estimators.evidence import _weigh, _weigh_one
+
+    rule = _rule(mismatch_model_error=2.0)
+    with np.errstate(divide="ignore"):
+        log_w = np.log(np.array([prior]))
+    one, batched = (log_w, initial_evidence_state(log_w)), (log_w, initial_evidence_state(log_w))
+    for l0, l1, s0, s1 in steps:
+        log_lik = np.array([[l0, l1]])
+        score = np.array([[s0, s0 if math.isnan(s0) else s1]])
+        w1, st1, stats1 = _weigh_one(rule, one[0], log_lik, score, one[1])
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            w2, st2, stats2 = _weigh(rule, batched[0], log_lik, score, batched[1])
+        np.testing.assert_allclose(w1, w2, rtol=1e-12, atol=1e-12)
+        for key in stats1:
+            np.testing.assert_allclose(stats1[key], stats2[key], rtol=1e-12, atol=1e-12)
+        for key in st1:
+            np.testing.assert_allclose(st1[key], st2[key], rtol=1e-12, atol=1e-12)
+        one, batched = (w1, st1), (w2, st2)

@@ -385,6 +385,8 @@ def _action_array(action: Any, expected: tuple[int, ...]) -> np.ndarray:
     Only real numbers are actions: strings, complex numbers, dates, masked
     arrays and other objects are refused rather than converted.
     """
+    if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == expected:
+        return action.astype(np.float64, copy=False)  # the common case, checked cheaply
     what = "action" if len(expected) == 1 else "actions"
     layout = (
         "[steering, acceleration]"
