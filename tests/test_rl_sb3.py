@@ -68,7 +68,8 @@ def test_check_env_estimator_observation_wrapper(env_id):
 
 
 def test_check_env_rl_wrappers():
-    """The stacks of examples/train_ppo.py."""
+    """The single-env wrapper stacks (steering only, action repeat, a human advisor under the
+    estimator wrapper) that examples/train_ppo.py used before the advisor task."""
     wrappers = pytest.importorskip("estimators.wrappers")
     params = dataclasses.replace(population("paper", 0)[0], speed=SpeedProfile.hold())
     env = SteeringOnly(gym.make(ENV_ID))
