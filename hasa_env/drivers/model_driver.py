@@ -132,8 +132,9 @@ class ModelBatch:
     def __init__(self, drivers: Sequence[ModelDriver]) -> None:
         self.drivers = list(drivers)
         self.num_cars = len(self.drivers)
-        forms = [d.model.arx() for d in self.drivers]
-        if any(f is None for f in forms):
+        maybe_forms = [d.model.arx() for d in self.drivers]
+        forms = [f for f in maybe_forms if f is not None]
+        if len(forms) != len(maybe_forms):
             raise ValueError("ModelBatch needs ARX models")
         self.forms = forms
         n = self.num_cars

@@ -195,7 +195,8 @@ class ExportResult:
     Attributes:
         dataset: the created ``minari.MinariDataset``.
         dataset_id: its id.
-        exported: the recordings (CSV paths) in the dataset, episode i = exported[i].
+        exported: the recordings (CSV paths; None for one built in memory) in the
+            dataset, episode i = exported[i].
         skipped: (path, reason) of every recording left out: corrupt files,
             recordings without steps, configs that differ from the first one.
         cut: exported recordings whose last step was marked truncated because
@@ -206,9 +207,9 @@ class ExportResult:
 
     dataset: Any
     dataset_id: str
-    exported: list[Path] = field(default_factory=list)
+    exported: list[Path | None] = field(default_factory=list)
     skipped: list[tuple[Path | None, str]] = field(default_factory=list)
-    cut: list[Path] = field(default_factory=list)
+    cut: list[Path | None] = field(default_factory=list)
     env_id: str = ""
     config: dict[str, Any] = field(default_factory=dict)
 
