@@ -206,7 +206,10 @@ def pooled(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     agg["seeds"] = ("seed", "nunique")
     table = frame.groupby(keys, sort=False, dropna=False).agg(**agg).reset_index()
     return [
-        {str(k): (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
+        {
+            str(k): (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in r.items()
+        }
         for r in table.to_dict(orient="records")
     ]
 

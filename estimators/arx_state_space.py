@@ -177,9 +177,7 @@ class ARXStateSpace:
     near_distance: float = field(init=False)
     far_distance: float = field(init=False)
 
-    def __init__(
-        self, arx: ARXForm | None, dt: float | None = None, decision_lag: int = 0
-    ) -> None:
+    def __init__(self, arx: ARXForm | None, dt: float | None = None, decision_lag: int = 0) -> None:
         if dt is None:
             dt = arx.dt if arx is not None else 0.01
         if not (np.isfinite(dt) and dt > 0):
@@ -298,7 +296,9 @@ class ARXStateSpace:
             near, far = self.near_distance, self.far_distance
             u[..., 0] = -(theta + np.arctan(y / near))
             u[..., 1] = -(theta + np.arctan(y / far))
-            across: tuple[tuple[float | np.ndarray, float | np.ndarray], tuple[np.ndarray, np.ndarray]]
+            across: tuple[
+                tuple[float | np.ndarray, float | np.ndarray], tuple[np.ndarray, np.ndarray]
+            ]
             across = (near, far), (y, y)
         else:
             points = check_road_points(road_points)

@@ -194,9 +194,7 @@ class FilterpyGMEKF:
             ).copy()
         else:
             if self._filters is None:
-                raise RuntimeError(
-                    "reset the whole batch (runs=None) before resetting single runs"
-                )
+                raise RuntimeError("reset the whole batch (runs=None) before resetting single runs")
             idx = (
                 np.flatnonzero(runs)
                 if np.asarray(runs).dtype == bool

@@ -82,7 +82,7 @@ class ModelDriver:
         self._generic: _GenericModelState | None = None
 
     @classmethod
-    def make_batch(cls, drivers: Sequence[ModelDriver]) -> Any:
+    def make_batch(cls, drivers: Sequence[ModelDriver]) -> ModelBatch | LoopBatch:
         """A vectorized batch if every model is an ARX model, else car-by-car."""
         if all(d.model.arx() is not None for d in drivers):
             return ModelBatch(drivers)

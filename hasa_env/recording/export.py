@@ -87,7 +87,9 @@ def _setup(config: Mapping[str, Any]) -> EnvSetup:
     return build_setup(config)
 
 
-def observations(data: pd.DataFrame, config: Mapping[str, Any], kind: str | None = None) -> Any:
+def observations(
+    data: pd.DataFrame, config: Mapping[str, Any], kind: str | None = None
+) -> np.ndarray | dict[str, np.ndarray]:
     """The env's observations of every recording row, recomputed from the columns.
 
     Args:

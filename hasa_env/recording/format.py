@@ -194,7 +194,9 @@ class RecordingList(list):
     :class:`RecordingError` per corrupt file (its ``path`` names the file).
     """
 
-    def __init__(self, recordings: Iterable[Recording] = (), errors: Iterable[RecordingError] = ()):
+    def __init__(
+        self, recordings: Iterable[Recording] = (), errors: Iterable[RecordingError] = ()
+    ) -> None:
         super().__init__(recordings)
         self.errors: list[RecordingError] = list(errors)
 

@@ -10,7 +10,7 @@ is :func:`hasa_env.sim.transition.env_step`.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, SupportsFloat
@@ -163,13 +163,13 @@ class EnvSetup:
         """Time between two observations (s): action_repeat * Ts."""
         return self.action_repeat * self.params.dt
 
-    def curvature_scalar(self):  # noqa: ANN201
+    def curvature_scalar(self) -> Callable[[float], float]:
         """kappa(s) for one car (Python float in, float out); a constant 0.0 on a straight road."""
         if self.road.is_straight:
             return _zero_curvature
         return partial(curvature_lookup_scalar, self.road.curvature_list, 1.0 / self.road.spacing)
 
-    def curvature_array(self):  # noqa: ANN201
+    def curvature_array(self) -> Callable[[np.ndarray], np.ndarray | float]:
         """kappa(s) for N cars (array in, array out); a constant 0.0 on a straight road."""
         if self.road.is_straight:
             return _zero_curvature
