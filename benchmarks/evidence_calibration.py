@@ -94,12 +94,12 @@ def calibration_table(
             "lambda": float(np.nanmedian(traces[True]["error"][:, r])),
         }
         for checks, label in ((False, "raw"), (True, "checked")):
-            log_w = traces[checks]["log_w"][:, r]
-            weight = np.exp(log_w[:, 0] - np.logaddexp(log_w[:, 0], log_w[:, 1]))
-            error = traces[checks]["lateral"][:, r] - truth[r]
+            run_log_w = traces[checks]["log_w"][:, r]
+            weight = np.exp(run_log_w[:, 0] - np.logaddexp(run_log_w[:, 0], run_log_w[:, 1]))
+            miss = traces[checks]["lateral"][:, r] - truth[r]
             row[f"final_weight_{label}"] = float(weight[-1])
             row[f"settle_s_{label}"] = _settle_time(weight, dt)
-            row[f"rmse_{label}"] = float(np.sqrt(np.mean(error * error)))
+            row[f"rmse_{label}"] = float(np.sqrt(np.mean(miss * miss)))
         rows.append(row)
     return rows
 

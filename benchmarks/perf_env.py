@@ -41,6 +41,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
@@ -86,8 +87,10 @@ _WARMUP = 20  # untimed steps before a single-env measurement
 _WARMUP_VECTOR = 400
 
 
-def _sample_actions(space: gym.spaces.Box, shape: tuple[int, ...], seed: int) -> np.ndarray:
+def _sample_actions(space: gym.Space, shape: tuple[int, ...], seed: int) -> np.ndarray:
     """Uniform actions over a bounded Box, shape ``shape + space.shape``, in the space's dtype."""
+    if not isinstance(space, gym.spaces.Box):
+        raise TypeError(f"the benchmark samples Box action spaces, got {space}")
     rng = np.random.default_rng(seed)
     low = np.broadcast_to(space.low, space.shape)
     high = np.broadcast_to(space.high, space.shape)
@@ -218,7 +221,7 @@ def run(quick: bool = False, seed: int = 0, progress: Callable[[str], None] | No
         say(f"{ENV_ID} native vector env, N={n}")
         key = f"vector_{n}"
         envs[key] = _measure(
-            lambda n=n: gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point"),
+            partial(gym.make_vec, ENV_ID, num_envs=n, vectorization_mode="vector_entry_point"),
             _time_vector,
             plan[key],
             seed,

@@ -205,7 +205,7 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
     say("driver view: window")
     results["driver_window"] = _rate(cycle(to_window), frames, repeats)
     steps_per_frame = SIM_FREQUENCY / TARGET_FPS
-    sim = {"owed": 0.0, "info": infos[0]}
+    sim: dict[str, Any] = {"owed": 0.0, "info": infos[0]}
 
     def with_physics(renderer: Any) -> Callable[[dict[str, Any]], None]:
         def frame(info: dict[str, Any]) -> None:

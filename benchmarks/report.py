@@ -75,7 +75,7 @@ def _stability(row: dict[str, Any], rank: str) -> str:
     value, share = row.get(rank), row.get(f"{rank}_stability")
     if value is None:
         return "-"
-    return f"{value}" if missing(share) else f"{value} ({100 * share:.0f}%)"
+    return f"{value}" if share is None or missing(share) else f"{value} ({100 * share:.0f}%)"
 
 
 def _of(numerator: str, denominator: str) -> Any:
@@ -179,6 +179,11 @@ _FIRST_KEYS = ("paper_rmse", "paper_r2", "paper_rmse_decrease", "paper_lateral_r
                "paper_lateral_rmse_std")  # fmt: skip
 
 
+def _numeric_sum(values: pd.Series) -> int:
+    """The sum of a column's numbers (anything else counts 0)."""
+    return int(pd.to_numeric(values, errors="coerce").fillna(0).sum())
+
+
 def pooled(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (driver, model), over seeds: means of the per-seed means, sums of the counts."""
     if not rows:
@@ -194,14 +199,17 @@ def pooled(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             )
     for key in _SUM_KEYS:
         if key in frame:
-            agg[key] = (key, lambda v: int(pd.to_numeric(v, errors="coerce").fillna(0).sum()))
+            agg[key] = (key, _numeric_sum)
     for key in _FIRST_KEYS:
         if key in frame:
             agg[key] = (key, "first")
     agg["seeds"] = ("seed", "nunique")
     table = frame.groupby(keys, sort=False, dropna=False).agg(**agg).reset_index()
     return [
-        {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
+        {
+            str(k): (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in r.items()
+        }
         for r in table.to_dict(orient="records")
     ]
 

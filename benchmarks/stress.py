@@ -44,7 +44,7 @@ class _SpoiledFit(GeneralizedModel):
     training = "training_run"
     """Which run it is fitted on: "training_run" or "constant_speed" (the protocol supplies it)."""
 
-    def fit(self, runs: Any, road: Any = None, **options: Any) -> GeneralizedModel:  # type: ignore[override]
+    def fit(self, runs: Any, road: Any = None, **options: Any) -> GeneralizedModel:
         fitted = super().fit(runs, road=road, **options)
         coefficients = {
             k: np.asarray(v, dtype=np.float64) for k, v in fitted.coefficients().items()
@@ -112,7 +112,7 @@ class UnregularizedConstantSpeed(GeneralizedModel):
     model_type = "stress_unregularized"
     training = "constant_speed"
 
-    def fit(self, runs: Any, road: Any = None, **options: Any) -> GeneralizedModel:  # type: ignore[override]
+    def fit(self, runs: Any, road: Any = None, **options: Any) -> GeneralizedModel:
         options = options | {"ridge": 0.0, "stable": False}
         return super().fit(runs, road=road, **options)
 

@@ -135,7 +135,7 @@ def road_point_rows(road_points: np.ndarray | None, n_rows: int) -> np.ndarray |
     return points
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class ARXStateSpace:
     """The augmented model of a car and an ARX steering model, for any ARX orders.
 
@@ -166,7 +166,7 @@ class ARXStateSpace:
     """
 
     arx: ARXForm | None
-    dt: float | None = None
+    dt: float
     decision_lag: int = 0
     lagged_arx: ARXForm | None = field(init=False, repr=False)
     n_memory: int = field(init=False)
@@ -177,13 +177,15 @@ class ARXStateSpace:
     near_distance: float = field(init=False)
     far_distance: float = field(init=False)
 
-    def __post_init__(self) -> None:
-        arx = self.arx
-        dt = self.dt if self.dt is not None else (arx.dt if arx is not None else 0.01)
+    def __init__(self, arx: ARXForm | None, dt: float | None = None, decision_lag: int = 0) -> None:
+        if dt is None:
+            dt = arx.dt if arx is not None else 0.01
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        object.__setattr__(self, "arx", arx)
         object.__setattr__(self, "dt", float(dt))
-        lag = self.decision_lag
+        object.__setattr__(self, "decision_lag", decision_lag)
+        lag = decision_lag
         if isinstance(lag, bool) or not isinstance(lag, int | np.integer) or lag < 0:
             raise ValueError(f"decision_lag must be a non-negative integer, got {lag!r}")
         if arx is not None and lag:
@@ -294,6 +296,9 @@ class ARXStateSpace:
             near, far = self.near_distance, self.far_distance
             u[..., 0] = -(theta + np.arctan(y / near))
             u[..., 1] = -(theta + np.arctan(y / far))
+            across: tuple[
+                tuple[float | np.ndarray, float | np.ndarray], tuple[np.ndarray, np.ndarray]
+            ]
             across = (near, far), (y, y)
         else:
             points = check_road_points(road_points)

@@ -87,7 +87,7 @@ class Estimate:
     component_covariances: np.ndarray
     weights: np.ndarray
     log_weights: np.ndarray
-    most_likely: np.ndarray
+    most_likely: np.ndarray | int
     hypotheses: np.ndarray
     state_names: tuple[str, ...]
     decision: np.ndarray | str = "undecided"
@@ -138,7 +138,7 @@ class Estimate:
             self.component_covariances[index],
             self.weights[index],
             self.log_weights[index],
-            self.most_likely[index],
+            np.asarray(self.most_likely)[index],
             self.hypotheses[index],
             self.state_names,
             _item(self.decision, index, str),

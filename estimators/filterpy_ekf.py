@@ -47,6 +47,8 @@ class ARXExtendedKalmanFilter(ExtendedKalmanFilter):
     then filterpy propagates ``P = F P F^T + Q``.
     """
 
+    x: np.ndarray  # (n, 1) state (filterpy's attribute)
+
     def __init__(self, matrices: FilterMatrices) -> None:
         model = matrices.model
         super().__init__(dim_x=model.n_states, dim_z=3, dim_u=3)
@@ -191,6 +193,8 @@ class FilterpyGMEKF:
                 self.matrices.initial_covariance, x0.shape + (x0.shape[-1],)
             ).copy()
         else:
+            if self._filters is None:
+                raise RuntimeError("reset the whole batch (runs=None) before resetting single runs")
             idx = (
                 np.flatnonzero(runs)
                 if np.asarray(runs).dtype == bool
@@ -285,6 +289,7 @@ class FilterpyGMEKF:
             else [acceleration[0], acceleration[1], self._steering[r], float(slow)]
         )
         log_w = self._log_w[r].copy()
+        assert self._filters is not None  # (step() checked)
         bank = self._filters[r]
         for ekf in bank:
             if ekf is not None:

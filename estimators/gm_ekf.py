@@ -148,6 +148,24 @@ class GaussianMixtureEKF:
 
     uses_true_bias = False
 
+    # Per-run state, set by reset() (and replaced by step()) through setattr;
+    # shapes: R runs, C hypotheses.
+    _P: np.ndarray  # (R*C, n, n) covariances
+    _points: np.ndarray | None  # (R, 4) road points of the last sample; None: straight
+    _log_w: np.ndarray  # (R, C) log weights
+    _active: np.ndarray  # (R, C) bool: not pruned
+    _hyp: np.ndarray  # (R, C) hypotheses (m)
+    _steering: np.ndarray  # (R,) last steering reading (model units; NaN: none)
+    _slow: np.ndarray  # (R,) bool: steering channel off (low speed)
+    _gated: np.ndarray  # (R, 3) bool: channels gated at the last step
+    _gated_count: np.ndarray  # (R, 3) int
+    _decision: np.ndarray  # (R,) int codes of estimators.evidence
+    _model_error: np.ndarray  # (R,)
+    _autocorrelation: np.ndarray  # (R,)
+    _evidence_scale: np.ndarray  # (R,)
+    _innovation_log_w: np.ndarray  # (R, C)
+    _normalized_innovation: np.ndarray  # (R, C, 3)
+
     def __init__(
         self,
         steering_model: ARXForm | None,
@@ -254,7 +272,7 @@ class GaussianMixtureEKF:
         else:
             x = self.matrices.initial_state(z, hyp, road_points=points)
         n = x.shape[-1]
-        cov = np.empty(x.shape + (n,))
+        cov: np.ndarray = np.empty(x.shape + (n,))
         cov[:] = self.matrices.initial_covariance
         x, cov = x.reshape(-1, n), cov.reshape(-1, n, n)
         steering = z[:, 2] * self.settings.steering_ratio
@@ -285,6 +303,7 @@ class GaussianMixtureEKF:
                 setattr(self, name, value)
         else:
             idx = self._check_runs(runs, n_runs, n_comp)
+            assert self._x is not None  # (_check_runs raises before the first reset)
             flat = self._flat_index(idx)
             self._x, self._P = self._x.copy(), self._P.copy()
             self._x[flat], self._P[flat] = x, cov

@@ -16,12 +16,13 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import pandas as pd
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
-from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
+from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.evidence import DECISIONS
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
@@ -52,6 +53,8 @@ def hypotheses_of(frame: pd.DataFrame) -> tuple[float, ...]:
     (``frame.attrs["config"]``, set by the drivers' runner and the recording
     loader), else the env default (0, -1.8)."""
     config = frame.attrs.get("config") if hasattr(frame, "attrs") else None
+    if config is None:
+        return DEFAULT_HYPOTHESES
     try:
         return tuple(float(h) for h in config["markings"]["hypotheses"])
     except (TypeError, KeyError):
@@ -198,6 +201,24 @@ class EstimationResult:
         return frames
 
 
+@runtime_checkable
+class _Gating(Protocol):
+    @property
+    def last_gated(self) -> np.ndarray: ...
+
+
+@runtime_checkable
+class _LowSpeed(Protocol):
+    @property
+    def low_speed(self) -> np.ndarray: ...
+
+
+@runtime_checkable
+class _ChannelNIS(Protocol):
+    @property
+    def channel_nis(self) -> np.ndarray: ...
+
+
 def run_estimator(
     estimator: LaneEstimator,
     frames: pd.DataFrame | Sequence[pd.DataFrame],
@@ -304,14 +325,17 @@ def run_estimator(
     weights = np.empty((n_runs, n_steps, n_comp))
     most_likely = np.empty((n_runs, n_steps), dtype=np.int64)
     components = np.empty((n_runs, n_steps, n_comp, n_states)) if store_components else None
-    gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if hasattr(estimator, "last_gated") else None
-    low_speed = np.zeros((n_runs, n_steps), dtype=bool) if hasattr(estimator, "low_speed") else None
+    # the optional diagnostics of the estimators that have them
+    gating = estimator if isinstance(estimator, _Gating) else None
+    slowing = estimator if isinstance(estimator, _LowSpeed) else None
+    checking = estimator if isinstance(estimator, _ChannelNIS) else None
+    gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if gating is not None else None
+    low_speed = np.zeros((n_runs, n_steps), dtype=bool) if slowing is not None else None
     decision = np.full((n_runs, n_steps), -1, dtype=np.int8)
     model_error = np.full((n_runs, n_steps), np.nan)
-    has_nis = hasattr(estimator, "channel_nis")
-    channel_nis = np.full((n_runs, n_steps, 3), np.nan) if has_nis else None
+    channel_nis = np.full((n_runs, n_steps, 3), np.nan) if checking is not None else None
 
-    def store(k: int, e) -> None:  # noqa: ANN001 - an Estimate
+    def store(k: int, e: Estimate) -> None:
         mean[:, k] = e.mean
         w = e.weights
         spread = (
@@ -323,15 +347,15 @@ def run_estimator(
         most_likely[:, k] = e.most_likely
         if components is not None:
             components[:, k] = e.component_means
-        if gated is not None and k:
-            gated[:, k] = estimator.last_gated
-        if low_speed is not None:
-            low_speed[:, k] = estimator.low_speed
+        if gated is not None and gating is not None and k:
+            gated[:, k] = gating.last_gated
+        if low_speed is not None and slowing is not None:
+            low_speed[:, k] = slowing.low_speed
         names = np.asarray(e.decision)
         decision[:, k] = np.select([names == name for name in DECISIONS], range(len(DECISIONS)), -1)
         model_error[:, k] = e.model_error
-        if channel_nis is not None and k:
-            channel_nis[:, k] = estimator.channel_nis
+        if channel_nis is not None and checking is not None and k:
+            channel_nis[:, k] = checking.channel_nis
 
     store(0, est)
     for k in range(1, n_steps):

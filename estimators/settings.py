@@ -208,6 +208,6 @@ class FilterSettings:
             "steering_sensor_std": float(noise["steering"]),
         }
         # a noise-free env would make R singular: keep a floor
-        values = {k: max(v, 1e-6) for k, v in values.items()}
-        values.update(overrides)
-        return cls(**values)
+        floored: dict[str, Any] = {k: max(v, 1e-6) for k, v in values.items()}
+        floored.update(overrides)
+        return cls(**floored)

@@ -37,7 +37,7 @@ Example::
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -50,6 +50,7 @@ from estimators.evidence import DECISIONS
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances
 from estimators.timing import check_sample_time, config_sample_time
+from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
 
@@ -234,8 +235,9 @@ def _vector_config(env: VectorEnv) -> Mapping[str, Any] | None:
     config = getattr(env.unwrapped, "config", None)
     if config is not None:
         return config
+    get_attr = getattr(env, "get_attr", None)  # gymnasium's sync / async vector envs
     try:
-        return env.get_attr("config")[0]  # gymnasium's sync / async vector envs
+        return None if get_attr is None else get_attr("config")[0]
     except (AttributeError, IndexError):
         return None
 
@@ -323,7 +325,7 @@ class EstimatorInfoWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         )
         return obs, self._add(info, self.estimate)
 
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.estimate = self.estimator.step(
             measurements_from_info(info), inputs_from_info(info), **self._road_points.kwargs(info)
@@ -351,10 +353,12 @@ class EstimatorObservationWrapper(EstimatorInfoWrapper):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         _, info = super().reset(seed=seed, options=options)
+        assert self.estimate is not None  # (set by the reset)
         return _observation(self.estimate, self.hypotheses)[0], info
 
-    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         _, reward, terminated, truncated, info = super().step(action)
+        assert self.estimate is not None  # (set by the step)
         return _observation(self.estimate, self.hypotheses)[0], reward, terminated, truncated, info
 
 
@@ -408,7 +412,8 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
-        obs, infos = self.env.reset(seed=seed, options=options)
+        # gymnasium's VectorEnv.reset says seed: int, its vector envs take a list too
+        obs, infos = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
         mask = None if options is None else options.get("reset_mask")
         if mask is None or self.estimate is None:
             self.estimate = self.estimator.reset(
@@ -447,7 +452,6 @@ class VectorEstimatorInfoWrapper(VectorWrapper):
         if stepping.all():
             est = self.estimator.step(measurement, acceleration, **road.kwargs(infos))
         else:
-            est = None
             if stepping.any():
                 est = self.estimator.step(
                     measurement[stepping],
@@ -482,12 +486,14 @@ class VectorEstimatorObservationWrapper(VectorEstimatorInfoWrapper):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         _, infos = super().reset(seed=seed, options=options)
+        assert self.estimate is not None  # (set by the reset)
         return _observation(self.estimate, self.hypotheses), infos
 
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         _, rewards, terminated, truncated, infos = super().step(actions)
+        assert self.estimate is not None  # (set by the step)
         return _observation(self.estimate, self.hypotheses), rewards, terminated, truncated, infos
 
 
@@ -513,7 +519,7 @@ def estimator_wrapper(
         )
 
     def wrap(env: gym.Env) -> EstimatorInfoWrapper:
-        config = env.unwrapped.config
+        config = hasa_unwrapped(env).config
         dt = config["action_repeat"] / config["sim_frequency"]
         settings = FilterSettings.from_env_config(config, steering_ratio=steering_ratio)
         return EstimatorInfoWrapper(env, GaussianMixtureEKF(arx, settings, dt=dt))

@@ -12,7 +12,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from estimators.wrappers import estimator_wrapper
+import gymnasium as gym
+
+from estimators.wrappers import EstimatorInfoWrapper, estimator_wrapper
 from hasa_env.devices.calibration import (
     CalibrationError,
     JoystickCalibration,
@@ -22,6 +24,7 @@ from hasa_env.devices.calibration import (
 )
 from hasa_env.devices.force_feedback import Autocentre, ForceFeedbackUnavailable
 from hasa_env.devices.sources import InputManager
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.steering.base import SteeringModel
 from hasa_env.steering.loading import default_steering_ratio, load_model
 
@@ -63,7 +66,7 @@ def estimator_model(spec: str, dt: float) -> SteeringModel:
     return model
 
 
-def estimator_for(spec: str, probe: Any) -> Callable[[Any], Any]:
+def estimator_for(spec: str, probe: LaneKeepingEnv) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """The env wrapper running the estimator with ``spec``'s model (checked on ``probe``)."""
     model = estimator_model(spec, probe.setup.env_step_duration)
     wrapper = estimator_wrapper(model, default_steering_ratio(spec, fitted=False))

@@ -231,7 +231,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"{rec.path}: model {spec}: {shown}")
 
     runs: dict[int, EstimatorRun] = {}
-    if args.estimator:
+    if args.estimator and model is not None:  # (loaded above with --estimator)
         for i, rec in enumerate(recordings):
             try:
                 result = estimate_recording(rec, model, ratio)

@@ -446,7 +446,7 @@ class _Walk:
 
     def integer(self, value: Any, field: Field, path: str) -> int:
         x = _as_number(value)
-        if type(x) is float:
+        if isinstance(x, float):  # (exactly a float: _as_number converts)
             if not (math.isfinite(x) and x.is_integer()):
                 raise self.must(path, field, value)
             x = int(x)

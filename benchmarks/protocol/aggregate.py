@@ -60,7 +60,7 @@ def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:
                 value = value.item()
             if isinstance(value, float) and not math.isfinite(value):
                 value = None
-            clean[key] = value
+            clean[str(key)] = value
         out.append(clean)
     return out
 
@@ -103,6 +103,10 @@ def _kept(flags: pd.Series) -> int:
     return int((~flags.astype(bool)).sum())
 
 
+def _sample_count(n: pd.Series) -> int:
+    return int(pd.to_numeric(n).fillna(0).sum())
+
+
 def _count(flags: pd.Series) -> int:
     return int(flags.astype(bool).sum())
 
@@ -120,7 +124,7 @@ def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) ->
     grouped = frame.groupby(_GROUP, sort=False, dropna=False)
     table = grouped.agg(
         n_runs=("_degenerate", _kept),
-        n_samples=("n", lambda n: int(pd.to_numeric(n).fillna(0).sum())),
+        n_samples=("n", _sample_count),
         rmse=("rmse", _finite_mean),
         rmse_std=("rmse", _finite_std),
         r2=("r2", _finite_mean),
@@ -253,7 +257,8 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
         )
         .reset_index()
     )
-    paper_mean, paper_std = [], []
+    paper_mean: list[float | None] = []
+    paper_std: list[float | None] = []
     for driver, model in zip(table["driver"], table["model"], strict=True):
         paper = paper_values.TABLE_2.get(driver)
         if paper is not None and model in BUILTIN_MODELS:

@@ -25,7 +25,7 @@ import pickle
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import pandas as pd
 
@@ -86,7 +86,10 @@ class ModelError(Exception):
         return {"model": self.model, "stage": self.stage, "message": str(self)}
 
 
-def load_user_model(spec: str) -> Any:
+Result = TypeVar("Result")
+
+
+def load_user_model(spec: str) -> SteeringModel:
     """The steering model a user names: ``"package.module:Name"`` or a saved model file.
 
     ``Name`` may be a :class:`hasa_env.steering.SteeringModel` subclass
@@ -116,7 +119,7 @@ def load_user_model(spec: str) -> Any:
         raise ModelError(str(spec), "import", str(exc)) from None
 
 
-def _checked(model: Any, spec: str) -> Any:
+def _checked(model: SteeringModel, spec: str) -> SteeringModel:
     try:
         model.check_regressors()
     except ValueError as exc:
@@ -175,13 +178,13 @@ def _child(
 
 
 def run_isolated(
-    func: Callable[..., Any],
+    func: Callable[..., Result],
     args: tuple[Any, ...],
     *,
     model: str,
     stage: str,
     time_limit: float | None,
-) -> Any:
+) -> Result:
     """``func(*args)`` for user model ``model``, isolated (see the module docstring).
 
     With ``time_limit`` (s) the call runs in a forked child process and its

@@ -252,7 +252,7 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
     illustrative = config.illustrative or (ILLUSTRATIVE if ILLUSTRATIVE in names else names[0])
     training_index = config.training_run
     if config.training_file is not None:
-        if training is None:
+        if training is None or training_file is None:  # (training is found with the file)
             where = "" if training_file is None else f" ({training_file})"
             raise BenchmarkError(
                 f"the training file {config.training_file!r}{where} is not one of the "
@@ -344,6 +344,7 @@ def load_frames(
     if runs[0].path is not None:
         frames = []
         for ref in runs:
+            assert ref.path is not None  # (a plan's runs are all recorded or all synthetic)
             rec = load_any(ref.path)
             frame = rec.data
             frame.attrs = {

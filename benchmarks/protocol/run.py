@@ -180,7 +180,7 @@ def run_protocol(
             if config.stress and seed is not None
             else None
         )
-        fitted, info = fit_models(
+        fitted, fit_info = fit_models(
             train_frame,
             candidates,
             errors,
@@ -192,7 +192,7 @@ def run_protocol(
         skipped += plan.get("skipped", [])
         t_fit += time.perf_counter() - t0
         fitted_by_seed[seed] = fitted
-        model_info += info
+        model_info += fit_info
         drivers += plan["drivers"]
         is_first = not first
         plot_run = next((r for r in validation if r.driver == illustrative), validation[0])

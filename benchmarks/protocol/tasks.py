@@ -9,6 +9,7 @@ import warnings
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -173,14 +174,15 @@ def _model_part(
     plus its predictions of the runs whose traces are plotted (by run index)."""
     part = ChunkResult()
     preds = _score_model(fm, task, frames, part)
-    if task.estimate and fm.residual_std is not None:
+    residual_std = fm.residual_std
+    if task.estimate and residual_std is not None:
 
         def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
             return GaussianMixtureEKF(
                 fm.model.arx(),
                 replace(
                     settings,
-                    steering_residual_std=max(fm.residual_std, 1e-9),
+                    steering_residual_std=max(residual_std, 1e-9),
                     evidence_checks=checks,
                 ),
                 decision_lag=fm.model.decision_lag,
@@ -193,7 +195,7 @@ def _model_part(
                 frames,
                 f"{fm.name}{UNCHECKED_SUFFIX}",
                 fm.kind,
-                lambda s, make=make: make(s, checks=False),
+                partial(make, checks=False),
                 part,
             )
     traced = {i: preds[i] for i, ref in enumerate(task.runs) if ref.key in task.trace_runs}

@@ -23,7 +23,7 @@ from typing import Any
 
 from hasa_env.drivers import intermittent, preview, synthetic
 from hasa_env.drivers.base import Driver
-from hasa_env.drivers.human import human_batch
+from hasa_env.drivers.human import HumanBatch, HumanDriver, human_batch
 
 __all__ = [
     "ARCHETYPES",
@@ -44,9 +44,9 @@ class Archetype:
     """One kind of synthetic driver: its parameters, single-car driver and batch classes."""
 
     name: str
-    params: type
-    driver: type
-    batch: type
+    params: type[HumanParams]
+    driver: type[HumanDriver]
+    batch: type[HumanBatch]
 
 
 ARCHETYPES: dict[str, Archetype] = {

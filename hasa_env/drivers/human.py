@@ -23,7 +23,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -260,6 +260,13 @@ class HumanBatch(ABC):
         """The command u(k) (rad, road wheel) of each car at this step."""
 
 
+class NamedParams(Protocol):
+    """What every driver's parameters have: the name of the driver they make."""
+
+    @property
+    def name(self) -> str: ...
+
+
 class HumanDriver:
     """A synthetic human of one archetype as a :class:`~hasa_env.drivers.base.Driver`.
 
@@ -269,7 +276,7 @@ class HumanDriver:
     types they drive).
     """
 
-    accepts: ClassVar[tuple[type, ...]]
+    accepts: ClassVar[tuple[type[NamedParams], ...]]
 
     def __init__(self, params: Any) -> None:
         if not isinstance(params, self.accepts):

@@ -176,6 +176,7 @@ class IntermittentBatch(HumanBatch):
 
     def _command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
         dt = self._dt
+        assert dt is not None  # (act() checked)
         seen = self._delay(
             np.column_stack(
                 [info["lateral_offset"], info["heading"], info["station"], info["speed"]]

@@ -82,7 +82,7 @@ class ModelDriver:
         self._generic: _GenericModelState | None = None
 
     @classmethod
-    def make_batch(cls, drivers: Sequence[ModelDriver]) -> Any:
+    def make_batch(cls, drivers: Sequence[ModelDriver]) -> ModelBatch | LoopBatch:
         """A vectorized batch if every model is an ARX model, else car-by-car."""
         if all(d.model.arx() is not None for d in drivers):
             return ModelBatch(drivers)
@@ -132,8 +132,9 @@ class ModelBatch:
     def __init__(self, drivers: Sequence[ModelDriver]) -> None:
         self.drivers = list(drivers)
         self.num_cars = len(self.drivers)
-        forms = [d.model.arx() for d in self.drivers]
-        if any(f is None for f in forms):
+        maybe_forms = [d.model.arx() for d in self.drivers]
+        forms = [f for f in maybe_forms if f is not None]
+        if len(forms) != len(maybe_forms):
             raise ValueError("ModelBatch needs ARX models")
         self.forms = forms
         n = self.num_cars

@@ -21,9 +21,9 @@ copies: ``replace(POPULATIONS["paper"], remnant_scale=2.0, seed_key="paper")``.
 from __future__ import annotations
 
 import zlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -226,7 +226,16 @@ _TWO_POINT = TwoPointRanges(
     noise_time_constant=_Range(0.2, 0.4),
     white_noise_probability=1.0 / 3.0,
 )
-_SHARED = {
+
+
+class _SharedRanges(TypedDict):
+    delay: _Range
+    neuromuscular_frequency: _Range
+    neuromuscular_damping: _Range
+    max_lateral_acceleration: _Range
+
+
+_SHARED: _SharedRanges = {
     "delay": _Range(0.15, 0.25),
     "neuromuscular_frequency": _Range(8.0, 14.0),
     "neuromuscular_damping": _Range(0.6, 0.85),
@@ -442,7 +451,11 @@ def _draw_intermittent(
     )
 
 
-_DRAW = {"two-point": _draw_two_point, "preview": _draw_preview, "intermittent": _draw_intermittent}
+_DRAW: dict[str, Callable[[PopulationSpec, np.random.Generator, dict], HumanParams]] = {
+    "two-point": _draw_two_point,
+    "preview": _draw_preview,
+    "intermittent": _draw_intermittent,
+}
 
 
 def _legacy_population(spec: PopulationSpec, seed: int, key: int, size: int) -> list[HumanParams]:

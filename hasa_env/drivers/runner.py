@@ -29,11 +29,12 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams, make_driver
+from hasa_env.drivers.archetypes import HumanParams, make_driver
 from hasa_env.drivers.base import Driver, make_batch
+from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.recording.writer import save_recording
 from hasa_env.sim.config import deep_merge
-from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS, recording_row
+from hasa_env.sim.setup import INFO_KEYS, RECORDING_COLUMNS, EnvSetup, recording_row
 
 __all__ = [
     "DEFAULT_ENV_ID",
@@ -87,11 +88,11 @@ def _frame(rows: np.ndarray | list, attrs: Mapping[str, Any]) -> pd.DataFrame:
         frame[column] = frame[column].astype(np.int64)
     for column in _BOOL_COLUMNS:
         frame[column] = frame[column].astype(bool)
-    frame.attrs = dict(attrs)
+    frame.attrs.update(attrs)  # (a new frame's attrs are empty)
     return frame
 
 
-def _env_dt(setup: Any) -> float:
+def _env_dt(setup: EnvSetup) -> float:
     return setup.dt * setup.action_repeat
 
 
@@ -144,7 +145,7 @@ def run_driver(
             "config applies only when the env is given by id; configure the env instance yourself"
         )
     env = env_id_or_env
-    track = str(env.unwrapped.config["track"])
+    track = str(hasa_unwrapped(env).config["track"])
     seeds = run_seeds(seed, runs, _key(driver, track))
     env_id = env.spec.id if env.spec is not None else ""
     return [_run_single(driver, env, s, options, env_id) for s in seeds]
@@ -157,7 +158,7 @@ def _run_single(
     options: Mapping[str, Any] | None,
     env_id: str,
 ) -> pd.DataFrame:
-    base = env.unwrapped
+    base = hasa_unwrapped(env)
     setup = base.setup
     road = setup.road
     env_seed, driver_seed = seeds
@@ -226,12 +227,14 @@ def run_drivers(
     cfg = _physical_config(config)
     env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", config=cfg)
     try:
-        base = env.unwrapped
+        base = hasa_unwrapped(env)
         setup = base.setup
         road = setup.road
         env_seeds = [int(s[0]) for s in seeds]
         batch = make_batch(drivers)
-        _, info = env.reset(seed=env_seeds, options=dict(options) if options else None)
+        # gymnasium's VectorEnv.reset says seed: int, its vector envs take a list too
+        options_ = dict(options) if options else None
+        _, info = env.reset(seed=env_seeds, options=options_)  # type: ignore[arg-type]
         batch.reset([int(s[1]) for s in seeds], _env_dt(setup))
         max_steps = -(-setup.max_sim_steps // setup.action_repeat)
         width = len(RECORDING_COLUMNS)
@@ -325,8 +328,7 @@ def run_population(
     objects: list[Driver] = []
     names: list[str] = []
     for item in drivers:
-        is_params = any(type(item) is a.params for a in ARCHETYPES.values())
-        driver = make_driver(item) if is_params else item
+        driver = make_driver(item) if isinstance(item, HumanParams) else item
         objects.append(driver)
         names.append(str(getattr(driver, "name", type(driver).__name__)))
     if len(set(names)) != len(names):

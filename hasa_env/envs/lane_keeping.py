@@ -8,7 +8,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hasa_env.render import make_renderer
+from hasa_env.envs.base import LaneKeepingBase
+from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     SCALAR_OPS,
     VehicleState,
@@ -17,12 +18,10 @@ from hasa_env.sim.dynamics import (
     sensor_readings,
 )
 from hasa_env.sim.setup import (
-    INFO_KEYS,
     build_setup,
     check_reset_options,
     draw_episode,
     draw_noise_block,
-    info_values,
     physical_action,
 )
 from hasa_env.sim.transition import env_step
@@ -30,7 +29,7 @@ from hasa_env.sim.transition import env_step
 __all__ = ["LaneKeepingEnv"]
 
 
-class LaneKeepingEnv(gym.Env):
+class LaneKeepingEnv(LaneKeepingBase, gym.Env):
     """A kinematic bicycle keeping its lane while the camera sees a biased lane.
 
     ## Description
@@ -126,8 +125,8 @@ class LaneKeepingEnv(gym.Env):
             "sensors": [b.astype(np.float64).tolist() for b in self.setup.sensor_bounds()],
             "state": [b.astype(np.float64).tolist() for b in self.setup.state_bounds()],
         }
-        self._renderer = None
-        self._state: VehicleState | None = None
+        self._renderer: SceneRenderer | None = None
+        self._state: VehicleState[float] | None = None
         self._ended = False  # the episode ended (terminated or truncated) without a reset since
         self._warned_ended = False
 
@@ -148,10 +147,10 @@ class LaneKeepingEnv(gym.Env):
         self._velocity = road_frame_velocity(state, SCALAR_OPS)
         kappa = self._curvature(state.station)
         imu = road_frame_acceleration(state, 0.0, kappa, self.setup.params, SCALAR_OPS)
-        self._finish_sample(imu, kappa)
+        self._finish_sample(state, imu, kappa)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), self._info()
+        return self._observation(state), self._info(state)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         if self._state is None:
@@ -176,16 +175,17 @@ class LaneKeepingEnv(gym.Env):
             self._phases,
         )
         self._sim_step += setup.action_repeat
-        self._state, self._velocity = outcome.state, outcome.velocity
+        state = self._state = outcome.state
+        self._velocity = outcome.velocity
         self._acceleration = acc
-        self._finish_sample(outcome.imu, self._curvature(outcome.state.station))
+        self._finish_sample(state, outcome.imu, self._curvature(state.station))
         terminated = bool(outcome.off_road)
         truncated = self._sim_step >= setup.max_sim_steps
         self._ended = self._ended or terminated or truncated
         reward = outcome.reward
         if self.render_mode == "human":
             self.render()
-        return self._observation(), float(reward), terminated, truncated, self._info()
+        return self._observation(state), float(reward), terminated, truncated, self._info(state)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
@@ -198,7 +198,7 @@ class LaneKeepingEnv(gym.Env):
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
             self._renderer = make_renderer(self.setup, self.render_mode)
-        return self._renderer.render(self._info())
+        return self._renderer.render(self._info(self._state))
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -206,44 +206,23 @@ class LaneKeepingEnv(gym.Env):
             self._renderer = None
 
     # ------------------------------------------------------------- helpers
-    def _finish_sample(self, imu: tuple[float, float], kappa: float) -> None:
+    def _finish_sample(
+        self, state: VehicleState[float], imu: tuple[float, float], kappa: float
+    ) -> None:
         if self._noise_pos >= len(self._noise):
             self._noise, self._noise_pos = draw_noise_block(self.np_random, self.setup).tolist(), 0
         noise = self._noise[self._noise_pos]
         self._noise_pos += 1
         self._kappa = kappa
-        self._sensors = sensor_readings(self._state, imu, self._bias, noise, self.setup.noise_std)
-
-    def _observation(self) -> Any:
-        setup = self.setup
-        kind = setup.observation_type
-        if kind == "sensors":
-            return self._sensor_obs()
-        if kind == "state":
-            return self._state_obs()
-        return {"sensors": self._sensor_obs(), "state": self._state_obs()}
+        self._sensors = sensor_readings(state, imu, self._bias, noise, self.setup.noise_std)
 
     def _sensor_obs(self) -> np.ndarray:
         return _clipped(self._sensors, *self._bounds["sensors"])
 
-    def _state_obs(self) -> np.ndarray:
-        s = self._state
+    def _state_obs(self, state: VehicleState) -> np.ndarray:
+        s = state
         values = (s.lateral_offset, s.heading, s.speed, s.steering, self._kappa)
         return _clipped(values, *self._bounds["state"])
-
-    def _info(self) -> dict[str, Any]:
-        values = info_values(
-            self._sim_step,
-            self._state,
-            self._velocity,
-            self._acceleration,
-            self._kappa,
-            self._bias,
-            self._bias_index,
-            self._sensors,
-            self.setup,
-        )
-        return dict(zip(INFO_KEYS, values, strict=True))
 
     @property
     def state(self) -> VehicleState | None:

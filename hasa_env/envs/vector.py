@@ -21,7 +21,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from hasa_env.render import make_renderer
+from hasa_env.envs.base import LaneKeepingBase
+from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     ARRAY_OPS,
     VehicleState,
@@ -35,7 +36,6 @@ from hasa_env.sim.setup import (
     check_reset_options,
     draw_episode,
     draw_noise_block,
-    info_values,
     physical_action,
 )
 from hasa_env.sim.transition import env_step
@@ -43,7 +43,7 @@ from hasa_env.sim.transition import env_step
 __all__ = ["LaneKeepingVectorEnv"]
 
 
-class LaneKeepingVectorEnv(VectorEnv):
+class LaneKeepingVectorEnv(LaneKeepingBase, VectorEnv):
     """N independent lane-keeping cars stepped together (see :class:`hasa_env.LaneKeepingEnv`).
 
     Spaces are the single env's, batched. ``infos`` is a dict of arrays (one
@@ -99,10 +99,10 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._phases = np.zeros((n, n_phases))  # disturbance phases of each car's episode
         self._velocity = (np.zeros(n), np.zeros(n))
         self._sensors = np.zeros((len(self.setup.noise_std), n))  # one row per channel
-        self._state: VehicleState | None = None
+        self._state: VehicleState[np.ndarray] | None = None
         self._arange = np.arange(n)
         self._row_base = self._arange * self.setup.noise_block  # car i's block in the flat noise
-        self._renderers: list[Any] | None = None
+        self._renderers: list[SceneRenderer] | None = None
         self._sensor_lo, self._sensor_hi = (
             b.astype(np.float64) for b in self.setup.sensor_bounds()
         )
@@ -136,7 +136,9 @@ class LaneKeepingVectorEnv(VectorEnv):
                 )
         if seed is None:
             seeds: list[int | None] = [None] * n
-        elif isinstance(seed, int | np.integer) and not isinstance(seed, bool):
+        elif isinstance(seed, bool):
+            raise TypeError(f"reset(seed=...) must be an integer, a list or None, got {seed!r}")
+        elif isinstance(seed, int | np.integer):
             seeds = [int(seed) + i for i in range(n)]
         else:
             seeds = list(seed)
@@ -154,15 +156,16 @@ class LaneKeepingVectorEnv(VectorEnv):
         for i in idx.tolist():
             if seeds[i] is not None:
                 self._rngs[i] = np.random.default_rng(seeds[i])
-        if self._state is None:
-            self._state = VehicleState(*(np.zeros(n) for _ in range(5)))
-        self._reset_envs(idx, options)
+        state = self._state
+        if state is None:
+            state = VehicleState(*(np.zeros(n) for _ in range(5)))
+        state = self._reset_envs(state, idx, options)
         self._autoreset[idx] = False
-        info = self._info()
+        info = self._info(state)
         if mask is not None:  # as gymnasium's vector envs: info entries of the reset cars only
             for key in INFO_KEYS:
                 info["_" + key] = mask.copy()
-        return self._observation(), info
+        return self._observation(state), info
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if self._state is None:
@@ -181,44 +184,51 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._sim_step,
             self._phases,
         )
-        self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in outcome.state))
+        state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in outcome.state))
+        self._state = state
         self._velocity = outcome.velocity
         self._sim_step += setup.action_repeat
         self._acceleration = acc
         # every car's next sample; the cars about to be reset are overwritten below
-        self._sample_all(outcome.imu, self._curvature_of(self._state.station), skip=resetting)
+        self._sample_all(state, outcome.imu, self._curvature_of(state.station), skip=resetting)
         terminated = np.asarray(outcome.off_road, dtype=bool)
         truncated = self._sim_step >= setup.max_sim_steps
         rewards = np.asarray(outcome.reward, dtype=np.float64)
         if resetting.any():
             idx = np.flatnonzero(resetting)
-            self._reset_envs(idx, None)
+            state = self._reset_envs(state, idx, None)
             rewards[idx] = 0.0
             terminated[idx] = False
             truncated[idx] = False
         self._autoreset = terminated | truncated
-        return self._observation(), rewards, terminated, truncated, self._info()
+        return self._observation(state), rewards, terminated, truncated, self._info(state)
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode='rgb_array'")
             return None
+        if self._state is None:
+            raise RuntimeError("call reset() before render()")
         if self._renderers is None:
             self._renderers = [make_renderer(self.setup, "rgb_array") for _ in range(self.num_envs)]
-        info = self._info()
+        info = self._info(self._state)
         frames = []
         for i, renderer in enumerate(self._renderers):
-            frames.append(
-                renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")})
-            )
+            frame = renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")})
+            assert frame is not None  # (rgb_array)
+            frames.append(frame)
         return tuple(frames)
 
     def close_extras(self, **kwargs: Any) -> None:
         self._renderers = None
 
     # ------------------------------------------------------------- helpers
-    def _reset_envs(self, idx: np.ndarray, options: dict[str, Any] | None) -> None:
-        fields = [f.copy() for f in self._state]
+    def _reset_envs(
+        self, state: VehicleState[np.ndarray], idx: np.ndarray, options: dict[str, Any] | None
+    ) -> VehicleState[np.ndarray]:
+        """Start new episodes for the cars ``idx`` of ``state``; returns (and keeps) the new
+        state of all cars."""
+        fields = [f.copy() for f in state]
         for i in idx.tolist():
             start, index, bias, block, phases = draw_episode(self._rngs[i], self.setup, options)
             if phases:
@@ -230,7 +240,7 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._noise_pos[i] = 0
             self._sim_step[i] = 0
             self._acceleration[i] = 0.0
-        self._state = VehicleState(*fields)
+        new_state = self._state = VehicleState(*fields)
         start_state = VehicleState(*(f[idx] for f in fields))
         velocity = road_frame_velocity(start_state, ARRAY_OPS)
         self._velocity[0][idx], self._velocity[1][idx] = velocity
@@ -244,6 +254,7 @@ class LaneKeepingVectorEnv(VectorEnv):
         self._kappa[idx] = kappa
         for channel, reading in zip(self._sensors, readings, strict=True):
             channel[idx] = reading
+        return new_state
 
     def _curvature_of(self, station: np.ndarray) -> np.ndarray:
         """Road curvature (1/m) at the given stations, same shape."""
@@ -257,7 +268,9 @@ class LaneKeepingVectorEnv(VectorEnv):
             self._noise[i] = draw_noise_block(self._rngs[i], self.setup)
             self._noise_pos[i] = 0
 
-    def _sample_all(self, imu: tuple, kappa: np.ndarray, skip: np.ndarray) -> None:
+    def _sample_all(
+        self, state: VehicleState[np.ndarray], imu: tuple, kappa: np.ndarray, skip: np.ndarray
+    ) -> None:
         """Every car's next noise row, sensors and curvature.
 
         Cars in ``skip`` (about to be reset, which draws them a new block) draw
@@ -270,42 +283,24 @@ class LaneKeepingVectorEnv(VectorEnv):
             pos = np.minimum(pos, block - 1)  # skipped cars: any row, overwritten at reset
         noise = self._noise.reshape(-1, self._noise.shape[2])[self._row_base + pos]
         self._noise_pos += 1
-        readings = sensor_readings(self._state, imu, self._bias, noise.T, self.setup.noise_std)
+        readings = sensor_readings(state, imu, self._bias, noise.T, self.setup.noise_std)
         self._kappa = np.array(kappa, dtype=np.float64)
         for channel, reading in zip(self._sensors, readings, strict=True):
             channel[:] = reading
 
-    def _observation(self) -> Any:
-        kind = self.setup.observation_type
-        if kind == "sensors":
-            return self._sensor_obs()
-        if kind == "state":
-            return self._state_obs()
-        return {"sensors": self._sensor_obs(), "state": self._state_obs()}
-
     def _sensor_obs(self) -> np.ndarray:
         return np.clip(self._sensors.T, self._sensor_lo, self._sensor_hi).astype(np.float32)
 
-    def _state_obs(self) -> np.ndarray:
-        s = self._state
+    def _state_obs(self, state: VehicleState) -> np.ndarray:
+        s = state
         values = np.stack([s.lateral_offset, s.heading, s.speed, s.steering, self._kappa], axis=1)
         return np.clip(values, self._state_lo, self._state_hi).astype(np.float32)
 
-    def _info(self) -> dict[str, Any]:
-        values = info_values(
-            self._sim_step,
-            self._state,
-            self._velocity,
-            self._acceleration,
-            self._kappa,
-            self._bias,
-            self._bias_index,
-            self._sensors,
-            self.setup,
-        )
+    def _info(self, state: VehicleState) -> dict[str, Any]:
+        """The info as arrays with gymnasium's ``"_key"`` masks (every car)."""
         info: dict[str, Any] = {}
         mask = np.ones(self.num_envs, dtype=bool)
-        for key, value in zip(INFO_KEYS, values, strict=True):
+        for key, value in super()._info(state).items():
             info[key] = np.array(value, copy=True)
             info["_" + key] = mask
         return info

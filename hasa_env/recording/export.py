@@ -87,7 +87,9 @@ def _setup(config: Mapping[str, Any]) -> EnvSetup:
     return build_setup(config)
 
 
-def observations(data: pd.DataFrame, config: Mapping[str, Any], kind: str | None = None) -> Any:
+def observations(
+    data: pd.DataFrame, config: Mapping[str, Any], kind: str | None = None
+) -> np.ndarray | dict[str, np.ndarray]:
     """The env's observations of every recording row, recomputed from the columns.
 
     Args:
@@ -195,7 +197,8 @@ class ExportResult:
     Attributes:
         dataset: the created ``minari.MinariDataset``.
         dataset_id: its id.
-        exported: the recordings (CSV paths) in the dataset, episode i = exported[i].
+        exported: the recordings (CSV paths; None for one built in memory) in the
+            dataset, episode i = exported[i].
         skipped: (path, reason) of every recording left out: corrupt files,
             recordings without steps, configs that differ from the first one.
         cut: exported recordings whose last step was marked truncated because
@@ -206,9 +209,9 @@ class ExportResult:
 
     dataset: Any
     dataset_id: str
-    exported: list[Path] = field(default_factory=list)
+    exported: list[Path | None] = field(default_factory=list)
     skipped: list[tuple[Path | None, str]] = field(default_factory=list)
-    cut: list[Path] = field(default_factory=list)
+    cut: list[Path | None] = field(default_factory=list)
     env_id: str = ""
     config: dict[str, Any] = field(default_factory=dict)
 

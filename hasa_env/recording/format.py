@@ -107,6 +107,10 @@ class RecordingError(ValueError):
     :attr:`column`.
     """
 
+    loaded: RecordingList
+    """Set on the error :func:`~hasa_env.recording.reader.load_recordings` raises with
+    ``strict=True``: the recordings that did load."""
+
     def __init__(
         self,
         message: str,
@@ -190,7 +194,9 @@ class RecordingList(list):
     :class:`RecordingError` per corrupt file (its ``path`` names the file).
     """
 
-    def __init__(self, recordings: Iterable[Recording] = (), errors: Iterable[RecordingError] = ()):
+    def __init__(
+        self, recordings: Iterable[Recording] = (), errors: Iterable[RecordingError] = ()
+    ) -> None:
         super().__init__(recordings)
         self.errors: list[RecordingError] = list(errors)
 
@@ -425,7 +431,11 @@ def _parser(column: str):  # noqa: ANN202
 
 def _check_header(names: list[str], source: Path | str) -> None:
     seen: set[str] = set()
-    dup = [n for n in names if n in seen or seen.add(n)]
+    dup = []
+    for n in names:
+        if n in seen:
+            dup.append(n)
+        seen.add(n)
     unknown = [n for n in names if n not in RECORDING_COLUMNS]
     missing = [c for c in RECORDING_COLUMNS if c not in seen]
     problems = []

@@ -13,7 +13,6 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
@@ -88,7 +87,7 @@ class RawInputWriter:
             self._file.close()
 
 
-def load_raw_inputs(path: str | os.PathLike[str]) -> Any:
+def load_raw_inputs(path: str | os.PathLike[str]) -> pd.DataFrame:
     """Read a raw-input side file (or the one next to a recording CSV) as a pandas DataFrame."""
     p = Path(path)
     if p.suffix == ".csv":

@@ -191,11 +191,11 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
             errors.append(RecordingError("sidecar without its CSV file", side.with_suffix(".csv")))
     result = RecordingList(good, errors)
     if errors and strict:
-        exc = RecordingError(
+        error = RecordingError(
             f"{len(errors)} corrupt recording(s) in {root}:\n" + "\n".join(f"  {e}" for e in errors)
         )
-        exc.loaded = result  # type: ignore[attr-defined]
-        raise exc
+        error.loaded = result
+        raise error
     for e in errors:
         warnings.warn(f"skipped corrupt recording: {e}", RecordingWarning, stacklevel=2)
     for rec in good:

@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording.format import (
     _BOOL_COLUMNS,
@@ -209,6 +210,7 @@ class RecordingWrapper(gym.Wrapper):
     # ------------------------------------------------------------ private
     def _init_seed_sequence(self, entropy: int | None) -> None:
         seq = np.random.SeedSequence(entropy)
+        assert isinstance(seq.entropy, int | np.integer)  # (from an int or fresh: one int)
         self._seed_entropy = int(seq.entropy)
         self._seed_rng = np.random.default_rng(seq)
 
@@ -228,10 +230,9 @@ class RecordingWrapper(gym.Wrapper):
             csv_path = self.directory / f"{self.prefix}_{index:03d}.csv"
             try:
                 fd = os.open(csv_path, flags, 0o666)
+                break
             except FileExistsError:
                 index += 1
-                continue
-            break
         self._fd = fd
         self._offset = 0
         self._write_error = None
@@ -246,7 +247,7 @@ class RecordingWrapper(gym.Wrapper):
             seed_source=source,
             seed_sequence_entropy=self._seed_entropy,
             reset_options=reset_options,
-            config=self.env.unwrapped.config,
+            config=hasa_unwrapped(self.env).config,
             metadata=self.recording_metadata,
         )
         self._sidecar = sidecar

@@ -8,7 +8,7 @@ Two views exist, chosen with ``config["render"]["view"]`` (see
 - ``"driver"`` (:class:`~hasa_env.render.driver_view.DriverViewRenderer`):
   the first-person perspective of the road ahead.
 
-Both draw the HUD of :mod:`hasa_env.render.common`;
+Both are a :class:`~hasa_env.render.common.SceneRenderer` and draw its HUD;
 :class:`~hasa_env.render.options.ViewOptions` says what they show (ghost
 markings, HUD items, and in the driver's view a bonnet and road texture:
 :meth:`ViewOptions.participant` is a study participant's view). Importing
@@ -17,13 +17,12 @@ this package does not import pygame; the renderers do when they are created.
 
 from __future__ import annotations
 
-from typing import Any
-
 from hasa_env.render.common import (
     GHOST_COLOUR,
     HYPOTHESIS_COLOURS,
     Hud,
     HumanWindow,
+    SceneRenderer,
     WeightSource,
     resolve_weights,
     surface_to_array,
@@ -31,6 +30,7 @@ from hasa_env.render.common import (
 from hasa_env.render.driver_view import DriverViewRenderer
 from hasa_env.render.options import HUD_ITEMS, ViewOptions
 from hasa_env.render.top_down import TopDownRenderer
+from hasa_env.sim.setup import EnvSetup
 
 __all__ = [
     "DriverViewRenderer",
@@ -39,6 +39,7 @@ __all__ = [
     "HYPOTHESIS_COLOURS",
     "Hud",
     "HumanWindow",
+    "SceneRenderer",
     "TopDownRenderer",
     "ViewOptions",
     "WeightSource",
@@ -49,20 +50,20 @@ __all__ = [
 
 
 def make_renderer(
-    setup: Any,
+    setup: EnvSetup,
     render_mode: str,
     *,
     view: str | None = None,
     weights: WeightSource = None,
     steering_ratio: float | None = None,
     options: ViewOptions | None = None,
-) -> Any:
+) -> SceneRenderer:
     """The renderer of ``view`` (default ``setup.config["render"]["view"]``) for an env set-up.
 
     ``options`` (:class:`ViewOptions`, default: everything shown) says what it
     draws. Returns a :class:`TopDownRenderer` or a :class:`DriverViewRenderer`;
-    both have ``draw(info, weights, message, target)``, ``render(info, weights)``
-    and ``close()``.
+    both are a :class:`SceneRenderer`, with ``draw(info, weights, message, target)``,
+    ``render(info, weights)`` and ``close()``.
     """
     view = setup.config["render"]["view"] if view is None else view
     if view == "top_down":

@@ -1,4 +1,5 @@
-"""What both views share: colours, the HUD, hypothesis weights, frames, the human window.
+"""What both views share: colours, the HUD, hypothesis weights, frames, the human window,
+and the renderer's frame of set-up, ``draw``, ``render`` and ``close`` (:class:`SceneRenderer`).
 
 Frames are drawn on an off-screen ``pygame.Surface`` (works headless, with
 ``SDL_VIDEODRIVER=dummy`` and no display) and returned as ``(H, W, 3)``
@@ -17,17 +18,21 @@ hypothesis. pygame is imported by the functions that draw, never at import.
 from __future__ import annotations
 
 import math
+import os
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from hasa_env.render.options import HUD_ITEMS
+from hasa_env.render.options import HUD_ITEMS, ViewOptions
+from hasa_env.sim.setup import EnvSetup
 
 __all__ = [
     "Hud",
     "HumanWindow",
+    "SceneRenderer",
     "surface_to_array",
     "resolve_weights",
     "WeightSource",
@@ -272,7 +277,7 @@ class HumanWindow:
         self.size = size
         self.frame_interval = 1.0 / float(fps)
         self.caption = caption
-        self.window = None
+        self.window: Any = None  # the pygame display surface, once opened
         self._anchor: float | None = None
         self._last_frame = -math.inf
 
@@ -306,3 +311,91 @@ class HumanWindow:
         if self.window is not None:
             self._pg.display.quit()
             self.window = None
+
+
+class SceneRenderer(ABC):
+    """An env's view: its off-screen surface, the HUD and the human window; one per env.
+
+    A view draws the scene in :meth:`_draw_scene`; :meth:`draw` puts the HUD over it,
+    :meth:`render` returns or shows the frame.
+
+    Args:
+        setup: the env's :class:`hasa_env.sim.setup.EnvSetup` (road, hypotheses, config).
+        render_mode: ``"rgb_array"`` (frames as arrays) or ``"human"`` (a window).
+        size: frame (width, height) in pixels.
+        caption: the human window's title.
+        weights: where the HUD takes hypothesis weights from (:data:`WeightSource`);
+            default: look in ``info``.
+        steering_ratio: steering-wheel / road-wheel angle, shown in the HUD if given.
+        options: what to draw (:class:`~hasa_env.render.options.ViewOptions`); default:
+            everything (ghost markings, full HUD), no bonnet or texture.
+    """
+
+    def __init__(
+        self,
+        setup: EnvSetup,
+        render_mode: str,
+        size: tuple[int, int],
+        caption: str,
+        *,
+        weights: WeightSource = None,
+        steering_ratio: float | None = None,
+        options: ViewOptions | None = None,
+    ) -> None:
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+        import pygame  # pygame: loaded only when drawing, never on headless paths
+
+        self._pg = pygame
+        self.setup = setup
+        self.render_mode = render_mode
+        self.width, self.height = size
+        self.fps = int(setup.config["render"]["fps"])
+        self.weights = weights
+        self.options = options if options is not None else ViewOptions()
+        self.surface = pygame.Surface((self.width, self.height))
+        self._target = self.surface
+        self.hud = Hud(
+            pygame, self.height, setup.config["time_limit"], steering_ratio, self.options.hud
+        )
+        self._window = HumanWindow(pygame, (self.width, self.height), self.fps, caption)
+
+    @abstractmethod
+    def _draw_scene(self, surface: Any, info: Mapping[str, Any]) -> None:
+        """Draw the view of the scene ``info`` describes onto ``surface`` (no HUD)."""
+
+    def draw(
+        self,
+        info: Mapping[str, Any],
+        weights: WeightSource = None,
+        message: str | None = None,
+        target: Any = None,
+    ) -> Any:
+        """Draw the scene described by an env ``info`` dict, with the HUD over it.
+
+        Args:
+            info: the env's info (keys of :data:`hasa_env.sim.setup.INFO_KEYS`).
+            weights: hypothesis weights for the HUD (default: the constructor's).
+            message: text centred over the scene (e.g. a countdown), or None.
+            target: surface to draw on (same size); default the off-screen surface.
+
+        Returns:
+            The surface drawn on.
+        """
+        surface = self.surface if target is None else target
+        self._target = surface
+        self._draw_scene(surface, info)
+        hypotheses = self.setup.hypotheses
+        shown = resolve_weights(self.weights if weights is None else weights, info, hypotheses)
+        self.hud.draw(surface, info, shown, message, hypotheses)
+        return surface
+
+    def render(self, info: Mapping[str, Any], weights: WeightSource = None) -> np.ndarray | None:
+        """``rgb_array``: the (H, W, 3) uint8 frame; ``human``: show it, paced by sim time."""
+        if self.render_mode == "rgb_array":
+            return surface_to_array(self.draw(info, weights))
+        if self._window.frame_due(float(info["time"])):
+            self._window.show(self.draw(info, weights))
+        return None
+
+    def close(self) -> None:
+        self._window.close()

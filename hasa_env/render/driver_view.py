@@ -31,7 +31,6 @@ appears at ``(W/2 - f Y_c / X_c, horizon + f h / X_c)`` with the focal length
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -42,13 +41,11 @@ from hasa_env.render.common import (
     GRASS_COLOUR,
     MARKING_COLOUR,
     ROAD_COLOUR,
-    Hud,
-    HumanWindow,
+    SceneRenderer,
     WeightSource,
-    resolve_weights,
-    surface_to_array,
 )
 from hasa_env.render.options import ViewOptions
+from hasa_env.sim.setup import EnvSetup
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 
 __all__ = [
@@ -108,7 +105,7 @@ BONNET_EDGE_COLOUR = (70, 74, 84)
 DASHBOARD_COLOUR = (16, 16, 19)
 
 
-class DriverViewRenderer:
+class DriverViewRenderer(SceneRenderer):
     """First-person perspective renderer of an env's ``info`` dict; one instance per env.
 
     Args:
@@ -125,7 +122,7 @@ class DriverViewRenderer:
 
     def __init__(
         self,
-        setup: Any,
+        setup: EnvSetup,
         render_mode: str = "rgb_array",
         *,
         weights: WeightSource = None,
@@ -136,31 +133,21 @@ class DriverViewRenderer:
     ) -> None:
         if render_mode not in ("rgb_array", "human"):
             raise ValueError(f"render_mode must be 'rgb_array' or 'human', got {render_mode!r}")
-        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-        import pygame  # pygame: loaded only when drawing, never on headless paths
-
-        self._pg = pygame
-        self.setup = setup
-        self.render_mode = render_mode
         rc = setup.config["render"]
-        self.width, self.height = (
-            size if size is not None else (int(rc["width"]), int(rc["height"]))
+        super().__init__(
+            setup,
+            render_mode,
+            size if size is not None else (int(rc["width"]), int(rc["height"])),
+            "hasa-env: driver's view",
+            weights=weights,
+            steering_ratio=steering_ratio,
+            options=options,
         )
-        self.fps = int(rc["fps"])
         self.eye_height = float(rc["eye_height"])
         self.field_of_view = float(rc["horizontal_field_of_view"])
         self.show_points = bool(rc["show_points"]) if show_points is None else bool(show_points)
         self.focal = 0.5 * self.width / math.tan(0.5 * self.field_of_view)
         self.horizon = HORIZON_FRACTION * self.height
-        self.weights = weights
-        self.options = options if options is not None else ViewOptions()
-        self.surface = pygame.Surface((self.width, self.height))
-        self.hud = Hud(
-            pygame, self.height, setup.config["time_limit"], steering_ratio, self.options.hud
-        )
-        self._window = HumanWindow(
-            pygame, (self.width, self.height), self.fps, "hasa-env: driver's view"
-        )
         self._bonnet = self._bonnet_surface() if self.options.bonnet else None
         road_cfg = setup.config["road"]
         lane = setup.road.lane_width
@@ -250,7 +237,7 @@ class DriverViewRenderer:
         station: float,
         period: float,
         offsets: list[float],
-        colour: tuple[int, int, int],
+        colour: tuple[int, ...],
         width: float,
         camera: tuple[float, float, float, float],
         near: float = 1.0,
@@ -293,27 +280,9 @@ class DriverViewRenderer:
                 pg.draw.polygon(self._target, colour, pts)
 
     # ----------------------------------------------------------- drawing
-    def draw(
-        self,
-        info: Mapping[str, Any],
-        weights: WeightSource = None,
-        message: str | None = None,
-        target: Any = None,
-    ) -> Any:
-        """Draw the driver's view of the scene described by an env ``info`` dict.
-
-        Args:
-            info: the env's info (keys of :data:`hasa_env.sim.setup.INFO_KEYS`).
-            weights: hypothesis weights for the HUD (default: the constructor's).
-            message: text centred over the scene (e.g. a countdown), or None.
-            target: surface to draw on (same size); default the off-screen surface.
-
-        Returns:
-            The surface drawn on.
-        """
+    def _draw_scene(self, surf: Any, info: Mapping[str, Any]) -> None:
+        """The road ahead from the driver's eye: sky, grass, road, markings, posts, bonnet."""
         pg = self._pg
-        surf = self.surface if target is None else target
-        self._target = surf
         w, h = self.width, self.height
         horizon = int(round(self.horizon))
         surf.fill(SKY_COLOUR, (0, 0, w, horizon))
@@ -350,11 +319,6 @@ class DriverViewRenderer:
             self._draw_points(station, camera)
         if self._bonnet is not None:
             surf.blit(self._bonnet, (0, self.height - self._bonnet.get_height()))
-        shown = resolve_weights(
-            self.weights if weights is None else weights, info, self.setup.hypotheses
-        )
-        self.hud.draw(surf, info, shown, message, self.setup.hypotheses)
-        return surf
 
     def _bonnet_surface(self) -> Any:
         """The bonnet and dashboard silhouette (drawn once, blitted every frame).
@@ -421,15 +385,3 @@ class DriverViewRenderer:
                     )
                 else:
                     pg.draw.circle(self._target, colour, (int(x), int(y)), radius)
-
-    # ------------------------------------------------------------ output
-    def render(self, info: Mapping[str, Any], weights: WeightSource = None) -> np.ndarray | None:
-        """``rgb_array``: the (H, W, 3) uint8 frame; ``human``: show it, paced by sim time."""
-        if self.render_mode == "rgb_array":
-            return surface_to_array(self.draw(info, weights))
-        if self._window.frame_due(float(info["time"])):
-            self._window.show(self.draw(info, weights))
-        return None
-
-    def close(self) -> None:
-        self._window.close()

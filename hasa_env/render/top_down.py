@@ -8,7 +8,6 @@ lane-centre hypothesis would put the lane, the car, and the shared HUD
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -20,18 +19,16 @@ from hasa_env.render.common import (
     GRASS_COLOUR,
     MARKING_COLOUR,
     ROAD_COLOUR,
-    Hud,
-    HumanWindow,
+    SceneRenderer,
     WeightSource,
-    resolve_weights,
-    surface_to_array,
 )
 from hasa_env.render.options import ViewOptions
+from hasa_env.sim.setup import EnvSetup
 
 __all__ = ["TopDownRenderer"]
 
 
-class TopDownRenderer:
+class TopDownRenderer(SceneRenderer):
     """Draws an env's info dict from above; one instance per env.
 
     Args:
@@ -45,33 +42,25 @@ class TopDownRenderer:
 
     def __init__(
         self,
-        setup: Any,
+        setup: EnvSetup,
         render_mode: str,
         *,
         weights: WeightSource = None,
         steering_ratio: float | None = None,
         options: ViewOptions | None = None,
     ) -> None:
-        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-        import pygame  # pygame: loaded only when drawing, never on headless paths
-
-        self._pg = pygame
-        self.setup = setup
-        self.render_mode = render_mode
         rc = setup.config["render"]
-        self.width, self.height = int(rc["width"]), int(rc["height"])
+        size = int(rc["width"]), int(rc["height"])
+        super().__init__(
+            setup,
+            render_mode,
+            size,
+            "hasa-env lane keeping",
+            weights=weights,
+            steering_ratio=steering_ratio,
+            options=options,
+        )
         self.ppm = float(rc["pixels_per_metre"])
-        self.fps = int(rc["fps"])
-        self.weights = weights
-        self.options = options if options is not None else ViewOptions()
-        pygame.font.init()
-        self.surface = pygame.Surface((self.width, self.height))
-        self.hud = Hud(
-            pygame, self.height, setup.config["time_limit"], steering_ratio, self.options.hud
-        )
-        self._window = HumanWindow(
-            pygame, (self.width, self.height), self.fps, "hasa-env lane keeping"
-        )
 
     # -------------------------------------------------------------- drawing
     def _to_screen(
@@ -94,30 +83,12 @@ class TopDownRenderer:
         gy = Y + np.cos(psi) * offset
         return [tuple(p) for p in self._to_screen(gx, gy, origin).tolist()]
 
-    def draw(
-        self,
-        info: Mapping[str, Any],
-        weights: WeightSource = None,
-        message: str | None = None,
-        target: Any = None,
-    ) -> Any:
-        """Draw the scene described by an env ``info`` dict.
-
-        Args:
-            info: the env's info (keys of :data:`hasa_env.sim.setup.INFO_KEYS`).
-            weights: hypothesis weights for the HUD (default: the constructor's).
-            message: text centred over the scene (e.g. a countdown), or None.
-            target: surface to draw on (same size); default the off-screen surface.
-
-        Returns:
-            The surface drawn on.
-        """
+    def _draw_scene(self, surf: Any, info: Mapping[str, Any]) -> None:
+        """The road from above: grass, road, true and ghost markings, the car."""
         pg = self._pg
         setup = self.setup
         road = setup.road
         width = road.lane_width
-        surf = self.surface if target is None else target
-        self._target = surf
         surf.fill(GRASS_COLOUR)
         s0 = float(info["station"])
         behind = self.height * 0.3 / self.ppm + 5.0
@@ -149,11 +120,6 @@ class TopDownRenderer:
                 pts = self._line_points(stations, -b + side * width, origin)
                 self._dashed(pts, stations, GHOST_COLOUR, max(1, line_w // 2), period=6.0)
         self._draw_car(info, origin)
-        shown = resolve_weights(
-            self.weights if weights is None else weights, info, setup.hypotheses
-        )
-        self.hud.draw(surf, info, shown, message, setup.hypotheses)
-        return surf
 
     def _dashed(
         self, pts: list, stations: np.ndarray, colour: tuple, line_w: int, period: float = 12.0
@@ -183,15 +149,3 @@ class TopDownRenderer:
         py = gy + corners[:, 0] * s + corners[:, 1] * c
         pts = [tuple(p) for p in self._to_screen(px, py, origin).tolist()]
         self._pg.draw.polygon(self._target, CAR_COLOUR, pts)
-
-    # ----------------------------------------------------------- output
-    def render(self, info: Mapping[str, Any], weights: WeightSource = None) -> np.ndarray | None:
-        """``rgb_array``: the (H, W, 3) uint8 frame; ``human``: show it, paced by sim time."""
-        if self.render_mode == "rgb_array":
-            return surface_to_array(self.draw(info, weights))
-        if self._window.frame_due(float(info["time"])):
-            self._window.show(self.draw(info, weights))
-        return None
-
-    def close(self) -> None:
-        self._window.close()

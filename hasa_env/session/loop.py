@@ -50,6 +50,7 @@ from hasa_env.recording.raw_inputs import (
 from hasa_env.recording.writer import RecordingWrapper
 from hasa_env.render import ViewOptions, make_renderer
 from hasa_env.session.settings import DriveSettings
+from hasa_env.session.study import seed_from_entropy
 from hasa_env.sim.config import deep_merge, make_config
 
 __all__ = ["DriveSession", "MAX_CATCH_UP", "RunResult", "RunSpec", "WAITING_STATES"]
@@ -202,12 +203,8 @@ class DriveSession:
         self.steps = 0
         """Env steps taken in the current run."""
         self.results: list[RunResult] = []
-        self._frame_clock = None
-        self._root_seed = (
-            settings.seed
-            if settings.seed is not None
-            else int(np.random.SeedSequence().entropy % 2**63)
-        )
+        self._frame_clock: Any = None  # a pygame.time.Clock once ticking
+        self._root_seed = settings.seed if settings.seed is not None else seed_from_entropy()
 
     # ---------------------------------------------------------- helpers
     def run_seeds(self) -> list[int]:

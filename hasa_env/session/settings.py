@@ -67,7 +67,7 @@ class DriveSettings:
         seconds: length of a run (the paper: 30 s).
         speed: initial speed (15 m/s).
         lateral_offset: initial lateral offset y (-0.5 m).
-        output: root directory of the recordings.
+        output: root directory of the recordings (a str or path; a Path once validated).
         seed: root seed of the runs' seeds (None: fresh entropy, recorded).
         countdown: seconds of countdown before each run (real time only).
         config: extra env configuration deep-merged onto the defaults.
@@ -85,7 +85,7 @@ class DriveSettings:
     seconds: float = 30.0
     speed: float = 15.0
     lateral_offset: float = -0.5
-    output: Path = Path("recordings")
+    output: Path | str = Path("recordings")
     seed: int | None = None
     countdown: float = 3.0
     config: Mapping[str, Any] = field(default_factory=dict)
@@ -141,4 +141,4 @@ class DriveSettings:
     @property
     def directory(self) -> Path:
         """Where this participant's recordings go: ``output / participant``."""
-        return self.output / self.participant
+        return Path(self.output) / self.participant

@@ -520,4 +520,6 @@ class Study:
 
 def seed_from_entropy() -> int:
     """A fresh root seed (recorded in the session file when the study gives none)."""
-    return int(np.random.SeedSequence().entropy % 2**63)
+    entropy = np.random.SeedSequence().entropy
+    assert isinstance(entropy, int)  # (fresh entropy is one int)
+    return entropy % 2**63

@@ -83,8 +83,12 @@ class Disturbance:
         return len(self.wind_frequencies) + len(self.camber_wavenumbers)
 
     def lateral_acceleration(
-        self, time: Any, station: Any, phases: Any, ops: SimpleNamespace
-    ) -> Any:
+        self,
+        time: float | np.ndarray,
+        station: float | np.ndarray,
+        phases: Any,
+        ops: SimpleNamespace,
+    ) -> float | np.ndarray:
         """a_d (m/s^2) at ``time`` (s) and ``station`` (m) for an episode's ``phases``.
 
         ``phases`` is a sequence of floats (one car) or an (N, n_phases) array

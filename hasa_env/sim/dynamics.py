@@ -26,7 +26,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import NamedTuple
+from typing import Generic, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -86,8 +86,13 @@ class VehicleParams:
     dt: float = 0.01
 
 
-class VehicleState(NamedTuple):
-    """Frenet state of the car (each field a float, or an array of N cars).
+StateValue = TypeVar("StateValue", float, np.ndarray)
+"""A state field's type: a float for one car, an (N,) array for N cars."""
+
+
+class VehicleState(NamedTuple, Generic[StateValue]):
+    """Frenet state of the car (each field a float, or an array of N cars:
+    ``VehicleState[float]``, ``VehicleState[np.ndarray]``).
 
     Attributes:
         station: s, arc length along the lane centre (m).
@@ -97,11 +102,11 @@ class VehicleState(NamedTuple):
         steering: delta, road-wheel angle in effect (rad, left +).
     """
 
-    station: float | np.ndarray
-    lateral_offset: float | np.ndarray
-    heading: float | np.ndarray
-    speed: float | np.ndarray
-    steering: float | np.ndarray
+    station: StateValue
+    lateral_offset: StateValue
+    heading: StateValue
+    speed: StateValue
+    steering: StateValue
 
 
 def step_vehicle(

@@ -15,6 +15,7 @@ the visual angle of the two-point steering model on any road.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -145,7 +146,7 @@ def lane_centre_bearing(
     station: np.ndarray | float,
     lateral_offset: np.ndarray | float,
     heading: np.ndarray | float,
-    distance: float,
+    distance: np.ndarray | float,
     lane_offset: np.ndarray | float = 0.0,
 ) -> np.ndarray:
     """Bearing (rad, positive = to the left) of the lane-centre point ``distance`` m ahead.
@@ -205,7 +206,7 @@ def curved_road(lane_width: float = 3.6, spacing: float = 0.5) -> Road:
     return Road("curved", spacing, _profile(segments, spacing), lane_width)
 
 
-TRACKS = {"straight": straight_road, "curved": curved_road}
+TRACKS: dict[str, Callable[..., Road]] = {"straight": straight_road, "curved": curved_road}
 
 
 def make_road(track: str, lane_width: float = 3.6) -> Road:

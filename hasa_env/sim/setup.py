@@ -10,10 +10,10 @@ is :func:`hasa_env.sim.transition.env_step`.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, SupportsFloat
 
 import numpy as np
 from gymnasium import spaces
@@ -104,7 +104,7 @@ def info_values(
 
 
 def recording_row(
-    step: int, info: Mapping[str, Any], reward: float, terminated: bool, truncated: bool
+    step: int, info: Mapping[str, Any], reward: SupportsFloat, terminated: bool, truncated: bool
 ) -> list:
     """One recording row (values in :data:`RECORDING_COLUMNS` order) from an env's ``info``."""
     return [
@@ -125,7 +125,8 @@ def _zero_curvature(station: Any) -> float:
     return 0.0
 
 
-_zero_curvature.is_zero = True  # lets step_vehicle drop the curvature terms
+# lets step_vehicle drop the curvature terms (mypy cannot declare a function's attribute)
+_zero_curvature.is_zero = True  # type: ignore[attr-defined]
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,13 +163,13 @@ class EnvSetup:
         """Time between two observations (s): action_repeat * Ts."""
         return self.action_repeat * self.params.dt
 
-    def curvature_scalar(self):  # noqa: ANN201
+    def curvature_scalar(self) -> Callable[[float], float]:
         """kappa(s) for one car (Python float in, float out); a constant 0.0 on a straight road."""
         if self.road.is_straight:
             return _zero_curvature
         return partial(curvature_lookup_scalar, self.road.curvature_list, 1.0 / self.road.spacing)
 
-    def curvature_array(self):  # noqa: ANN201
+    def curvature_array(self) -> Callable[[np.ndarray], np.ndarray | float]:
         """kappa(s) for N cars (array in, array out); a constant 0.0 on a straight road."""
         if self.road.is_straight:
             return _zero_curvature
@@ -355,7 +356,7 @@ def physical_action(setup: EnvSetup, action: Any, num_envs: int | None = None) -
     The same arithmetic for both (the backends of :mod:`hasa_env.sim.dynamics`).
     """
     single = num_envs is None
-    expected = (2,) if single else (num_envs, 2)
+    expected = (2,) if num_envs is None else (num_envs, 2)
     arr = _action_array(action, expected)
     if single:
         steer, acc = arr.tolist()

@@ -99,6 +99,7 @@ def env_step(
         state = step_vehicle(state, steering, acceleration, params, curvature, ops, a_d)
         left = left_road(state, lower, upper, ops)
         off_road = left if off_road is None else off_road | left
+    assert off_road is not None  # (action_repeat >= 1)
     end_velocity = road_frame_velocity(state, ops)
     imu = mean_road_frame_acceleration(velocity, end_velocity, setup.env_step_duration)
     lateral_weight, rate_weight, penalty = setup.reward_weights

@@ -328,7 +328,9 @@ class SteeringModel(ABC):
             used: set[int] = set()
             for step in (0.37, -0.61):
                 frame = base.copy()
-                frame.loc[j, feature] += step * scales.get(feature, 1.0) + 1e-3
+                values = frame[feature].to_numpy(copy=True)
+                values[j] += step * scales.get(feature, 1.0) + 1e-3
+                frame[feature] = values
                 other = design_of(frame)
                 assert other is not None
                 rows = np.flatnonzero(

@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -104,7 +103,7 @@ def road_of_frame(frame: pd.DataFrame) -> Road | None:
     Looks at ``frame.attrs["track"]`` or ``frame.attrs["config"]["track"]``
     (and ``["road"]["lane_width"]``), as a recording's metadata may carry them.
     """
-    attrs: Mapping[str, Any] = frame.attrs or {}
+    attrs = frame.attrs or {}
     config = attrs.get("config")
     track = attrs.get("track")
     width = 3.6

@@ -418,7 +418,7 @@ def fit_model(
         sensor_std=sensor_std,
     )
     try:
-        regressor_features = [r.feature for r in model.regressors]
+        regressor_features = [r.feature for r in getattr(model, "regressors", ())]
     except Exception:  # noqa: BLE001 - a user model's regressors need not match its design
         regressor_features = []
     collinearity = (

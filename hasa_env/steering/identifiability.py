@@ -162,6 +162,7 @@ def check_identifiability(
         An :class:`IdentifiabilityReport`, or None if the model is not an ARX model.
     """
     grad_gain = grad_memory = None
+    arx: ARXForm | None
     if isinstance(model, ARXForm):
         arx = model
     else:

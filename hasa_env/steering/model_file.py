@@ -141,7 +141,7 @@ def model_from_dict(
     if expected is not None and not issubclass(target, expected):
         raise ModelFileError(
             f"{source}: field 'type' is {model_type!r} but {expected.__name__}.from_json expects "
-            f"{expected.model_type!r}; use SteeringModel.load to read any model"
+            f"{getattr(expected, 'model_type', None)!r}; use SteeringModel.load to read any model"
         )
     features = doc["features"]
     common = {

@@ -153,6 +153,6 @@ def select_order(
         .sort_values([criterion, "n_params"], kind="stable")
         .reset_index(drop=True)
     )
-    best = {k: int(table.loc[0, k]) for k in ("na", "nb", "nc", "nd")}
+    best = {k: int(table[k].to_numpy()[0]) for k in ("na", "nb", "nc", "nd")}
     model = GeneralizedModel(**best, **model_kwargs).fit(frames, road=road, ridge=ridge_lambda)
     return OrderSelection(best, criterion, table, n, model, ridge_lambda)

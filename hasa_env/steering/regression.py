@@ -92,7 +92,7 @@ def _standardize(matrix: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, 
     scale = np.sqrt(np.mean(matrix * matrix, axis=0))
     dead = np.flatnonzero(scale == 0)
     if dead.size:
-        label = [names[i] if i < len(names) else f"column {i}" for i in dead]
+        label = [names[i] if i < len(names) else f"column {i}" for i in dead.tolist()]
         raise ValueError(
             f"regressors {label} are identically zero in the data; they cannot be fitted"
         )

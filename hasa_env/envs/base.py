@@ -1,0 +1,83 @@
+"""What the single-car and the vector env share, and the type of an unwrapped hasa env.
+
+:class:`LaneKeepingBase` builds the observation of the configured type and the
+info from an env's per-episode values, floats for one car
+(:class:`~hasa_env.envs.lane_keeping.LaneKeepingEnv`) or arrays for N
+(:class:`~hasa_env.envs.vector.LaneKeepingVectorEnv`); :func:`hasa_unwrapped`
+gives code that takes any wrapped hasa env its ``config`` and ``setup``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, Protocol, cast
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import VectorEnv
+
+from hasa_env.sim.dynamics import VehicleState
+from hasa_env.sim.setup import INFO_KEYS, EnvSetup, info_values
+
+__all__ = ["HasaEnv", "LaneKeepingBase", "hasa_unwrapped"]
+
+
+class HasaEnv(Protocol):
+    """An unwrapped hasa env, single or vector: its validated config and its set-up."""
+
+    config: dict[str, Any]
+    setup: EnvSetup
+
+
+def hasa_unwrapped(env: gym.Env | VectorEnv) -> HasaEnv:
+    """``env.unwrapped`` as a hasa env (typed only: a non-hasa env fails where used)."""
+    return cast(HasaEnv, env.unwrapped)
+
+
+class LaneKeepingBase(ABC):
+    """The observation and the info of a lane-keeping env from its per-episode values.
+
+    The values are floats for one car and (N,) arrays for N cars; ``_sensors``
+    holds the readings in :data:`hasa_env.sim.dynamics.SENSOR_NAMES` order (a
+    tuple for one car, a (6, N) array for N).
+    """
+
+    setup: EnvSetup
+    _sim_step: Any
+    _velocity: tuple[Any, Any]
+    _acceleration: Any
+    _kappa: Any
+    _bias: Any
+    _bias_index: Any
+    _sensors: Any
+
+    @abstractmethod
+    def _sensor_obs(self) -> np.ndarray:
+        """The ``"sensors"`` observation: the readings saturated at their bounds, float32."""
+
+    @abstractmethod
+    def _state_obs(self, state: VehicleState) -> np.ndarray:
+        """The ``"state"`` observation (oracle): state and curvature at their bounds, float32."""
+
+    def _observation(self, state: VehicleState) -> Any:
+        kind = self.setup.observation_type
+        if kind == "sensors":
+            return self._sensor_obs()
+        if kind == "state":
+            return self._state_obs(state)
+        return {"sensors": self._sensor_obs(), "state": self._state_obs(state)}
+
+    def _info(self, state: VehicleState) -> dict[str, Any]:
+        """The info of :data:`hasa_env.sim.setup.INFO_KEYS` (floats for one car, arrays for N)."""
+        values = info_values(
+            self._sim_step,
+            state,
+            self._velocity,
+            self._acceleration,
+            self._kappa,
+            self._bias,
+            self._bias_index,
+            self._sensors,
+            self.setup,
+        )
+        return dict(zip(INFO_KEYS, values, strict=True))
