@@ -220,14 +220,15 @@ def split_config(config: Mapping[str, Any] | None) -> tuple[dict[str, Any], dict
         config = {}
     if not isinstance(config, Mapping):
         raise ConfigError(f"config must be a mapping (dict), got {type(config).__name__}")
-    env_part = {k: copy.deepcopy(v) for k, v in config.items() if k not in _OWN.fields}
+    own_keys = _OWN.fields or {}
+    env_part = {k: copy.deepcopy(v) for k, v in config.items() if k not in own_keys}
     if "observation" in env_part:
         raise ConfigError(
             "config key 'observation' does not apply to the advisor task: its observation is "
             "the estimate and the raw sensors (see help(estimators.advisor_env))"
         )
     own = validate(
-        {k: v for k, v in config.items() if k in _OWN.fields},
+        {k: v for k, v in config.items() if k in own_keys},
         _OWN,
         describe=_describe,
         error=_error,

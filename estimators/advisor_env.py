@@ -22,7 +22,7 @@ from estimators.advisor_setup import (
     observation_rows,
 )
 from hasa_env.drivers.human import human_batch
-from hasa_env.render import make_renderer
+from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     SCALAR_OPS,
     VehicleState,
@@ -159,7 +159,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
         self._steering_limit = env.steering_limit
         self._acc_low, self._acc_high = env.acceleration_limits
         self._wheel_std = env.noise_std[5]
-        self._renderer = None
+        self._renderer: SceneRenderer | None = None
         self._state: VehicleState | None = None
 
     # ------------------------------------------------------------------ API
@@ -263,6 +263,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
             )
             substeps.append(outcome.state.lateral_offset)
         self._substeps = substeps
+        assert estimate is not None  # action_repeat >= 1: the loop ran
         self._readout = estimate_readout(estimate, setup.hypotheses)
         lateral_weight, rate_weight, penalty = setup.env.reward_weights
         reward = lane_keeping_reward(
@@ -309,6 +310,12 @@ class LaneKeepingAdvisorEnv(gym.Env):
         return self._estimator
 
     # ------------------------------------------------------------- helpers
+    def _live(self) -> VehicleState:
+        """The true state of the running episode (a RuntimeError before the first reset)."""
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        return self._state
+
     def _sample_sensors(self, imu: tuple[float, float], kappa: float) -> None:
         """This sample's sensor readings (one noise row of the car's block)."""
         if self._noise_pos >= len(self._noise):
@@ -318,7 +325,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
         self._noise_pos += 1
         self._kappa = kappa
         self._sensors = sensor_readings(
-            self._state, imu, self._bias, noise, self.setup.env.noise_std
+            self._live(), imu, self._bias, noise, self.setup.env.noise_std
         )
 
     def _wheel_reading(self, command: float) -> float:
@@ -337,7 +344,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
     def _info(self) -> dict[str, Any]:
         values = info_values(
             self._sim_step,
-            self._state,
+            self._live(),
             self._velocity,
             self._acceleration,
             self._kappa,

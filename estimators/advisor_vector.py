@@ -286,6 +286,12 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         return self._estimator
 
     # ------------------------------------------------------------- helpers
+    def _live(self) -> VehicleState:
+        """The true state of the running episode (a RuntimeError before the first reset)."""
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        return self._state
+
     def _reset_cars(self, idx: np.ndarray, options: dict[str, Any] | None, whole: bool) -> None:
         """Start new episodes of the cars ``idx``: car, sensors, human, estimator."""
         setup = self.setup
@@ -302,7 +308,7 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
                     f"integers 0..{len(setup.drivers) - 1} (one per driver of the population)"
                 )
             chosen = int(value)
-        fields = [f.copy() for f in self._state]
+        fields = [f.copy() for f in self._live()]
         human_seeds, wheel_seeds = [], []
         for i in idx.tolist():
             rng = self._rngs[i]
@@ -387,10 +393,10 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
             pos = np.minimum(self._noise_pos, block - 1)
         noise = self._noise.reshape(-1, self._noise.shape[2])[self._row_base + pos]
         self._noise_pos += 1
-        readings = sensor_readings(self._state, imu, self._bias, noise.T, env.noise_std)
-        kappa = self._curvature(self._state.station)
+        readings = sensor_readings(self._live(), imu, self._bias, noise.T, env.noise_std)
+        kappa = self._curvature(self._live().station)
         self._kappa = np.array(
-            np.broadcast_to(np.asarray(kappa, dtype=np.float64), self._state.station.shape)
+            np.broadcast_to(np.asarray(kappa, dtype=np.float64), self._live().station.shape)
         )
         for channel, reading in zip(self._sensors, readings, strict=True):
             channel[:] = reading
@@ -401,7 +407,7 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
     def _info(self) -> dict[str, Any]:
         values = info_values(
             self._sim_step,
-            self._state,
+            self._live(),
             self._velocity,
             self._acceleration,
             self._kappa,

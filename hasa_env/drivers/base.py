@@ -62,6 +62,20 @@ class BatchDriver(Protocol):
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]: ...
 
 
+@runtime_checkable
+class PartialBatchDriver(BatchDriver, Protocol):
+    """A :class:`BatchDriver` whose cars restart one by one (``reset(..., cars=...)``,
+    one seed per entry of ``cars``) and whose steering can be asked alone: what a
+    vector env with partial resets needs of its advisors (the archetypes'
+    :class:`~hasa_env.drivers.human.HumanBatch`, :class:`LoopBatch`, :class:`CompositeBatch`)."""
+
+    def reset(
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | np.ndarray | None = None
+    ) -> None: ...
+
+    def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray: ...
+
+
 # ---------------------------------------------------------------- speed
 @dataclass(frozen=True)
 class SpeedProfile:
@@ -198,7 +212,7 @@ class LoopBatch:
         self.num_cars = len(self.drivers)
 
     def reset(
-        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | None = None
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | np.ndarray | None = None
     ) -> None:
         """Reset every car's driver, or only those of ``cars`` (indices, one seed each)."""
         drivers = self.drivers if cars is None else [self.drivers[int(i)] for i in cars]
@@ -223,7 +237,7 @@ class CompositeBatch:
         self.num_cars = num_cars
 
     def reset(
-        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | None = None
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | np.ndarray | None = None
     ) -> None:
         """Reset every car's driver, or only those of ``cars`` (indices, one seed each;
         the parts must support partial resets, as :class:`~hasa_env.drivers.human.HumanBatch`)."""
@@ -238,7 +252,7 @@ class CompositeBatch:
         for idx, batch in self.parts:
             local = np.flatnonzero(np.isin(idx, rows))
             if local.size:
-                batch.reset([seed_of[int(idx[j])] for j in local.tolist()], dt, local)
+                partial(batch).reset([seed_of[int(idx[j])] for j in local.tolist()], dt, local)
 
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
         steering = np.zeros(self.num_cars)
@@ -256,8 +270,18 @@ class CompositeBatch:
         steering = np.zeros(self.num_cars)
         keys = [k for k in info if not k.startswith("_")]
         for idx, batch in self.parts:
-            steering[idx] = batch.steer({k: np.asarray(info[k])[idx] for k in keys}, road)
+            steering[idx] = partial(batch).steer({k: np.asarray(info[k])[idx] for k in keys}, road)
         return steering
+
+
+def partial(batch: BatchDriver) -> PartialBatchDriver:
+    """``batch`` as a :class:`PartialBatchDriver`, or a TypeError naming what it lacks."""
+    if not isinstance(batch, PartialBatchDriver):
+        raise TypeError(
+            f"{type(batch).__name__} cannot restart single cars or steer alone "
+            "(needs reset(seeds, dt, cars=...) and steer(info, road))"
+        )
+    return batch
 
 
 def make_batch(drivers: Sequence[Driver]) -> BatchDriver:

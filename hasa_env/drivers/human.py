@@ -30,6 +30,7 @@ import numpy as np
 from hasa_env.drivers.base import (
     BatchDriver,
     CompositeBatch,
+    PartialBatchDriver,
     SpeedProfile,
     _profile_arrays,
     info_arrays,
@@ -143,6 +144,7 @@ class HumanBatch(ABC):
     """
 
     params_type: ClassVar[type]
+    _fresh: np.ndarray  # cars whose next step is their first, set by reset()
     registry: ClassVar[dict[type, type[HumanBatch]]] = {}
     """params_type -> batch class, filled as the archetypes' batch classes are defined."""
 
@@ -174,7 +176,7 @@ class HumanBatch(ABC):
         return np.array([getattr(p, key) for p in self.params], dtype=np.float64)
 
     def reset(
-        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | None = None
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | np.ndarray | None = None
     ) -> None:
         """Start every car's run (``seeds``: one per car), or only those of ``cars``.
 
@@ -305,7 +307,7 @@ class HumanDriver:
         return f"{type(self).__name__}({self.params!r})"
 
 
-def human_batch(params: Sequence[Any]) -> BatchDriver:
+def human_batch(params: Sequence[Any]) -> PartialBatchDriver:
     """One vectorized batch for N cars, car i driven by ``params[i]`` (archetypes may mix).
 
     Each archetype's cars form one batch of its class (:attr:`HumanBatch.registry`);
@@ -322,7 +324,7 @@ def human_batch(params: Sequence[Any]) -> BatchDriver:
                 f"not synthetic driver parameters: {type(p).__name__} (allowed: {allowed})"
             )
         groups.setdefault(type(p), []).append(i)
-    parts: list[tuple[np.ndarray, BatchDriver]] = [
+    parts: list[tuple[np.ndarray, PartialBatchDriver]] = [
         (np.array(idx), HumanBatch.registry[kind]([params[i] for i in idx]))
         for kind, idx in groups.items()
     ]

@@ -123,6 +123,11 @@ class IntermittentBatch(HumanBatch):
 
     params_type = IntermittentParams
 
+    # Per-run state, set by _reset() / _start().
+    _noise: NoiseBlocks
+    _delay: DelayLine
+    _base: np.ndarray
+
     def __init__(self, params: Sequence[IntermittentParams]) -> None:
         super().__init__(params)
         self.feedback = PreviewFeedback([p.cost for p in self.params])

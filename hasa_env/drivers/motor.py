@@ -248,6 +248,12 @@ class MotorStage:
         max_steering: each car's wheel limit (rad at the road wheel).
     """
 
+    # Per-run state, set by reset().
+    _noise: NoiseBlocks
+    _fresh: np.ndarray
+    _angle: np.ndarray
+    _rate: np.ndarray
+
     def __init__(
         self,
         frequency: np.ndarray,

@@ -118,6 +118,10 @@ class PreviewBatch(HumanBatch):
 
     params_type = PreviewParams
 
+    # Per-run state, set by _reset() / _start().
+    _delay: DelayLine
+    _command_state: np.ndarray
+
     def __init__(self, params: Sequence[PreviewParams]) -> None:
         super().__init__(params)
         self.wheelbase = self.arr("wheelbase")

@@ -224,6 +224,14 @@ class SyntheticBatch(HumanBatch):
 
     params_type = DriverParams
 
+    # Per-run state, set by _reset() / _start().
+    _noise: NoiseBlocks
+    _delay: DelayLine
+    _phi_prev: np.ndarray
+    _omega_prev: np.ndarray
+    _command_state: np.ndarray
+    _command_noise: np.ndarray
+
     def __init__(self, params: Sequence[DriverParams]) -> None:
         super().__init__(params)
         self.near_time, self.far_time = self.arr("near_time"), self.arr("far_time")

@@ -14,6 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
+from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.rl.wrappers import env_action
 
 __all__ = [
@@ -116,14 +117,14 @@ class DriverPolicy:
         self._env: gym.Env | None = None
 
     def reset(self, seed: int, env: gym.Env) -> None:
-        setup = env.unwrapped.setup
+        setup = hasa_unwrapped(env).setup
         self.driver.reset(seed, dt=setup.dt * setup.action_repeat)
         self._env = env
 
     def act(self, observation: Any, info: Mapping[str, Any]) -> np.ndarray:
         if self._env is None:
             raise RuntimeError("call reset(seed, env) before act()")
-        steering, acceleration = self.driver.act(info, self._env.unwrapped.setup.road)
+        steering, acceleration = self.driver.act(info, hasa_unwrapped(self._env).setup.road)
         return env_action(self._env, steering, acceleration)
 
 
@@ -186,7 +187,7 @@ def evaluate(
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     env = make_env()
     try:
-        setup = env.unwrapped.setup
+        setup = hasa_unwrapped(env).setup
         n_hyp = len(setup.hypotheses)
         returns: list[float] = []
         offsets: list[float] = []

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hasa_env.drivers.archetypes import HumanParams, archetype_of
+from hasa_env.drivers.base import PartialBatchDriver
 from hasa_env.drivers.human import INFO_NEEDED, human_batch
 from hasa_env.sim.road import Road
 
@@ -37,7 +38,7 @@ class _Batch:
     """One vectorized batch of one driver and the car in each of its slots (-1: free)."""
 
     driver: int
-    humans: object
+    humans: PartialBatchDriver
     car_at: np.ndarray
     rows: np.ndarray = field(init=False)  # the car whose info each slot gets
     live: np.ndarray = field(init=False)  # slots holding a car
@@ -94,32 +95,37 @@ class HumanPool:
         """Batches in the pool (one or more per driver that has driven)."""
         return len(self._batches)
 
-    def assign(self, cars: Sequence[int], drivers: Sequence[int], seeds: Sequence[int]) -> None:
+    def assign(
+        self,
+        cars: Sequence[int] | np.ndarray,
+        drivers: Sequence[int] | np.ndarray,
+        seeds: Sequence[int],
+    ) -> None:
         """Car ``cars[j]`` starts a new run with driver ``drivers[j]`` seeded ``seeds[j]``."""
-        cars = np.asarray(cars, dtype=np.int64).reshape(-1)
-        drivers = np.asarray(drivers, dtype=np.int64).reshape(-1)
-        if not (cars.size == drivers.size == len(seeds)):
+        car_rows = np.asarray(cars, dtype=np.int64).reshape(-1)
+        driver_rows = np.asarray(drivers, dtype=np.int64).reshape(-1)
+        if not (car_rows.size == driver_rows.size == len(seeds)):
             raise ValueError(
-                f"assign needs one driver and one seed per car, got {cars.size} cars, "
-                f"{drivers.size} drivers and {len(seeds)} seeds"
+                f"assign needs one driver and one seed per car, got {car_rows.size} cars, "
+                f"{driver_rows.size} drivers and {len(seeds)} seeds"
             )
-        if cars.size and (cars.min() < 0 or cars.max() >= self.num_cars):
+        if car_rows.size and (car_rows.min() < 0 or car_rows.max() >= self.num_cars):
             raise IndexError(f"cars must index the {self.num_cars} cars")
-        if drivers.size and (drivers.min() < 0 or drivers.max() >= len(self.drivers)):
+        if driver_rows.size and (driver_rows.min() < 0 or driver_rows.max() >= len(self.drivers)):
             raise IndexError(f"drivers must index the {len(self.drivers)} drivers")
-        if np.unique(cars).size != cars.size:
+        if np.unique(car_rows).size != car_rows.size:
             raise ValueError("assign got a car twice")
         touched: dict[int, list[tuple[int, int]]] = {}  # batch -> [(slot, seed)]
-        for car in cars.tolist():  # free the old slots first, so they can be reused
+        for car in car_rows.tolist():  # free the old slots first, so they can be reused
             b = int(self._batch_of[car])
             if b >= 0:
                 self._batches[b].car_at[self._slot_of[car]] = -1
                 touched.setdefault(b, [])
-        for driver in np.unique(drivers).tolist():
-            mine = np.flatnonzero(drivers == driver)
+        for driver in np.unique(driver_rows).tolist():
+            mine = np.flatnonzero(driver_rows == driver)
             slots = self._free_slots(driver, mine.size)
             for j, (b, slot) in zip(mine.tolist(), slots, strict=True):
-                car = int(cars[j])
+                car = int(car_rows[j])
                 self._batches[b].car_at[slot] = car
                 self._batch_of[car], self._slot_of[car] = b, slot
                 self.driver_of[car] = driver
@@ -127,8 +133,8 @@ class HumanPool:
         for b, restarts in touched.items():
             batch = self._batches[b]
             if restarts:
-                slots = [s for s, _ in restarts]
-                batch.humans.reset([seed for _, seed in restarts], self.dt, cars=slots)
+                restart_slots = [s for s, _ in restarts]
+                batch.humans.reset([seed for _, seed in restarts], self.dt, cars=restart_slots)
             batch.refresh()
 
     def _free_slots(self, driver: int, count: int) -> list[tuple[int, int]]:

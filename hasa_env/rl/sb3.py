@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -154,7 +154,8 @@ class SB3VecEnv(VecEnv):
         if self.autoreset_mode != AutoresetMode.SAME_STEP:
             _check_partial_reset(venv, tuple(trusted_wrappers))
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
-        self.metadata = {**self.metadata, "autoreset_mode": AutoresetMode.SAME_STEP}
+        # SB3 types metadata as render modes only; gymnasium also keeps the autoreset mode.
+        self.metadata = {**self.metadata, "autoreset_mode": AutoresetMode.SAME_STEP}  # type: ignore[dict-item]
         self._actions: np.ndarray | None = None
         self._obs: Any = None
 
@@ -169,7 +170,8 @@ class SB3VecEnv(VecEnv):
                 "SB3VecEnv: a gymnasium VectorEnv takes one options dict for all envs; "
                 f"set_options() got different ones: {options}"
             )
-        obs, info = self.venv.reset(seed=seed, options=options[0] or None)
+        # Gymnasium types a vector reset's seed as one int; vector envs take one per env too.
+        obs, info = self.venv.reset(seed=cast(Any, seed), options=options[0] or None)
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = _info_rows(info, self.num_envs)
@@ -190,7 +192,7 @@ class SB3VecEnv(VecEnv):
         n = self.num_envs
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
             infos = _info_rows(info, n)
-            final_obs = info.get("final_obs")
+            final_obs: Any = info.get("final_obs")
             for i in np.flatnonzero(dones).tolist():
                 step_info = dict(infos[i].get("final_info", {}))
                 self.reset_infos[i] = {
@@ -221,15 +223,19 @@ class SB3VecEnv(VecEnv):
     def close(self) -> None:
         self.venv.close()
 
-    def _per_env(self) -> bool:
-        """True if the vector env holds separate env objects (gymnasium's sync / async)."""
-        return isinstance(self.venv.unwrapped, gym.vector.SyncVectorEnv | gym.vector.AsyncVectorEnv)
+    def _per_env(self) -> gym.vector.SyncVectorEnv | gym.vector.AsyncVectorEnv | None:
+        """The vector env if it holds separate env objects (gymnasium's sync / async), else None."""
+        base = self.venv.unwrapped
+        if isinstance(base, gym.vector.SyncVectorEnv | gym.vector.AsyncVectorEnv):
+            return base
+        return None
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
         """The attribute of each env; a native vector env shares one value for all cars."""
         idx = list(self._get_indices(indices))
-        if self._per_env():
-            values = self.venv.unwrapped.get_attr(attr_name)
+        per_env = self._per_env()
+        if per_env is not None:
+            values = per_env.get_attr(attr_name)
             return [values[i] for i in idx]
         value = getattr(self.venv, attr_name)
         return [value for _ in idx]
@@ -237,11 +243,12 @@ class SB3VecEnv(VecEnv):
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         """Set an attribute; on a native vector env only for all cars at once."""
         idx = list(self._get_indices(indices))
-        if self._per_env():
-            values = list(self.venv.unwrapped.get_attr(attr_name))
+        per_env = self._per_env()
+        if per_env is not None:
+            values = list(per_env.get_attr(attr_name))
             for i in idx:
                 values[i] = value
-            self.venv.unwrapped.set_attr(attr_name, values)
+            per_env.set_attr(attr_name, values)
             return
         if sorted(idx) != list(range(self.num_envs)):
             raise ValueError(
@@ -255,12 +262,13 @@ class SB3VecEnv(VecEnv):
     ) -> list[Any]:
         """Call a method of each env (gymnasium's ``VectorEnv.call``)."""
         idx = list(self._get_indices(indices))
-        if not self._per_env():
+        per_env = self._per_env()
+        if per_env is None:
             raise NotImplementedError(
                 f"env_method({method_name!r}): a {type(self.venv.unwrapped).__name__} has no "
                 "per-env objects to call methods on"
             )
-        results = self.venv.unwrapped.call(method_name, *method_args, **method_kwargs)
+        results = per_env.call(method_name, *method_args, **method_kwargs)
         return [results[i] for i in idx]
 
     def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: Any = None) -> list[bool]:
@@ -275,4 +283,6 @@ class SB3VecEnv(VecEnv):
         if self.venv.render_mode != "rgb_array":
             return [None for _ in range(self.num_envs)]
         frames = self.venv.render()
-        return list(frames) if frames is not None else [None for _ in range(self.num_envs)]
+        if frames is None:
+            return [None for _ in range(self.num_envs)]
+        return [np.asarray(frame) for frame in frames]

@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import VectorEnv
 
+from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.envs.vector import LaneKeepingVectorEnv
 
 __all__ = [
@@ -64,7 +65,9 @@ def _neutral_acceleration(base: Any) -> float:
     return 0.0
 
 
-def _steering_space(space: spaces.Box) -> spaces.Box:
+def _steering_space(space: spaces.Space) -> spaces.Box:
+    if not isinstance(space, spaces.Box):
+        raise TypeError(f"a steering-only action needs a Box action space, got {space}")
     return spaces.Box(space.low[:1], space.high[:1], dtype=space.dtype)
 
 
@@ -176,7 +179,7 @@ class HumanAdvisor(gym.Wrapper):
         self.driver = driver
         self._rng = np.random.default_rng()
         self._command = 0.0
-        self._noise_std = float(base.config["noise"]["steering"])
+        self._noise_std = float(hasa_unwrapped(base).config["noise"]["steering"])
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -184,7 +187,7 @@ class HumanAdvisor(gym.Wrapper):
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self._rng = np.random.default_rng(seed)
-        setup = self.env.unwrapped.setup
+        setup = hasa_unwrapped(self.env).setup
         self.driver.reset(int(self._rng.integers(0, 2**31 - 1)), dt=setup.dt * setup.action_repeat)
         info = dict(info)
         info["sensor_steering_applied"] = info["sensor_steering"]
@@ -198,7 +201,7 @@ class HumanAdvisor(gym.Wrapper):
         noise = self._noise_std * float(self._rng.standard_normal())
         info["sensor_steering"] = self._command + noise
         self._command = self._decide(info)
-        return obs, reward, terminated, truncated, info
+        return obs, float(reward), terminated, truncated, info
 
     @property
     def command(self) -> float:
@@ -206,7 +209,7 @@ class HumanAdvisor(gym.Wrapper):
         return self._command
 
     def _decide(self, info: Mapping[str, Any]) -> float:
-        steering, _ = self.driver.act(info, self.env.unwrapped.setup.road)
+        steering, _ = self.driver.act(info, hasa_unwrapped(self.env).setup.road)
         if not math.isfinite(steering):
             raise RuntimeError(f"the advising driver returned a non-finite steering {steering!r}")
         return float(steering)
@@ -218,7 +221,7 @@ def env_action(env: gym.Env, steering: float, acceleration: float) -> np.ndarray
     Handles normalized and physical action types and :class:`SteeringOnly`
     (whose action is the steering alone; the acceleration is then dropped).
     """
-    setup = env.unwrapped.setup
+    setup = hasa_unwrapped(env).setup
     limit = setup.steering_limit
     lo, hi = setup.acceleration_limits
     if setup.normalized_actions:
