@@ -22,6 +22,7 @@ from estimators.advisor_setup import (
     observation_rows,
 )
 from hasa_env.drivers.human import human_batch
+from hasa_env.envs.base import check_render_mode
 from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     SCALAR_OPS,
@@ -138,11 +139,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
         render_mode: str | None = None,
         track: str | None = None,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode={render_mode!r} is not supported; allowed: None, "
-                + ", ".join(repr(m) for m in self.metadata["render_modes"])
-            )
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.setup: AdvisorSetup = build_advisor_setup(config, track)
         self.config = self.setup.config
         self.render_mode = render_mode

@@ -39,6 +39,8 @@ from estimators.advisor_setup import (
     estimate_readout,
     observation_rows,
 )
+from hasa_env.envs.base import check_vector_args
+from hasa_env.envs.vector import vector_reset_request
 from hasa_env.render import make_renderer
 from hasa_env.rl.humans import HumanPool
 from hasa_env.sim.dynamics import (
@@ -81,17 +83,9 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         track: str | None = None,
         max_episode_steps: int | None = None,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(
-                f"render_mode={render_mode!r} is not supported by the vector env; allowed: "
-                "None, 'rgb_array'"
-            )
-        if max_episode_steps is not None:
-            raise ValueError(
-                "max_episode_steps is not supported; set config['time_limit'] (s) instead"
-            )
+        num_envs = check_vector_args(
+            num_envs, render_mode, self.metadata["render_modes"], max_episode_steps
+        )
         self.setup: AdvisorSetup = build_advisor_setup(config, track)
         self.config = self.setup.config
         n = self.num_envs = int(num_envs)
@@ -135,28 +129,9 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         n = self.num_envs
-        options = dict(options or {})
-        mask = options.pop("reset_mask", None)
-        if mask is not None:
-            mask = np.asarray(mask)
-            if mask.shape != (n,) or mask.dtype != np.bool_:
-                raise ValueError(
-                    f"reset option 'reset_mask' must be a bool array of shape ({n},), got {mask!r}"
-                )
-            if not mask.any():
-                raise ValueError("reset option 'reset_mask' must select at least one env")
-            if self._state is None and not mask.all():
-                raise RuntimeError(
-                    "reset() without reset_mask must come first (it resets every car)"
-                )
-        if seed is None:
-            seeds: list[int | None] = [None] * n
-        elif isinstance(seed, int | np.integer):
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
+        mask, seeds, options = vector_reset_request(
+            seed, options, n, started=self._state is not None
+        )
         allowed = (*RESET_OPTIONS, *ADVISOR_RESET_OPTIONS)
         for key in options:
             if key not in allowed:

@@ -19,7 +19,7 @@ from gymnasium.vector import VectorEnv
 from hasa_env.sim.dynamics import VehicleState
 from hasa_env.sim.setup import INFO_KEYS, EnvSetup, info_values
 
-__all__ = ["HasaEnv", "LaneKeepingBase", "hasa_unwrapped"]
+__all__ = ["HasaEnv", "LaneKeepingBase", "check_render_mode", "check_vector_args", "hasa_unwrapped"]
 
 
 class HasaEnv(Protocol):
@@ -27,6 +27,27 @@ class HasaEnv(Protocol):
 
     config: dict[str, Any]
     setup: EnvSetup
+
+
+def check_render_mode(render_mode: str | None, allowed: list[str], kind: str = "env") -> None:
+    """A ValueError naming the allowed modes unless ``render_mode`` is None or one of ``allowed``."""
+    if render_mode is not None and render_mode not in allowed:
+        raise ValueError(
+            f"render_mode={render_mode!r} is not supported by the {kind}; allowed: None, "
+            + ", ".join(repr(m) for m in allowed)
+        )
+
+
+def check_vector_args(
+    num_envs: Any, render_mode: str | None, allowed: list[str], max_episode_steps: Any
+) -> int:
+    """A native vector env's constructor arguments checked; returns ``num_envs`` as an int."""
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+        raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+    check_render_mode(render_mode, allowed, "vector env")
+    if max_episode_steps is not None:
+        raise ValueError("max_episode_steps is not supported; set config['time_limit'] (s) instead")
+    return int(num_envs)
 
 
 def hasa_unwrapped(env: gym.Env | VectorEnv) -> HasaEnv:

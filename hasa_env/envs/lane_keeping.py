@@ -8,7 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hasa_env.envs.base import LaneKeepingBase
+from hasa_env.envs.base import LaneKeepingBase, check_render_mode
 from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     SCALAR_OPS,
@@ -109,11 +109,7 @@ class LaneKeepingEnv(LaneKeepingBase, gym.Env):
         render_mode: str | None = None,
         track: str | None = None,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode={render_mode!r} is not supported; allowed: None, "
-                + ", ".join(repr(m) for m in self.metadata["render_modes"])
-            )
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.setup = build_setup(config, track)
         self.config = self.setup.config
         self.render_mode = render_mode

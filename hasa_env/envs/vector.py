@@ -21,7 +21,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from hasa_env.envs.base import LaneKeepingBase
+from hasa_env.envs.base import LaneKeepingBase, check_vector_args
 from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     ARRAY_OPS,
@@ -40,7 +40,58 @@ from hasa_env.sim.setup import (
 )
 from hasa_env.sim.transition import env_step
 
-__all__ = ["LaneKeepingVectorEnv"]
+__all__ = ["LaneKeepingVectorEnv", "vector_reset_request"]
+
+
+def vector_reset_request(
+    seed: int | list[int | None] | None,
+    options: Mapping[str, Any] | None,
+    num_envs: int,
+    *,
+    started: bool,
+) -> tuple[np.ndarray | None, list[int | None], dict[str, Any]]:
+    """A vector env's ``reset(seed=..., options=...)`` checked: (reset_mask or None, one
+    seed per env, the other options).
+
+    ``seed``: None, an int (env i gets ``seed + i``) or one int >= 0 / None per env;
+    ``options["reset_mask"]``: a (N,) bool array selecting the envs to reset (a partial
+    reset, only once the env has ``started``). Everything is checked before any state
+    or generator changes, so a refused reset leaves the env as it was.
+    """
+    n = num_envs
+    if options is not None and not isinstance(options, Mapping):
+        raise ValueError(
+            f"reset options must be a mapping (dict) or None, got {type(options).__name__} "
+            f"{options!r:.60}"
+        )
+    options = dict(options or {})
+    mask = options.pop("reset_mask", None)
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.shape != (n,) or mask.dtype != np.bool_:
+            raise ValueError(
+                f"reset option 'reset_mask' must be a bool array of shape ({n},), got {mask!r}"
+            )
+        if not mask.any():
+            raise ValueError("reset option 'reset_mask' must select at least one env")
+        if not started and not mask.all():
+            raise RuntimeError("reset() without reset_mask must come first (it resets every car)")
+    if seed is None:
+        seeds: list[int | None] = [None] * n
+    elif isinstance(seed, bool):
+        raise TypeError(f"reset(seed=...) must be an integer, a list or None, got {seed!r}")
+    elif isinstance(seed, int | np.integer):
+        seeds = [int(seed) + i for i in range(n)]
+    else:
+        seeds = list(seed)
+        if len(seeds) != n:
+            raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
+    for i, s in enumerate(seeds):
+        if s is not None and (isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0):
+            raise ValueError(
+                f"reset(seed=...): seed {i} must be an integer >= 0 or None, got {s!r}"
+            )
+    return mask, seeds, options
 
 
 class LaneKeepingVectorEnv(LaneKeepingBase, VectorEnv):
@@ -66,16 +117,9 @@ class LaneKeepingVectorEnv(LaneKeepingBase, VectorEnv):
         track: str | None = None,
         max_episode_steps: int | None = None,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(
-                f"render_mode={render_mode!r} is not supported by the vector env; allowed: None, 'rgb_array'"
-            )
-        if max_episode_steps is not None:
-            raise ValueError(
-                "max_episode_steps is not supported; set config['time_limit'] (s) instead"
-            )
+        num_envs = check_vector_args(
+            num_envs, render_mode, self.metadata["render_modes"], max_episode_steps
+        )
         self.setup = build_setup(config, track)
         self.config = self.setup.config
         self.num_envs = int(num_envs)
@@ -113,44 +157,9 @@ class LaneKeepingVectorEnv(LaneKeepingBase, VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         n = self.num_envs
-        # everything is checked before any state or generator changes: a refused reset
-        # leaves the env as it was (no zero state, no draw)
-        if options is not None and not isinstance(options, Mapping):
-            raise ValueError(
-                f"reset options must be a mapping (dict) or None, got {type(options).__name__} "
-                f"{options!r:.60}"
-            )
-        options = dict(options or {})
-        mask = options.pop("reset_mask", None)
-        if mask is not None:
-            mask = np.asarray(mask)
-            if mask.shape != (n,) or mask.dtype != np.bool_:
-                raise ValueError(
-                    f"reset option 'reset_mask' must be a bool array of shape ({n},), got {mask!r}"
-                )
-            if not mask.any():
-                raise ValueError("reset option 'reset_mask' must select at least one env")
-            if self._state is None and not mask.all():
-                raise RuntimeError(
-                    "reset() without reset_mask must come first (it resets every car)"
-                )
-        if seed is None:
-            seeds: list[int | None] = [None] * n
-        elif isinstance(seed, bool):
-            raise TypeError(f"reset(seed=...) must be an integer, a list or None, got {seed!r}")
-        elif isinstance(seed, int | np.integer):
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"reset(seed=...) got {len(seeds)} seeds for {n} envs")
-        for i, s in enumerate(seeds):
-            if s is not None and (
-                isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0
-            ):
-                raise ValueError(
-                    f"reset(seed=...): seed {i} must be an integer >= 0 or None, got {s!r}"
-                )
+        mask, seeds, options = vector_reset_request(
+            seed, options, n, started=self._state is not None
+        )
         idx = self._arange if mask is None else np.flatnonzero(mask)
         options = check_reset_options(options, self.setup)
         for i in idx.tolist():
