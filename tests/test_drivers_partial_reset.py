@@ -38,7 +38,7 @@ def test_a_restarted_car_drives_as_a_driver_reset_alone(track):
     infos = [_info(rng, n, k) for k in range(260)]
     restart_at, cars, seeds = 37, np.array([1, 4]), [7, 9]
     alone = {int(c): human_batch([params[c]]) for c in cars}
-    steering = []
+    steering, accelerations = [], []
     for k, info in enumerate(infos):
         if k == restart_at:
             batch.reset(seeds, 0.01, cars=cars)
@@ -46,6 +46,7 @@ def test_a_restarted_car_drives_as_a_driver_reset_alone(track):
                 alone[c].reset([seed], 0.01)
         s, a = batch.act(info, road)
         steering.append(s)
+        accelerations.append(a)
         if k >= restart_at:
             for c, single in alone.items():
                 one = {key: info[key][c : c + 1] for key in INFO_NEEDED}
@@ -56,8 +57,9 @@ def test_a_restarted_car_drives_as_a_driver_reset_alone(track):
     untouched.reset(list(range(100, 100 + n)), 0.01)
     others = np.setdiff1d(np.arange(n), cars)
     for k, info in enumerate(infos):
-        s, _ = untouched.act(info, road)
+        s, a = untouched.act(info, road)
         assert np.array_equal(s[others], steering[k][others]), k
+        assert np.array_equal(a[others], accelerations[k][others]), k  # pedal remnant too
 
 
 def test_steer_is_the_steering_of_act():

@@ -77,8 +77,9 @@ def test_every_driver_of_five_populations_stays_in_its_lane_for_30_s(env_id):
         assert len(frame) == 3001 and not frame["terminated"].any(), p.name
         assert frame["lateral_offset"].abs().max() < 1.8, p.name  # the rear axle stays in lane
         top.append(frame["speed"].max())
-    assert max(top) == pytest.approx(45.0, abs=0.1) or "Curved" in env_id  # ramps reach 45 m/s
-    assert min(top) == pytest.approx(15.0, abs=0.1)
+    # ramps reach 45 m/s and holders stay at 15 m/s, up to the pedal remnant's wander
+    assert max(top) == pytest.approx(45.0, abs=1.5) or "Curved" in env_id
+    assert min(top) == pytest.approx(15.0, abs=1.5)
 
 
 def _increment_stats(frame):

@@ -89,6 +89,13 @@ class SpeedProfile:
     ``sqrt(max_lateral_acceleration / |curvature|)``, braking at
     ``comfortable_deceleration``.
 
+    The foot is not a cruise control: a synthetic human (:class:`~hasa_env.drivers.human.HumanBatch`)
+    adds a pedal remnant to the commanded acceleration, an Ornstein-Uhlenbeck process of
+    stationary std ``pedal_noise`` (m/s^2) and time constant ``pedal_time_constant`` (s).
+    Through the speed loop of gain g it moves a held speed by a std of
+    ``pedal_noise * sqrt(tau / (g (1 + g tau)))`` (tau the time constant): 0.29 m/s for
+    0.35 m/s^2, 2 s and g = 1. 0 (the default) is a perfectly held speed.
+
     Attributes:
         target_speed: m/s, or None to hold the initial speed.
         start_time: s when the ramp starts.
@@ -97,6 +104,8 @@ class SpeedProfile:
         max_lateral_acceleration: m/s^2 the driver accepts in bends (inf: ignores bends).
         comfortable_deceleration: m/s^2 used to slow down before a bend.
         max_acceleration: m/s^2, limit of the speed controller (both ways).
+        pedal_noise: m/s^2, stationary std of the pedal remnant (>= 0; 0: none).
+        pedal_time_constant: s, time constant of the pedal remnant (> 0).
     """
 
     target_speed: float | None = None
@@ -106,6 +115,8 @@ class SpeedProfile:
     max_lateral_acceleration: float = math.inf
     comfortable_deceleration: float = 2.5
     max_acceleration: float = 4.0
+    pedal_noise: float = 0.0
+    pedal_time_constant: float = 2.0
 
     def __post_init__(self) -> None:
         if self.target_speed is not None and not (0.0 <= self.target_speed <= 150.0):
@@ -114,12 +125,21 @@ class SpeedProfile:
                 f"got {self.target_speed}"
             )
         for name in ("ramp_rate", "gain", "max_lateral_acceleration", "comfortable_deceleration",
-                     "max_acceleration"):  # fmt: skip
+                     "max_acceleration", "pedal_time_constant"):  # fmt: skip
             value = getattr(self, name)
             if not value > 0:
                 raise ValueError(f"SpeedProfile.{name} must be > 0, got {value}")
         if not math.isfinite(self.start_time) or self.start_time < 0:
             raise ValueError(f"SpeedProfile.start_time must be >= 0 s, got {self.start_time}")
+        if not (math.isfinite(self.pedal_noise) and 0.0 <= self.pedal_noise <= 4.0):
+            raise ValueError(
+                f"SpeedProfile.pedal_noise must be in [0, 4] m/s^2, got {self.pedal_noise}"
+            )
+        if not math.isfinite(self.pedal_time_constant):
+            raise ValueError(
+                "SpeedProfile.pedal_time_constant must be a finite number of seconds > 0, "
+                f"got {self.pedal_time_constant}"
+            )
 
     @classmethod
     def hold(cls, max_lateral_acceleration: float = math.inf) -> SpeedProfile:
@@ -141,6 +161,8 @@ def _profile_arrays(profiles: Sequence[SpeedProfile]) -> dict[str, np.ndarray]:
         "lateral": np.array([p.max_lateral_acceleration for p in profiles]),
         "braking": np.array([p.comfortable_deceleration for p in profiles]),
         "limit": np.array([p.max_acceleration for p in profiles]),
+        "pedal_noise": np.array([p.pedal_noise for p in profiles]),
+        "pedal_time_constant": np.array([p.pedal_time_constant for p in profiles]),
     }
 
 
@@ -152,8 +174,10 @@ def speed_command(
     initial_speed: np.ndarray,
     info: Mapping[str, np.ndarray],
     road: Road,
+    remnant: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Acceleration (m/s^2) of N cars following their speed profiles (see :class:`SpeedProfile`)."""
+    """Acceleration (m/s^2) of N cars following their speed profiles (see :class:`SpeedProfile`),
+    with ``remnant`` (the pedal remnant, m/s^2, (N,)) added before the limit."""
     t = info["time"]
     v = info["speed"]
     target = profile["target"]
@@ -188,6 +212,8 @@ def speed_command(
         approaching = slowing & (ahead[np.arange(v.size), binding] > 1.0)
         feed_forward = np.where(slowing, np.where(approaching, -braking, 0.0), feed_forward)
     accel = profile["gain"] * (reference - v) + feed_forward
+    if remnant is not None:
+        accel = accel + remnant
     return np.clip(accel, -profile["limit"], profile["limit"])
 
 

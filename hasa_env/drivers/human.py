@@ -36,7 +36,7 @@ from hasa_env.drivers.base import (
     info_arrays,
     speed_command,
 )
-from hasa_env.drivers.motor import MotorParams, MotorStage
+from hasa_env.drivers.motor import MotorParams, MotorStage, NoiseBlocks
 from hasa_env.sim.road import Road, lane_centre_bearing
 
 __all__ = [
@@ -58,7 +58,7 @@ MIN_SPEED = 1.0
 INFO_NEEDED = ("time", "station", "lateral_offset", "heading", "speed", "steering")
 """The ``info`` keys a synthetic driver reads."""
 
-MOTOR_STREAM, OWN_STREAM = 0, 1
+MOTOR_STREAM, OWN_STREAM, PEDAL_STREAM = 0, 1, 2
 """Spawn keys of a car's SeedSequence: the output stage's and the archetype's noise."""
 
 
@@ -136,7 +136,8 @@ class HumanBatch(ABC):
     :meth:`_start` (state at the first step, from the true ``info``) and
     :meth:`_command` (the command u(k), rad, of the control law). The output
     stage turns it into the applied steering; :func:`speed_command` gives the
-    acceleration.
+    acceleration, with each driver's pedal remnant (an OU process of std
+    ``speed.pedal_noise``, its own noise stream) added.
 
     ``reset(seeds, dt, cars=...)`` restarts only some cars (a vector env's
     autoreset): each restarted car then drives exactly as a driver reset
@@ -145,6 +146,11 @@ class HumanBatch(ABC):
 
     params_type: ClassVar[type]
     _fresh: np.ndarray  # cars whose next step is their first, set by reset()
+    # the pedal remnant (m/s^2) of each car, its AR(1) coefficient, innovation std and draws
+    _pedal: np.ndarray
+    _pedal_rho: np.ndarray
+    _pedal_innovation: np.ndarray
+    _pedal_draws: NoiseBlocks
     registry: ClassVar[dict[type, type[HumanBatch]]] = {}
     """params_type -> batch class, filled as the archetypes' batch classes are defined."""
 
@@ -196,6 +202,8 @@ class HumanBatch(ABC):
             if float(dt) != self._dt:
                 raise ValueError(f"a partial reset keeps the batch's dt = {self._dt} s, got {dt}")
             self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt, rows)
+            self._pedal_draws.restart(rows, [car_streams(s, PEDAL_STREAM) for s in seeds])
+            self._pedal[rows] = 0.0
             self._reset(seeds, self._dt, rows)
             self._fresh[rows] = True
             return
@@ -205,6 +213,12 @@ class HumanBatch(ABC):
             raise ValueError(f"dt must be > 0 s, got {dt}")
         self._dt = float(dt)
         self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
+        # pedal remnant: p(k+1) = rho p(k) + std sqrt(1 - rho^2) e(k), rho = exp(-dt / tau)
+        rho = np.exp(-self._dt / self.profile["pedal_time_constant"])
+        self._pedal_rho = rho
+        self._pedal_innovation = self.profile["pedal_noise"] * np.sqrt(1.0 - rho * rho)
+        self._pedal_draws = NoiseBlocks([car_streams(s, PEDAL_STREAM) for s in seeds], 1)
+        self._pedal = np.zeros(self.num_cars)
         self.delay_steps = np.array([round(p.delay / dt) for p in self.params], dtype=np.int64)
         self._reset(seeds, self._dt, None)
         self._all_fresh = True
@@ -212,7 +226,12 @@ class HumanBatch(ABC):
 
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
         steering = self.steer(info, road)
-        acceleration = speed_command(self.profile, self._initial_speed, info, road)
+        remnant = None
+        if self._pedal_innovation.any():
+            draws = self._pedal_draws.next()[:, 0]
+            self._pedal = self._pedal_rho * self._pedal + self._pedal_innovation * draws
+            remnant = self._pedal
+        acceleration = speed_command(self.profile, self._initial_speed, info, road, remnant)
         return steering, acceleration
 
     def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:

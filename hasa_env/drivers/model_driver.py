@@ -77,6 +77,11 @@ class ModelDriver:
         self.noise_std = float(noise_std)
         self.steering_ratio = float(steering_ratio)
         self.speed = speed if speed is not None else SpeedProfile.hold()
+        if self.speed.pedal_noise > 0:
+            raise ValueError(
+                "ModelDriver: speed.pedal_noise must be 0 (a model driver holds its speed "
+                "profile exactly; the pedal remnant belongs to the synthetic humans)"
+            )
         self.name = name if name is not None else model.name
         self._batch: ModelBatch | None = None
         self._generic: _GenericModelState | None = None

@@ -144,6 +144,21 @@ _SpeedBehaviour = tuple[_Range | None, _Range, _Range]
 
 
 @dataclass(frozen=True)
+class PedalRanges:
+    """Ranges of the pedal remnant (:class:`~hasa_env.drivers.base.SpeedProfile`
+    ``pedal_noise`` m/s^2, ``pedal_time_constant`` s)."""
+
+    noise: _Range
+    time_constant: _Range
+
+    def draw(self, rng: np.random.Generator) -> dict[str, float]:
+        return {
+            "pedal_noise": self.noise.draw(rng),
+            "pedal_time_constant": self.time_constant.draw(rng),
+        }
+
+
+@dataclass(frozen=True)
 class PopulationSpec:
     """How a named population is drawn.
 
@@ -161,6 +176,8 @@ class PopulationSpec:
         max_lateral_acceleration: ranges of the traits every archetype has.
         two_point, preview, intermittent: the archetypes' trait ranges.
         motor: the output stage's ranges; None: no remnant, no quantization.
+        pedal: the pedal remnant's ranges; None: every driver holds its speed
+            profile exactly.
         remnant_scale: multiplies every remnant std after the lag of the drawn
             drivers (>= 0).
         command_scale: multiplies the command noise before the lag (>= 0).
@@ -185,6 +202,7 @@ class PopulationSpec:
     preview: PreviewRanges | None = None
     intermittent: IntermittentRanges | None = None
     motor: MotorRanges | None = None
+    pedal: PedalRanges | None = None
     remnant_scale: float = 1.0
     command_scale: float = 1.0
     env_config: Mapping[str, Any] = field(default_factory=dict)
@@ -251,6 +269,10 @@ _HUMAN_MOTOR = MotorRanges(
     command_std=_Range(0.004, 0.012),
     command_time_constant=_Range(0.028, 0.052),
 )
+# A foot on a pedal is no cruise control: a held speed wanders by a few tenths of a m/s
+# (about +-1 km/h) over a 30 s run (docs/design.md §7.4). Chosen as a plain human figure, not
+# fitted to any benchmark number; the sensitivity to it is in docs/calibration.md.
+_HUMAN_PEDAL = PedalRanges(noise=_Range(0.2, 0.5), time_constant=_Range(1.0, 3.0))
 _WHEEL_STUDY = {
     # what a G29 study measures: the wheel's own (quantized) reading, no automotive sensor noise
     "noise": {"steering": 0.0},
@@ -274,7 +296,8 @@ POPULATIONS: dict[str, PopulationSpec] = {
             "delay 0.15-0.25 s, neuromuscular lag, remnant after the lag (broadband OU "
             "2e-4-5e-4 rad, 8-12 Hz tremor 8e-5-1.5e-4 rad, signal-dependent), G29 wheel "
             "quantization at steering ratio 15; per archetype one holds 15 m/s, one ramps to "
-            "25-38 m/s, one to 45 m/s."
+            "25-38 m/s, one to 45 m/s, each with a pedal remnant (OU, 0.2-0.5 m/s^2, 1-3 s: "
+            "a held speed wanders by a std of 0.1-0.4 m/s)."
         ),
         archetypes=("two-point", "preview", "intermittent"),
         speed_behaviours=(_HOLD, _MODERATE, _FAST),
@@ -298,6 +321,7 @@ POPULATIONS: dict[str, PopulationSpec] = {
             refractory_period=_Range(0.1, 0.25),
         ),
         motor=_HUMAN_MOTOR,
+        pedal=_HUMAN_PEDAL,
         remnant_scale=0.1,
         env_config=_WHEEL_STUDY,
     ),
@@ -374,9 +398,12 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanP
         archetype, behaviour = slots[int(order[index])]
         own = np.random.default_rng(np.random.SeedSequence([int(seed), key, 1 + index]))
         command = np.random.default_rng(np.random.SeedSequence([int(seed), key, 1 + index, 2]))
+        # the pedal remnant from a stream of its own: adding it left every other draw as it was
+        pedal_rng = np.random.default_rng(np.random.SeedSequence([int(seed), key, 1 + index, 3]))
+        pedal = {} if spec.pedal is None else spec.pedal.draw(pedal_rng)
         common = {
             "name": driver_name,
-            "speed": _draw_speed(behaviour, spec, own),
+            "speed": _draw_speed(behaviour, spec, own, pedal),
             "delay": spec.delay.draw(own),
             "neuromuscular_frequency": spec.neuromuscular_frequency.draw(own),
             "neuromuscular_damping": spec.neuromuscular_damping.draw(own),
@@ -389,7 +416,10 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanP
 
 
 def _draw_speed(
-    behaviour: _SpeedBehaviour, spec: PopulationSpec, rng: np.random.Generator
+    behaviour: _SpeedBehaviour,
+    spec: PopulationSpec,
+    rng: np.random.Generator,
+    pedal: Mapping[str, float] | None = None,
 ) -> SpeedProfile:
     target, rate, start = behaviour
     return SpeedProfile(
@@ -397,6 +427,7 @@ def _draw_speed(
         ramp_rate=rate.draw(rng),
         start_time=start.draw(rng),
         max_lateral_acceleration=spec.max_lateral_acceleration.draw(rng),
+        **(pedal or {}),
     )
 
 
