@@ -93,7 +93,13 @@ class GaussianMixtureEKF:
       above it with a finite steering reading z_3(k), the memory of every
       active hypothesis restarts as at reset,
       ``m_i = steady_memory(z_3(k), x_i(k|k))``, ``P_mm = memory_std^2 I``,
-      uncorrelated with the vehicle states (:attr:`low_speed`).
+      uncorrelated with the vehicle states (:attr:`low_speed`);
+    - outside the model's road: while the road ahead curves more than
+      ``steering_curvature_limit`` (``max(|kappa_near|, |kappa_far|)`` with
+      ``kappa_d = 2 |dy_d| / (dx_d^2 + dy_d^2)`` from the road points at k,
+      decided for step k+1) the steering channel is off and its memory held
+      and restarted exactly as at low speed: a model is trusted only on roads
+      as curved as those it was fitted on (:class:`FilterSettings`).
 
     Road geometry: with ``road_points`` (:mod:`estimators.road_geometry`) the
     bearings are those of the lane centre ahead on a curved road
@@ -187,6 +193,9 @@ class GaussianMixtureEKF:
         self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
         self._min_speed = settings.min_speed if self.model.has_steering else 0.0
+        self._curvature_limit = (
+            settings.steering_curvature_limit if self.model.has_steering else math.inf
+        )
         self._straight_points = straight_road_points(
             self.model.near_distance, self.model.far_distance
         )
@@ -232,8 +241,9 @@ class GaussianMixtureEKF:
 
     @property
     def low_speed(self) -> np.ndarray:
-        """Runs whose steering channel is off (speed estimate below ``min_speed``):
-        (R,) bool (a single run: one bool)."""
+        """Runs whose steering channel is off (speed estimate below ``min_speed``, or the
+        road ahead more curved than ``steering_curvature_limit``): (R,) bool (a single run:
+        one bool)."""
         return self._run_view(self._slow)
 
     # ------------------------------------------------------------------ API
@@ -282,7 +292,7 @@ class GaussianMixtureEKF:
             "_active": np.isfinite(log_w),
             "_hyp": hyp.copy(),
             "_steering": steering,
-            "_slow": (z[:, 0] < self._min_speed) & (self._min_speed > 0),
+            "_slow": self._channel_off_at_reset(z, points),
             "_gated": np.zeros((n_runs, 3), dtype=bool),
             "_gated_count": np.zeros((n_runs, 3), dtype=np.int64),
             **initial_evidence_state(log_w),
@@ -538,15 +548,23 @@ class GaussianMixtureEKF:
                     normalize_log_weights(np.where(new_active, new_log_w, -np.inf), new_log_w),
                     new_log_w,
                 )
-        # ---- low speed: steering off below min_speed, memory restarted above it
+        # ---- steering channel off below min_speed or on a road ahead more curved than
+        # steering_curvature_limit; its memory restarts when the channel comes back
         new_slow = slow
         restart = None
-        if self._min_speed > 0 and (any_slow or x_post[:, VX].min() < self._min_speed):
-            # (|v_i| >= v_x,i >= min_speed for all i: no run is slow)
-            speed = np.hypot(x_post[:, VX], x_post[:, VY]).reshape(log_w.shape)
-            new_slow = np.einsum("rc,rc->r", np.exp(new_log_w), speed) < self._min_speed
+        speed_check = self._min_speed > 0 and (any_slow or x_post[:, VX].min() < self._min_speed)
+        curved = self._curved(points)
+        if speed_check or curved is not None:
+            if speed_check:
+                # (|v_i| >= v_x,i >= min_speed for all i: no run is slow)
+                speed = np.hypot(x_post[:, VX], x_post[:, VY]).reshape(log_w.shape)
+                new_slow = np.einsum("rc,rc->r", np.exp(new_log_w), speed) < self._min_speed
+            else:
+                new_slow = np.zeros(n_runs, dtype=bool)
+            if curved is not None:
+                new_slow = new_slow | curved
             if any_slow:
-                # leave the low-speed mode only with a steering reading to restart from
+                # leave the mode only with a steering reading to restart from
                 restart = slow & ~new_slow & ~np.isnan(steering)
                 new_slow = new_slow | (slow & np.isnan(steering))
         if restart is not None and restart.any():
@@ -572,6 +590,22 @@ class GaussianMixtureEKF:
         if any_gated:
             new["_gated_count"] = run["_gated_count"] + gated
         return x_post, cov_post, new
+
+    def _curved(self, points: np.ndarray | None) -> np.ndarray | None:
+        """(R,) bool: the road ahead curves more than ``steering_curvature_limit`` (None when
+        no run can: a straight road or no limit). ``kappa = 2 |dy| / (dx^2 + dy^2)`` is the
+        curvature of the arc from the car's station to the near and the far point."""
+        if points is None or not math.isfinite(self._curvature_limit):
+            return None
+        dx, dy = points[:, 0::2], points[:, 1::2]
+        kappa = 2.0 * np.abs(dy) / (dx * dx + dy * dy)
+        return kappa.max(axis=1) > self._curvature_limit
+
+    def _channel_off_at_reset(self, z: np.ndarray, points: np.ndarray | None) -> np.ndarray:
+        """(R,) bool: runs that start with the steering channel off (slow or curved)."""
+        off = (z[:, 0] < self._min_speed) & (self._min_speed > 0)
+        curved = self._curved(points)
+        return off if curved is None else off | curved
 
     def _restart_memory(
         self,

@@ -82,7 +82,8 @@ class EstimationResult:
         gated: (R, T, 3) channels [speed, camera, steering] the estimator's
             outlier gate rejected at each step (None if it has no gate).
         low_speed: (R, T) steps with the steering channel off below the
-            estimator's ``min_speed`` (None if it has no such mode).
+            estimator's ``min_speed`` or on a road ahead more curved than its
+            ``steering_curvature_limit`` (None if it has no such mode).
         decision: (R, T) decision state codes (:data:`estimators.evidence.DECISIONS`:
             0 undecided, 1 decided, 2 model_mismatch; -1 where invalid).
         model_error: (R, T) the statistic behind ``model_mismatch``

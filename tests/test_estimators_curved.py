@@ -8,6 +8,9 @@ results unchanged.
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import gymnasium as gym
 import numpy as np
 import pandas as pd
@@ -285,3 +288,49 @@ def test_wrappers_give_the_estimator_the_road_ahead():
         assert infos["estimate_lateral_offset"][car] == pytest.approx(
             single_infos[car]["estimate_lateral_offset"], abs=1e-9
         )
+
+
+# ---------------------------------------------------------------- outside the model's road
+def test_the_curvature_limit_comes_from_the_training_data():
+    from estimators.settings import STRAIGHT_CURVATURE, steering_curvature_limit
+
+    assert steering_curvature_limit(np.zeros(300)) == STRAIGHT_CURVATURE
+    assert steering_curvature_limit(np.array([0.0, -1 / 120, np.nan])) == pytest.approx(
+        1 / 120 + STRAIGHT_CURVATURE
+    )
+    assert steering_curvature_limit(None) == math.inf
+    assert steering_curvature_limit(np.array([np.nan])) == math.inf
+    with pytest.raises(ValueError, match="steering_curvature_limit"):
+        FilterSettings(steering_curvature_limit=-1.0)
+
+
+def test_a_straight_road_model_leaves_the_lane_alone_on_bends():
+    """The benchmark's case: the generalized model fitted on a straight run of a driver who
+    later drives the curved track. With the limit the steering channel is off on the bends
+    (and only there), and the run never ends confidently in a wrong lane."""
+    from benchmarks.protocol import ProtocolConfig
+    from benchmarks.protocol.plan import load_frames, synthetic_plan
+    from estimators.settings import steering_curvature_limit
+    from estimators.tuning import steering_residual_std
+    from hasa_env.steering import GeneralizedModel
+
+    plan = synthetic_plan(ProtocolConfig(seeds=(0,)), 0)
+    train_ref = next(r for r in plan["main"] if r.driver == plan["illustrative"] and r.index == 0)
+    train = load_frames([train_ref], "straight", plan["env_config"], plan["params"])[0]
+    model = GeneralizedModel().fit(train)
+    curved = load_frames(plan["curved"][:2], "curved", plan["env_config"], plan["params"])
+    limit = steering_curvature_limit(train["road_curvature"].to_numpy())
+    residual = steering_residual_std(model.arx(), train, decision_lag=model.decision_lag)
+    settings = FilterSettings.from_env_config(
+        curved[0].attrs["config"], steering_residual_std=residual
+    )
+    ekf = GaussianMixtureEKF(
+        model.arx(), replace(settings, steering_curvature_limit=limit),
+        decision_lag=model.decision_lag,
+    )  # fmt: skip
+    result = run_estimator(ekf, curved)
+    on_bends = np.abs(np.stack([f["road_curvature"].to_numpy() for f in curved])) > 0.002
+    assert result.low_speed[on_bends].mean() > 0.95  # off where the road bends
+    lead_in = np.stack([f["station"].to_numpy() for f in curved]) < 150.0 - 25.0
+    assert result.low_speed[lead_in].mean() < 0.05  # on along the 150 m lead-in straight
+    assert not result.wrong_lane_confident(0.95).any()

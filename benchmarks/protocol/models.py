@@ -37,6 +37,7 @@ from benchmarks.protocol.config import (
     BenchmarkError,
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
+from estimators.settings import steering_curvature_limit
 from estimators.tuning import steering_residual_std
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
@@ -242,13 +243,18 @@ class FittedModel:
         name: the name in the results; kind: "builtin" or "user";
         model: the fitted :class:`SteeringModel`; residual_std: its one-step
         residual level on the training run for the filter (rad; None: no
-        ARX form, no estimation).
+        ARX form, no estimation); curvature_limit: the filter's
+        ``steering_curvature_limit`` (1/m) from the road curvature of the run the
+        model was fitted on (:func:`estimators.settings.steering_curvature_limit`;
+        ``math.inf`` for a saved model scored with its own parameters, whose
+        training data are unknown).
     """
 
     name: str
     kind: str
     model: Any
     residual_std: float | None
+    curvature_limit: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -383,7 +389,13 @@ def fit_models(
         info["error"] = None
         # the road-blind baseline is a steering reference only: it has no lane information
         residual = None if kind == "baseline" else info_fit["filter_residual_std"]
-        fitted.append(FittedModel(name, kind, model_fitted, residual))
+        limit = (
+            math.inf
+            if candidate.fixed or "road_curvature" not in own
+            else steering_curvature_limit(own["road_curvature"].to_numpy())
+        )
+        info["steering_curvature_limit"] = limit
+        fitted.append(FittedModel(name, kind, model_fitted, residual, limit))
         infos.append(info)
     return fitted, infos
 

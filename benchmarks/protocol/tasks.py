@@ -176,14 +176,18 @@ def _model_part(
     preds = _score_model(fm, task, frames, part)
     residual_std = fm.residual_std
     if task.estimate and residual_std is not None:
+        # the model is trusted on roads as curved as its training run's, unless --filter says
+        own_limit = "steering_curvature_limit" not in task.filter_settings
 
         def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
+            limit = fm.curvature_limit if own_limit else settings.steering_curvature_limit
             return GaussianMixtureEKF(
                 fm.model.arx(),
                 replace(
                     settings,
                     steering_residual_std=max(residual_std, 1e-9),
                     evidence_checks=checks,
+                    steering_curvature_limit=limit if checks else math.inf,
                 ),
                 decision_lag=fm.model.decision_lag,
             )
