@@ -35,7 +35,10 @@ estimator.steering_residual_std the model's residual std (rad, model units); nul
                                 fit's, else FilterSettings' 2e-3 (null)
 estimator.outlier_gate          gate outlying measurements (FilterSettings.innovation_gate
                                 6); off by default here, see docs/design.md §12.5 (false)
-estimator.settings              further FilterSettings fields by name ({})
+estimator.settings              further FilterSettings fields by name ({}); the presets
+                                and 'fit:' models get steering_curvature_limit 2e-4 1/m
+                                (fitted on a straight road: no lane evidence from the
+                                steering on a bend, docs/design.md §8.11)
 ==============================  ==========================================================
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
@@ -58,7 +61,7 @@ from typing import Any
 from estimators.base import LaneEstimator
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.gm_ekf import GaussianMixtureEKF
-from estimators.settings import FilterSettings
+from estimators.settings import STRAIGHT_CURVATURE, FilterSettings
 from estimators.timing import check_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import POPULATIONS, make_driver, population, run_driver
@@ -67,7 +70,7 @@ from hasa_env.sim.config import ConfigError, deep_merge
 from hasa_env.sim.config import default_config as env_default_config
 from hasa_env.sim.config import describe_config as env_describe_config
 from hasa_env.steering.arx import ARXForm
-from hasa_env.steering.loading import default_steering_ratio, load_model
+from hasa_env.steering.loading import PAPER_PRESETS, default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 from hasa_env.validation import Field, schema, validate
 
@@ -347,6 +350,11 @@ def estimator_factory(
         overrides.setdefault("innovation_gate", math.inf)
     if residual is not None:
         overrides.setdefault("steering_residual_std", residual)
+    spec = est["steering_model"]
+    if est["type"] != "no_steering" and (spec in _FITTED or spec in PAPER_PRESETS):
+        # fitted on a straight road (the paper's track, the population's training run): no
+        # lane evidence from its steering on a bend (docs/design.md §8.11)
+        overrides.setdefault("steering_curvature_limit", STRAIGHT_CURVATURE)
     try:
         settings = FilterSettings.from_env_config(env_config, **overrides)
     except (TypeError, ValueError) as exc:

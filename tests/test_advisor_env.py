@@ -308,3 +308,15 @@ def test_renders_headless_with_the_estimator_weights_in_the_info():
     )
     vector.reset(seed=0)
     assert [f.shape for f in vector.render()] == [(480, 640, 3)] * 2
+
+
+def test_a_straight_road_model_gives_no_lane_evidence_on_bends_unless_configured():
+    from estimators.settings import STRAIGHT_CURVATURE
+
+    env = gym.make("hasa_env/LaneKeepingAdvisorCurved-v0")
+    assert env.unwrapped.estimator.settings.steering_curvature_limit == STRAIGHT_CURVATURE
+    env.close()
+    config = {"estimator": {"settings": {"steering_curvature_limit": 0.01}}}
+    env = gym.make("hasa_env/LaneKeepingAdvisorCurved-v0", config=config)
+    assert env.unwrapped.estimator.settings.steering_curvature_limit == 0.01
+    env.close()
