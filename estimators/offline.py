@@ -413,6 +413,7 @@ def estimate_recording(
     steering_model: SteeringModelLike,
     steering_ratio: float = 1.0,
     residual_std: float | None = None,
+    steering_curvature_limit: float = math.inf,
 ) -> EstimatorRun:
     """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
 
@@ -427,13 +428,18 @@ def estimate_recording(
     (:func:`estimators.tuning.steering_residual_std`): the evidence checks
     (:mod:`estimators.evidence`) temper evidence whose residuals exceed the
     level they are given, but cannot recover evidence a level set far too
-    high hides.
+    high hides. ``steering_curvature_limit`` (1/m): no lane evidence from the steering
+    where the road ahead curves more (:class:`FilterSettings`; the model's training
+    roads, :func:`estimators.settings.steering_curvature_limit`).
     """
     data = recording.data
     cfg = recording.config
     hypotheses = np.asarray(cfg["markings"]["hypotheses"], dtype=np.float64)
     arx = steering_model.arx()
-    overrides: dict[str, float] = {"steering_ratio": steering_ratio}
+    overrides: dict[str, float] = {
+        "steering_ratio": steering_ratio,
+        "steering_curvature_limit": steering_curvature_limit,
+    }
     if arx is not None:
         level = residual_std
         if level is None:

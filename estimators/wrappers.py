@@ -36,6 +36,7 @@ Example::
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from typing import Any, SupportsFloat
 
@@ -498,7 +499,9 @@ class VectorEstimatorObservationWrapper(VectorEstimatorInfoWrapper):
 
 
 def estimator_wrapper(
-    model: SteeringModelLike, steering_ratio: float = 1.0
+    model: SteeringModelLike,
+    steering_ratio: float = 1.0,
+    steering_curvature_limit: float = math.inf,
 ) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """A wrapper factory: the Gaussian-mixture EKF runs alongside each env it wraps.
 
@@ -509,7 +512,9 @@ def estimator_wrapper(
     ``info["estimate_weights"]`` carries the live hypothesis weights the HUD
     shows (the recording keeps its standard columns). ``steering_ratio``:
     model units per road-wheel radian (15 for the paper's presets,
-    :func:`hasa_env.steering.loading.default_steering_ratio`).
+    :func:`hasa_env.steering.loading.default_steering_ratio`);
+    ``steering_curvature_limit``: :class:`estimators.settings.FilterSettings`' field (1/m;
+    the steering channel is off on roads more curved than the model was fitted on).
     """
     arx = model.arx()
     if arx is None:
@@ -521,7 +526,11 @@ def estimator_wrapper(
     def wrap(env: gym.Env) -> EstimatorInfoWrapper:
         config = hasa_unwrapped(env).config
         dt = config["action_repeat"] / config["sim_frequency"]
-        settings = FilterSettings.from_env_config(config, steering_ratio=steering_ratio)
+        settings = FilterSettings.from_env_config(
+            config,
+            steering_ratio=steering_ratio,
+            steering_curvature_limit=steering_curvature_limit,
+        )
         return EstimatorInfoWrapper(env, GaussianMixtureEKF(arx, settings, dt=dt))
 
     return wrap

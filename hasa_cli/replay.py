@@ -55,6 +55,7 @@ from hasa_cli import (
     console_script,
     error,
 )
+from hasa_cli.inputs import curvature_limit_for
 from hasa_env.recording import check_replay
 from hasa_env.recording.reader import load_paths
 from hasa_env.render.frames import write_frames
@@ -213,9 +214,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         road = recordings[0].road
         if args.steering is not None:
             model.steering_signal = args.steering
+        fitted_on = None
         if args.fit:
             model = model.fit(recordings[0].data, road)
+            fitted_on = recordings[0].data
             print(f"model {spec}: fitted on {recordings[0].path}")
+        curvature_limit = curvature_limit_for(spec, fitted_on)
         ratio = args.steering_ratio
         if ratio is None:
             ratio = default_steering_ratio(spec, args.fit)
@@ -234,7 +238,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.estimator and model is not None:  # (loaded above with --estimator)
         for i, rec in enumerate(recordings):
             try:
-                result = estimate_recording(rec, model, ratio)
+                result = estimate_recording(
+                    rec, model, ratio, steering_curvature_limit=curvature_limit
+                )
             except ValueError as exc:  # e.g. sampled at another rate than the model
                 error(PROG, f"{rec.path}: cannot run the estimator: {exc}")
                 problems.append(str(exc))

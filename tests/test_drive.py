@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -39,6 +40,8 @@ def _session(tmp_path, pg, wheel, hook_extra=None, seconds=3.0, driver="2", **se
     profile = _g29_for(wheel)
     inputs = InputManager(profiles=[profile], pygame_module=pg)
     params = {p.name: p for p in population("paper", seed=0)}[driver]
+    # a foot at rest (no pedal remnant): the pedals' raw reading at rest is checked below
+    params = params.with_speed(dataclasses.replace(params.speed, pedal_noise=0.0))
     wheel_driver = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
 
     def hook(session):

@@ -189,3 +189,17 @@ def test_replay_accepts_every_start_that_reset_accepts(tmp_path):
     rec = load_recording(env.path)
     assert rec.data["lateral_offset"].iloc[0] == 21.5 and rec.data["heading"].iloc[0] == 1.3
     assert check_replay(rec).matches
+
+
+def test_the_curvature_limit_follows_what_the_model_was_fitted_on():
+    import math
+
+    import pandas as pd
+
+    from estimators.settings import STRAIGHT_CURVATURE
+    from hasa_cli.inputs import curvature_limit_for
+
+    assert curvature_limit_for("generalized") == STRAIGHT_CURVATURE  # a paper preset
+    assert curvature_limit_for("my_model.json") == math.inf  # training roads unknown
+    curved = pd.DataFrame({"road_curvature": [0.0, 1 / 150, -1 / 120]})
+    assert curvature_limit_for("generalized", curved) == 1 / 120 + STRAIGHT_CURVATURE
