@@ -4,6 +4,12 @@ Vectorized over lane hypotheses and over many runs at once: states are
 (runs, components, n), covariances (runs, components, n, n). Its settings
 live in :mod:`estimators.settings`, its matrices and batched predict/update
 in :mod:`estimators.filter_matrices`; both names are re-exported here.
+
+Why this module is long: the filter's docstring states its equations, its robustness rules
+and every deviation from the paper (as filterpy's filters do), and one step keeps those rules
+(missing inputs, the outlier gate, the evidence rule, pruning, the steering channel off at low
+speed or outside the model's road curvature) in one sequence a reader can follow; the
+arithmetic itself is in :mod:`estimators.filter_matrices` and :mod:`estimators.evidence`.
 """
 
 from __future__ import annotations
