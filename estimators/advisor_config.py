@@ -35,10 +35,11 @@ estimator.steering_residual_std the model's residual std (rad, model units); nul
                                 fit's, else FilterSettings' 2e-3 (null)
 estimator.outlier_gate          gate outlying measurements (FilterSettings.innovation_gate
                                 6); off by default here, see docs/design.md §12.5 (false)
-estimator.settings              further FilterSettings fields by name ({}); the presets
-                                and 'fit:' models get steering_curvature_limit 2e-4 1/m
-                                (fitted on a straight road: no lane evidence from the
-                                steering on a bend, docs/design.md §8.11)
+estimator.settings              further FilterSettings fields by name ({}); by default
+                                steering_curvature_limit from the roads the model was
+                                fitted on (presets and 'fit:' models: straight, 2e-4 1/m;
+                                no lane evidence from the steering on a bend,
+                                docs/design.md §8.11)
 ==============================  ==========================================================
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
@@ -61,7 +62,7 @@ from typing import Any
 from estimators.base import LaneEstimator
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.gm_ekf import GaussianMixtureEKF
-from estimators.settings import STRAIGHT_CURVATURE, FilterSettings
+from estimators.settings import FilterSettings, model_curvature_limit
 from estimators.timing import check_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import POPULATIONS, make_driver, population, run_driver
@@ -70,7 +71,7 @@ from hasa_env.sim.config import ConfigError, deep_merge
 from hasa_env.sim.config import default_config as env_default_config
 from hasa_env.sim.config import describe_config as env_describe_config
 from hasa_env.steering.arx import ARXForm
-from hasa_env.steering.loading import PAPER_PRESETS, default_steering_ratio, load_model
+from hasa_env.steering.loading import default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 from hasa_env.validation import Field, schema, validate
 
@@ -295,11 +296,12 @@ def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, fl
 
 def _steering_model(
     own: Mapping[str, Any], env_config: Mapping[str, Any]
-) -> tuple[ARXForm | None, int, float, float | None]:
-    """(ARX form, decision lag, steering ratio, residual std or None) of the configured model."""
+) -> tuple[ARXForm | None, int, float, float | None, float]:
+    """(ARX form, decision lag, steering ratio, residual std or None, curvature limit 1/m) of
+    the configured model."""
     est = own["estimator"]
     if est["type"] == "no_steering":
-        return None, 0, 1.0, est["steering_residual_std"]
+        return None, 0, 1.0, est["steering_residual_std"], math.inf
     spec = est["steering_model"]
     dt = 1.0 / env_config["sim_frequency"]
     residual = est["steering_residual_std"]
@@ -329,13 +331,14 @@ def _steering_model(
         )
     if est["steering_ratio"] is not None:
         ratio = est["steering_ratio"]
-    return arx, int(getattr(model, "decision_lag", 1)), ratio, residual
+    limit = model_curvature_limit(model)
+    return arx, int(getattr(model, "decision_lag", 1)), ratio, residual, limit
 
 
 def estimator_factory(
     own: Mapping[str, Any], env_config: Mapping[str, Any]
 ) -> Callable[[], LaneEstimator]:
-    arx, lag, ratio, residual = _steering_model(own, env_config)
+    arx, lag, ratio, residual, curvature_limit = _steering_model(own, env_config)
     est = own["estimator"]
     overrides = dict(est["settings"])
     names = {f.name for f in dataclasses.fields(FilterSettings)}
@@ -350,11 +353,9 @@ def estimator_factory(
         overrides.setdefault("innovation_gate", math.inf)
     if residual is not None:
         overrides.setdefault("steering_residual_std", residual)
-    spec = est["steering_model"]
-    if est["type"] != "no_steering" and (spec in _FITTED or spec in PAPER_PRESETS):
-        # fitted on a straight road (the paper's track, the population's training run): no
-        # lane evidence from its steering on a bend (docs/design.md §8.11)
-        overrides.setdefault("steering_curvature_limit", STRAIGHT_CURVATURE)
+    # no lane evidence from the steering on roads more curved than the model was fitted on
+    # (the presets and 'fit:' models: a straight road; docs/design.md §8.11)
+    overrides.setdefault("steering_curvature_limit", curvature_limit)
     try:
         settings = FilterSettings.from_env_config(env_config, **overrides)
     except (TypeError, ValueError) as exc:

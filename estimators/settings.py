@@ -11,7 +11,12 @@ import numpy as np
 
 from hasa_env.validation import Field, schema, validate_fields
 
-__all__ = ["STRAIGHT_CURVATURE", "FilterSettings", "steering_curvature_limit"]
+__all__ = [
+    "STRAIGHT_CURVATURE",
+    "FilterSettings",
+    "model_curvature_limit",
+    "steering_curvature_limit",
+]
 
 
 def _positive(unit: str = "", infinite: bool = False) -> Field:
@@ -132,10 +137,10 @@ class FilterSettings:
             well: measured on the benchmark's curved track, the generalized
             model fitted on a straight run ended 6 of 20 runs with more than
             0.99 on the wrong lane, each flipped within 1 s of the first bend
-            while its model error stayed near 1 (consistent). The benchmark
-            sets it per model from its training run
-            (:func:`steering_curvature_limit`); ``math.inf`` (the default)
-            trusts the model on any road.
+            while its model error stayed near 1 (consistent). The benchmark,
+            the advisor task and the command-line programs set it per model
+            from the roads it was fitted on (:func:`model_curvature_limit`);
+            ``math.inf`` (the default) trusts the model on any road.
         max_acceleration: IMU readings with |a| above this (m/s^2) are
             implausible and treated as missing, like NaN (input 0 with
             ``missing_acceleration_std``). Default 50 m/s^2 (about 5 g):
@@ -249,3 +254,11 @@ def steering_curvature_limit(training_curvature: Any) -> float:
     if values.size == 0:
         return math.inf
     return float(values.max()) + STRAIGHT_CURVATURE
+
+
+def model_curvature_limit(model: Any) -> float:
+    """The ``steering_curvature_limit`` (1/m) for a steering model from the roads it was fitted
+    on (its ``training_curvature``, set by ``fit`` and kept in its file; the paper's presets
+    0), ``math.inf`` when they are unknown."""
+    value = getattr(model, "training_curvature", None)
+    return math.inf if value is None else steering_curvature_limit(value)

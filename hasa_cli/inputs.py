@@ -6,7 +6,6 @@ Used by :mod:`hasa_cli.drive` (the plain session) and :mod:`hasa_cli.study`
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from collections.abc import Callable
@@ -14,9 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import pandas as pd
 
-from estimators.settings import STRAIGHT_CURVATURE, steering_curvature_limit
+from estimators.settings import model_curvature_limit
 from estimators.wrappers import EstimatorInfoWrapper, estimator_wrapper
 from hasa_env.devices.calibration import (
     CalibrationError,
@@ -29,10 +27,9 @@ from hasa_env.devices.force_feedback import Autocentre, ForceFeedbackUnavailable
 from hasa_env.devices.sources import InputManager
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.steering.base import SteeringModel
-from hasa_env.steering.loading import PAPER_PRESETS, default_steering_ratio, load_model
+from hasa_env.steering.loading import default_steering_ratio, load_model
 
 __all__ = [
-    "curvature_limit_for",
     "estimator_for",
     "estimator_model",
     "joystick_profiles",
@@ -75,22 +72,11 @@ def estimator_model(spec: str, dt: float) -> SteeringModel:
     return model
 
 
-def curvature_limit_for(spec: str, fitted_on: pd.DataFrame | None = None) -> float:
-    """The filter's ``steering_curvature_limit`` (1/m) for the model ``spec``: from the
-    recording it was fitted on (``fitted_on``), 2e-4 for the paper's presets (fitted on a
-    straight road), else ``math.inf`` (a saved or user model: its training roads unknown)."""
-    if fitted_on is not None and "road_curvature" in fitted_on:
-        return steering_curvature_limit(fitted_on["road_curvature"].to_numpy())
-    if fitted_on is None and spec in PAPER_PRESETS:
-        return STRAIGHT_CURVATURE
-    return math.inf
-
-
 def estimator_for(spec: str, probe: LaneKeepingEnv) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """The env wrapper running the estimator with ``spec``'s model (checked on ``probe``)."""
     model = estimator_model(spec, probe.setup.env_step_duration)
     wrapper = estimator_wrapper(
-        model, default_steering_ratio(spec, fitted=False), curvature_limit_for(spec)
+        model, default_steering_ratio(spec, fitted=False), model_curvature_limit(model)
     )
     wrapper(probe)  # fail now, not after the countdown
     return wrapper

@@ -46,6 +46,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from estimators.offline import EstimatorRun, estimate_recording
+from estimators.settings import model_curvature_limit
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -55,7 +56,6 @@ from hasa_cli import (
     console_script,
     error,
 )
-from hasa_cli.inputs import curvature_limit_for
 from hasa_env.recording import check_replay
 from hasa_env.recording.reader import load_paths
 from hasa_env.render.frames import write_frames
@@ -214,12 +214,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         road = recordings[0].road
         if args.steering is not None:
             model.steering_signal = args.steering
-        fitted_on = None
         if args.fit:
             model = model.fit(recordings[0].data, road)
-            fitted_on = recordings[0].data
             print(f"model {spec}: fitted on {recordings[0].path}")
-        curvature_limit = curvature_limit_for(spec, fitted_on)
+        curvature_limit = model_curvature_limit(model)  # the roads it was fitted on
         ratio = args.steering_ratio
         if ratio is None:
             ratio = default_steering_ratio(spec, args.fit)

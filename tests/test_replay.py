@@ -191,15 +191,21 @@ def test_replay_accepts_every_start_that_reset_accepts(tmp_path):
     assert check_replay(rec).matches
 
 
-def test_the_curvature_limit_follows_what_the_model_was_fitted_on():
+def test_the_curvature_limit_follows_what_the_model_was_fitted_on(tmp_path):
     import math
 
     import pandas as pd
 
-    from estimators.settings import STRAIGHT_CURVATURE
-    from hasa_cli.inputs import curvature_limit_for
+    from estimators.settings import STRAIGHT_CURVATURE, model_curvature_limit
+    from hasa_env.steering import GeneralizedModel, SteeringModel
+    from hasa_env.steering.fitting import training_curvature
 
-    assert curvature_limit_for("generalized") == STRAIGHT_CURVATURE  # a paper preset
-    assert curvature_limit_for("my_model.json") == math.inf  # training roads unknown
+    paper = GeneralizedModel.paper()  # fitted on the paper's straight track
+    assert model_curvature_limit(paper) == STRAIGHT_CURVATURE
+    path = tmp_path / "model.json"
+    paper.save(path)
+    assert SteeringModel.load(path).training_curvature == 0.0  # kept in the file
+    assert model_curvature_limit(GeneralizedModel()) == math.inf  # unfitted: unknown
     curved = pd.DataFrame({"road_curvature": [0.0, 1 / 150, -1 / 120]})
-    assert curvature_limit_for("generalized", curved) == 1 / 120 + STRAIGHT_CURVATURE
+    assert training_curvature(curved) == 1 / 120
+    assert training_curvature(pd.DataFrame({"station": [0.0, 300.0]})) == 0.0  # straight

@@ -37,7 +37,7 @@ from benchmarks.protocol.config import (
     BenchmarkError,
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
-from estimators.settings import steering_curvature_limit
+from estimators.settings import model_curvature_limit, steering_curvature_limit
 from estimators.tuning import steering_residual_std
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
@@ -244,10 +244,10 @@ class FittedModel:
         model: the fitted :class:`SteeringModel`; residual_std: its one-step
         residual level on the training run for the filter (rad; None: no
         ARX form, no estimation); curvature_limit: the filter's
-        ``steering_curvature_limit`` (1/m) from the road curvature of the run the
-        model was fitted on (:func:`estimators.settings.steering_curvature_limit`;
-        ``math.inf`` for a saved model scored with its own parameters, whose
-        training data are unknown).
+        ``steering_curvature_limit`` (1/m) from the roads the model was fitted on
+        (:func:`estimators.settings.model_curvature_limit`; for a model the
+        benchmark fitted without that record, its training run's; ``math.inf``
+        for a saved model whose file does not say).
     """
 
     name: str
@@ -389,11 +389,11 @@ def fit_models(
         info["error"] = None
         # the road-blind baseline is a steering reference only: it has no lane information
         residual = None if kind == "baseline" else info_fit["filter_residual_std"]
-        limit = (
-            math.inf
-            if candidate.fixed or "road_curvature" not in own
-            else steering_curvature_limit(own["road_curvature"].to_numpy())
-        )
+        # trusted on roads up to those it was fitted on: its own record (fit, model file),
+        # else the training run's for a model the benchmark fitted
+        limit = model_curvature_limit(model_fitted)
+        if math.isinf(limit) and not candidate.fixed and "road_curvature" in own:
+            limit = steering_curvature_limit(own["road_curvature"].to_numpy())
         info["steering_curvature_limit"] = limit
         fitted.append(FittedModel(name, kind, model_fitted, residual, limit))
         infos.append(info)

@@ -56,6 +56,10 @@ A model with structure (orders, options) also overrides :meth:`structure`
 :meth:`fit` instead of :meth:`design`. Defining the subclass registers its
 ``model_type`` so :meth:`SteeringModel.load` can read its files.
 ``examples/custom_steering_model.py`` is a complete, runnable example.
+
+Why this module is long: it is the one class users subclass, so its docstrings are the guide to
+writing a model, and its public API (features, prediction, simulation, fitting, files) is kept
+in one place; the work is in :mod:`hasa_env.steering.fitting`, ``scoring`` and ``model_file``.
 """
 
 from __future__ import annotations
@@ -178,6 +182,10 @@ class SteeringModel(ABC):
         self._parameters = self._as_vector(parameters, "parameters")
         self._standard_errors = self._as_vector(standard_errors, "standard_errors")
         self.fit_result: FitResult | None = None
+        self.training_curvature: float | None = None
+        """The largest |road curvature| (1/m) of the data the model was fitted on (0 for a
+        straight road); None: unknown. Set by :meth:`fit`, saved in the model file; an
+        estimator trusts the model's steering only on roads up to it (docs/design.md §8.11)."""
 
     # ------------------------------------------------------------ to implement
     @property
@@ -534,6 +542,8 @@ class SteeringModel(ABC):
             "parameters": self.parameters,
             "standard_errors": self.standard_errors,
         }
+        if self.training_curvature is not None:
+            document["training"] = {"max_abs_road_curvature": self.training_curvature}
         if cls.__module__ != "__main__" and "<locals>" not in cls.__qualname__:
             document["class"] = f"{cls.__module__}:{cls.__qualname__}"
         return document

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from hasa_env.sim.road import Road
+from hasa_env.sim.road import Road, curvature_lookup_array
 from hasa_env.steering.design import SteeringModelLike as SteeringModel
 from hasa_env.steering.design import as_runs, lagged, r_squared
 from hasa_env.steering.identifiability import (
@@ -309,6 +309,30 @@ def design_blocks(
     return out
 
 
+def training_curvature(
+    runs: pd.DataFrame | Sequence[pd.DataFrame], road: Road | None = None
+) -> float | None:
+    """The largest |road curvature| (1/m) along the runs a model is fitted on: the runs'
+    ``road_curvature`` column, else ``road``'s curvature at their ``station``; 0 when the
+    features were computed for a straight road (no ``road`` or a straight one); None when
+    neither tells (a curved ``road`` and runs without stations)."""
+    largest = 0.0
+    for run in as_runs(runs):
+        if "road_curvature" in run:
+            values = np.abs(run["road_curvature"].to_numpy(dtype=np.float64))
+        elif road is None or road.is_straight:
+            continue
+        elif "station" in run:
+            stations = run["station"].to_numpy(dtype=np.float64)
+            values = np.abs(curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations))
+        else:
+            return None
+        values = values[np.isfinite(values)]
+        if values.size:
+            largest = max(largest, float(values.max()))
+    return largest
+
+
 def fit_model(
     model: SteeringModel,
     runs: pd.DataFrame | Sequence[pd.DataFrame],
@@ -427,6 +451,7 @@ def fit_model(
     checks = _checks(fitted, solution, report, condition, cv_lambda, collinearity)
     result = replace(result, identifiability=report, checks=checks)
     fitted.fit_result = result
+    fitted.training_curvature = training_curvature(runs, road)
     if warn:
         if report is not None and not report.ok:
             warnings.warn(

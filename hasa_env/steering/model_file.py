@@ -61,6 +61,12 @@ _FEATURES = {
     ),
     "regressors": Field("strings", None, "The regressors' names (checked against the structure)."),
 }  # fmt: skip
+_TRAINING = {
+    "max_abs_road_curvature": Field(
+        "number", None, "The largest |road curvature| of the training data (null: unknown).",
+        unit="1/m", low=0.0, optional=True,
+    ),
+}  # fmt: skip
 _PARAMETERS = Field(
     "mapping", each=Field("number"), optional=True, doc="Parameter name -> value, or null."
 )
@@ -105,6 +111,9 @@ def _schema(cls: str | None = None) -> Field:
             "structure": Field("mapping", {}, "The model's keyword arguments.", each=ANY_JSON),
             "parameters": _PARAMETERS,
             "standard_errors": _STANDARD_ERRORS,
+            "training": Field(
+                "mapping", {}, "What the model was fitted on (optional).", fields=_TRAINING
+            ),
         }
     )
 
@@ -120,7 +129,8 @@ def model_from_dict(
     ``decision_lag`` (int >= 0), ``steering_signal`` ("measured" or "applied"),
     ``regressors`` (optional; checked)},
     ``structure`` (the model's keyword arguments), ``parameters`` (name ->
-    number, or null) and ``standard_errors`` (same, >= 0, or null).
+    number, or null), ``standard_errors`` (same, >= 0, or null) and, optionally,
+    ``training`` {``max_abs_road_curvature`` (1/m, >= 0, or null)}.
 
     Raises:
         ModelFileError: naming ``source``, the field and the allowed values.
@@ -186,9 +196,11 @@ def model_from_dict(
                 f"{source}: field 'features.regressors' is {listed!r} but this structure uses "
                 f"{regressors}"
             )
-    return target(
+    model = target(
         **structure,
         parameters=values["parameters"],
         standard_errors=values["standard_errors"],
         **common,
     )
+    model.training_curvature = doc["training"].get("max_abs_road_curvature")
+    return model

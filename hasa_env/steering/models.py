@@ -74,7 +74,9 @@ class TwoPointModel(SteeringModel):
         (e.g. ``steering_signal``).
         """
         kwargs.setdefault("name", "two-point (paper)")
-        return cls(-0.2, 0.7, 0.087, dt=dt, **kwargs)
+        model = cls(-0.2, 0.7, 0.087, dt=dt, **kwargs)
+        model.training_curvature = 0.0  # fitted on the paper's straight track
+        return model
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -183,7 +185,7 @@ class GeneralizedModel(SteeringModel):
         :class:`~hasa_env.steering.base.SteeringModel` options (e.g. ``steering_signal``).
         """
         kwargs.setdefault("name", "generalized (paper)")
-        return cls.from_coefficients(
+        model = cls.from_coefficients(
             (1.47, -0.51),
             (-5.73, 17.32, -17.65, 6.12),
             (0.11,),
@@ -191,6 +193,8 @@ class GeneralizedModel(SteeringModel):
             dt=0.01,
             **kwargs,
         )
+        model.training_curvature = 0.0  # fitted on the paper's straight track
+        return model
 
     def structure(self) -> dict[str, Any]:
         return dict(self.orders)
