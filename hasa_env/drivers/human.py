@@ -36,7 +36,7 @@ from hasa_env.drivers.base import (
     info_arrays,
     speed_command,
 )
-from hasa_env.drivers.motor import MotorParams, MotorStage, NoiseBlocks
+from hasa_env.drivers.motor import MotorParams, MotorStage, NoiseBlocks, ou_coefficients
 from hasa_env.sim.road import Road, lane_centre_bearing
 
 __all__ = [
@@ -213,10 +213,9 @@ class HumanBatch(ABC):
             raise ValueError(f"dt must be > 0 s, got {dt}")
         self._dt = float(dt)
         self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
-        # pedal remnant: p(k+1) = rho p(k) + std sqrt(1 - rho^2) e(k), rho = exp(-dt / tau)
-        rho = np.exp(-self._dt / self.profile["pedal_time_constant"])
-        self._pedal_rho = rho
-        self._pedal_innovation = self.profile["pedal_noise"] * np.sqrt(1.0 - rho * rho)
+        self._pedal_rho, self._pedal_innovation = ou_coefficients(
+            self.profile["pedal_noise"], self.profile["pedal_time_constant"], self._dt
+        )
         self._pedal_draws = NoiseBlocks([car_streams(s, PEDAL_STREAM) for s in seeds], 1)
         self._pedal = np.zeros(self.num_cars)
         self.delay_steps = np.array([round(p.delay / dt) for p in self.params], dtype=np.int64)

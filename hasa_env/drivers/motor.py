@@ -182,6 +182,18 @@ class MotorParams:
         return cls(**data)
 
 
+def ou_coefficients(std: Any, time_constant: Any, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rho, innovation std) of an Ornstein-Uhlenbeck process of stationary std ``std`` and
+    time constant ``time_constant`` (s) sampled every ``dt`` s, per car::
+
+        x(k) = rho x(k-1) + std sqrt(1 - rho^2) e(k),   rho = exp(-dt / tau)   (0 if tau = 0: white)
+    """
+    tau = np.asarray(time_constant, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        rho = np.where(tau > 0, np.exp(-dt / np.maximum(tau, 1e-300)), 0.0)
+    return rho, np.asarray(std, dtype=np.float64) * np.sqrt(1.0 - rho**2)
+
+
 @lru_cache(maxsize=256)
 def neuromuscular_lag(frequency: float, damping: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation of delta'' = w^2 (u - delta) - 2 z w delta'.
@@ -312,13 +324,8 @@ class MotorStage:
             ad[:, 1, 1],
         )
         self._b0, self._b1 = bd[:, 0], bd[:, 1]
-        tau = self.broadband_tau
-        with np.errstate(divide="ignore"):
-            self._rho = np.where(tau > 0, np.exp(-dt / np.maximum(tau, 1e-300)), 0.0)
-            tau_c = self.command_tau
-            self._rho_c = np.where(tau_c > 0, np.exp(-dt / np.maximum(tau_c, 1e-300)), 0.0)
-        self._innovation = np.sqrt(1.0 - self._rho**2)
-        self._innovation_c = self.command_std * np.sqrt(1.0 - self._rho_c**2)
+        self._rho, self._innovation = ou_coefficients(1.0, self.broadband_tau, dt)
+        self._rho_c, self._innovation_c = ou_coefficients(self.command_std, self.command_tau, dt)
         self.commanded = bool(np.any(self.command_std > 0))
         # a tremor at or above the Nyquist frequency of the env step cannot be carried by
         # actions held over the step (e.g. a policy acting every 0.1 s): it is left out

@@ -62,7 +62,7 @@ from hasa_env.drivers.human import (
     params_to_dict,
 )
 from hasa_env.drivers.intermittent import IntermittentParams
-from hasa_env.drivers.motor import MotorParams, NoiseBlocks
+from hasa_env.drivers.motor import MotorParams, NoiseBlocks, ou_coefficients
 from hasa_env.drivers.preview import PreviewParams
 from hasa_env.sim.road import Road
 
@@ -250,11 +250,7 @@ class SyntheticBatch(HumanBatch):
             return
         self._noise = NoiseBlocks(rngs, 1)
         self._delay = DelayLine(self.delay_steps, 2)
-        with np.errstate(divide="ignore"):
-            self._rho = np.where(
-                self.noise_tau > 0, np.exp(-dt / np.maximum(self.noise_tau, 1e-300)), 0.0
-            )
-        self._innovation = self.noise_std * np.sqrt(1.0 - self._rho**2)
+        self._rho, self._innovation = ou_coefficients(self.noise_std, self.noise_tau, dt)
 
     def _bearings(
         self, info: Mapping[str, np.ndarray], road: Road
