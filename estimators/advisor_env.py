@@ -22,7 +22,7 @@ from estimators.advisor_setup import (
     observation_rows,
 )
 from hasa_env.drivers.human import human_batch
-from hasa_env.envs.base import check_render_mode
+from hasa_env.envs.base import check_render_mode, started_state
 from hasa_env.render import SceneRenderer, make_renderer
 from hasa_env.sim.dynamics import (
     SCALAR_OPS,
@@ -307,12 +307,6 @@ class LaneKeepingAdvisorEnv(gym.Env):
         return self._estimator
 
     # ------------------------------------------------------------- helpers
-    def _live(self) -> VehicleState:
-        """The true state of the running episode (a RuntimeError before the first reset)."""
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
-        return self._state
-
     def _sample_sensors(self, imu: tuple[float, float], kappa: float) -> None:
         """This sample's sensor readings (one noise row of the car's block)."""
         if self._noise_pos >= len(self._noise):
@@ -322,7 +316,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
         self._noise_pos += 1
         self._kappa = kappa
         self._sensors = sensor_readings(
-            self._live(), imu, self._bias, noise, self.setup.env.noise_std
+            started_state(self._state), imu, self._bias, noise, self.setup.env.noise_std
         )
 
     def _wheel_reading(self, command: float) -> float:
@@ -341,7 +335,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
     def _info(self) -> dict[str, Any]:
         values = info_values(
             self._sim_step,
-            self._live(),
+            started_state(self._state),
             self._velocity,
             self._acceleration,
             self._kappa,

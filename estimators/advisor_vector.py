@@ -39,7 +39,7 @@ from estimators.advisor_setup import (
     estimate_readout,
     observation_rows,
 )
-from hasa_env.envs.base import check_vector_args
+from hasa_env.envs.base import check_vector_args, started_state
 from hasa_env.envs.vector import vector_reset_request
 from hasa_env.render import make_renderer
 from hasa_env.rl.humans import HumanPool
@@ -261,12 +261,6 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         return self._estimator
 
     # ------------------------------------------------------------- helpers
-    def _live(self) -> VehicleState:
-        """The true state of the running episode (a RuntimeError before the first reset)."""
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
-        return self._state
-
     def _reset_cars(self, idx: np.ndarray, options: dict[str, Any] | None, whole: bool) -> None:
         """Start new episodes of the cars ``idx``: car, sensors, human, estimator."""
         setup = self.setup
@@ -283,7 +277,7 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
                     f"integers 0..{len(setup.drivers) - 1} (one per driver of the population)"
                 )
             chosen = int(value)
-        fields = [f.copy() for f in self._live()]
+        fields = [f.copy() for f in started_state(self._state)]
         human_seeds, wheel_seeds = [], []
         for i in idx.tolist():
             rng = self._rngs[i]
@@ -368,10 +362,11 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
             pos = np.minimum(self._noise_pos, block - 1)
         noise = self._noise.reshape(-1, self._noise.shape[2])[self._row_base + pos]
         self._noise_pos += 1
-        readings = sensor_readings(self._live(), imu, self._bias, noise.T, env.noise_std)
-        kappa = self._curvature(self._live().station)
+        state = started_state(self._state)
+        readings = sensor_readings(state, imu, self._bias, noise.T, env.noise_std)
+        kappa = self._curvature(state.station)
         self._kappa = np.array(
-            np.broadcast_to(np.asarray(kappa, dtype=np.float64), self._live().station.shape)
+            np.broadcast_to(np.asarray(kappa, dtype=np.float64), state.station.shape)
         )
         for channel, reading in zip(self._sensors, readings, strict=True):
             channel[:] = reading
@@ -382,7 +377,7 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
     def _info(self) -> dict[str, Any]:
         values = info_values(
             self._sim_step,
-            self._live(),
+            started_state(self._state),
             self._velocity,
             self._acceleration,
             self._kappa,

@@ -19,7 +19,14 @@ from gymnasium.vector import VectorEnv
 from hasa_env.sim.dynamics import VehicleState
 from hasa_env.sim.setup import INFO_KEYS, EnvSetup, info_values
 
-__all__ = ["HasaEnv", "LaneKeepingBase", "check_render_mode", "check_vector_args", "hasa_unwrapped"]
+__all__ = [
+    "HasaEnv",
+    "LaneKeepingBase",
+    "check_render_mode",
+    "check_vector_args",
+    "hasa_unwrapped",
+    "started_state",
+]
 
 
 class HasaEnv(Protocol):
@@ -48,6 +55,13 @@ def check_vector_args(
     if max_episode_steps is not None:
         raise ValueError("max_episode_steps is not supported; set config['time_limit'] (s) instead")
     return int(num_envs)
+
+
+def started_state(state: VehicleState | None) -> VehicleState:
+    """An env's true state, or the RuntimeError of a step before the first reset."""
+    if state is None:
+        raise RuntimeError("call reset() before step()")
+    return state
 
 
 def hasa_unwrapped(env: gym.Env | VectorEnv) -> HasaEnv:
