@@ -44,9 +44,9 @@ estimator.settings              further FilterSettings fields by name ({}); by d
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
 the true state driving and the human advising, its estimate is the best of the four
-(lateral RMSE 0.049 m over six 30 s episodes, true lane always found; fitted
-generalized 0.145 m; fitted two-point 0.44 m; two-point preset 0.80 m), and with the
-human driving 0.078 m (docs/design.md §12.4, ``examples/advisor_estimators.py``).
+(lateral RMSE 0.035 m over six 30 s episodes, true lane always found; fitted
+generalized 0.155 m; fitted two-point 0.44 m; two-point preset 0.80 m), and with the
+human driving 0.069 m (docs/design.md §12.4, ``examples/advisor_estimators.py``).
 """
 
 from __future__ import annotations
