@@ -61,19 +61,14 @@ def _variant(
         yield population
         return
     spec = POPULATIONS[population]
-    name = f"{population}@command_scale={command_scale or 1:g},pedal_scale={pedal_scale or 1:g}"
-    pedal = spec.pedal
-    if pedal is not None and pedal_scale is not None:
-        noise = pedal.noise
-        pedal = (
-            None
-            if pedal_scale == 0
-            else replace(pedal, noise=replace(noise, low=noise.low * pedal_scale,
-                                              high=noise.high * pedal_scale))
-        )  # fmt: skip
+    command = 1.0 if command_scale is None else command_scale
+    pedal_factor = 1.0 if pedal_scale is None else pedal_scale
+    name = f"{population}@command_scale={command:g},pedal_scale={pedal_factor:g}"
+    # pedal x 0 is no pedal remnant at all (its draws come from a stream of their own)
+    pedal = None if spec.pedal is None or pedal_factor == 0 else spec.pedal.scaled(pedal_factor)
     POPULATIONS[name] = replace(
         spec,
-        command_scale=spec.command_scale * (1.0 if command_scale is None else command_scale),
+        command_scale=spec.command_scale * command,
         pedal=pedal,
         seed_key=spec.seed_key or population,
     )

@@ -157,6 +157,10 @@ class PedalRanges:
             "pedal_time_constant": self.time_constant.draw(rng),
         }
 
+    def scaled(self, factor: float) -> PedalRanges:
+        """The same ranges with the noise std times ``factor`` (same draws otherwise)."""
+        return replace(self, noise=_Range(self.noise.low * factor, self.noise.high * factor))
+
 
 @dataclass(frozen=True)
 class PopulationSpec:
