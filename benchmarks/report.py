@@ -377,6 +377,26 @@ def _model_notes(result: BenchmarkResult) -> list[tuple[str, str]]:
     return list(seen.items())
 
 
+UNSAFE_SHARE = 0.01
+"""An estimator that ends more than this share of its runs (straight and curved) with more than
+0.95 on a wrong lane is named in the findings (the bound of docs/design.md §8.11)."""
+
+
+def _unsafe_estimators(result: BenchmarkResult) -> list[str]:
+    """ "name a/b (x %)" of every estimator above :data:`UNSAFE_SHARE`, in summary order."""
+    out = []
+    for row in result.summary:
+        wrong = row.get("wrong_lane_confident_runs")
+        runs = row.get("estimated_runs")
+        if wrong is None or not runs or not math.isfinite(float(runs)):
+            continue
+        wrong = float(wrong) + float(row.get("curved_wrong_lane_confident_runs") or 0.0)
+        runs = float(runs) + float(row.get("curved_estimated_runs") or 0.0)
+        if wrong > UNSAFE_SHARE * runs:
+            out.append(f"{row['model']} {wrong:.0f}/{runs:.0f} ({wrong / runs:.1%})")
+    return out
+
+
 def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
     """Headline numbers next to the paper's claims (means over seeds, with intervals)."""
     by = {r["model"]: r for r in result.summary}
@@ -406,6 +426,12 @@ def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
         lines.append(
             f"{bullet}baselines: no steering {interval(fixed(3), 'lateral_rmse')(base)} m "
             f"(paper: 0.9), oracle {interval(fixed(3), 'lateral_rmse')(oracle)} m"
+        )
+    unsafe = _unsafe_estimators(result)
+    if unsafe:
+        lines.append(
+            f"{bullet}confidently in the wrong lane (> 0.95) in more than "
+            f"{UNSAFE_SHARE:.0%} of runs: " + ", ".join(unsafe)
         )
     flagged = [r for r in _checks_rows(result) if r.get("flags") and r.get("kind") != "baseline"]
     if flagged:

@@ -10,7 +10,7 @@ paper's orders fitted on the seed's training run, then spoiled:
 | ``stress_no_lane_info`` | the fit with every bearing coefficient (b, c) set to 0: it predicts steering from its own past and v_y only, so it cannot tell lanes apart |
 | ``stress_sign_flipped`` | the fit with the bearing and v_y coefficients (b, c, d) negated: it expects the driver to steer away from the lane centre |
 | ``stress_random_arx`` | a random stable ARX model: AR poles drawn with radius 0.3-0.95, each b, c, d coefficient drawn from a normal with the fitted block's RMS (seeded by the training run) |
-| ``stress_unregularized`` | plain least squares (no ridge, no stability check) on a constant-speed run of the training driver: the collinear fit of issue 10, with AR poles far outside the unit circle |
+| ``stress_unregularized`` | plain least squares (no ridge, no stability check) on a constant-speed run of the training driver: a collinear fit (flagged ``collinear_features`` on all 15 seeds measured, 0-4 and 25-34), unstable on 2 of them (seeds 0 and 3: an AR pole at 1.003-1.008), and whose lane terms can point either way while it predicts the steering well |
 
 What a good estimator does with them: it ends no run confidently (> 0.95)
 in the wrong lane, and its lateral RMSE stays near the no-steering

@@ -14,6 +14,8 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -27,7 +29,7 @@ from benchmarks.protocol import (
     load_user_model,
     run_protocol,
 )
-from benchmarks.report import CSV_TABLES, format_tables, write_outputs
+from benchmarks.report import CSV_TABLES, _unsafe_estimators, format_tables, write_outputs
 from hasa_cli.bench import format_perf_table, main, perf_rows
 
 # the all-PI drivers without remnant ("paper-pi") until the default population is calibrated
@@ -607,3 +609,23 @@ def test_python_dash_m_benchmarks_is_the_cli() -> None:
     assert done.returncode == 0, done.stderr
     for option in ("--recordings", "--scheduler", "--workers", "--population", "--quiet"):
         assert option in done.stdout
+
+
+def test_findings_name_estimators_confidently_wrong_in_more_than_one_percent() -> None:
+    rows = [
+        # 4 + 1 of 485 runs: 1.03 % (straight and curved together)
+        {"model": "bad", "estimated_runs": 465.0, "wrong_lane_confident_runs": 4.0,
+         "curved_estimated_runs": 20.0, "curved_wrong_lane_confident_runs": 1.0},
+        # 4 of 485: 0.82 %, under the bound
+        {"model": "ok", "estimated_runs": 465.0, "wrong_lane_confident_runs": 4.0,
+         "curved_estimated_runs": 20.0, "curved_wrong_lane_confident_runs": 0.0},
+        # no curved track: 2 of 100
+        {"model": "straight_only", "estimated_runs": 100.0, "wrong_lane_confident_runs": 2.0},
+        # a model without estimation rows
+        {"model": "road_blind", "estimated_runs": None, "wrong_lane_confident_runs": None},
+    ]  # fmt: skip
+    result: Any = SimpleNamespace(summary=rows)
+    assert _unsafe_estimators(result) == [
+        "bad 5/485 (1.0%)",
+        "straight_only 2/100 (2.0%)",
+    ]
