@@ -134,7 +134,20 @@ _CHECK_COLUMNS = [
     Column(lambda r: text(r.get("identifiable")), "identifiable"),
     Column("lane_snr", "lane SNR", fixed(2)),
     Column(lambda r: ", ".join(r.get("flags") or []) or "-", "flags", left=True),
+    Column(lambda r: _lane_keeping_cell(r.get("lane_keeping")), "drives (closed loop)", left=True),
 ]
+
+
+def _lane_keeping_cell(outcome: dict[str, Any] | None) -> str:
+    """The lane-keeping check in a cell: "on road, max |y| 0.54 m" or "off road 4/4 (3.7 s)"."""
+    if not outcome:
+        return "-"
+    if outcome.get("error"):
+        return "could not drive"
+    if outcome.get("passed"):
+        return f"on road, max |y| {outcome['max_abs_lateral_offset']:.2f} m"
+    return f"off road {outcome['runs_left_road']}/{outcome['runs']} ({outcome['first_exit']:.1f} s)"
+
 
 _STEERING_COLUMNS = [
     Column("driver", "Driver", left=True),
@@ -217,10 +230,13 @@ def pooled(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 def _checks_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
     rows = []
     for m in result.models:
-        checks = m.get("checks")
-        if m.get("error") or not checks:
+        checks = m.get("checks") or {}
+        if m.get("error") or not (checks or m.get("lane_keeping")):
             continue
-        rows.append({"name": m["name"], "kind": m.get("kind"), "seed": m.get("seed"), **checks})
+        rows.append(
+            {"name": m["name"], "kind": m.get("kind"), "seed": m.get("seed"), **checks}
+            | {"lane_keeping": m.get("lane_keeping")}
+        )
     return rows
 
 
@@ -269,7 +285,10 @@ def _sections(
             "checks",
             "The fits' checks per seed (docs/design.md §6.5): ridge penalty chosen by blocked "
             "cross-validation on the training run, condition number of the standardized design, "
-            "largest AR pole, lane-offset identifiability with the steering-sensor noise",
+            "largest AR pole, lane-offset identifiability with the steering-sensor noise; "
+            "and whether the model, driving 4 cars itself on the training run's conditions, "
+            "keeps them on the road (docs/design.md §8.11: one that does not gives the "
+            "estimator no lane evidence)",
             _checks_rows(result),
             _CHECK_COLUMNS,
             "name",

@@ -15,6 +15,10 @@ paper's orders fitted on the seed's training run, then spoiled:
 What a good estimator does with them: it ends no run confidently (> 0.95)
 in the wrong lane, and its lateral RMSE stays near the no-steering
 baseline's (the steering channel is then worth nothing, but costs nothing).
+Each is also put in the driver's seat first (the benchmark's lane-keeping
+check, :func:`benchmarks.protocol.models.check_lane_keeping`): the
+sign-flipped model leaves the road within seconds on every seed measured,
+and a model that does gives the estimator no lane evidence.
 """
 
 from __future__ import annotations

@@ -35,6 +35,11 @@ estimator.steering_residual_std the model's residual std (rad, model units); nul
                                 fit's, else FilterSettings' 2e-3 (null)
 estimator.outlier_gate          gate outlying measurements (FilterSettings.innovation_gate
                                 6); off by default here, see docs/design.md §12.5 (false)
+estimator.lane_check            refuse (ConfigError) a model that drives off the road
+                                when it steers itself (4 cars, 30 s, straight track;
+                                hasa_env.drivers.require_lane_keeping; only for the
+                                'mixture' estimator); the two-point preset does, at
+                                15 m/s (true)
 estimator.settings              further FilterSettings fields by name ({}); by default
                                 steering_curvature_limit from the roads the model was
                                 fitted on (presets and 'fit:' models: straight, 2e-4 1/m;
@@ -45,7 +50,8 @@ estimator.settings              further FilterSettings fields by name ({}); by d
 Why the generalized preset by default: with the "paper" population, a lane keeper on
 the true state driving and the human advising, its estimate is the best of the four
 (lateral RMSE 0.035 m over six 30 s episodes, true lane always found; fitted
-generalized 0.155 m; fitted two-point 0.44 m; two-point preset 0.80 m), and with the
+generalized 0.155 m; fitted two-point 0.44 m; two-point preset 0.80 m, refused by
+``estimator.lane_check`` since it cannot keep the car on the road), and with the
 human driving 0.069 m (docs/design.md §12.4, ``examples/advisor_estimators.py``).
 """
 
@@ -65,7 +71,13 @@ from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.settings import FilterSettings, model_curvature_limit
 from estimators.timing import check_sample_time
 from estimators.tuning import steering_residual_std
-from hasa_env.drivers import POPULATIONS, make_driver, population, run_driver
+from hasa_env.drivers import (
+    POPULATIONS,
+    make_driver,
+    population,
+    require_lane_keeping,
+    run_driver,
+)
 from hasa_env.drivers.archetypes import HumanParams
 from hasa_env.sim.config import ConfigError, deep_merge
 from hasa_env.sim.config import default_config as env_default_config
@@ -182,6 +194,14 @@ _OWN = schema(
                 "task: under a learning policy's driving the gate can drop the camera for good "
                 "and the estimate runs away (docs/design.md §12.5).",
             ),
+            "lane_check": Field(
+                "bool",
+                True,
+                "Refuse a steering model that cannot keep the car on the road when it steers "
+                "itself (hasa_env.drivers.require_lane_keeping: 4 cars, 30 s, the default "
+                "straight track): the mixture estimator would read the lane from wrong "
+                "evidence (docs/design.md §8.11).",
+            ),
             "settings": Field(
                 "mapping",
                 {},
@@ -278,6 +298,10 @@ def driver_index(value: Any, drivers: list[HumanParams]) -> int | None:
 
 
 # ------------------------------------------------------------------ estimator
+_LANE_CHECKS: dict[tuple[Any, ...], str | None] = {}
+"""Lane-keeping checks done, by (model spec, advisor section, ratio, dt): None or the refusal."""
+
+
 @functools.lru_cache(maxsize=16)
 def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, float]:
     """(fitted model, residual std (rad)) of ``kind`` on one run of the population's first
@@ -331,6 +355,19 @@ def _steering_model(
         )
     if est["steering_ratio"] is not None:
         ratio = est["steering_ratio"]
+    if est["lane_check"] and est["type"] == "mixture":
+        key = (spec, json.dumps(own["advisor"], sort_keys=True), ratio, dt)
+        if key not in _LANE_CHECKS:  # every env of a vector or an evaluation shares it
+            try:
+                require_lane_keeping(model, steering_ratio=ratio)
+                _LANE_CHECKS[key] = None
+            except ValueError as exc:
+                _LANE_CHECKS[key] = str(exc)
+        if _LANE_CHECKS[key] is not None:
+            raise ConfigError(
+                f"config key 'estimator.steering_model' = {spec!r}: {_LANE_CHECKS[key]} "
+                "(set 'estimator.lane_check' to false to use it anyway)"
+            )
     limit = model_curvature_limit(model)
     return arx, int(getattr(model, "decision_lag", 1)), ratio, residual, limit
 

@@ -10,7 +10,9 @@ samples whose steering reading the estimator gated as an outlier.
 ``--policy aggressive``: instead, twelve episodes of a jerky, high-gain lane keeper at
 10 Hz that throws the wheel +-0.15 rad at random for the first 6 s (as a policy still
 learning does); ``--gate`` turns the estimator's outlier gate on (the task's default: off,
-docs/design.md §12.5).
+docs/design.md §12.5). A model that drives off the road when it steers itself is refused
+by the task (``estimator.lane_check``, docs/design.md §8.11; the two-point preset is) and
+printed as such; ``--no-lane-check`` scores it anyway.
 
 Usage::
 
@@ -27,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import hasa_env  # noqa: F401 - registers the ids
+from hasa_env import ConfigError
 
 START = {"initial_state": {"lateral_offset_std": 0.5, "heading_std": 0.02}}
 
@@ -45,13 +48,13 @@ def aggressive(info: dict, rng: np.random.Generator, step: int) -> np.ndarray:
 
 
 def score(
-    model: str, drives: str, episodes: int, policy: str, gate: bool
+    model: str, drives: str, episodes: int, policy: str, gate: bool, lane_check: bool = True
 ) -> tuple[float, int, int]:
     """(mean lateral RMSE of the estimate (m), episodes ending on the true lane, gated
     steering samples)."""
     config = {
         **START,
-        "estimator": {"steering_model": model, "outlier_gate": gate},
+        "estimator": {"steering_model": model, "outlier_gate": gate, "lane_check": lane_check},
         "advisor": {"drives": drives},
         "action_repeat": 10 if policy == "aggressive" else 1,
     }
@@ -86,11 +89,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--policy", choices=("lane-keeper", "aggressive"), default="lane-keeper")
     parser.add_argument("--gate", action="store_true", help="the outlier gate on")
     parser.add_argument("--episodes", type=int, default=None, help="default 6 (aggressive: 12)")
+    parser.add_argument(
+        "--no-lane-check", action="store_true", help="score models that cannot drive too"
+    )
     args = parser.parse_args(argv)
     episodes = args.episodes or (6 if args.policy == "lane-keeper" else 12)
     print(f"{'model':<18} {'lateral RMSE (m)':>17} {'true lane':>10} {'gated steering':>15}")
     for model in args.models.split(","):
-        rmse, true_lane, gated = score(model, args.drives, episodes, args.policy, args.gate)
+        try:
+            rmse, true_lane, gated = score(
+                model, args.drives, episodes, args.policy, args.gate, not args.no_lane_check
+            )
+        except ConfigError as exc:
+            print(f"{model:<18} refused: {exc}")
+            continue
         print(f"{model:<18} {rmse:>17.3f} {true_lane:>6}/{episodes:<3} {gated:>15}")
     return 0
 

@@ -25,6 +25,7 @@ from hasa_env.devices.calibration import (
 )
 from hasa_env.devices.force_feedback import Autocentre, ForceFeedbackUnavailable
 from hasa_env.devices.sources import InputManager
+from hasa_env.drivers import require_lane_keeping
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.steering.base import SteeringModel
 from hasa_env.steering.loading import default_steering_ratio, load_model
@@ -72,12 +73,17 @@ def estimator_model(spec: str, dt: float) -> SteeringModel:
     return model
 
 
-def estimator_for(spec: str, probe: LaneKeepingEnv) -> Callable[[gym.Env], EstimatorInfoWrapper]:
-    """The env wrapper running the estimator with ``spec``'s model (checked on ``probe``)."""
+def estimator_for(
+    spec: str, probe: LaneKeepingEnv, lane_check: bool = True
+) -> Callable[[gym.Env], EstimatorInfoWrapper]:
+    """The env wrapper running the estimator with ``spec``'s model (checked on ``probe``;
+    with ``lane_check``, ValueError if the model cannot keep the car on the road when it
+    steers itself: :func:`hasa_env.drivers.require_lane_keeping`)."""
     model = estimator_model(spec, probe.setup.env_step_duration)
-    wrapper = estimator_wrapper(
-        model, default_steering_ratio(spec, fitted=False), model_curvature_limit(model)
-    )
+    ratio = default_steering_ratio(spec, fitted=False)
+    if lane_check:
+        require_lane_keeping(model, steering_ratio=ratio, what=f"--estimator {spec!r}")
+    wrapper = estimator_wrapper(model, ratio, model_curvature_limit(model))
     wrapper(probe)  # fail now, not after the countdown
     return wrapper
 

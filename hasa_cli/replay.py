@@ -56,6 +56,7 @@ from hasa_cli import (
     console_script,
     error,
 )
+from hasa_env.drivers import require_lane_keeping
 from hasa_env.recording import check_replay
 from hasa_env.recording.reader import load_paths
 from hasa_env.render.frames import write_frames
@@ -148,6 +149,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="run the Gaussian-mixture EKF with --model (default generalized) on each recording",
     )
+    p.add_argument(
+        "--no-lane-check",
+        action="store_true",
+        help="run --estimator even with a model that drives off the road when it steers "
+        "itself (checked by default: 4 cars, 30 s, the straight track)",
+    )
     p.add_argument("--frames", type=Path, default=None, help="write PNG frames into this directory")
     p.add_argument(
         "--video", type=Path, default=None, help="write a video (needs imageio + imageio-ffmpeg)"
@@ -222,6 +229,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         if ratio is None:
             ratio = default_steering_ratio(spec, args.fit)
         print(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
+        if args.estimator and not args.no_lane_check:
+            try:  # a model that cannot keep a lane would give the estimator wrong evidence
+                require_lane_keeping(model, steering_ratio=ratio, what=f"model {spec!r}")
+            except ValueError as exc:
+                error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
+                return EXIT_USAGE
         if args.model is not None:
             for rec in recordings:
                 scores = score(model, in_model_units(rec.data, ratio), rec.road)

@@ -393,6 +393,19 @@ def test_stress_set_and_unchecked_estimators_are_scored() -> None:
     assert all(r["final_decision"] == "undecided" and not r["wrong_lane_confident"] for r in rows)
     text = format_tables(result)
     assert "Lane decisions" in text and "stress_sign_flipped (no checks)" in text
+    # a model that drives off the road gives no lane evidence (with the checks), on this
+    # 4 s training run the random ARX and the unregularized fit
+    described = {m["name"]: m for m in result.models}
+    assert described["generalized"]["lane_keeping"]["passed"]
+    assert "lane_keeping" not in described["road_blind"]
+    failed = [n for n in stress if not described[n]["lane_keeping"]["passed"]]
+    assert failed
+    for name in failed:
+        checked = [r for r in result.runs_estimation if r["model"] == name]
+        unchecked = [r for r in result.runs_estimation if r["model"] == f"{name} (no checks)"]
+        assert checked and all(r["final_decision"] == "undecided" for r in checked)
+        assert any(r["final_decision"] != "undecided" for r in unchecked)
+    assert "off road 4/4" in text  # the Checks table says so
 
 
 # --------------------------------------------------------------- determinism

@@ -24,7 +24,7 @@ import multiprocessing
 import pickle
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
 import pandas as pd
@@ -39,6 +39,7 @@ from benchmarks.protocol.config import (
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.settings import model_curvature_limit, steering_curvature_limit
 from estimators.tuning import steering_residual_std
+from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
 from hasa_env.steering.features import steering_features
 from hasa_env.steering.loading import (
@@ -55,6 +56,7 @@ __all__ = [
     "Candidate",
     "FittedModel",
     "ModelError",
+    "check_lane_keeping",
     "describe",
     "fit_models",
     "load_models",
@@ -69,7 +71,7 @@ class ModelError(Exception):
 
     Attributes:
         model: the model's name (or its import path if it never loaded).
-        stage: "import", "interface", "fit", "predict" or "estimate".
+        stage: "import", "interface", "fit", "lane-keeping check", "predict" or "estimate".
         detail: what went wrong.
     """
 
@@ -247,7 +249,9 @@ class FittedModel:
         ``steering_curvature_limit`` (1/m) from the roads the model was fitted on
         (:func:`estimators.settings.model_curvature_limit`; for a model the
         benchmark fitted without that record, its training run's; ``math.inf``
-        for a saved model whose file does not say).
+        for a saved model whose file does not say); keeps_lane: the model passed
+        its lane-keeping check (:func:`check_lane_keeping`): with the evidence
+        checks on, a model that fails it gets the no-steering estimator.
     """
 
     name: str
@@ -255,6 +259,7 @@ class FittedModel:
     model: Any
     residual_std: float | None
     curvature_limit: float = math.inf
+    keeps_lane: bool = True
 
 
 @dataclass(frozen=True)
@@ -497,3 +502,77 @@ def _fit_one(
     if notes:
         info["note"] = "; ".join(notes)
     return fitted, info
+
+
+LANE_CHECK_DURATION = 30.0
+"""How long (s) the lane-keeping check drives, whatever the training run's time limit (a model
+that steers away from the lane centre needs a few seconds to leave the road, one that drifts
+more)."""
+
+
+def _lane_keeping(
+    models: list[SteeringModel],
+    env_id: str,
+    config: dict[str, Any],
+    speed: SpeedProfile,
+    seed: int,
+) -> list[dict[str, Any]]:
+    checks = lane_keeping_checks(models, env_id=env_id, config=config, speed=speed, seed=seed)
+    return [check.to_dict() | {"summary": check.describe()} for check in checks]
+
+
+def check_lane_keeping(
+    fitted: Sequence[FittedModel],
+    infos: Sequence[dict[str, Any]],
+    *,
+    env_id: str,
+    config: dict[str, Any],
+    speed: SpeedProfile,
+    seed: int | None,
+    time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
+) -> list[FittedModel]:
+    """Let every fitted model with an estimator drive (:func:`hasa_env.drivers.lane_keeping_check`:
+    4 cars, no equation noise, on the training run's env and config, for
+    :data:`LANE_CHECK_DURATION`) and keep the outcome: in each model's description
+    (``infos``, key ``lane_keeping``) and as :attr:`FittedModel.keeps_lane`.
+
+    A model that drives off the road has lane terms that do not keep a lane, so the
+    estimator takes no lane evidence from it (docs/design.md §8.11). A user model's drive
+    runs isolated with ``time_limit``; if it fails there (raises, hangs), it does not pass
+    and the reason is kept."""
+    config = dict(config) | {"time_limit": LANE_CHECK_DURATION}
+    speed = replace(speed, pedal_noise=0.0)
+    described = {(info["name"], info.get("seed")): info for info in infos}
+    drive_seed = 0 if seed is None else seed
+    checked = [fm for fm in fitted if fm.kind != "baseline" and fm.residual_std is not None]
+    outcomes: dict[str, dict[str, Any]] = {}
+    ours = [fm for fm in checked if fm.kind != "user"]  # all their cars in one vector env
+    if ours:
+        try:
+            results = _lane_keeping([fm.model for fm in ours], env_id, config, speed, drive_seed)
+        except ValueError as exc:
+            raise BenchmarkError(f"the lane-keeping check of the built-in models: {exc}") from None
+        outcomes.update({fm.name: r for fm, r in zip(ours, results, strict=True)})
+    for fm in checked:
+        if fm.kind != "user":
+            continue
+        try:
+            outcomes[fm.name] = run_isolated(
+                _lane_keeping, ([fm.model], env_id, config, speed, drive_seed),
+                model=fm.name, stage="lane-keeping check", time_limit=time_limit,
+            )[0]  # fmt: skip
+        except ModelError as exc:
+            outcomes[fm.name] = {
+                "passed": False, "error": str(exc), "summary": f"could not drive: {exc}"
+            }  # fmt: skip
+    out = []
+    for fm in fitted:
+        outcome = outcomes.get(fm.name)
+        if outcome is None:
+            out.append(fm)
+            continue
+        info = described.get((fm.name, seed))
+        if info is not None:
+            info["lane_keeping"] = outcome
+        out.append(replace(fm, keeps_lane=bool(outcome["passed"])))
+    return out

@@ -32,9 +32,13 @@
    (``wrong_lane_confident``), the lateral NEES and each channel's NIS
    (docs/design.md §9.8). The curved-track runs get the same rows, the
    estimator given the road ahead (:mod:`estimators.road_geometry`).
-   With ``stress`` the stress set of bad advisors (:mod:`benchmarks.stress`)
-   is scored too; with ``compare_checks`` every model's estimator also runs
-   without the evidence checks (:mod:`estimators.evidence`).
+   Before that each fitted model drives 4 cars itself for 30 s on the
+   training run's conditions (:func:`benchmarks.protocol.models.check_lane_keeping`);
+   one that leaves the road gets the no-steering estimator (docs/design.md
+   §8.11). With ``stress`` the stress set of bad advisors
+   (:mod:`benchmarks.stress`) is scored too; with ``compare_checks`` every
+   model's estimator also runs without the evidence checks
+   (:mod:`estimators.evidence`) and without the lane-keeping check.
 
 Runs are grouped into tasks of ``batch_size`` consecutive runs (the
 vectorized driver runner and the estimator batched over the task's runs;
@@ -71,12 +75,20 @@ from benchmarks.protocol.aggregate import (
     verdict,
 )
 from benchmarks.protocol.config import (
+    _ENV_IDS,
     BASELINES,
     UNCHECKED_SUFFIX,
     BenchmarkError,
     ProtocolConfig,
 )
-from benchmarks.protocol.models import FittedModel, ModelError, describe, fit_models, load_models
+from benchmarks.protocol.models import (
+    FittedModel,
+    ModelError,
+    check_lane_keeping,
+    describe,
+    fit_models,
+    load_models,
+)
 from benchmarks.protocol.plan import (
     RunRef,
     chunks,
@@ -88,6 +100,7 @@ from benchmarks.protocol.plan import (
 from benchmarks.protocol.plots import plot_data
 from benchmarks.protocol.results import BenchmarkResult, versions
 from benchmarks.protocol.tasks import ChunkResult, ChunkTask, run_chunk
+from hasa_env.drivers import SpeedProfile
 
 __all__ = ["run_protocol"]
 
@@ -189,6 +202,18 @@ def run_protocol(
             constant_speed_train=constant_speed,
             time_limit=config.model_time_limit,
         )
+        if config.estimate:  # can each model drive? (no lane evidence from one that cannot)
+            fitted = check_lane_keeping(
+                fitted,
+                fit_info,
+                env_id=_ENV_IDS[config.track],
+                config=train_frame.attrs["config"],
+                speed=(
+                    plan["params"][illustrative].speed if seed is not None else SpeedProfile.hold()
+                ),
+                seed=seed,
+                time_limit=config.model_time_limit,
+            )
         skipped += plan.get("skipped", [])
         t_fit += time.perf_counter() - t0
         fitted_by_seed[seed] = fitted

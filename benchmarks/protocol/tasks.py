@@ -180,6 +180,8 @@ def _model_part(
         own_limit = "steering_curvature_limit" not in task.filter_settings
 
         def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
+            if checks and not fm.keeps_lane:  # it drove off the road: no lane evidence from it
+                return NoSteeringEKF(settings)
             limit = fm.curvature_limit if own_limit else settings.steering_curvature_limit
             return GaussianMixtureEKF(
                 fm.model.arx(),

@@ -12,6 +12,7 @@
   :func:`population` draws a seeded population ("Ill", "1", ..., "8").
 - :class:`ModelDriver`: any steering model plus noise, with a steering ratio.
 - :class:`ReplayDriver`: plays back a recording's actions.
+- :func:`lane_keeping_check`: can a steering model drive? (closed loop, :class:`LaneKeepingCheck`).
 - :func:`run_driver`, :func:`run_drivers`, :func:`run_population`: recordings
   (one DataFrame per run), vectorized over the native vector env;
   :func:`save_runs` writes them in the recording format.
@@ -19,6 +20,13 @@
 
 from hasa_env.drivers.archetypes import ARCHETYPES, make_driver, params_from_dict
 from hasa_env.drivers.base import BatchDriver, Driver, SpeedProfile, make_batch
+from hasa_env.drivers.closed_loop import (
+    LANE_CHECK_CONFIG,
+    LaneKeepingCheck,
+    lane_keeping_check,
+    lane_keeping_checks,
+    require_lane_keeping,
+)
 from hasa_env.drivers.intermittent import IntermittentDriver, IntermittentParams
 from hasa_env.drivers.model_driver import ModelDriver, ReplayDriver
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
@@ -35,6 +43,11 @@ from hasa_env.drivers.runner import (
 from hasa_env.drivers.synthetic import DriverParams, SyntheticDriver
 
 __all__ = [
+    "LANE_CHECK_CONFIG",
+    "LaneKeepingCheck",
+    "lane_keeping_check",
+    "lane_keeping_checks",
+    "require_lane_keeping",
     "ARCHETYPES",
     "BatchDriver",
     "Driver",
