@@ -299,7 +299,7 @@ def driver_index(value: Any, drivers: list[HumanParams]) -> int | None:
 
 # ------------------------------------------------------------------ estimator
 _LANE_CHECKS: dict[tuple[Any, ...], str | None] = {}
-"""Lane-keeping checks done, by (model spec, advisor section, ratio, dt): None or the refusal."""
+"""Lane-keeping checks done, by (spec, model class, parameters, ratio, dt): None or the refusal."""
 
 
 @functools.lru_cache(maxsize=16)
@@ -356,7 +356,7 @@ def _steering_model(
     if est["steering_ratio"] is not None:
         ratio = est["steering_ratio"]
     if est["lane_check"] and est["type"] == "mixture":
-        key = (spec, json.dumps(own["advisor"], sort_keys=True), ratio, dt)
+        key = (spec, type(model).__qualname__, json.dumps(model.parameters), ratio, dt)
         if key not in _LANE_CHECKS:  # every env of a vector or an evaluation shares it
             try:
                 require_lane_keeping(model, steering_ratio=ratio)

@@ -123,7 +123,8 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     data.add_argument(
         "--compare-checks",
         action="store_true",
-        help="also run every model's estimator without the evidence checks ('<model> (no checks)')",
+        help="also run every model's estimator without the evidence checks and the lane-keeping "
+        "check ('<model> (no checks)')",
     )
     noise = parser.add_argument_group("sensor noise (std; default: the env's)")
     noise.add_argument("--speed-noise", type=float, metavar="M/S", help="speedometer (0.05)")

@@ -97,7 +97,9 @@ _SCHEMA = schema(
         "filter_settings": Field(
             "mapping", doc="FilterSettings fields for every estimator.", each=Field("json")
         ),
-        "compare_checks": Field("bool", doc="Also run the estimators without the evidence checks."),
+        "compare_checks": Field(
+            "bool", doc="Also run the estimators without the evidence and lane-keeping checks."
+        ),
         "min_duration": Field(
             "number", doc="Shortest recording that is scored.", unit="s", low=0.0
         ),
