@@ -94,7 +94,8 @@ class GaussianMixtureEKF:
       steering reading is also kept out of the next prediction's memory
       update. :attr:`gated_counts` counts the gated samples per run and channel;
     - low speed: while ``sum_i w_i |v_i| < min_speed`` (decided on the
-      estimate at k-1) the steering row is dropped (no update, no weight)
+      estimate at k-1; also above ``steering_max_speed``, the speeds a
+      model was not fitted at) the steering row is dropped (no update, no weight)
       and the memory is held (:class:`FilterMatrices`); at the first estimate
       above it with a finite steering reading z_3(k), the memory of every
       active hypothesis restarts as at reset,
@@ -199,6 +200,7 @@ class GaussianMixtureEKF:
         self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
         self._min_speed = settings.min_speed if self.model.has_steering else 0.0
+        self._max_speed = settings.steering_max_speed if self.model.has_steering else math.inf
         self._curvature_limit = (
             settings.steering_curvature_limit if self.model.has_steering else math.inf
         )
@@ -559,12 +561,17 @@ class GaussianMixtureEKF:
         new_slow = slow
         restart = None
         speed_check = self._min_speed > 0 and (any_slow or x_post[:, VX].min() < self._min_speed)
+        if not speed_check and self._max_speed < math.inf:
+            # (|v_i| <= |v_x,i| + |v_y,i| <= steering_max_speed for all i: no run is too fast)
+            fastest = np.abs(x_post[:, VX]).max() + np.abs(x_post[:, VY]).max()
+            speed_check = any_slow or fastest > self._max_speed
         curved = self._curved(points)
         if speed_check or curved is not None:
             if speed_check:
                 # (|v_i| >= v_x,i >= min_speed for all i: no run is slow)
                 speed = np.hypot(x_post[:, VX], x_post[:, VY]).reshape(log_w.shape)
-                new_slow = np.einsum("rc,rc->r", np.exp(new_log_w), speed) < self._min_speed
+                mixture_speed = np.einsum("rc,rc->r", np.exp(new_log_w), speed)
+                new_slow = (mixture_speed < self._min_speed) | (mixture_speed > self._max_speed)
             else:
                 new_slow = np.zeros(n_runs, dtype=bool)
             if curved is not None:
@@ -609,7 +616,7 @@ class GaussianMixtureEKF:
 
     def _channel_off_at_reset(self, z: np.ndarray, points: np.ndarray | None) -> np.ndarray:
         """(R,) bool: runs that start with the steering channel off (slow or curved)."""
-        off = (z[:, 0] < self._min_speed) & (self._min_speed > 0)
+        off = ((z[:, 0] < self._min_speed) & (self._min_speed > 0)) | (z[:, 0] > self._max_speed)
         curved = self._curved(points)
         return off if curved is None else off | curved
 

@@ -47,6 +47,7 @@ _SCHEMA = schema(
         "innovation_gate": _positive(infinite=True),
         "min_speed": _non_negative("m/s"),
         "steering_curvature_limit": Field("number", unit="1/m", low=0.0, infinite=True),
+        "steering_max_speed": _positive("m/s", infinite=True),
         "max_acceleration": _positive("m/s^2", infinite=True),
         "evidence_checks": Field("bool"),
         "evidence_window": _positive("s"),
@@ -141,6 +142,12 @@ class FilterSettings:
             the advisor task and the command-line programs set it per model
             from the roads it was fitted on (:func:`model_curvature_limit`);
             ``math.inf`` (the default) trusts the model on any road.
+        steering_max_speed: above this speed (m/s, the mixture's estimate) the
+            steering channel is off as below ``min_speed`` (memory held,
+            restarted below it): with ``min_speed`` it confines the steering
+            evidence to the speeds a model was fitted at. ``math.inf`` (the
+            default): any speed. Nothing sets it per model yet (docs/design.md
+            §8.11: measured on one seed as a way to the open part of issue 11).
         max_acceleration: IMU readings with |a| above this (m/s^2) are
             implausible and treated as missing, like NaN (input 0 with
             ``missing_acceleration_std``). Default 50 m/s^2 (about 5 g):
@@ -190,6 +197,7 @@ class FilterSettings:
     innovation_gate: float = 6.0
     min_speed: float = 3.0
     steering_curvature_limit: float = math.inf
+    steering_max_speed: float = math.inf
     max_acceleration: float = 50.0
     evidence_checks: bool = True
     evidence_window: float = 5.0

@@ -320,3 +320,26 @@ def test_filterpy_reference_follows_the_same_rules(runs):
     np.testing.assert_array_equal(fast.gated, ref.gated)
     np.testing.assert_allclose(fast.component_means, ref.component_means, rtol=0, atol=1e-8)
     np.testing.assert_allclose(fast.weights, ref.weights, rtol=0, atol=1e-9)
+
+
+def test_steering_is_ignored_above_steering_max_speed_and_restarts_below_it():
+    """``steering_max_speed``: the speeds a model was not fitted at are treated as low
+    speed is (no steering evidence, memory held, restarted from the steering below it)."""
+    ekf = make_ekf(steering_max_speed=20.0)
+    start = np.array([25.0, -0.4, 0.01 / RATIO])
+    ekf.reset(start, [0.0, -1.8])
+    assert ekf.low_speed  # too fast from the start
+    est = ekf.step(np.array([25.0, -0.4, 0.3]), np.zeros(2))
+    np.testing.assert_allclose(est.weights, [0.5, 0.5], rtol=1e-15)  # no steering evidence
+    assert ekf.low_speed
+    speed = 25.0
+    while ekf.low_speed:
+        speed -= 0.05
+        est = ekf.step(np.array([speed, -0.4, 0.01 / RATIO]), np.array([-5.0, 0.0]))
+        assert speed > 18.0
+    assert speed < 20.0  # back in the model's speeds: the steering channel is on again
+    fast = make_ekf()  # the default: any speed
+    fast.reset(start, [0.0, -1.8])
+    assert not fast.low_speed
+    with pytest.raises(ValueError, match="steering_max_speed"):
+        make_ekf(steering_max_speed=0.0)
