@@ -12,10 +12,12 @@ import numpy as np
 from hasa_env.validation import Field, schema, validate_fields
 
 __all__ = [
+    "SPEED_MARGIN",
     "STRAIGHT_CURVATURE",
     "FilterSettings",
     "model_curvature_limit",
     "steering_curvature_limit",
+    "steering_speed_limits",
 ]
 
 
@@ -270,3 +272,23 @@ def model_curvature_limit(model: Any) -> float:
     0), ``math.inf`` when they are unknown."""
     value = getattr(model, "training_curvature", None)
     return math.inf if value is None else steering_curvature_limit(value)
+
+
+SPEED_MARGIN = 1.0
+"""m/s by which a model's training speeds are widened before its steering counts as evidence
+(:func:`steering_speed_limits`). Set after one trace (docs/design.md §8.11: a fit at 15 m/s whose
+lane evidence turned between 16.9 and 18.4 m/s) and checked on seeds not used to set it."""
+
+
+def steering_speed_limits(training_speeds: Any) -> tuple[float, float]:
+    """(``min_speed``, ``steering_max_speed``) in m/s for a model fitted at ``training_speeds``
+    (m/s, any shape; NaN ignored; None or empty: unknown, ``(0, math.inf)``): their range widened
+    by :data:`SPEED_MARGIN`, the lower end no lower than FilterSettings' default ``min_speed``."""
+    if training_speeds is None:
+        return 0.0, math.inf
+    values = np.asarray(training_speeds, dtype=np.float64).reshape(-1)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return 0.0, math.inf
+    low = max(float(values.min()) - SPEED_MARGIN, FilterSettings.min_speed)
+    return low, float(values.max()) + SPEED_MARGIN

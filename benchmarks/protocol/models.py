@@ -37,7 +37,11 @@ from benchmarks.protocol.config import (
     BenchmarkError,
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
-from estimators.settings import model_curvature_limit, steering_curvature_limit
+from estimators.settings import (
+    model_curvature_limit,
+    steering_curvature_limit,
+    steering_speed_limits,
+)
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
@@ -251,7 +255,10 @@ class FittedModel:
         benchmark fitted without that record, its training run's; ``math.inf``
         for a saved model whose file does not say); keeps_lane: the model passed
         its lane-keeping check (:func:`check_lane_keeping`): with the evidence
-        checks on, a model that fails it gets the no-steering estimator.
+        checks on, a model that fails it gets the no-steering estimator; speed_limits:
+        the filter's (``min_speed``, ``steering_max_speed``) (m/s) from the speeds it was
+        fitted at (:func:`estimators.settings.steering_speed_limits`; a saved model's are
+        unknown: no limit).
     """
 
     name: str
@@ -260,6 +267,7 @@ class FittedModel:
     residual_std: float | None
     curvature_limit: float = math.inf
     keeps_lane: bool = True
+    speed_limits: tuple[float, float] = (0.0, math.inf)
 
 
 @dataclass(frozen=True)
@@ -400,7 +408,14 @@ def fit_models(
         if math.isinf(limit) and not candidate.fixed and "road_curvature" in own:
             limit = steering_curvature_limit(own["road_curvature"].to_numpy())
         info["steering_curvature_limit"] = limit
-        fitted.append(FittedModel(name, kind, model_fitted, residual, limit))
+        # and at speeds like those it was fitted at (a saved model's are not known)
+        speeds = (
+            steering_speed_limits(own["speed"].to_numpy())
+            if not candidate.fixed and "speed" in own
+            else (0.0, math.inf)
+        )
+        info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
+        fitted.append(FittedModel(name, kind, model_fitted, residual, limit, speed_limits=speeds))
         infos.append(info)
     return fitted, infos
 

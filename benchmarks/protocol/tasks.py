@@ -178,11 +178,18 @@ def _model_part(
     if task.estimate and residual_std is not None:
         # the model is trusted on roads as curved as its training run's, unless --filter says
         own_limit = "steering_curvature_limit" not in task.filter_settings
+        own_speeds = not {"min_speed", "steering_max_speed"} & set(task.filter_settings)
 
         def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
             if checks and not fm.keeps_lane:  # it drove off the road: no lane evidence from it
                 return NoSteeringEKF(settings)
             limit = fm.curvature_limit if own_limit else settings.steering_curvature_limit
+            if checks and own_speeds:  # and at speeds like those it was fitted at
+                settings = replace(
+                    settings,
+                    min_speed=max(settings.min_speed, fm.speed_limits[0]),
+                    steering_max_speed=min(settings.steering_max_speed, fm.speed_limits[1]),
+                )
             return GaussianMixtureEKF(
                 fm.model.arx(),
                 replace(
