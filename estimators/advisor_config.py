@@ -44,7 +44,9 @@ estimator.settings              further FilterSettings fields by name ({}); by d
                                 steering_curvature_limit from the roads the model was
                                 fitted on (presets and 'fit:' models: straight, 2e-4 1/m;
                                 no lane evidence from the steering on a bend,
-                                docs/design.md §8.11)
+                                docs/design.md §8.11), and min_speed / steering_max_speed
+                                from the speeds it was fitted at ('fit:' models; the
+                                presets' are unknown)
 ==============================  ==========================================================
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
@@ -68,7 +70,7 @@ from typing import Any
 from estimators.base import LaneEstimator
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.gm_ekf import GaussianMixtureEKF
-from estimators.settings import FilterSettings, model_curvature_limit
+from estimators.settings import FilterSettings, model_curvature_limit, model_speed_limits
 from estimators.timing import check_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import (
@@ -320,12 +322,12 @@ def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, fl
 
 def _steering_model(
     own: Mapping[str, Any], env_config: Mapping[str, Any]
-) -> tuple[ARXForm | None, int, float, float | None, float]:
-    """(ARX form, decision lag, steering ratio, residual std or None, curvature limit 1/m) of
-    the configured model."""
+) -> tuple[ARXForm | None, int, float, float | None, float, tuple[float, float]]:
+    """(ARX form, decision lag, steering ratio, residual std or None, curvature limit 1/m,
+    (min, max) speed m/s) of the configured model."""
     est = own["estimator"]
     if est["type"] == "no_steering":
-        return None, 0, 1.0, est["steering_residual_std"], math.inf
+        return None, 0, 1.0, est["steering_residual_std"], math.inf, (0.0, math.inf)
     spec = est["steering_model"]
     dt = 1.0 / env_config["sim_frequency"]
     residual = est["steering_residual_std"]
@@ -369,13 +371,14 @@ def _steering_model(
                 "(set 'estimator.lane_check' to false to use it anyway)"
             )
     limit = model_curvature_limit(model)
-    return arx, int(getattr(model, "decision_lag", 1)), ratio, residual, limit
+    speeds = model_speed_limits(model)
+    return arx, int(getattr(model, "decision_lag", 1)), ratio, residual, limit, speeds
 
 
 def estimator_factory(
     own: Mapping[str, Any], env_config: Mapping[str, Any]
 ) -> Callable[[], LaneEstimator]:
-    arx, lag, ratio, residual, curvature_limit = _steering_model(own, env_config)
+    arx, lag, ratio, residual, curvature_limit, speeds = _steering_model(own, env_config)
     est = own["estimator"]
     overrides = dict(est["settings"])
     names = {f.name for f in dataclasses.fields(FilterSettings)}
@@ -393,6 +396,9 @@ def estimator_factory(
     # no lane evidence from the steering on roads more curved than the model was fitted on
     # (the presets and 'fit:' models: a straight road; docs/design.md §8.11)
     overrides.setdefault("steering_curvature_limit", curvature_limit)
+    # and at speeds like those it was fitted at ('fit:' models; the presets' are unknown)
+    overrides.setdefault("steering_max_speed", speeds[1])
+    overrides.setdefault("min_speed", max(FilterSettings.min_speed, speeds[0]))
     try:
         settings = FilterSettings.from_env_config(env_config, **overrides)
     except (TypeError, ValueError) as exc:

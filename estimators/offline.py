@@ -414,6 +414,7 @@ def estimate_recording(
     steering_ratio: float = 1.0,
     residual_std: float | None = None,
     steering_curvature_limit: float = math.inf,
+    speed_limits: tuple[float, float] = (0.0, math.inf),
 ) -> EstimatorRun:
     """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
 
@@ -430,7 +431,8 @@ def estimate_recording(
     level they are given, but cannot recover evidence a level set far too
     high hides. ``steering_curvature_limit`` (1/m): no lane evidence from the steering
     where the road ahead curves more (:class:`FilterSettings`; the model's training
-    roads, :func:`estimators.settings.steering_curvature_limit`).
+    roads, :func:`estimators.settings.steering_curvature_limit`); ``speed_limits``: (min, max)
+    speed (m/s) outside which too (:func:`estimators.settings.model_speed_limits`).
     """
     data = recording.data
     cfg = recording.config
@@ -439,6 +441,8 @@ def estimate_recording(
     overrides: dict[str, float] = {
         "steering_ratio": steering_ratio,
         "steering_curvature_limit": steering_curvature_limit,
+        "min_speed": max(FilterSettings.min_speed, speed_limits[0]),
+        "steering_max_speed": speed_limits[1],
     }
     if arx is not None:
         level = residual_std

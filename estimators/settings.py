@@ -16,6 +16,7 @@ __all__ = [
     "STRAIGHT_CURVATURE",
     "FilterSettings",
     "model_curvature_limit",
+    "model_speed_limits",
     "steering_curvature_limit",
     "steering_speed_limits",
 ]
@@ -148,8 +149,9 @@ class FilterSettings:
             steering channel is off as below ``min_speed`` (memory held,
             restarted below it): with ``min_speed`` it confines the steering
             evidence to the speeds a model was fitted at. ``math.inf`` (the
-            default): any speed. Nothing sets it per model yet (docs/design.md
-            §8.11: measured on one seed as a way to the open part of issue 11).
+            default): any speed. The benchmark, the advisor task and the
+            command-line programs set both per model from the speeds it was
+            fitted at (:func:`model_speed_limits`; docs/design.md §8.11).
         max_acceleration: IMU readings with |a| above this (m/s^2) are
             implausible and treated as missing, like NaN (input 0 with
             ``missing_acceleration_std``). Default 50 m/s^2 (about 5 g):
@@ -292,3 +294,11 @@ def steering_speed_limits(training_speeds: Any) -> tuple[float, float]:
         return 0.0, math.inf
     low = max(float(values.min()) - SPEED_MARGIN, FilterSettings.min_speed)
     return low, float(values.max()) + SPEED_MARGIN
+
+
+def model_speed_limits(model: Any) -> tuple[float, float]:
+    """(``min_speed``, ``steering_max_speed``) (m/s) for a steering model from the speeds it was
+    fitted at (its ``training_speed_range``, set by ``fit`` and kept in its file;
+    :func:`steering_speed_limits`), ``(0, math.inf)`` when they are unknown (the paper's
+    presets, old model files)."""
+    return steering_speed_limits(getattr(model, "training_speed_range", None))

@@ -502,6 +502,7 @@ def estimator_wrapper(
     model: SteeringModelLike,
     steering_ratio: float = 1.0,
     steering_curvature_limit: float = math.inf,
+    speed_limits: tuple[float, float] = (0.0, math.inf),
 ) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """A wrapper factory: the Gaussian-mixture EKF runs alongside each env it wraps.
 
@@ -514,7 +515,10 @@ def estimator_wrapper(
     model units per road-wheel radian (15 for the paper's presets,
     :func:`hasa_env.steering.loading.default_steering_ratio`);
     ``steering_curvature_limit``: :class:`estimators.settings.FilterSettings`' field (1/m;
-    the steering channel is off on roads more curved than the model was fitted on).
+    the steering channel is off on roads more curved than the model was fitted on);
+    ``speed_limits``: (min, max) speed (m/s) outside which it is off too
+    (:func:`estimators.settings.model_speed_limits`; the lower end never below the default
+    ``min_speed``).
     """
     arx = model.arx()
     if arx is None:
@@ -530,6 +534,8 @@ def estimator_wrapper(
             config,
             steering_ratio=steering_ratio,
             steering_curvature_limit=steering_curvature_limit,
+            min_speed=max(FilterSettings.min_speed, speed_limits[0]),
+            steering_max_speed=speed_limits[1],
         )
         return EstimatorInfoWrapper(env, GaussianMixtureEKF(arx, settings, dt=dt))
 

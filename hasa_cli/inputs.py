@@ -14,7 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from estimators.settings import model_curvature_limit
+from estimators.settings import model_curvature_limit, model_speed_limits
 from estimators.wrappers import EstimatorInfoWrapper, estimator_wrapper
 from hasa_env.devices.calibration import (
     CalibrationError,
@@ -83,7 +83,9 @@ def estimator_for(
     ratio = default_steering_ratio(spec, fitted=False)
     if lane_check:
         require_lane_keeping(model, steering_ratio=ratio, what=f"--estimator {spec!r}")
-    wrapper = estimator_wrapper(model, ratio, model_curvature_limit(model))
+    wrapper = estimator_wrapper(
+        model, ratio, model_curvature_limit(model), model_speed_limits(model)
+    )
     wrapper(probe)  # fail now, not after the countdown
     return wrapper
 

@@ -46,7 +46,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from estimators.offline import EstimatorRun, estimate_recording
-from estimators.settings import model_curvature_limit
+from estimators.settings import model_curvature_limit, model_speed_limits
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -250,7 +250,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         for i, rec in enumerate(recordings):
             try:
                 result = estimate_recording(
-                    rec, model, ratio, steering_curvature_limit=curvature_limit
+                    rec,
+                    model,
+                    ratio,
+                    steering_curvature_limit=curvature_limit,
+                    speed_limits=model_speed_limits(model),
                 )
             except ValueError as exc:  # e.g. sampled at another rate than the model
                 error(PROG, f"{rec.path}: cannot run the estimator: {exc}")

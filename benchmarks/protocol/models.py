@@ -39,6 +39,7 @@ from benchmarks.protocol.config import (
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.settings import (
     model_curvature_limit,
+    model_speed_limits,
     steering_curvature_limit,
     steering_speed_limits,
 )
@@ -257,8 +258,9 @@ class FittedModel:
         its lane-keeping check (:func:`check_lane_keeping`): with the evidence
         checks on, a model that fails it gets the no-steering estimator; speed_limits:
         the filter's (``min_speed``, ``steering_max_speed``) (m/s) from the speeds it was
-        fitted at (:func:`estimators.settings.steering_speed_limits`; a saved model's are
-        unknown: no limit).
+        fitted at (:func:`estimators.settings.model_speed_limits`; for a model the benchmark
+        fitted without that record, its training run's; none for a saved model whose file does
+        not say).
     """
 
     name: str
@@ -408,12 +410,11 @@ def fit_models(
         if math.isinf(limit) and not candidate.fixed and "road_curvature" in own:
             limit = steering_curvature_limit(own["road_curvature"].to_numpy())
         info["steering_curvature_limit"] = limit
-        # and at speeds like those it was fitted at (a saved model's are not known)
-        speeds = (
-            steering_speed_limits(own["speed"].to_numpy())
-            if not candidate.fixed and "speed" in own
-            else (0.0, math.inf)
-        )
+        # and at speeds like those it was fitted at: its own record, else (a model the
+        # benchmark fitted) its training run's
+        speeds = model_speed_limits(model_fitted)
+        if math.isinf(speeds[1]) and not candidate.fixed and "speed" in own:
+            speeds = steering_speed_limits(own["speed"].to_numpy())
         info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
         fitted.append(FittedModel(name, kind, model_fitted, residual, limit, speed_limits=speeds))
         infos.append(info)

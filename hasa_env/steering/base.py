@@ -183,6 +183,7 @@ class SteeringModel(ABC):
         self._standard_errors = self._as_vector(standard_errors, "standard_errors")
         self.fit_result: FitResult | None = None
         self.training_curvature: float | None = None
+        self.training_speed_range: tuple[float, float] | None = None
         """The largest |road curvature| (1/m) of the data the model was fitted on (0 for a
         straight road); None: unknown. Set by :meth:`fit`, saved in the model file; an
         estimator trusts the model's steering only on roads up to it (docs/design.md §8.11)."""
@@ -542,8 +543,13 @@ class SteeringModel(ABC):
             "parameters": self.parameters,
             "standard_errors": self.standard_errors,
         }
+        training: dict[str, float] = {}
         if self.training_curvature is not None:
-            document["training"] = {"max_abs_road_curvature": self.training_curvature}
+            training["max_abs_road_curvature"] = self.training_curvature
+        if self.training_speed_range is not None:
+            training["min_speed"], training["max_speed"] = self.training_speed_range
+        if training:
+            document["training"] = training
         if cls.__module__ != "__main__" and "<locals>" not in cls.__qualname__:
             document["class"] = f"{cls.__module__}:{cls.__qualname__}"
         return document

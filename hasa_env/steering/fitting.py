@@ -309,6 +309,17 @@ def design_blocks(
     return out
 
 
+def training_speed_range(runs: pd.DataFrame | Sequence[pd.DataFrame]) -> tuple[float, float] | None:
+    """(min, max) speed (m/s) of the runs a model is fitted on (their ``speed`` column, NaN
+    ignored); None when they have none."""
+    values = [run["speed"].to_numpy(dtype=np.float64) for run in as_runs(runs) if "speed" in run]
+    finite = np.concatenate(values) if values else np.zeros(0)
+    finite = finite[np.isfinite(finite)]
+    if finite.size == 0:
+        return None
+    return float(finite.min()), float(finite.max())
+
+
 def training_curvature(
     runs: pd.DataFrame | Sequence[pd.DataFrame], road: Road | None = None
 ) -> float | None:
@@ -452,6 +463,7 @@ def fit_model(
     result = replace(result, identifiability=report, checks=checks)
     fitted.fit_result = result
     fitted.training_curvature = training_curvature(runs, road)
+    fitted.training_speed_range = training_speed_range(runs)
     if warn:
         if report is not None and not report.ok:
             warnings.warn(

@@ -66,6 +66,14 @@ _TRAINING = {
         "number", None, "The largest |road curvature| of the training data (null: unknown).",
         unit="1/m", low=0.0, optional=True,
     ),
+    "min_speed": Field(
+        "number", None, "The lowest speed of the training data (null: unknown).",
+        unit="m/s", low=0.0, optional=True,
+    ),
+    "max_speed": Field(
+        "number", None, "The highest speed of the training data (null: unknown).",
+        unit="m/s", low=0.0, optional=True,
+    ),
 }  # fmt: skip
 _PARAMETERS = Field(
     "mapping", each=Field("number"), optional=True, doc="Parameter name -> value, or null."
@@ -130,7 +138,8 @@ def model_from_dict(
     ``regressors`` (optional; checked)},
     ``structure`` (the model's keyword arguments), ``parameters`` (name ->
     number, or null), ``standard_errors`` (same, >= 0, or null) and, optionally,
-    ``training`` {``max_abs_road_curvature`` (1/m, >= 0, or null)}.
+    ``training`` {``max_abs_road_curvature`` (1/m, >= 0, or null), ``min_speed`` and
+    ``max_speed`` (m/s, both or neither)}.
 
     Raises:
         ModelFileError: naming ``source``, the field and the allowed values.
@@ -203,4 +212,11 @@ def model_from_dict(
         **common,
     )
     model.training_curvature = doc["training"].get("max_abs_road_curvature")
+    low, high = doc["training"].get("min_speed"), doc["training"].get("max_speed")
+    if (low is None) != (high is None) or (low is not None and low > high):
+        raise ModelFileError(
+            f"{source}: fields 'training.min_speed' and 'training.max_speed' must both be given, "
+            f"with min_speed <= max_speed (got {low!r} and {high!r})"
+        )
+    model.training_speed_range = None if low is None else (float(low), float(high))
     return model
