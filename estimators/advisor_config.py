@@ -70,7 +70,12 @@ from typing import Any
 from estimators.base import LaneEstimator
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.gm_ekf import GaussianMixtureEKF
-from estimators.settings import FilterSettings, model_curvature_limit, model_speed_limits
+from estimators.settings import (
+    FilterSettings,
+    model_curvature_limit,
+    model_speed_limits,
+    speed_settings,
+)
 from estimators.timing import check_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import (
@@ -397,8 +402,8 @@ def estimator_factory(
     # (the presets and 'fit:' models: a straight road; docs/design.md §8.11)
     overrides.setdefault("steering_curvature_limit", curvature_limit)
     # and at speeds like those it was fitted at ('fit:' models; the presets' are unknown)
-    overrides.setdefault("steering_max_speed", speeds[1])
-    overrides.setdefault("min_speed", max(FilterSettings.min_speed, speeds[0]))
+    for key, value in speed_settings(speeds).items():
+        overrides.setdefault(key, value)
     try:
         settings = FilterSettings.from_env_config(env_config, **overrides)
     except (TypeError, ValueError) as exc:

@@ -26,6 +26,7 @@ from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneE
 from estimators.evidence import DECISIONS
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
+from estimators.settings import speed_settings
 from estimators.timing import check_sample_time, recording_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.recording.format import Recording
@@ -441,8 +442,7 @@ def estimate_recording(
     overrides: dict[str, float] = {
         "steering_ratio": steering_ratio,
         "steering_curvature_limit": steering_curvature_limit,
-        "min_speed": max(FilterSettings.min_speed, speed_limits[0]),
-        "steering_max_speed": speed_limits[1],
+        **speed_settings(speed_limits),
     }
     if arx is not None:
         level = residual_std

@@ -17,6 +17,7 @@ __all__ = [
     "FilterSettings",
     "model_curvature_limit",
     "model_speed_limits",
+    "speed_settings",
     "steering_curvature_limit",
     "steering_speed_limits",
 ]
@@ -302,3 +303,12 @@ def model_speed_limits(model: Any) -> tuple[float, float]:
     :func:`steering_speed_limits`), ``(0, math.inf)`` when they are unknown (the paper's
     presets, old model files)."""
     return steering_speed_limits(getattr(model, "training_speed_range", None))
+
+
+def speed_settings(
+    limits: tuple[float, float], min_speed: float = FilterSettings.min_speed
+) -> dict[str, float]:
+    """The :class:`FilterSettings` fields for speed ``limits`` (m/s, :func:`model_speed_limits`):
+    ``min_speed`` the higher of ``min_speed`` and the lower limit, ``steering_max_speed`` the
+    upper one."""
+    return {"min_speed": max(min_speed, limits[0]), "steering_max_speed": limits[1]}

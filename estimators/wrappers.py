@@ -50,6 +50,7 @@ from estimators.base import Estimate, LaneEstimator, inputs_from_info, measureme
 from estimators.evidence import DECISIONS
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances
+from estimators.settings import speed_settings
 from estimators.timing import check_sample_time, config_sample_time
 from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.sim.road import Road
@@ -534,8 +535,7 @@ def estimator_wrapper(
             config,
             steering_ratio=steering_ratio,
             steering_curvature_limit=steering_curvature_limit,
-            min_speed=max(FilterSettings.min_speed, speed_limits[0]),
-            steering_max_speed=speed_limits[1],
+            **speed_settings(speed_limits),
         )
         return EstimatorInfoWrapper(env, GaussianMixtureEKF(arx, settings, dt=dt))
 

@@ -558,7 +558,7 @@ def check_lane_keeping(
     and the reason is kept."""
     config = dict(config) | {"time_limit": LANE_CHECK_DURATION}
     speed = replace(speed, pedal_noise=0.0)
-    described = {(info["name"], info.get("seed")): info for info in infos}
+    described = {info["name"]: info for info in infos}  # (all of this seed)
     drive_seed = 0 if seed is None else seed
     checked = [fm for fm in fitted if fm.kind != "baseline" and fm.residual_std is not None]
     outcomes: dict[str, dict[str, Any]] = {}
@@ -569,9 +569,7 @@ def check_lane_keeping(
         except ValueError as exc:
             raise BenchmarkError(f"the lane-keeping check of the built-in models: {exc}") from None
         outcomes.update({fm.name: r for fm, r in zip(ours, results, strict=True)})
-    for fm in checked:
-        if fm.kind != "user":
-            continue
+    for fm in (fm for fm in checked if fm.kind == "user"):  # each in its own process
         try:
             outcomes[fm.name] = run_isolated(
                 _lane_keeping, ([fm.model], env_id, config, speed, drive_seed),
@@ -587,7 +585,7 @@ def check_lane_keeping(
         if outcome is None:
             out.append(fm)
             continue
-        info = described.get((fm.name, seed))
+        info = described.get(fm.name)
         if info is not None:
             info["lane_keeping"] = outcome
         out.append(replace(fm, keeps_lane=bool(outcome["passed"])))

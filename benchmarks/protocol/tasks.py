@@ -27,6 +27,7 @@ from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
 from estimators.offline import run_estimator
+from estimators.settings import speed_settings
 from hasa_env.steering import residual_diagnostics, score_runs
 
 __all__ = [
@@ -185,11 +186,7 @@ def _model_part(
                 return NoSteeringEKF(settings)
             limit = fm.curvature_limit if own_limit else settings.steering_curvature_limit
             if checks and own_speeds:  # and at speeds like those it was fitted at
-                settings = replace(
-                    settings,
-                    min_speed=max(settings.min_speed, fm.speed_limits[0]),
-                    steering_max_speed=min(settings.steering_max_speed, fm.speed_limits[1]),
-                )
+                settings = replace(settings, **speed_settings(fm.speed_limits, settings.min_speed))
             return GaussianMixtureEKF(
                 fm.model.arx(),
                 replace(
