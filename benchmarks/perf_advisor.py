@@ -41,7 +41,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-import hasa_env  # noqa: F401 - registers the ids
+import advisor_tasks  # noqa: F401 - registers the advisor ids (and hasa_env's)
 from benchmarks.perf_env import _sample_actions
 
 __all__ = ["run", "main", "format_table", "TARGETS", "MEASURES"]

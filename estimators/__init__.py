@@ -13,9 +13,9 @@
 - :func:`run_estimator`: filter recordings offline, batched.
 - Gymnasium wrappers: :class:`EstimatorInfoWrapper`,
   :class:`EstimatorObservationWrapper` (single and vector envs).
-- The human-as-advisor task ``hasa_env/LaneKeepingAdvisor-v0``:
-  :class:`LaneKeepingAdvisorEnv` and :class:`LaneKeepingAdvisorVectorEnv`
-  (:mod:`estimators.advisor_env`, :mod:`estimators.advisor_vector`; loaded on first access).
+
+The human-as-advisor task (an env with a human and this package's estimator in the
+loop) is the layer above: :mod:`advisor_tasks`.
 """
 
 from estimators.arx_state_space import MEASUREMENT_NAMES, PHYSICAL_STATE_NAMES, ARXStateSpace
@@ -55,8 +55,6 @@ __all__ = [
     "FilterpyGMEKF",  # noqa: F822 - a lazy attribute (see below)
     "GaussianMixtureEKF",
     "LaneEstimator",
-    "LaneKeepingAdvisorEnv",  # noqa: F822 - a lazy attribute (see below)
-    "LaneKeepingAdvisorVectorEnv",  # noqa: F822 - a lazy attribute (see below)
     "MEASUREMENT_KEYS",
     "MEASUREMENT_NAMES",
     "NoSteeringEKF",
@@ -76,12 +74,8 @@ __all__ = [
 
 
 # loaded on first access: the filterpy reference filter imports filterpy (and with it
-# scipy.stats, about a second); the advisor task the drivers and the RL layer
-_LAZY = {
-    "FilterpyGMEKF": "estimators.filterpy_ekf",
-    "LaneKeepingAdvisorEnv": "estimators.advisor_env",
-    "LaneKeepingAdvisorVectorEnv": "estimators.advisor_vector",
-}
+# scipy.stats, about a second)
+_LAZY = {"FilterpyGMEKF": "estimators.filterpy_ekf"}
 __getattr__, __dir__ = lazy_attributes(
     __name__, _LAZY, eager=[n for n in __all__ if n not in _LAZY]
 )

@@ -196,7 +196,7 @@ def _check_timing(config: Mapping[str, Any] | None, estimator: LaneEstimator) ->
         raise ValueError(
             f"{exc}. For a policy acting every {repeat} samples with an estimate made from "
             "every sample, use the advisor task gym.make('hasa_env/LaneKeepingAdvisor-v0', "
-            f"config={{'action_repeat': {repeat}}}) (estimators.advisor_env), whose estimator "
+            f"config={{'action_repeat': {repeat}}}) (import advisor_tasks first), whose estimator "
             "steps at the simulation rate inside each env step"
         ) from None
 

@@ -28,7 +28,7 @@ import argparse
 import gymnasium as gym
 import numpy as np
 
-import hasa_env  # noqa: F401 - registers the ids
+import advisor_tasks  # noqa: F401 - registers the advisor ids (and hasa_env's)
 from hasa_env import ConfigError
 
 START = {"initial_state": {"lateral_offset_std": 0.5, "heading_std": 0.02}}

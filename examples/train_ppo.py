@@ -7,7 +7,7 @@ trained on native vector envs through ``hasa_env.rl.SB3VecEnv``:
 - ``camera``: ``hasa_env/LaneKeeping-v0``'s sensors (speed, the *biased* camera,
   heading, IMU, steering);
 - ``advisor``: the human-as-advisor task ``hasa_env/LaneKeepingAdvisor-v0``
-  (:mod:`estimators.advisor_env`): PPO drives; a synthetic human of the "paper"
+  (:mod:`advisor_tasks.env`): PPO drives; a synthetic human of the "paper"
   population (a new one each episode) advises by steering alongside, and the
   Gaussian-mixture EKF, stepping at every 100 Hz sample inside each 10 Hz step, turns
   that advice into the estimate PPO observes (lateral offset and its std, heading,
@@ -49,7 +49,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-import hasa_env  # noqa: F401 - registers the env ids
+import advisor_tasks  # noqa: F401 - registers the advisor ids (and hasa_env's)
 from hasa_env.drivers import POPULATIONS, SpeedProfile, SyntheticDriver, population
 from hasa_env.rl import (
     ActionRepeat,

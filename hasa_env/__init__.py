@@ -3,14 +3,9 @@
 Importing ``hasa_env`` registers the environment ids:
 
 - ``hasa_env/LaneKeeping-v0``: straight road;
-- ``hasa_env/LaneKeepingCurved-v0``: the shipped curved track;
-- ``hasa_env/LaneKeepingAdvisor-v0`` and ``hasa_env/LaneKeepingAdvisorCurved-v0``: the
-  human-as-advisor task (a policy drives, a synthetic human advises the estimator). It
-  lives in :mod:`estimators.advisor_env`, a layer above this package: the ids name it
-  by entry-point strings, which gymnasium imports only at ``gym.make``, so importing
-  ``hasa_env`` never imports ``estimators`` (docs/design.md §2.1).
+- ``hasa_env/LaneKeepingCurved-v0``: the shipped curved track.
 
-All have a native vector entry point
+Both have a native vector entry point
 (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
 The package's layers (docs/design.md §2): :mod:`hasa_env.sim` (config, road,
 dynamics, the pure transition) at the bottom, then :mod:`hasa_env.steering`,
@@ -38,9 +33,6 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 ENV_IDS = ("hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0")
 """The registered lane-keeping environment ids."""
 
-ADVISOR_ENV_IDS = ("hasa_env/LaneKeepingAdvisor-v0", "hasa_env/LaneKeepingAdvisorCurved-v0")
-"""The registered ids of the human-as-advisor task (:mod:`estimators.advisor_env`)."""
-
 _RECORDING_NAMES = (
     "Recording",
     "RecordingError",
@@ -61,7 +53,6 @@ __all__ = [
     "describe_config",
     "make_config",
     "register_envs",
-    "ADVISOR_ENV_IDS",
     "ENV_IDS",
     "__version__",
     *_RECORDING_NAMES,
@@ -84,16 +75,6 @@ def register_envs() -> None:
             id=env_id,
             entry_point="hasa_env.envs.lane_keeping:LaneKeepingEnv",
             vector_entry_point="hasa_env.envs.vector:LaneKeepingVectorEnv",
-            kwargs={"track": track},
-        )
-    # entry-point strings: gymnasium imports estimators only when one is made
-    for env_id, track in zip(ADVISOR_ENV_IDS, ("straight", "curved"), strict=True):
-        if env_id in gym.registry:
-            continue
-        gym.register(
-            id=env_id,
-            entry_point="estimators.advisor_env:LaneKeepingAdvisorEnv",
-            vector_entry_point="estimators.advisor_vector:LaneKeepingAdvisorVectorEnv",
             kwargs={"track": track},
         )
 

@@ -1,4 +1,4 @@
-"""The human-as-advisor task (estimators.advisor_env / advisor_vector): spaces, config,
+"""The human-as-advisor task (advisor_tasks.env / advisor_tasks.vector): spaces, config,
 determinism, the estimator at the simulation rate, and the vector twin bit for bit."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import hasa_env
-from estimators.advisor_setup import ADVISOR_INFO_KEYS, default_config, observation_names
+import advisor_tasks
+from advisor_tasks.setup import ADVISOR_INFO_KEYS, default_config, observation_names
 from hasa_env import ConfigError
 
 ID = "hasa_env/LaneKeepingAdvisor-v0"
@@ -38,16 +38,37 @@ def _same_step(vector_out, single_out, i: int) -> None:
         np.testing.assert_array_equal(np.asarray(info[key][i]), np.asarray(value), err_msg=key)
 
 
-def test_registered_by_entry_point_strings_without_importing_estimators_at_import():
-    for env_id in hasa_env.ADVISOR_ENV_IDS:
+def test_registered_by_advisor_tasks_with_entry_point_strings():
+    for env_id in advisor_tasks.ADVISOR_ENV_IDS:
         spec = gym.spec(env_id)
-        assert spec.entry_point == "estimators.advisor_env:LaneKeepingAdvisorEnv"
-        assert spec.vector_entry_point == "estimators.advisor_vector:LaneKeepingAdvisorVectorEnv"
+        assert spec.entry_point == "advisor_tasks.env:LaneKeepingAdvisorEnv"
+        assert spec.vector_entry_point == "advisor_tasks.vector:LaneKeepingAdvisorVectorEnv"
     import subprocess
 
-    code = "import sys, hasa_env; print('estimators' in sys.modules)"
+    # hasa_env registers only its own ids and imports nothing above it; advisor_tasks
+    # registers the task without importing the estimators until an env is made
+    code = (
+        "import sys, gymnasium as gym, hasa_env\n"
+        "print('hasa_env/LaneKeepingAdvisor-v0' in gym.registry, 'estimators' in sys.modules)\n"
+        "import advisor_tasks\n"
+        "print('hasa_env/LaneKeepingAdvisor-v0' in gym.registry, 'estimators' in sys.modules)\n"
+        "gym.make('hasa_env/LaneKeepingAdvisor-v0')\n"
+        "print('estimators' in sys.modules)\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
+    assert out.stdout.split("\n")[:3] == ["False False", "True False", "True"]
+
+
+def test_make_with_module_prefix_imports_the_task():
+    import subprocess
+
+    code = (
+        "import gymnasium as gym\n"
+        "env = gym.make('advisor_tasks:hasa_env/LaneKeepingAdvisor-v0')\n"
+        "print(type(env.unwrapped).__name__)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "LaneKeepingAdvisorEnv"
 
 
 @pytest.mark.parametrize("env_id", [ID, CURVED])

@@ -3,7 +3,7 @@
 - import-linter's contracts in pyproject.toml (layers between and inside the
   packages, no cycles between sibling modules or packages) hold;
 - independently of it, no module of ``hasa_env`` imports ``estimators``,
-  ``benchmarks`` or ``hasa_cli``, at module level or inside a function;
+  ``advisor_tasks``, ``benchmarks`` or ``hasa_cli``, at module level or inside a function;
 - imports inside functions are kept for optional or heavy dependencies
   (pygame on paths that must stay headless, the optional extras), each with a
   one-line reason on the import's line.
@@ -21,7 +21,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("hasa_env", "estimators", "benchmarks", "hasa_cli")
+PACKAGES = ("hasa_env", "estimators", "advisor_tasks", "benchmarks", "hasa_cli")
+ABOVE_HASA_ENV = ("estimators", "advisor_tasks", "benchmarks", "hasa_cli")
+"""The packages above hasa_env (docs/design.md §2)."""
 
 LOCAL_IMPORTS_ALLOWED = {
     "pygame": "SDL: never loaded on headless paths",
@@ -82,7 +84,7 @@ def test_hasa_env_never_imports_the_layers_above_it(path):
         (node.lineno, name)
         for node, _ in _imports(tree)
         for name in _imported_names(node)
-        if name.split(".")[0] in ("estimators", "benchmarks", "hasa_cli")
+        if name.split(".")[0] in ABOVE_HASA_ENV
     ]
     assert not above, f"{path.relative_to(ROOT)} imports an upper layer: {above}"
 

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import hasa_env  # noqa: F401  (registers the envs)
+import advisor_tasks  # noqa: F401  (registers the advisor ids and hasa_env's)
 from hasa_cli import EXIT_USAGE
 from hasa_cli.inputs import estimator_for
 from hasa_cli.replay import main as replay_main

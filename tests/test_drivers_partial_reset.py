@@ -1,6 +1,6 @@
 """Partial resets of driver batches: a restarted car drives as a driver reset alone.
 
-The vector advisor task (``estimators.advisor_vector``) restarts one car's
+The vector advisor task (``advisor_tasks.vector``) restarts one car's
 synthetic human when that car's episode ends, while the other cars' humans
 go on; these tests pin the batch hooks it relies on.
 """

@@ -10,8 +10,8 @@
 - :mod:`~hasa_env.rl.evaluation`: :func:`evaluate` and :func:`compare` of
   policies (:class:`SB3Policy`, :class:`DriverPolicy`, :class:`ConstantSteering`).
 - :class:`HumanPool` (:mod:`~hasa_env.rl.humans`): synthetic humans for the N cars of a
-  vector env, each car's human chosen per episode (the advisor task's,
-  :mod:`estimators.advisor_vector`).
+  vector env, each car's human chosen per episode (as the human-as-advisor task's vector
+  env uses them).
 """
 
 from hasa_env._lazy import lazy_attributes

@@ -2,7 +2,7 @@
 
 ``gym.make("hasa_env/LaneKeepingAdvisor-v0")`` (straight road) or
 ``"hasa_env/LaneKeepingAdvisorCurved-v0"``; the vector twin is
-:class:`estimators.advisor_vector.LaneKeepingAdvisorVectorEnv`
+:class:`advisor_tasks.vector.LaneKeepingAdvisorVectorEnv`
 (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from estimators.advisor_setup import (
+from advisor_tasks.setup import (
     AdvisorSetup,
     WheelNoise,
     build_advisor_setup,
@@ -78,7 +78,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
 
     ## Observation space
     ``Box(15 + H,)`` float32, H = number of lane hypotheses (default 2: 17 entries),
-    :func:`estimators.advisor_setup.observation_names`; values saturate at the bounds:
+    :func:`advisor_tasks.setup.observation_names`; values saturate at the bounds:
 
     | index        | entry                        | unit  | what                                          | bounds          |
     |--------------|------------------------------|-------|-----------------------------------------------|-----------------|
@@ -105,7 +105,7 @@ class LaneKeepingAdvisorEnv(gym.Env):
 
     ## Info
     The same keys at ``reset`` and every ``step``
-    (:data:`estimators.advisor_setup.ADVISOR_INFO_KEYS`):
+    (:data:`advisor_tasks.setup.ADVISOR_INFO_KEYS`):
 
     | key                          | unit  | what                                                   |
     |------------------------------|-------|--------------------------------------------------------|
@@ -127,8 +127,8 @@ class LaneKeepingAdvisorEnv(gym.Env):
 
     ## Arguments
     ``gym.make("hasa_env/LaneKeepingAdvisor-v0", config={...}, render_mode=None)``;
-    ``config`` is deep-merged onto :func:`estimators.advisor_setup.default_config` and
-    validated (:func:`estimators.advisor_setup.describe_config` lists every key).
+    ``config`` is deep-merged onto :func:`advisor_tasks.setup.default_config` and
+    validated (:func:`advisor_tasks.setup.describe_config` lists every key).
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}

@@ -2,12 +2,12 @@
 configuration, the observation and info layout, the estimate's readout and the wheel
 sensor's noise (docs/design.md §12).
 
-The task (``hasa_env/LaneKeepingAdvisor-v0``, :mod:`estimators.advisor_env`): a policy
+The task (``hasa_env/LaneKeepingAdvisor-v0``, :mod:`advisor_tasks.env`): a policy
 drives; a synthetic human of a named population sits at the wheel, sees the true
 markings and steers as it would drive; its measured steering feeds the human-as-advisor
 estimator at the simulation rate; the policy observes the estimate and the raw sensors.
 
-The configuration and the estimator: :mod:`estimators.advisor_config`.
+The configuration and the estimator: :mod:`advisor_tasks.config`.
 
 Why a separate module in ``estimators``: the task needs the estimator, and
 ``hasa_env`` never imports ``estimators`` (docs/design.md §2.1); ``hasa_env`` registers
@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from estimators.advisor_config import (
+from advisor_tasks.config import (
     default_config,
     describe_config,
     driver_index,
@@ -79,7 +79,7 @@ ADVISOR_INFO_KEYS = (
 
 
 def observation_names(num_hypotheses: int) -> tuple[str, ...]:
-    """The observation's entries in order (see :class:`estimators.advisor_env.LaneKeepingAdvisorEnv`)."""
+    """The observation's entries in order (see :class:`advisor_tasks.env.LaneKeepingAdvisorEnv`)."""
     return (
         *OBSERVATION_ESTIMATE,
         *(f"estimate_weight_{i}" for i in range(num_hypotheses)),

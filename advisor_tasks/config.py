@@ -256,7 +256,7 @@ def split_config(config: Mapping[str, Any] | None) -> tuple[dict[str, Any], dict
     if "observation" in env_part:
         raise ConfigError(
             "config key 'observation' does not apply to the advisor task: its observation is "
-            "the estimate and the raw sensors (see help(estimators.advisor_env))"
+            "the estimate and the raw sensors (see help(advisor_tasks.env))"
         )
     own = validate(
         {k: v for k, v in config.items() if k in own_keys},

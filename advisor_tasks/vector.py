@@ -1,5 +1,5 @@
 """The human-as-advisor task for N cars at once: the vector twin of
-:class:`estimators.advisor_env.LaneKeepingAdvisorEnv`.
+:class:`advisor_tasks.env.LaneKeepingAdvisorEnv`.
 
 ``gym.make_vec("hasa_env/LaneKeepingAdvisor-v0", num_envs=N,
 vectorization_mode="vector_entry_point", config={...})``. The cars are numpy arrays
@@ -30,8 +30,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from estimators.advisor_env import ADVISOR_RESET_OPTIONS
-from estimators.advisor_setup import (
+from advisor_tasks.env import ADVISOR_RESET_OPTIONS
+from advisor_tasks.setup import (
     ADVISOR_INFO_KEYS,
     AdvisorSetup,
     WheelNoise,
@@ -65,7 +65,7 @@ __all__ = ["LaneKeepingAdvisorVectorEnv"]
 
 class LaneKeepingAdvisorVectorEnv(VectorEnv):
     """N cars of the advisor task stepped together (see the module docstring and
-    :class:`estimators.advisor_env.LaneKeepingAdvisorEnv` for spaces, reward and info)."""
+    :class:`advisor_tasks.env.LaneKeepingAdvisorEnv` for spaces, reward and info)."""
 
     metadata = {
         "render_modes": ["rgb_array"],
