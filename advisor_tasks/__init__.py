@@ -22,10 +22,9 @@ choice), :mod:`~advisor_tasks.setup` (frozen set-up, spaces, readout),
 
 from __future__ import annotations
 
-import gymnasium as gym
-
 import hasa_env  # noqa: F401 - registers the plain ids first
 from hasa_env._lazy import lazy_attributes
+from hasa_env.envs.base import register_track_ids
 
 ADVISOR_ENV_IDS = ("hasa_env/LaneKeepingAdvisor-v0", "hasa_env/LaneKeepingAdvisorCurved-v0")
 """The registered ids of the human-as-advisor task."""
@@ -56,15 +55,11 @@ def register_envs() -> None:
 
     Entry-point strings: gymnasium imports the env modules only when one is made.
     """
-    for env_id, track in zip(ADVISOR_ENV_IDS, ("straight", "curved"), strict=True):
-        if env_id in gym.registry:
-            continue
-        gym.register(
-            id=env_id,
-            entry_point="advisor_tasks.env:LaneKeepingAdvisorEnv",
-            vector_entry_point="advisor_tasks.vector:LaneKeepingAdvisorVectorEnv",
-            kwargs={"track": track},
-        )
+    register_track_ids(
+        ADVISOR_ENV_IDS,
+        "advisor_tasks.env:LaneKeepingAdvisorEnv",
+        "advisor_tasks.vector:LaneKeepingAdvisorVectorEnv",
+    )
 
 
 register_envs()

@@ -20,20 +20,14 @@ from advisor_tasks.setup import (
     build_advisor_setup,
     estimate_readout,
     observation_rows,
+    pop_advisor_option,
 )
 from hasa_env.drivers.human import human_batch
-from hasa_env.envs.base import check_render_mode, started_state
-from hasa_env.render import SceneRenderer, make_renderer
-from hasa_env.sim.dynamics import (
-    SCALAR_OPS,
-    VehicleState,
-    lane_keeping_reward,
-    road_frame_acceleration,
-    road_frame_velocity,
-    sensor_readings,
-)
-from hasa_env.sim.setup import INFO_KEYS, draw_episode, draw_noise_block, info_values
-from hasa_env.sim.transition import env_step
+from hasa_env.envs.base import RendersOneCar, check_render_mode, started
+from hasa_env.sim.car import Car, advance_car, car_info_values, start_car, truncated
+from hasa_env.sim.dynamics import SCALAR_OPS, VehicleState
+from hasa_env.sim.setup import INFO_KEYS
+from hasa_env.sim.transition import env_step, step_reward
 
 __all__ = ["LaneKeepingAdvisorEnv", "ADVISOR_RESET_OPTIONS"]
 
@@ -41,7 +35,7 @@ ADVISOR_RESET_OPTIONS = ("advisor_index",)
 """Reset options of the advisor task besides the lane-keeping env's (``bias_index``, ...)."""
 
 
-class LaneKeepingAdvisorEnv(gym.Env):
+class LaneKeepingAdvisorEnv(RendersOneCar, gym.Env):
     """Lane keeping with ambiguous markings, where the estimate comes from a human's advice.
 
     ## Description
@@ -149,15 +143,14 @@ class LaneKeepingAdvisorEnv(gym.Env):
         env = self.setup.env
         self._curvature = env.curvature_scalar()
         self._bounds = self.setup.observation_bounds()
-        self._sensor_bounds = [b.astype(np.float64) for b in env.sensor_bounds()]
         self._estimator = self.setup.make_estimator()
         self._humans: dict[int, Any] = {}  # one single-car batch per advisor, reused
         self._wheel_noise = WheelNoise(1)
         self._steering_limit = env.steering_limit
         self._acc_low, self._acc_high = env.acceleration_limits
-        self._wheel_std = env.noise_std[5]
-        self._renderer: SceneRenderer | None = None
-        self._state: VehicleState | None = None
+        self._wheel_std = env.noise_std.steering
+        self._scene = self.setup.env
+        self._car: Car[float] | None = None
 
     # ------------------------------------------------------------------ API
     def reset(
@@ -166,140 +159,86 @@ class LaneKeepingAdvisorEnv(gym.Env):
         super().reset(seed=seed)
         setup = self.setup
         options = dict(options or {})
-        chosen = _advisor_option(options, len(setup.drivers))
+        chosen = pop_advisor_option(options, len(setup.drivers))
         rng = self.np_random
-        state, index, bias, block, phases = draw_episode(rng, setup.env, options)
+        car = self._car = start_car(rng, setup.env, options, self._curvature)
         drawn = int(rng.integers(len(setup.drivers)))
         human_seed, wheel_seed = (int(s) for s in rng.integers(0, 2**63 - 1, size=2))
         if chosen is None:
             chosen = drawn if setup.fixed_driver is None else setup.fixed_driver
         self._advisor = chosen
-        self._phases = phases
-        self._state = state
-        self._bias, self._bias_index = bias, index
-        self._noise, self._noise_pos = block.tolist(), 0
-        self._sim_step = 0
-        self._acceleration = 0.0
-        self._velocity = road_frame_velocity(state, SCALAR_OPS)
-        kappa = self._curvature(state.station)
-        imu = road_frame_acceleration(state, 0.0, kappa, setup.env.params, SCALAR_OPS)
-        self._sample_sensors(imu, kappa)
         human = self._humans.get(chosen)
         if human is None:
             human = self._humans[chosen] = human_batch([setup.drivers[chosen]])
         human.reset([human_seed], setup.dt)
         self._human = human
         self._wheel_noise.restart(np.array([0]), [wheel_seed])
+        state = car.state
         self._command = state.steering
         self._policy_steering = state.steering
-        self._wheel = self._wheel_reading(state.steering)
+        self._wheel = self._wheel_reading(car, state.steering)
         self._substeps = [state.lateral_offset] * setup.env.action_repeat
         estimate = self._estimator.reset(
-            self._measurement(),
+            self._measurement(car),
             setup.hypotheses,
             prior=setup.prior,
-            true_bias=float(bias),
+            true_bias=float(car.bias),
             **setup.road_points(np.array([state.station])),
         )
         self._readout = estimate_readout(estimate, setup.hypotheses)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), self._info()
+        return self._observation(car), self._info(car)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
+        car = started(self._car)
         setup = self.setup
         policy_steering, policy_acceleration = setup.action_to_physical(action, None)
         self._policy_steering = float(policy_steering)
         road = setup.env.road
-        start_steering = self._state.steering
+        start_steering = car.state.steering
         off_road = False
         substeps = []
         estimate = None
         for _ in range(setup.env.action_repeat):
-            state = self._state
-            info = {
-                "time": np.array([self._sim_step * setup.dt]),
-                "station": np.array([state.station]),
-                "lateral_offset": np.array([state.lateral_offset]),
-                "heading": np.array([state.heading]),
-                "speed": np.array([state.speed]),
-                "steering": np.array([state.steering]),
-            }
-            if setup.human_drives:
-                command, human_acceleration = self._human.act(info, road)
-                command = float(command[0])
-                steering = min(max(command, -self._steering_limit), self._steering_limit)
-                acceleration = min(max(float(human_acceleration[0]), self._acc_low), self._acc_high)
-            else:
-                command = float(self._human.steer(info, road)[0])
-                steering, acceleration = policy_steering, policy_acceleration
+            command, steering, acceleration = self._human_sample(
+                car, road, policy_steering, policy_acceleration
+            )
             outcome = env_step(
-                state,
-                self._velocity,
+                car.state,
+                car.velocity,
                 steering,
                 acceleration,
                 setup.sample,
                 self._curvature,
                 SCALAR_OPS,
-                self._sim_step,
-                self._phases,
+                car.sim_step,
+                car.phases,
             )
-            self._sim_step += 1
-            self._state, self._velocity = outcome.state, outcome.velocity
-            self._acceleration = acceleration
             off_road = off_road or bool(outcome.off_road)
-            self._sample_sensors(outcome.imu, self._curvature(outcome.state.station))
+            advance_car(car, outcome, acceleration, 1, self.np_random, setup.env, self._curvature)
             self._command = command
-            self._wheel = self._wheel_reading(command)
+            self._wheel = self._wheel_reading(car, command)
+            sensors = car.sensors
             estimate = self._estimator.step(
-                self._measurement(),
-                np.array([[self._sensors[3], self._sensors[4]]]),
-                **setup.road_points(np.array([outcome.state.station])),
+                self._measurement(car),
+                np.array([[sensors.imu_longitudinal, sensors.imu_lateral]]),
+                **setup.road_points(np.array([car.state.station])),
             )
-            substeps.append(outcome.state.lateral_offset)
+            substeps.append(car.state.lateral_offset)
         self._substeps = substeps
         assert estimate is not None  # action_repeat >= 1: the loop ran
         self._readout = estimate_readout(estimate, setup.hypotheses)
-        lateral_weight, rate_weight, penalty = setup.env.reward_weights
-        reward = lane_keeping_reward(
-            self._state.lateral_offset,
-            self._state.steering - start_steering,
-            off_road,
-            0.5 * setup.env.road.lane_width,
-            self._steering_limit,
-            lateral_weight,
-            rate_weight,
-            penalty,
-        )
-        truncated = self._sim_step >= setup.env.max_sim_steps
+        reward = step_reward(setup.env, start_steering, car.state, off_road)
+        time_up = truncated(car, setup.env)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), float(reward), off_road, truncated, self._info()
-
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
-                "to gym.make"
-            )
-            return None
-        if self._state is None:
-            raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            self._renderer = make_renderer(self.setup.env, self.render_mode)
-        return self._renderer.render(self._info())
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        return self._observation(car), float(reward), off_road, time_up, self._info(car)
 
     @property
     def state(self) -> VehicleState | None:
         """The true Frenet state (None before the first reset)."""
-        return self._state
+        return None if self._car is None else self._car.state
 
     @property
     def estimator(self) -> Any:
@@ -307,43 +246,45 @@ class LaneKeepingAdvisorEnv(gym.Env):
         return self._estimator
 
     # ------------------------------------------------------------- helpers
-    def _sample_sensors(self, imu: tuple[float, float], kappa: float) -> None:
-        """This sample's sensor readings (one noise row of the car's block)."""
-        if self._noise_pos >= len(self._noise):
-            self._noise = draw_noise_block(self.np_random, self.setup.env).tolist()
-            self._noise_pos = 0
-        noise = self._noise[self._noise_pos]
-        self._noise_pos += 1
-        self._kappa = kappa
-        self._sensors = sensor_readings(
-            started_state(self._state), imu, self._bias, noise, self.setup.env.noise_std
-        )
+    def _human_sample(
+        self, car: Car[float], road: Any, policy_steering: float, policy_acceleration: float
+    ) -> tuple[float, float, float]:
+        """The human's command at this sample, decided on the true state, and the
+        (steering, acceleration) that drive the car: the human's, clipped, when the
+        human drives; the policy's otherwise."""
+        state = car.state
+        info = {
+            "time": np.array([car.sim_step * self.setup.dt]),
+            "station": np.array([state.station]),
+            "lateral_offset": np.array([state.lateral_offset]),
+            "heading": np.array([state.heading]),
+            "speed": np.array([state.speed]),
+            "steering": np.array([state.steering]),
+        }
+        if self.setup.human_drives:
+            command, human_acceleration = self._human.act(info, road)
+            command = float(command[0])
+            steering = min(max(command, -self._steering_limit), self._steering_limit)
+            acceleration = min(max(float(human_acceleration[0]), self._acc_low), self._acc_high)
+            return command, steering, acceleration
+        command = float(self._human.steer(info, road)[0])
+        return command, policy_steering, policy_acceleration
 
-    def _wheel_reading(self, command: float) -> float:
+    def _wheel_reading(self, car: Car[float], command: float) -> float:
         """The steering sensor's reading of the human's wheel (rad)."""
         if self.setup.human_drives:  # the car's own steering sensor reads the human's wheel
-            return self._sensors[5]
+            return car.sensors.steering
         return command + self._wheel_std * float(self._wheel_noise.draw()[0])
 
-    def _measurement(self) -> np.ndarray:
-        return np.array([[self._sensors[0], self._sensors[1], self._wheel]])
+    def _measurement(self, car: Car[float]) -> np.ndarray:
+        return np.array([[car.sensors.speed, car.sensors.camera_lateral, self._wheel]])
 
-    def _observation(self) -> np.ndarray:
-        sensors = np.array([self._sensors], dtype=np.float64)
+    def _observation(self, car: Car[float]) -> np.ndarray:
+        sensors = np.array([car.sensors], dtype=np.float64)
         return observation_rows(self._readout, sensors, np.array([self._wheel]), self._bounds)[0]
 
-    def _info(self) -> dict[str, Any]:
-        values = info_values(
-            self._sim_step,
-            started_state(self._state),
-            self._velocity,
-            self._acceleration,
-            self._kappa,
-            self._bias,
-            self._bias_index,
-            self._sensors,
-            self.setup.env,
-        )
+    def _info(self, car: Car[float]) -> dict[str, Any]:
+        values = car_info_values(car, self.setup.env)
         info: dict[str, Any] = dict(zip(INFO_KEYS, values, strict=True))
         for key, value in self._readout.items():
             row = value[0]
@@ -361,16 +302,3 @@ class LaneKeepingAdvisorEnv(gym.Env):
         info["policy_steering"] = float(self._policy_steering)
         info["substep_lateral_offset"] = np.array(self._substeps, dtype=np.float64)
         return info
-
-
-def _advisor_option(options: dict[str, Any], count: int) -> int | None:
-    """Pop and check the ``advisor_index`` reset option (None when absent)."""
-    if "advisor_index" not in options:
-        return None
-    value = options.pop("advisor_index")
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 0 <= value < count:
-        raise ValueError(
-            f"reset option 'advisor_index' = {value!r} is out of range: allowed integers "
-            f"0..{count - 1} (one per driver of the population)"
-        )
-    return int(value)

@@ -40,7 +40,7 @@ from estimators.wrappers import estimate_info_keys
 from hasa_env.drivers import POPULATIONS, population
 from hasa_env.drivers.archetypes import HumanParams
 from hasa_env.sim.config import deep_merge
-from hasa_env.sim.dynamics import SENSOR_NAMES
+from hasa_env.sim.sensors import SENSOR_NAMES
 from hasa_env.sim.setup import INFO_KEYS, EnvSetup, build_setup, physical_action
 
 __all__ = [
@@ -53,6 +53,7 @@ __all__ = [
     "estimate_readout",
     "observation_names",
     "observation_rows",
+    "pop_advisor_option",
 ]
 
 # ------------------------------------------------------------------ layout
@@ -331,3 +332,16 @@ class WheelNoise:
             pos = self._pos[rows]
         self._pos[rows] = pos + 1
         return self._block[rows, pos]
+
+
+def pop_advisor_option(options: dict[str, Any], count: int) -> int | None:
+    """Pop and check the ``advisor_index`` reset option (None when absent)."""
+    if "advisor_index" not in options:
+        return None
+    value = options.pop("advisor_index")
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 0 <= value < count:
+        raise ValueError(
+            f"reset option 'advisor_index' = {value!r} is out of range: allowed integers "
+            f"0..{count - 1} (one per driver of the population)"
+        )
+    return int(value)

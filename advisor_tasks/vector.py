@@ -25,7 +25,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -38,32 +37,27 @@ from advisor_tasks.setup import (
     build_advisor_setup,
     estimate_readout,
     observation_rows,
+    pop_advisor_option,
 )
-from hasa_env.envs.base import check_vector_args, started_state
+from hasa_env.envs.base import RendersCars, check_vector_args, started
 from hasa_env.envs.vector import vector_reset_request
-from hasa_env.render import make_renderer
 from hasa_env.rl.humans import HumanPool
-from hasa_env.sim.dynamics import (
-    ARRAY_OPS,
-    VehicleState,
-    lane_keeping_reward,
-    road_frame_acceleration,
-    road_frame_velocity,
-    sensor_readings,
+from hasa_env.sim.car import (
+    Car,
+    advance_cars,
+    car_info_values,
+    empty_cars,
+    start_cars,
+    truncated,
 )
-from hasa_env.sim.setup import (
-    INFO_KEYS,
-    RESET_OPTIONS,
-    draw_episode,
-    draw_noise_block,
-    info_values,
-)
-from hasa_env.sim.transition import env_step
+from hasa_env.sim.dynamics import ARRAY_OPS
+from hasa_env.sim.setup import INFO_KEYS, RESET_OPTIONS
+from hasa_env.sim.transition import env_step, step_reward
 
 __all__ = ["LaneKeepingAdvisorVectorEnv"]
 
 
-class LaneKeepingAdvisorVectorEnv(VectorEnv):
+class LaneKeepingAdvisorVectorEnv(RendersCars, VectorEnv):
     """N cars of the advisor task stepped together (see the module docstring and
     :class:`advisor_tasks.env.LaneKeepingAdvisorEnv` for spaces, reward and info)."""
 
@@ -98,20 +92,9 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         self._curvature = env.curvature_array()
         self._bounds = self.setup.observation_bounds()
         self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n)]
-        self._noise = np.zeros((n, env.noise_block, len(env.noise_std)))
-        self._noise_pos = np.zeros(n, dtype=np.int64)
-        self._row_base = np.arange(n) * env.noise_block  # car i's block in the flat noise
-        self._sim_step = np.zeros(n, dtype=np.int64)
-        self._acceleration = np.zeros(n)
-        self._bias = np.zeros(n)
-        self._bias_index = np.zeros(n, dtype=np.int64)
+        self._cars = empty_cars(n, env)
+        self._car: Car[np.ndarray] | None = None  # the cars once reset
         self._autoreset = np.zeros(n, dtype=bool)
-        self._kappa = np.zeros(n)
-        n_phases = env.disturbance.n_phases if env.disturbance is not None else 0
-        self._phases = np.zeros((n, n_phases))
-        self._velocity = (np.zeros(n), np.zeros(n))
-        self._sensors = np.zeros((len(env.noise_std), n))  # one row per channel
-        self._state: VehicleState | None = None
         self._arange = np.arange(n)
         self._humans = HumanPool(self.setup.drivers, n, self.setup.dt)
         self._wheel_noise = WheelNoise(n)
@@ -122,16 +105,14 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         self._wheel = np.zeros(n)
         self._substeps = np.zeros((n, env.action_repeat))
         self._readout: dict[str, np.ndarray] = {}
-        self._renderers: list[Any] | None = None
+        self._scene = self.setup.env
 
     # ------------------------------------------------------------------ API
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         n = self.num_envs
-        mask, seeds, options = vector_reset_request(
-            seed, options, n, started=self._state is not None
-        )
+        mask, seeds, options = vector_reset_request(seed, options, n, started=self._car is not None)
         allowed = (*RESET_OPTIONS, *ADVISOR_RESET_OPTIONS)
         for key in options:
             if key not in allowed:
@@ -142,118 +123,71 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         for i in idx.tolist():
             if seeds[i] is not None:
                 self._rngs[i] = np.random.default_rng(seeds[i])
-        if self._state is None:
-            self._state = VehicleState(*(np.zeros(n) for _ in range(5)))
-        self._reset_cars(idx, options, whole=mask is None)
+        cars = self._car = self._cars
+        self._reset_cars(cars, idx, options, whole=mask is None)
         self._autoreset[idx] = False
-        info = self._info()
+        info = self._info(cars)
         if mask is not None:  # as gymnasium's vector envs: info entries of the reset cars only
             for key in ADVISOR_INFO_KEYS:
                 info["_" + key] = mask.copy()
-        return self._observation(), info
+        return self._observation(cars), info
 
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
+        cars = started(self._car)
         setup = self.setup
         env = setup.env
         policy_steering, policy_acceleration = setup.action_to_physical(actions, self.num_envs)
         self._policy_steering = np.array(policy_steering, dtype=np.float64)
         resetting = self._autoreset.copy()
         any_resetting = bool(resetting.any())
-        road = env.road
-        limit = env.steering_limit
-        low, high = env.acceleration_limits
-        start_steering = self._state.steering
+        start_steering = cars.state.steering
         off_road = np.zeros(self.num_envs, dtype=bool)
         for j in range(env.action_repeat):
-            state = self._state
-            info = {
-                "time": self._sim_step * setup.dt,
-                "station": state.station,
-                "lateral_offset": state.lateral_offset,
-                "heading": state.heading,
-                "speed": state.speed,
-                "steering": state.steering,
-            }
-            if setup.human_drives:
-                command, human_acceleration = self._humans.act(info, road)
-                steering = np.minimum(np.maximum(command, -limit), limit)
-                acceleration = np.minimum(np.maximum(human_acceleration, low), high)
-            else:
-                command = self._humans.steer(info, road)
-                steering, acceleration = policy_steering, policy_acceleration
+            command, steering, acceleration = self._human_sample(
+                cars, policy_steering, policy_acceleration
+            )
             outcome = env_step(
-                state,
-                self._velocity,
+                cars.state,
+                cars.velocity,
                 steering,
                 acceleration,
                 setup.sample,
                 self._curvature,
                 ARRAY_OPS,
-                self._sim_step,
-                self._phases,
+                cars.sim_step,
+                cars.phases,
             )
-            self._state = VehicleState(*(np.asarray(f, dtype=np.float64) for f in outcome.state))
-            self._velocity = outcome.velocity
-            self._sim_step += 1
-            self._acceleration = np.asarray(acceleration, dtype=np.float64)
             off_road |= np.asarray(outcome.off_road, dtype=bool)
-            self._sample_all(outcome.imu, skip=resetting)
+            advance_cars(
+                cars, outcome, acceleration, 1, self._rngs, env, self._curvature, resetting
+            )
             self._command = command
-            self._wheel = self._wheel_reading(command, None)
-            measurement = np.column_stack([self._sensors[0], self._sensors[1], self._wheel])
-            imu = self._sensors[3:5].T
+            self._wheel = self._wheel_reading(cars, command, None)
+            sensors = cars.sensors
+            measurement = np.column_stack([sensors.speed, sensors.camera_lateral, self._wheel])
+            imu = np.column_stack([sensors.imu_longitudinal, sensors.imu_lateral])
             if any_resetting:  # placeholders: missing, so they neither update nor gate
                 measurement[resetting] = np.nan
                 imu = np.where(resetting[:, None], 0.0, imu)
-            self._estimator.step(measurement, imu, **setup.road_points(self._state.station))
-            self._substeps[:, j] = self._state.lateral_offset
-        lateral_weight, rate_weight, penalty = env.reward_weights
+            self._estimator.step(measurement, imu, **setup.road_points(cars.state.station))
+            self._substeps[:, j] = cars.state.lateral_offset
         rewards = np.asarray(
-            lane_keeping_reward(
-                self._state.lateral_offset,
-                self._state.steering - start_steering,
-                off_road,
-                0.5 * env.road.lane_width,
-                limit,
-                lateral_weight,
-                rate_weight,
-                penalty,
-            ),
-            dtype=np.float64,
+            step_reward(env, start_steering, cars.state, off_road), dtype=np.float64
         )
         terminated = off_road
-        truncated = self._sim_step >= env.max_sim_steps
+        time_up = truncated(cars, env)
         if resetting.any():
             idx = np.flatnonzero(resetting)
-            self._reset_cars(idx, None, whole=False)
+            self._reset_cars(cars, idx, None, whole=False)
             rewards[idx] = 0.0
             terminated[idx] = False
-            truncated[idx] = False
+            time_up[idx] = False
         else:
             self._readout = estimate_readout(self._estimator.estimate(), setup.hypotheses)
-        self._autoreset = terminated | truncated
-        return self._observation(), rewards, terminated, truncated, self._info()
-
-    def render(self) -> tuple[np.ndarray, ...] | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called without render_mode='rgb_array'")
-            return None
-        if self._renderers is None:
-            self._renderers = [
-                make_renderer(self.setup.env, "rgb_array") for _ in range(self.num_envs)
-            ]
-        info = self._info()
-        return tuple(
-            renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")})
-            for i, renderer in enumerate(self._renderers)
-        )
-
-    def close_extras(self, **kwargs: Any) -> None:
-        self._renderers = None
+        self._autoreset = terminated | time_up
+        return self._observation(cars), rewards, terminated, time_up, self._info(cars)
 
     @property
     def estimator(self) -> Any:
@@ -261,27 +195,48 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
         return self._estimator
 
     # ------------------------------------------------------------- helpers
-    def _reset_cars(self, idx: np.ndarray, options: dict[str, Any] | None, whole: bool) -> None:
-        """Start new episodes of the cars ``idx``: car, sensors, human, estimator."""
+    def _human_sample(
+        self, cars: Car[np.ndarray], policy_steering: Any, policy_acceleration: Any
+    ) -> tuple[np.ndarray, Any, Any]:
+        """The humans' commands at this sample, decided on the true states, and the
+        (steering, acceleration) that drive the cars: the humans', clipped, when they
+        drive; the policy's otherwise."""
         setup = self.setup
         env = setup.env
+        state = cars.state
+        info = {
+            "time": cars.sim_step * setup.dt,
+            "station": state.station,
+            "lateral_offset": state.lateral_offset,
+            "heading": state.heading,
+            "speed": state.speed,
+            "steering": state.steering,
+        }
+        if setup.human_drives:
+            command, human_acceleration = self._humans.act(info, env.road)
+            limit = env.steering_limit
+            low, high = env.acceleration_limits
+            steering = np.minimum(np.maximum(command, -limit), limit)
+            acceleration = np.minimum(np.maximum(human_acceleration, low), high)
+            return command, steering, acceleration
+        return self._humans.steer(info, env.road), policy_steering, policy_acceleration
+
+    def _reset_cars(
+        self, cars: Car[np.ndarray], idx: np.ndarray, options: dict[str, Any] | None, whole: bool
+    ) -> None:
+        """Start new episodes of the cars ``idx``: car, sensors, human, estimator.
+
+        Each car's generator draws its episode (:func:`hasa_env.sim.car.start_cars`),
+        then its advisor's index and the seeds of its human and of its wheel sensor,
+        the single env's order.
+        """
+        setup = self.setup
         options = dict(options or {})
-        chosen = None
-        if "advisor_index" in options:
-            value = options.pop("advisor_index")
-            if isinstance(value, bool) or not isinstance(value, int | np.integer):
-                raise ValueError(f"reset option 'advisor_index' must be an integer, got {value!r}")
-            if not 0 <= value < len(setup.drivers):
-                raise ValueError(
-                    f"reset option 'advisor_index' = {value!r} is out of range: allowed "
-                    f"integers 0..{len(setup.drivers) - 1} (one per driver of the population)"
-                )
-            chosen = int(value)
-        fields = [f.copy() for f in started_state(self._state)]
+        chosen = pop_advisor_option(options, len(setup.drivers))
+        start_cars(cars, idx, self._rngs, setup.env, options, self._curvature)
         human_seeds, wheel_seeds = [], []
         for i in idx.tolist():
             rng = self._rngs[i]
-            start, index, bias, block, phases = draw_episode(rng, env, options)
             drawn = int(rng.integers(len(setup.drivers)))
             human_seed, wheel_seed = (int(s) for s in rng.integers(0, 2**63 - 1, size=2))
             if chosen is not None:
@@ -290,104 +245,49 @@ class LaneKeepingAdvisorVectorEnv(VectorEnv):
                 self._advisor[i] = drawn if setup.fixed_driver is None else setup.fixed_driver
             human_seeds.append(human_seed)
             wheel_seeds.append(wheel_seed)
-            if phases:
-                self._phases[i] = phases
-            for f, value in zip(fields, start, strict=True):
-                f[i] = value
-            self._bias[i], self._bias_index[i] = bias, index
-            self._noise[i] = block
-            self._noise_pos[i] = 0
-            self._sim_step[i] = 0
-            self._acceleration[i] = 0.0
-        self._state = VehicleState(*fields)
-        start_state = VehicleState(*(f[idx] for f in fields))
-        velocity = road_frame_velocity(start_state, ARRAY_OPS)
-        self._velocity[0][idx], self._velocity[1][idx] = velocity
-        # the reset cars' first sample: instantaneous IMU at zero acceleration
-        kappa = np.broadcast_to(
-            np.asarray(self._curvature(start_state.station), dtype=np.float64), idx.shape
-        )
-        imu = road_frame_acceleration(start_state, 0.0, kappa, env.params, ARRAY_OPS)
-        noise = self._noise[idx, 0]
-        self._noise_pos[idx] = 1
-        readings = sensor_readings(start_state, imu, self._bias[idx], noise.T, env.noise_std)
-        self._kappa[idx] = kappa
-        for channel, reading in zip(self._sensors, readings, strict=True):
-            channel[idx] = reading
         self._humans.assign(idx, self._advisor[idx], human_seeds)
         self._wheel_noise.restart(idx, wheel_seeds)
-        steering = start_state.steering
+        steering = cars.state.steering[idx]
         self._command[idx] = steering
         self._policy_steering[idx] = steering
-        self._wheel[idx] = self._wheel_reading(steering, idx)
-        self._substeps[idx] = start_state.lateral_offset[:, None]
+        self._wheel[idx] = self._wheel_reading(cars, steering, idx)
+        self._substeps[idx] = cars.state.lateral_offset[idx][:, None]
+        sensors = cars.sensors
         measurement = np.column_stack(
-            [self._sensors[0][idx], self._sensors[1][idx], self._wheel[idx]]
+            [sensors.speed[idx], sensors.camera_lateral[idx], self._wheel[idx]]
         )
-        points = setup.road_points(start_state.station)
+        points = setup.road_points(cars.state.station[idx])
         if whole:
             estimate = self._estimator.reset(
-                measurement, setup.hypotheses, prior=setup.prior, true_bias=self._bias, **points
+                measurement, setup.hypotheses, prior=setup.prior, true_bias=cars.bias, **points
             )
         else:
             estimate = self._estimator.reset(
                 measurement,
                 setup.hypotheses,
                 prior=setup.prior,
-                true_bias=self._bias[idx],
+                true_bias=cars.bias[idx],
                 runs=idx,
                 **points,
             )
         self._readout = estimate_readout(estimate, setup.hypotheses)
 
-    def _wheel_reading(self, command: np.ndarray, idx: np.ndarray | None) -> np.ndarray:
+    def _wheel_reading(
+        self, cars: Car[np.ndarray], command: np.ndarray, idx: np.ndarray | None
+    ) -> np.ndarray:
         """The steering sensor's reading of the humans' wheels (rad), of cars ``idx`` (None: all)."""
         if self.setup.human_drives:  # the car's own steering sensor reads the human's wheel
-            return self._sensors[5].copy() if idx is None else self._sensors[5][idx]
-        return command + self.setup.env.noise_std[5] * self._wheel_noise.draw(idx)
+            wheel = cars.sensors.steering
+            return wheel.copy() if idx is None else wheel[idx]
+        return command + self.setup.env.noise_std.steering * self._wheel_noise.draw(idx)
 
-    def _sample_all(self, imu: tuple, skip: np.ndarray) -> None:
-        """Every car's sensors at this sample (one noise row each).
+    def _observation(self, cars: Car[np.ndarray]) -> np.ndarray:
+        sensors = np.stack(cars.sensors, axis=1)
+        return observation_rows(self._readout, sensors, self._wheel, self._bounds)
 
-        Cars in ``skip`` (about to be reset, which draws them a new block) draw nothing
-        from their generators; their readings here are placeholders.
-        """
-        env = self.setup.env
-        block = env.noise_block
-        pos = self._noise_pos
-        if pos.max() >= block:
-            for i in np.flatnonzero((pos >= block) & ~skip).tolist():
-                self._noise[i] = draw_noise_block(self._rngs[i], env)
-                self._noise_pos[i] = 0
-            pos = np.minimum(self._noise_pos, block - 1)
-        noise = self._noise.reshape(-1, self._noise.shape[2])[self._row_base + pos]
-        self._noise_pos += 1
-        state = started_state(self._state)
-        readings = sensor_readings(state, imu, self._bias, noise.T, env.noise_std)
-        kappa = self._curvature(state.station)
-        self._kappa = np.array(
-            np.broadcast_to(np.asarray(kappa, dtype=np.float64), state.station.shape)
-        )
-        for channel, reading in zip(self._sensors, readings, strict=True):
-            channel[:] = reading
-
-    def _observation(self) -> np.ndarray:
-        return observation_rows(self._readout, self._sensors.T, self._wheel, self._bounds)
-
-    def _info(self) -> dict[str, Any]:
-        values = info_values(
-            self._sim_step,
-            started_state(self._state),
-            self._velocity,
-            self._acceleration,
-            self._kappa,
-            self._bias,
-            self._bias_index,
-            self._sensors,
-            self.setup.env,
-        )
+    def _info(self, cars: Car[np.ndarray]) -> dict[str, Any]:
         info: dict[str, Any] = {}
-        for key, value in zip(INFO_KEYS, values, strict=True):
+        for key, value in zip(INFO_KEYS, car_info_values(cars, self.setup.env), strict=True):
             info[key] = np.array(value, copy=True)
         for key, value in self._readout.items():
             info[key] = np.array(value, copy=True)

@@ -18,9 +18,8 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-import gymnasium as gym
-
 from hasa_env._lazy import lazy_attributes
+from hasa_env.envs.base import register_track_ids
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.envs.vector import LaneKeepingVectorEnv
 from hasa_env.sim.config import ConfigError, default_config, describe_config, make_config
@@ -68,15 +67,11 @@ __getattr__, __dir__ = lazy_attributes(
 
 def register_envs() -> None:
     """Register the hasa_env ids with gymnasium (idempotent; done on import)."""
-    for env_id, track in zip(ENV_IDS, ("straight", "curved"), strict=True):
-        if env_id in gym.registry:
-            continue
-        gym.register(
-            id=env_id,
-            entry_point="hasa_env.envs.lane_keeping:LaneKeepingEnv",
-            vector_entry_point="hasa_env.envs.vector:LaneKeepingVectorEnv",
-            kwargs={"track": track},
-        )
+    register_track_ids(
+        ENV_IDS,
+        "hasa_env.envs.lane_keeping:LaneKeepingEnv",
+        "hasa_env.envs.vector:LaneKeepingVectorEnv",
+    )
 
 
 register_envs()

@@ -167,7 +167,7 @@ options = st.one_of(
 
 
 def _snapshot(env) -> tuple:
-    state = env.unwrapped._state
+    state = env.unwrapped._car.state
     return (tuple(np.atleast_1d(np.asarray(f, dtype=float)).tolist() for f in state),
             env.unwrapped.np_random.bit_generator.state["state"]["state"]
             if hasattr(env.unwrapped, "np_random") else None)  # fmt: skip
@@ -196,12 +196,12 @@ def test_fuzzed_reset_options_single(single, opts):
 def test_fuzzed_reset_options_vector(vector, opts):
     vector.reset(seed=5)
     env = vector.unwrapped
-    before = ([f.copy() for f in env._state], [r.bit_generator.state for r in env._rngs])
+    before = ([f.copy() for f in env._car.state], [r.bit_generator.state for r in env._rngs])
     try:
         vector.reset(options=opts)
     except ValueError as exc:
         assert re.match(r"(unknown )?reset (option|options)[ ']", str(exc)), str(exc)
-        after = ([f.copy() for f in env._state], [r.bit_generator.state for r in env._rngs])
+        after = ([f.copy() for f in env._car.state], [r.bit_generator.state for r in env._rngs])
         assert all(np.array_equal(a, b) for a, b in zip(before[0], after[0], strict=True))
         assert before[1] == after[1]
         return

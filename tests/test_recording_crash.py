@@ -66,10 +66,10 @@ def test_a_failed_write_leaves_a_loadable_file_and_stops_that_recording(tmp_path
     assert not rec.complete and rec.steps == 10
     assert compare_recordings(rec, replay(rec)) is None
     # no more steps into that file; the env is not stepped either
-    before = env.unwrapped._sim_step
+    before = env.unwrapped._car.sim_step
     with pytest.raises(RecordingError, match="call reset"):
         env.step(np.array([0.01, 0.0], dtype=np.float32))
-    assert env.unwrapped._sim_step == before and not env.recording
+    assert env.unwrapped._car.sim_step == before and not env.recording
     # a reset starts a clean new recording; the old one is left as it was
     env.reset(seed=2)
     for _ in range(5):

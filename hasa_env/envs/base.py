@@ -1,7 +1,7 @@
 """What the single-car and the vector env share, and the type of an unwrapped hasa env.
 
 :class:`LaneKeepingBase` builds the observation of the configured type and the
-info from an env's per-episode values, floats for one car
+info from an env's car record (:class:`hasa_env.sim.car.Car`), floats for one car
 (:class:`~hasa_env.envs.lane_keeping.LaneKeepingEnv`) or arrays for N
 (:class:`~hasa_env.envs.vector.LaneKeepingVectorEnv`); :func:`hasa_unwrapped`
 gives code that takes any wrapped hasa env its ``config`` and ``setup``.
@@ -10,22 +10,27 @@ gives code that takes any wrapped hasa env its ``config`` and ``setup``.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from typing import Any, Protocol, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import VectorEnv
 
-from hasa_env.sim.dynamics import VehicleState
-from hasa_env.sim.setup import INFO_KEYS, EnvSetup, info_values
+from hasa_env.render import SceneRenderer, make_renderer
+from hasa_env.sim.car import Car, car_info_values
+from hasa_env.sim.setup import INFO_KEYS, EnvSetup
 
 __all__ = [
     "HasaEnv",
     "LaneKeepingBase",
+    "RendersCars",
+    "RendersOneCar",
     "check_render_mode",
     "check_vector_args",
     "hasa_unwrapped",
-    "started_state",
+    "register_track_ids",
+    "started",
 ]
 
 
@@ -57,11 +62,28 @@ def check_vector_args(
     return int(num_envs)
 
 
-def started_state(state: VehicleState | None) -> VehicleState:
-    """An env's true state, or the RuntimeError of a step before the first reset."""
-    if state is None:
+def register_track_ids(ids: Sequence[str], entry_point: str, vector_entry_point: str) -> None:
+    """Register ``ids`` with gymnasium, one per track: ``ids[0]`` the straight road,
+    ``ids[1]`` the shipped curved track (idempotent: a registered id is left alone).
+
+    The entry points are ``"module:Class"`` strings, imported only when an env is made.
+    """
+    for env_id, track in zip(ids, ("straight", "curved"), strict=True):
+        if env_id in gym.registry:
+            continue
+        gym.register(
+            id=env_id,
+            entry_point=entry_point,
+            vector_entry_point=vector_entry_point,
+            kwargs={"track": track},
+        )
+
+
+def started(car: Car | None) -> Car:
+    """An env's car, or the RuntimeError of a step before the first reset."""
+    if car is None:
         raise RuntimeError("call reset() before step()")
-    return state
+    return car
 
 
 def hasa_unwrapped(env: gym.Env | VectorEnv) -> HasaEnv:
@@ -70,49 +92,106 @@ def hasa_unwrapped(env: gym.Env | VectorEnv) -> HasaEnv:
 
 
 class LaneKeepingBase(ABC):
-    """The observation and the info of a lane-keeping env from its per-episode values.
+    """The observation and the info of a lane-keeping env from its car record.
 
-    The values are floats for one car and (N,) arrays for N cars; ``_sensors``
-    holds the readings in :data:`hasa_env.sim.dynamics.SENSOR_NAMES` order (a
-    tuple for one car, a (6, N) array for N).
+    ``_car`` is the :class:`~hasa_env.sim.car.Car` of the episode (floats for one car,
+    (N,) arrays for N cars); the subclasses saturate the values at the bounds in
+    their backend's way.
     """
 
     setup: EnvSetup
-    _sim_step: Any
-    _velocity: tuple[Any, Any]
-    _acceleration: Any
-    _kappa: Any
-    _bias: Any
-    _bias_index: Any
-    _sensors: Any
+    _car: Car | None
 
     @abstractmethod
-    def _sensor_obs(self) -> np.ndarray:
+    def _sensor_obs(self, car: Car) -> np.ndarray:
         """The ``"sensors"`` observation: the readings saturated at their bounds, float32."""
 
     @abstractmethod
-    def _state_obs(self, state: VehicleState) -> np.ndarray:
+    def _state_obs(self, car: Car) -> np.ndarray:
         """The ``"state"`` observation (oracle): state and curvature at their bounds, float32."""
 
-    def _observation(self, state: VehicleState) -> Any:
+    def _observation(self, car: Car) -> Any:
         kind = self.setup.observation_type
         if kind == "sensors":
-            return self._sensor_obs()
+            return self._sensor_obs(car)
         if kind == "state":
-            return self._state_obs(state)
-        return {"sensors": self._sensor_obs(), "state": self._state_obs(state)}
+            return self._state_obs(car)
+        return {"sensors": self._sensor_obs(car), "state": self._state_obs(car)}
 
-    def _info(self, state: VehicleState) -> dict[str, Any]:
+    def _info(self, car: Car) -> dict[str, Any]:
         """The info of :data:`hasa_env.sim.setup.INFO_KEYS` (floats for one car, arrays for N)."""
-        values = info_values(
-            self._sim_step,
-            state,
-            self._velocity,
-            self._acceleration,
-            self._kappa,
-            self._bias,
-            self._bias_index,
-            self._sensors,
-            self.setup,
-        )
-        return dict(zip(INFO_KEYS, values, strict=True))
+        return dict(zip(INFO_KEYS, car_info_values(car, self.setup), strict=True))
+
+
+class RendersOneCar:
+    """``render`` and ``close`` of a single-car env (the plain one and the advisor task).
+
+    The env sets ``render_mode``, ``_car`` (None before the first reset), ``_scene``
+    (the set-up whose road and markings are drawn) and defines ``_info(car)``.
+    """
+
+    render_mode: str | None
+    _car: Any
+    _scene: EnvSetup
+    _renderer: SceneRenderer | None = None
+
+    @abstractmethod
+    def _info(self, car: Any) -> dict[str, Any]:
+        """The env's info for ``car`` (what the renderer draws)."""
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
+                "to gym.make"
+            )
+            return None
+        if self._car is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            self._renderer = make_renderer(self._scene, self.render_mode)
+        return self._renderer.render(self._info(self._car))
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class RendersCars:
+    """``render`` and ``close_extras`` of a native vector env: one ``rgb_array`` frame per car.
+
+    The env sets ``render_mode``, ``num_envs``, ``_car`` (None before the first reset),
+    ``_scene`` and defines ``_info(cars)`` (arrays, with gymnasium's ``"_key"`` masks).
+    """
+
+    render_mode: str | None
+    num_envs: int
+    _car: Any
+    _scene: EnvSetup
+    _renderers: list[SceneRenderer] | None = None
+
+    @abstractmethod
+    def _info(self, car: Any) -> dict[str, Any]:
+        """The env's info for the cars (one entry per car)."""
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode='rgb_array'")
+            return None
+        if self._car is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderers is None:
+            self._renderers = [
+                make_renderer(self._scene, "rgb_array") for _ in range(self.num_envs)
+            ]
+        info = self._info(self._car)
+        frames = []
+        for i, renderer in enumerate(self._renderers):
+            frame = renderer.render({k: v[i] for k, v in info.items() if not k.startswith("_")})
+            assert frame is not None  # (rgb_array)
+            frames.append(frame)
+        return tuple(frames)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._renderers = None

@@ -8,28 +8,16 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hasa_env.envs.base import LaneKeepingBase, check_render_mode
-from hasa_env.render import SceneRenderer, make_renderer
-from hasa_env.sim.dynamics import (
-    SCALAR_OPS,
-    VehicleState,
-    road_frame_acceleration,
-    road_frame_velocity,
-    sensor_readings,
-)
-from hasa_env.sim.setup import (
-    build_setup,
-    check_reset_options,
-    draw_episode,
-    draw_noise_block,
-    physical_action,
-)
-from hasa_env.sim.transition import env_step
+from hasa_env.envs.base import LaneKeepingBase, RendersOneCar, check_render_mode, started
+from hasa_env.sim.car import Car, advance_car, start_car, state_values, truncated
+from hasa_env.sim.dynamics import SCALAR_OPS, VehicleState
+from hasa_env.sim.setup import build_setup, check_reset_options, physical_action
+from hasa_env.sim.transition import env_step, step_reward
 
 __all__ = ["LaneKeepingEnv"]
 
 
-class LaneKeepingEnv(LaneKeepingBase, gym.Env):
+class LaneKeepingEnv(LaneKeepingBase, RendersOneCar, gym.Env):
     """A kinematic bicycle keeping its lane while the camera sees a biased lane.
 
     ## Description
@@ -121,8 +109,8 @@ class LaneKeepingEnv(LaneKeepingBase, gym.Env):
             "sensors": [b.astype(np.float64).tolist() for b in self.setup.sensor_bounds()],
             "state": [b.astype(np.float64).tolist() for b in self.setup.state_bounds()],
         }
-        self._renderer: SceneRenderer | None = None
-        self._state: VehicleState[float] | None = None
+        self._scene = self.setup
+        self._car: Car[float] | None = None
         self._ended = False  # the episode ended (terminated or truncated) without a reset since
         self._warned_ended = False
 
@@ -133,24 +121,13 @@ class LaneKeepingEnv(LaneKeepingBase, gym.Env):
         options = check_reset_options(options, self.setup)  # refused: nothing reseeded or drawn
         super().reset(seed=seed)
         self._ended = self._warned_ended = False
-        state, index, bias, block, phases = draw_episode(self.np_random, self.setup, options)
-        self._phases = phases
-        self._state = state
-        self._bias, self._bias_index = bias, index
-        self._noise, self._noise_pos = block.tolist(), 0
-        self._sim_step = 0
-        self._acceleration = 0.0
-        self._velocity = road_frame_velocity(state, SCALAR_OPS)
-        kappa = self._curvature(state.station)
-        imu = road_frame_acceleration(state, 0.0, kappa, self.setup.params, SCALAR_OPS)
-        self._finish_sample(state, imu, kappa)
+        car = self._car = start_car(self.np_random, self.setup, options, self._curvature)
         if self.render_mode == "human":
             self.render()
-        return self._observation(state), self._info(state)
+        return self._observation(car), self._info(car)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
+        car = started(self._car)
         setup = self.setup
         steer, acc = physical_action(setup, action)
         if self._ended and not self._warned_ended:
@@ -159,71 +136,38 @@ class LaneKeepingEnv(LaneKeepingBase, gym.Env):
                 "reset(): the car drives on past its end; call reset() to start a new episode"
             )
             self._warned_ended = True
+        start_steering = car.state.steering
         outcome = env_step(
-            self._state,
-            self._velocity,
+            car.state,
+            car.velocity,
             steer,
             acc,
             setup,
             self._curvature,
             SCALAR_OPS,
-            self._sim_step,
-            self._phases,
+            car.sim_step,
+            car.phases,
         )
-        self._sim_step += setup.action_repeat
-        state = self._state = outcome.state
-        self._velocity = outcome.velocity
-        self._acceleration = acc
-        self._finish_sample(state, outcome.imu, self._curvature(state.station))
+        advance_car(car, outcome, acc, setup.action_repeat, self.np_random, setup, self._curvature)
+        reward = step_reward(setup, start_steering, outcome.state, outcome.off_road)
         terminated = bool(outcome.off_road)
-        truncated = self._sim_step >= setup.max_sim_steps
-        self._ended = self._ended or terminated or truncated
-        reward = outcome.reward
+        time_up = truncated(car, setup)
+        self._ended = self._ended or terminated or time_up
         if self.render_mode == "human":
             self.render()
-        return self._observation(state), float(reward), terminated, truncated, self._info(state)
-
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
-                "to gym.make"
-            )
-            return None
-        if self._state is None:
-            raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            self._renderer = make_renderer(self.setup, self.render_mode)
-        return self._renderer.render(self._info(self._state))
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        return self._observation(car), float(reward), terminated, time_up, self._info(car)
 
     # ------------------------------------------------------------- helpers
-    def _finish_sample(
-        self, state: VehicleState[float], imu: tuple[float, float], kappa: float
-    ) -> None:
-        if self._noise_pos >= len(self._noise):
-            self._noise, self._noise_pos = draw_noise_block(self.np_random, self.setup).tolist(), 0
-        noise = self._noise[self._noise_pos]
-        self._noise_pos += 1
-        self._kappa = kappa
-        self._sensors = sensor_readings(state, imu, self._bias, noise, self.setup.noise_std)
+    def _sensor_obs(self, car: Car) -> np.ndarray:
+        return _clipped(car.sensors, *self._bounds["sensors"])
 
-    def _sensor_obs(self) -> np.ndarray:
-        return _clipped(self._sensors, *self._bounds["sensors"])
-
-    def _state_obs(self, state: VehicleState) -> np.ndarray:
-        s = state
-        values = (s.lateral_offset, s.heading, s.speed, s.steering, self._kappa)
-        return _clipped(values, *self._bounds["state"])
+    def _state_obs(self, car: Car) -> np.ndarray:
+        return _clipped(state_values(car), *self._bounds["state"])
 
     @property
     def state(self) -> VehicleState | None:
         """The true Frenet state (None before the first reset)."""
-        return self._state
+        return None if self._car is None else self._car.state
 
 
 def _clipped(values: tuple, low: list[float], high: list[float]) -> np.ndarray:

@@ -45,7 +45,7 @@ from hasa_env.recording.format import (
 )
 from hasa_env.recording.reader import load_recording, load_recordings
 from hasa_env.sim.config import deep_merge
-from hasa_env.sim.dynamics import SENSOR_NAMES
+from hasa_env.sim.sensors import SENSOR_NAMES
 from hasa_env.sim.setup import INFO_KEYS, STATE_NAMES, EnvSetup, build_setup
 
 __all__ = [

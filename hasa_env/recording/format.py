@@ -41,6 +41,7 @@ import pandas as pd
 from hasa_env._versions import installed_versions
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
+from hasa_env.sim.sensors import SENSOR_NAMES, SENSOR_UNITS
 from hasa_env.sim.setup import RECORDING_COLUMNS
 from hasa_env.validation import ABSENT, ANY_JSON, Field, schema, validate, version
 
@@ -70,12 +71,7 @@ COLUMN_UNITS: dict[str, str] = {
     "lateral_velocity": "m/s",
     "bias": "m",
     "bias_index": "1",
-    "sensor_speed": "m/s",
-    "sensor_camera_lateral": "m",
-    "sensor_camera_heading": "rad",
-    "sensor_imu_longitudinal": "m/s^2",
-    "sensor_imu_lateral": "m/s^2",
-    "sensor_steering": "rad",
+    **{f"sensor_{name}": unit for name, unit in zip(SENSOR_NAMES, SENSOR_UNITS, strict=True)},
     "reward": "1",
     "terminated": "bool",
     "truncated": "bool",

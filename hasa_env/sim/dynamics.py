@@ -39,10 +39,8 @@ __all__ = [
     "road_frame_velocity",
     "road_frame_acceleration",
     "mean_road_frame_acceleration",
-    "sensor_readings",
     "lane_keeping_reward",
     "left_road",
-    "SENSOR_NAMES",
 ]
 
 
@@ -222,43 +220,6 @@ def road_frame_acceleration(
         v * ops.sin(state.steering) / ops.cos(state.steering) / params.wheelbase - curvature * s_dot
     )
     return acceleration * cos_t - v * sin_t * yaw_rate, acceleration * sin_t + v * cos_t * yaw_rate
-
-
-SENSOR_NAMES = (
-    "speed",
-    "camera_lateral",
-    "camera_heading",
-    "imu_longitudinal",
-    "imu_lateral",
-    "steering",
-)
-"""Sensor channels, in observation order (units: m/s, m, rad, m/s^2, m/s^2, rad)."""
-
-
-def sensor_readings(
-    state: VehicleState,
-    imu: tuple,
-    bias: float | np.ndarray,
-    noise: tuple,
-    noise_std: tuple,
-) -> tuple:
-    """Noisy sensor readings (see :data:`SENSOR_NAMES`).
-
-    Args:
-        state: true state.
-        imu: true road-frame accelerations (x'', y'') (m/s^2).
-        bias: camera bias b (m): the camera reads y + b.
-        noise: six standard-normal draws (floats or arrays), one per channel.
-        noise_std: six noise standard deviations, one per channel.
-    """
-    return (
-        state.speed + noise_std[0] * noise[0],
-        state.lateral_offset + bias + noise_std[1] * noise[1],
-        state.heading + noise_std[2] * noise[2],
-        imu[0] + noise_std[3] * noise[3],
-        imu[1] + noise_std[4] * noise[4],
-        state.steering + noise_std[5] * noise[5],
-    )
 
 
 def left_road(

@@ -20,8 +20,9 @@ from gymnasium import spaces
 
 from hasa_env.sim.config import make_config
 from hasa_env.sim.disturbance import Disturbance
-from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, SENSOR_NAMES, VehicleParams, VehicleState
+from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, VehicleParams, VehicleState
 from hasa_env.sim.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
+from hasa_env.sim.sensors import SENSOR_NAMES, SENSOR_NOISE_KEYS, Sensors, sensor_bounds
 from hasa_env.validation import ABSENT, Field, schema, validate
 
 __all__ = [
@@ -69,40 +70,6 @@ reproduces the run.
 """
 
 
-def info_values(
-    sim_step: Any,
-    state: VehicleState,
-    velocity: tuple,
-    acceleration: Any,
-    curvature: Any,
-    bias: Any,
-    bias_index: Any,
-    sensors: Any,
-    setup: EnvSetup,
-) -> tuple:
-    """The values of ``info`` in :data:`INFO_KEYS` order (floats for one car, arrays for N).
-
-    ``velocity`` is the road-frame (v_x, v_y) of ``state``; ``sensors`` the
-    sequence of the six sensor readings (or its columns).
-    """
-    vx, vy = velocity
-    return (
-        sim_step * setup.dt,
-        state.station,
-        state.lateral_offset,
-        state.heading,
-        state.speed,
-        state.steering,
-        acceleration,
-        curvature,
-        vx,
-        vy,
-        bias,
-        bias_index,
-        *sensors,
-    )
-
-
 def recording_row(
     step: int, info: Mapping[str, Any], reward: SupportsFloat, terminated: bool, truncated: bool
 ) -> list:
@@ -138,7 +105,8 @@ class EnvSetup:
     params: VehicleParams
     hypotheses: tuple[float, ...]
     cumulative_probabilities: tuple[float, ...]
-    noise_std: tuple[float, ...]
+    noise_std: Sensors
+    """Each sensor channel's noise standard deviation (:mod:`hasa_env.sim.sensors`)."""
     noise_block: int
     lower_edge: float
     upper_edge: float
@@ -184,10 +152,8 @@ class EnvSetup:
         return spaces.Box(lo, hi, dtype=np.float32)
 
     def sensor_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        vmax = self.params.max_speed
-        lo = [-10.0, -50.0, -math.pi, -200.0, -200.0, -(self.steering_limit + 1.0)]
-        hi = [vmax + 10.0, 50.0, math.pi, 200.0, 200.0, self.steering_limit + 1.0]
-        return np.array(lo, dtype=np.float32), np.array(hi, dtype=np.float32)
+        """(low, high) of the ``"sensors"`` observation (:func:`hasa_env.sim.sensors.sensor_bounds`)."""
+        return sensor_bounds(self.params.max_speed, self.steering_limit)
 
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo = [-50.0, -math.pi, 0.0, -self.steering_limit, -1.0]
@@ -223,9 +189,7 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
     probs = cfg["markings"]["probabilities"] or [1.0 / len(hyps)] * len(hyps)
     cum = tuple(float(c) for c in np.cumsum(probs))
     noise = cfg["noise"]
-    noise_std = tuple(
-        float(noise[k]) for k in ("speed", "camera", "camera_heading", "imu", "imu", "steering")
-    )
+    noise_std = Sensors(*(float(noise[key]) for key in SENSOR_NOISE_KEYS))
     margin = road_cfg["offroad_margin"]
     lower = -width / 2 - road_cfg["lanes_right"] * width - margin
     upper = width / 2 + road_cfg["lanes_left"] * width + margin

@@ -12,12 +12,16 @@ action held, and returns what the env reports about it::
         off_road <- off_road or left_road(x)           checked at every sample
     (v_x, v_y) = (v cos theta, v sin theta)            road-frame velocity at the end
     imu = ((v_x, v_y) - (v_x, v_y)_start) / (action_repeat Ts)
-    reward = 1 - w_y (y / (W/2))^2 - w_d ((delta - delta_start) / delta_max)^2
-             - offroad_penalty * off_road
+
+The reward and the end of an episode are functions of the transition:
+:func:`step_reward` (of the steering at the start of the env step and the outcome)
+and ``Transition.off_road`` (terminated); :func:`hasa_env.sim.car.truncated` says when
+the time is up. The advisor task steps ``env_step`` one sample at a time and takes the
+reward of the whole env step from the same function.
 
 Sensor noise is not part of it: each env draws its noise rows from its
 cars' own generators (blocks, :func:`hasa_env.sim.setup.draw_noise_block`)
-and passes them to :func:`hasa_env.sim.dynamics.sensor_readings`, so the
+and passes them to :func:`hasa_env.sim.sensors.sensor_readings` (:mod:`hasa_env.sim.car`), so the
 transition is a function of its arguments only, bit-identical for both
 backends (tested by ``tests/test_vector.py``).
 """
@@ -38,7 +42,7 @@ from hasa_env.sim.dynamics import (
 )
 from hasa_env.sim.setup import EnvSetup
 
-__all__ = ["Transition", "env_step"]
+__all__ = ["Transition", "env_step", "step_reward"]
 
 
 class Transition(NamedTuple):
@@ -49,15 +53,14 @@ class Transition(NamedTuple):
         velocity: road-frame (v_x, v_y) at the end (m/s).
         imu: mean road-frame acceleration (x'', y'') over the step (m/s^2),
             what the IMU reports before noise.
-        off_road: the car left the road (or turned backwards) at any sample.
-        reward: the env step's reward.
+        off_road: the car left the road (or turned backwards) at any sample: the
+            episode is terminated.
     """
 
     state: VehicleState
     velocity: tuple[Any, Any]
     imu: tuple[Any, Any]
     off_road: Any
-    reward: Any
 
 
 def env_step(
@@ -87,7 +90,6 @@ def env_step(
     """
     params = setup.params
     lower, upper = setup.lower_edge, setup.upper_edge
-    previous_steering = state.steering
     disturbance = setup.disturbance
     off_road = None
     for i in range(setup.action_repeat):
@@ -102,10 +104,23 @@ def env_step(
     assert off_road is not None  # (action_repeat >= 1)
     end_velocity = road_frame_velocity(state, ops)
     imu = mean_road_frame_acceleration(velocity, end_velocity, setup.env_step_duration)
+    return Transition(state, end_velocity, imu, off_road)
+
+
+def step_reward(setup: EnvSetup, start_steering: Any, state: VehicleState, off_road: Any) -> Any:
+    """The reward of an env step (floats for one car, arrays for N)::
+
+        reward = 1 - w_y (y / (W/2))^2 - w_d ((delta - delta_start) / delta_max)^2
+                 - offroad_penalty * off_road
+
+    with y and delta of ``state``, the state at the end of the step, delta_start the
+    steering at its start and ``off_road`` whether the car left the road during it
+    (``Transition.off_road``).
+    """
     lateral_weight, rate_weight, penalty = setup.reward_weights
-    reward = lane_keeping_reward(
+    return lane_keeping_reward(
         state.lateral_offset,
-        steering - previous_steering,
+        state.steering - start_steering,
         off_road,
         0.5 * setup.road.lane_width,
         setup.steering_limit,
@@ -113,4 +128,3 @@ def env_step(
         rate_weight,
         penalty,
     )
-    return Transition(state, end_velocity, imu, off_road, reward)
