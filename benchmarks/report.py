@@ -7,9 +7,12 @@ beside ours; :func:`write_outputs` writes ``results.json``, the CSV tables
 
 The tables, in order:
 
-1. the verdict over population seeds: per model, the mean of the per-seed
-   values with its 95 % confidence interval, ranks and how often a model
-   holds its rank (:func:`benchmarks.protocol.aggregate.verdict`);
+1. the verdict over population seeds (or over the participants of recordings):
+   per model, the mean of the per-seed values with its 95 % hierarchical
+   percentile-bootstrap interval, the shares of runs counted with their exact
+   (Clopper-Pearson) intervals, ranks among every ranked model and how often a
+   model holds its rank (:func:`benchmarks.protocol.aggregate.verdict`,
+   :mod:`benchmarks.protocol.intervals`);
 2. the fits' checks per seed (ridge penalty, condition number, largest AR
    pole, stability, identifiability);
 3. per driver, means over the seeds: steering prediction (paper table 1; the
@@ -30,9 +33,11 @@ import pandas as pd
 
 from benchmarks.figures import write_figures
 from benchmarks.protocol import BenchmarkResult
+from benchmarks.protocol.intervals import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 from benchmarks.protocol.results import json_clean
 from benchmarks.tables import (
     Column,
+    count_share,
     fixed,
     interval,
     missing,
@@ -72,10 +77,12 @@ def _ratio(value: Any) -> str:
 
 
 def _stability(row: dict[str, Any], rank: str) -> str:
-    value, share = row.get(rank), row.get(f"{rank}_stability")
+    """ "rank of models (share of bootstrap replicates holding it)", e.g. "2 of 4 (85%)"."""
+    value, share, models = row.get(rank), row.get(f"{rank}_stability"), row.get(f"{rank}_models")
     if value is None:
         return "-"
-    return f"{value}" if share is None or missing(share) else f"{value} ({100 * share:.0f}%)"
+    shown = f"{value}" if missing(models) else f"{value} of {int(models)}"
+    return shown if missing(share) else f"{shown} ({100 * share:.0f}%)"
 
 
 def _of(numerator: str, denominator: str) -> Any:
@@ -94,7 +101,7 @@ _VERDICT_COLUMNS = [
     Column(interval(percent, "rmse_decrease_vs_two_point"), "RMSE dec. [95% CI]"),
     Column(interval(fixed(2), "rmse_over_paper_median"), "ours/paper [95% CI]"),
     Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
-    Column(_of("decided_runs", "estimated_runs"), "decided"),
+    Column(count_share("decided_runs", "estimated_runs"), "decided [95% CI]"),
     Column(lambda r: _stability(r, "rank_lateral"), "rank lat. (kept)"),
     Column(lambda r: _stability(r, "rank_steering"), "rank steer. (kept)"),
     Column("free_run_diverged", "free runs diverged"),
@@ -104,12 +111,15 @@ _SAFETY_COLUMNS = [
     Column("model", "Estimator", left=True),
     Column("kind", "kind", left=True),
     Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
-    Column(_of("wrong_lane_confident_runs", "estimated_runs"), "confident wrong lane"),
-    Column(_of("undecided_runs", "estimated_runs"), "undecided"),
-    Column(_of("model_mismatch_runs", "estimated_runs"), "model mismatch"),
+    Column(count_share("wrong_lane_confident_runs", "estimated_runs"), "confident wrong lane"),
+    Column(count_share("undecided_runs", "estimated_runs"), "undecided"),
+    Column(count_share("model_mismatch_runs", "estimated_runs"), "model mismatch"),
     Column(interval(fixed(2), "lateral_nees"), "lat. NEES [95% CI]"),
-    Column(interval(fixed(3), "curved_lateral_rmse"), "curved lat. RMSE (m)"),
-    Column(_of("curved_wrong_lane_confident_runs", "curved_estimated_runs"), "curved conf. wrong"),
+    Column(interval(fixed(3), "curved_lateral_rmse"), "curved lat. RMSE (m) [95% CI]"),
+    Column(
+        count_share("curved_wrong_lane_confident_runs", "curved_estimated_runs"),
+        "curved conf. wrong",
+    ),
 ]
 
 _SEED_COLUMNS = [
@@ -240,25 +250,44 @@ def _checks_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
     return rows
 
 
-def _sections(
-    result: BenchmarkResult,
-) -> list[tuple[str, str, list[dict], list[Column], str | None]]:
-    """(key, title, rows, columns, group) of each table."""
-    cfg = result.config
+Section = tuple[str, str, list[dict], list[Column], str | None]
+"""(key, title, rows, columns, group) of one table."""
+
+
+def _interval_note(cfg: dict[str, Any]) -> tuple[str, str]:
+    """(over what, how the intervals were computed) for the verdict's captions."""
     seeds = cfg.get("seeds")
-    over = f"over {len(seeds)} population seeds {seeds}" if seeds else "over the recordings"
-    ci = (
-        "95 % CI: Student's t over the per-seed values"
-        if seeds and len(seeds) > 1
-        else "one seed: no interval (use --seeds for a verdict)"
+    if not seeds:
+        return (
+            "over the recordings (participants)",
+            "95 % CI: percentile bootstrap over the participants, "
+            f"{BOOTSTRAP_RESAMPLES} replicates, generator seed {BOOTSTRAP_SEED}",
+        )
+    over = f"over {len(seeds)} population seeds {seeds}"
+    if len(seeds) == 1:
+        return over, (
+            "95 % CI: percentile bootstrap over the drivers of the one seed (use --seeds for "
+            f"the seeds' spread), {BOOTSTRAP_RESAMPLES} replicates, generator seed {BOOTSTRAP_SEED}"
+        )
+    return over, (
+        "95 % CI: hierarchical percentile bootstrap, seeds then drivers within seeds, "
+        f"{BOOTSTRAP_RESAMPLES} replicates, generator seed {BOOTSTRAP_SEED}"
     )
-    sections: list[tuple[str, str, list[dict], list[Column], str | None]] = [
+
+
+def _verdict_sections(result: BenchmarkResult) -> list[Section]:
+    """The verdict, the lane decisions and the per-seed table."""
+    cfg = result.config
+    over, ci = _interval_note(cfg)
+    shares = "k/n [95 % CI] = runs counted / runs with the exact (Clopper-Pearson) interval"
+    return [
         (
             "summary",
             f"Verdict {over}: per model, the mean over seeds of the per-seed mean over drivers "
             f"({ci}); ours/paper = median over drivers of our one-step steering RMSE / the "
             f"paper's converted to road-wheel rad (paper / {PAPER_STEERING_RATIO:g}); rank "
-            "(kept) = overall rank (share of seeds holding it)",
+            "(kept) = overall rank among every built-in, user and baseline model (share of "
+            f"bootstrap replicates on which it holds that rank); {shares}",
             result.summary,
             _VERDICT_COLUMNS,
             None,
@@ -269,30 +298,41 @@ def _sections(
             f"{float(cfg.get('weight_threshold', 0.95)):g} on a wrong lane, runs left undecided "
             "or with a model mismatch at the end (estimators.evidence), the lateral NEES "
             "(mean (y_hat - y)^2 / sigma^2; 1: the reported std is right), and the curved "
-            "track with the road ahead as a known input",
+            f"track with the road ahead as a known input; {shares}; other intervals as in "
+            "the verdict",
             [r for r in result.summary if r.get("estimated_runs")],
             _SAFETY_COLUMNS,
             None,
         ),
         (
             "seed_summary",
-            "Per seed: means over drivers",
+            "Per seed: means over drivers" + ("" if cfg.get("seeds") else " (recordings: one)"),
             result.seed_summary,
             _SEED_COLUMNS,
             "seed",
         ),
-        (
-            "checks",
-            "The fits' checks per seed (docs/design.md §6.5): ridge penalty chosen by blocked "
-            "cross-validation on the training run, condition number of the standardized design, "
-            "largest AR pole, lane-offset identifiability with the steering-sensor noise; "
-            "and whether the model, driving 4 cars itself on the training run's conditions, "
-            "keeps them on the road (docs/design.md §8.11: one that does not gives the "
-            "estimator no lane evidence)",
-            _checks_rows(result),
-            _CHECK_COLUMNS,
-            "name",
-        ),
+    ]
+
+
+def _checks_section(result: BenchmarkResult) -> Section:
+    return (
+        "checks",
+        "The fits' checks per seed (docs/design.md §6.5): ridge penalty chosen by blocked "
+        "cross-validation on the training run, condition number of the standardized design, "
+        "largest AR pole, lane-offset identifiability with the steering-sensor noise; "
+        "and whether the model, driving 4 cars itself on the training run's conditions, "
+        "keeps them on the road (docs/design.md §8.11: one that does not gives the "
+        "estimator no lane evidence)",
+        _checks_rows(result),
+        _CHECK_COLUMNS,
+        "name",
+    )
+
+
+def _steering_sections(result: BenchmarkResult) -> list[Section]:
+    """Steering prediction per driver (paper table 1) and on the curved track."""
+    cfg = result.config
+    sections: list[Section] = [
         (
             "steering",
             "Steering prediction (paper table 1), per driver, means over seeds of the mean over "
@@ -305,7 +345,7 @@ def _sections(
             pooled(result.steering),
             _STEERING_COLUMNS,
             "driver",
-        ),
+        )
     ]
     if result.curved:
         sections.append(
@@ -321,8 +361,14 @@ def _sections(
                 "driver",
             )
         )
+    return sections
+
+
+def _estimation_sections(result: BenchmarkResult) -> list[Section]:
+    """Lateral estimation per driver (paper table 2) and on the curved track."""
+    cfg = result.config
     threshold = float(cfg.get("weight_threshold", 0.95))
-    sections.append(
+    sections: list[Section] = [
         (
             "estimation",
             "Lateral estimation (paper table 2), per driver, means over seeds: RMSE of the "
@@ -333,7 +379,7 @@ def _sections(
             _ESTIMATION_COLUMNS,
             "driver",
         )
-    )
+    ]
     if result.curved_estimation:
         sections.append(
             (
@@ -346,6 +392,16 @@ def _sections(
             )
         )
     return sections
+
+
+def _sections(result: BenchmarkResult) -> list[Section]:
+    """Every table of the report, in order."""
+    return [
+        *_verdict_sections(result),
+        _checks_section(result),
+        *_steering_sections(result),
+        *_estimation_sections(result),
+    ]
 
 
 def _source(cfg: dict[str, Any]) -> str:
@@ -462,24 +518,7 @@ def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
 # --------------------------------------------------------------------- markdown
 def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     """The Markdown report: configuration, tables, findings, figures, errors, versions."""
-    cfg = result.config
-    lines = ["# hasa-bench: the human-as-advisor benchmark", ""]
-    lines.append(
-        "Protocol of Mai et al. (sections 3.3 and 4.3; docs/design.md §9). Our numbers are "
-        "what the code measured; the paper's published values are printed beside them for "
-        "comparison, nothing is tuned toward them. The paper's steering RMSEs are steering-"
-        f"wheel angles; beside ours they are divided by the steering ratio "
-        f"{PAPER_STEERING_RATIO:g} (road-wheel rad)."
-    )
-    lines.append("")
-    lines.append(f"Data: {_source(cfg)}.")
-    lines.append("")
-    lines.append("## Configuration")
-    lines.append("")
-    lines.append("```json")
-    lines.append(json.dumps(json_clean(cfg), indent=2))
-    lines.append("```")
-    lines.append("")
+    lines = _markdown_head(result.config)
     for key, title, rows, columns, _ in _sections(result):
         lines.append(f"## {key.replace('_', ' ').capitalize()}")
         lines.append("")
@@ -500,8 +539,42 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
         lines.append("")
         lines.extend(f"- `{e['model']}` ({e['stage']}): {e['message']}" for e in result.errors)
         lines.append("")
-    lines.append("## Models")
+    lines.extend(_markdown_models(result))
+    lines.extend(_markdown_figures(result.config, figures))
+    if result.notes:
+        lines.append("## Notes")
+        lines.append("")
+        lines.extend(f"- {n}" for n in result.notes)
+        lines.append("")
+    lines.extend(_markdown_run(result))
+    return "\n".join(lines)
+
+
+def _markdown_head(cfg: dict[str, Any]) -> list[str]:
+    """The report's title, what it compares, the data and the configuration."""
+    lines = ["# hasa-bench: the human-as-advisor benchmark", ""]
+    lines.append(
+        "Protocol of Mai et al. (sections 3.3 and 4.3; docs/design.md §9). Our numbers are "
+        "what the code measured; the paper's published values are printed beside them for "
+        "comparison, nothing is tuned toward them. The paper's steering RMSEs are steering-"
+        f"wheel angles; beside ours they are divided by the steering ratio "
+        f"{PAPER_STEERING_RATIO:g} (road-wheel rad)."
+    )
     lines.append("")
+    lines.append(f"Data: {_source(cfg)}.")
+    lines.append("")
+    lines.append("## Configuration")
+    lines.append("")
+    lines.append("```json")
+    lines.append(json.dumps(json_clean(cfg), indent=2))
+    lines.append("```")
+    lines.append("")
+    return lines
+
+
+def _markdown_models(result: BenchmarkResult) -> list[str]:
+    """One item per fitted model: parameters, identifiability, residual std, notes, warnings."""
+    lines = ["## Models", ""]
     for m in result.models:
         if m.get("error"):
             continue
@@ -522,50 +595,54 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
         for w in m.get("warnings") or []:
             lines.append(f"  - warning: {w}")
     lines.append("")
-    if figures:
-        lines.append("## Figures")
+    return lines
+
+
+_FIGURE_CAPTIONS = {
+    "steering_prediction": "Steering prediction vs measured on one validation run "
+    "(paper Fig. 4) and the prediction error",
+    "residual_acf": "Autocorrelation of the one-step residuals, training run and mean "
+    "over the illustrative driver's validation runs (paper Fig. 5)",
+    "lateral_estimate": "Lateral estimate vs truth and the true lane's weight on one "
+    "validation run (paper Fig. 8)",
+    "lateral_error": "Lateral error over the first seconds, mean and std over the "
+    "illustrative driver's validation runs (paper Fig. 9)",
+    "curved_steering": "Steering prediction on the curved track (paper Fig. 7)",
+}
+
+
+def _markdown_figures(cfg: dict[str, Any], figures: dict[str, str]) -> list[str]:
+    """The figures with their captions (nothing without figures)."""
+    if not figures:
+        return []
+    lines = ["## Figures", ""]
+    first = (cfg.get("seeds") or [None])[0]
+    if first is not None:
+        lines.append(f"The figures show population seed {first}.")
         lines.append("")
-        first = (cfg.get("seeds") or [None])[0]
-        if first is not None:
-            lines.append(f"The figures show population seed {first}.")
-            lines.append("")
-        captions = {
-            "steering_prediction": "Steering prediction vs measured on one validation run "
-            "(paper Fig. 4) and the prediction error",
-            "residual_acf": "Autocorrelation of the one-step residuals, training run and mean "
-            "over the illustrative driver's validation runs (paper Fig. 5)",
-            "lateral_estimate": "Lateral estimate vs truth and the true lane's weight on one "
-            "validation run (paper Fig. 8)",
-            "lateral_error": "Lateral error over the first seconds, mean and std over the "
-            "illustrative driver's validation runs (paper Fig. 9)",
-            "curved_steering": "Steering prediction on the curved track (paper Fig. 7)",
-        }
-        for key, name in figures.items():
-            lines.append(f"### {captions.get(key, key)}")
-            lines.append("")
-            lines.append(f"![{key}]({name})")
-            lines.append("")
-    if result.notes:
-        lines.append("## Notes")
+    for key, name in figures.items():
+        lines.append(f"### {_FIGURE_CAPTIONS.get(key, key)}")
         lines.append("")
-        lines.extend(f"- {n}" for n in result.notes)
+        lines.append(f"![{key}]({name})")
         lines.append("")
-    lines.append("## Run")
-    lines.append("")
+    return lines
+
+
+def _markdown_run(result: BenchmarkResult) -> list[str]:
+    """How the protocol ran (executor, wall time) and the versions."""
     ex = result.executor
-    lines.append(
+    return [
+        "## Run",
+        "",
         f"Executor: {ex['kind']}"
         + (f", {ex['workers']} workers" if ex.get("workers") else "")
         + (f", scheduler {ex['scheduler']}" if ex.get("scheduler") else "")
         + f", {ex['tasks']} tasks of up to {ex.get('batch_size')} runs. Protocol wall time "
-        f"{result.timing.get('total', float('nan')):.1f} s (writing files and figures excluded)."
-    )
-    lines.append("")
-    lines.append(
-        "Versions: " + ", ".join(f"{k} {v}" for k, v in result.versions.items() if k != "platform")
-    )
-    lines.append("")
-    return "\n".join(lines)
+        f"{result.timing.get('total', float('nan')):.1f} s (writing files and figures excluded).",
+        "",
+        "Versions: " + ", ".join(f"{k} {v}" for k, v in result.versions.items() if k != "platform"),
+        "",
+    ]
 
 
 # ----------------------------------------------------------------------- output

@@ -7,16 +7,22 @@ Three levels, all with pandas ``groupby``:
 2. per (seed, model): means over drivers (:func:`summarize_seeds`), the
    ranks of the models on that seed;
 3. per model, over seeds (:func:`verdict`): the mean of the per-seed values
-   and a 95 % confidence interval from Student's t over the seeds::
+   with a 95 % hierarchical percentile-bootstrap interval (seeds, then drivers
+   within seeds; participants for recordings; :mod:`benchmarks.protocol.intervals`)::
 
-       mean = (1/S) sum_s x_s
-       half = t_{0.975, S-1} * sd(x_s) / sqrt(S)         (no interval with S = 1)
+       mean = (1/S) sum_s x_s,    x_s = mean over the seed's drivers
+       [low, high] = 2.5 / 97.5 percentiles of the same mean over resampled
+                     seeds and drivers (fixed generator seed)
 
-   Each seed draws a new population of drivers and new runs, so the per-seed
-   values are independent draws of what the benchmark measures and the
-   interval says how much a verdict depends on the draw. ``rank_stability``
-   is the share of seeds on which a model holds its overall rank (the rank
-   of its mean over seeds).
+   and exact (Clopper-Pearson) intervals of the shares of runs counted
+   (decided, confidently in a wrong lane, undecided, model mismatch).
+   Recordings have one "seed" (``None``): their interval is over participants.
+
+Ranks: every steering model and estimator of kind builtin, user or baseline
+is ranked against all the others (smallest RMSE first), overall by the mean
+over seeds and on each seed; stress models and the estimators without the
+evidence checks are not ranked. ``rank_*_stability`` is the share of bootstrap
+replicates on which a model holds its overall rank among all of them.
 
 Degenerate runs are counted per row (``degenerate_runs``), left out of the
 means and of ``n_runs``: a run whose rows carry a ``degenerate`` reason
@@ -37,12 +43,20 @@ from scipy import stats
 
 from benchmarks import paper_values
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
+from benchmarks.protocol.intervals import (
+    clopper_pearson,
+    hierarchical_bootstrap,
+    percentile_interval,
+    replicate_ranks,
+)
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = [
+    "RANKED_KINDS",
     "aggregate_estimation",
     "aggregate_steering",
     "confidence_interval",
+    "same_seed",
     "summarize_seeds",
     "verdict",
 ]
@@ -284,9 +298,18 @@ def _kind(name: str, kinds: Mapping[str, str] | None = None) -> str:
     return "baseline" if name in BASELINES else "user"
 
 
-_RANKED_KINDS = ("builtin", "user")
-"""The kinds of models ranked against each other (not baselines, stress models, or the
-models' estimators without the evidence checks)."""
+RANKED_KINDS = ("builtin", "user", "baseline")
+"""The kinds of models ranked against each other: every steering model and estimator but the
+stress models and the estimators without the evidence checks (diagnostics, not candidates)."""
+
+
+def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
+    """Rows of ``seeds`` equal to ``seed``; ``None`` (recordings: no population seed) and NaN
+    are one seed."""
+    if seed is None or (isinstance(seed, float) and math.isnan(seed)):
+        return seeds.isna()
+    return seeds.astype(object) == seed
+
 
 _SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs")
 
@@ -314,9 +337,9 @@ def summarize_seeds(
     rows = []
     for seed in seeds:
         for name in names:
-            ss = s[(s["seed"].astype(object) == seed) & (s["model"] == name)] if len(s) else s
-            ee = e[(e["seed"].astype(object) == seed) & (e["model"] == name)] if len(e) else e
-            cc = c[(c["seed"].astype(object) == seed) & (c["model"] == name)] if len(c) else c
+            ss = s[same_seed(s["seed"], seed) & (s["model"] == name)] if len(s) else s
+            ee = e[same_seed(e["seed"], seed) & (e["model"] == name)] if len(e) else e
+            cc = c[same_seed(c["seed"], seed) & (c["model"] == name)] if len(c) else c
             if not len(ss) and not len(ee):
                 continue
             row: dict[str, Any] = {
@@ -360,8 +383,8 @@ def summarize_seeds(
         table[rank_key] = None
         if not len(table):
             continue
-        ranked = table[table["kind"].isin(_RANKED_KINDS) & table[key].notna()]
-        ranks = ranked.groupby("seed")[key].rank(method="min")
+        ranked = table[table["kind"].isin(RANKED_KINDS) & table[key].notna()]
+        ranks = ranked.groupby("seed", dropna=False)[key].rank(method="min")
         table.loc[ranks.index, rank_key] = ranks.astype(int)
     return _records(table)
 
@@ -382,57 +405,132 @@ def confidence_interval(values: Sequence[float], level: float = 0.95) -> tuple[f
     return mean, mean - half, mean + half
 
 
-_VERDICT_KEYS = ("rmse", "r2_increments", "rmse_decrease_vs_two_point", "lateral_rmse",
-                 "rmse_over_paper_median", "curved_lateral_rmse", "lateral_nees")  # fmt: skip
+_VERDICT_KEYS = {
+    "rmse": ("steering", "rmse", False),
+    "r2_increments": ("steering", "r2_increments", False),
+    "rmse_decrease_vs_two_point": ("steering", "rmse_decrease_vs_two_point", False),
+    "lateral_rmse": ("estimation", "lateral_rmse_mean", False),
+    "rmse_over_paper_median": ("steering", "rmse_over_paper", True),
+    "curved_lateral_rmse": ("curved_estimation", "lateral_rmse_mean", False),
+    "lateral_nees": ("estimation", "lateral_nees", False),
+}
+"""Verdict key -> (per-driver table, its column, the per-seed statistic is the median over
+drivers) of the bootstrap; the point estimate is the mean of the per-seed summary's key."""
+
+_COUNTS = ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged", "degenerate_runs",
+           "curved_estimated_runs", *_SAFETY_COUNTS, *(f"curved_{k}" for k in _SAFETY_COUNTS))  # fmt: skip
+_SHARES = {
+    "decided_runs": "estimated_runs",
+    **{key: "estimated_runs" for key in _SAFETY_COUNTS},
+    **{f"curved_{key}": "curved_estimated_runs" for key in _SAFETY_COUNTS},
+}
+"""Count -> its number of runs: ``{count}_share`` with its Clopper-Pearson interval."""
+
+
+def _verdict_row(name: str, part: pd.DataFrame, kind: str) -> dict[str, Any]:
+    """One model's verdict row without intervals and ranks: means over seeds, sums of counts,
+    the shares of runs counted with their exact binomial intervals."""
+    row: dict[str, Any] = {
+        "model": name,
+        "kind": kind,
+        "seeds": int(part["seed"].nunique(dropna=False)),
+        "drivers": int(part["drivers"].max()),
+        "runs": int(part["runs"].sum()),
+    }
+    for key in _VERDICT_KEYS:
+        row[key] = _finite_mean(part[key]) if key in part else float("nan")
+    for key in _COUNTS:
+        values = pd.to_numeric(part[key], errors="coerce") if key in part else pd.Series()
+        row[key] = int(values.sum()) if values.notna().any() else None
+    for key, total in _SHARES.items():
+        count, runs = row.get(key), row.get(total)
+        share = count / runs if count is not None and runs else None
+        low, high = clopper_pearson(count, runs) if share is not None else (None, None)
+        row |= {f"{key}_share": share, f"{key}_share_ci_low": low, f"{key}_share_ci_high": high}
+    return row
+
+
+def _seed_groups(
+    rows: Sequence[dict[str, Any]], seeds: Sequence[Any], column: str, names: Sequence[str]
+) -> list[np.ndarray]:
+    """Per seed, the ``(drivers, models)`` array of ``column`` (NaN where a model has no row;
+    a table without drivers is one driver per seed: the per-seed summary)."""
+    frame = pd.DataFrame(list(rows))
+    groups = []
+    for seed in seeds:
+        part = frame[same_seed(frame["seed"], seed)] if len(frame) else frame
+        if not len(part) or column not in part:
+            groups.append(np.full((1, len(names)), np.nan))
+            continue
+        part = part.assign(_value=pd.to_numeric(part[column], errors="coerce"))
+        if "driver" not in part:
+            part = part.assign(driver="")
+        wide = part.pivot_table(
+            index="driver", columns="model", values="_value", aggfunc="mean", dropna=False
+        )
+        groups.append(wide.reindex(columns=list(names)).to_numpy(dtype=np.float64))
+    return groups
+
+
+def _rank_stability(table: pd.DataFrame, key: str, rank_key: str, replicates: np.ndarray) -> None:
+    """``rank_key`` (the overall rank of the mean among every ranked model), ``rank_key_models``
+    (how many) and ``rank_key_stability`` (the share of bootstrap replicates on which the model
+    holds that rank among all of them), in ``table`` (rows in the replicates' column order)."""
+    table[rank_key] = None
+    table[f"{rank_key}_models"] = None
+    table[f"{rank_key}_stability"] = None
+    ranked = table["kind"].isin(RANKED_KINDS).to_numpy() & table[key].notna().to_numpy()
+    if not ranked.any():
+        return
+    index = table.index[ranked]
+    overall = table.loc[index, key].astype(float).rank(method="min").astype(int)
+    table.loc[index, rank_key] = overall
+    table.loc[index, f"{rank_key}_models"] = int(ranked.sum())
+    ranks = replicate_ranks(replicates[:, ranked])
+    table.loc[index, f"{rank_key}_stability"] = np.mean(
+        ranks == overall.to_numpy()[None, :], axis=0
+    )
 
 
 def verdict(
     seed_rows: Sequence[dict[str, Any]],
     models: Sequence[str],
     kinds: Mapping[str, str] | None = None,
+    *,
+    steering: Sequence[dict[str, Any]] = (),
+    estimation: Sequence[dict[str, Any]] = (),
+    curved_estimation: Sequence[dict[str, Any]] = (),
 ) -> list[dict[str, Any]]:
-    """Per model over seeds: means with 95 % intervals (see the module docstring), ranks,
-    rank stability, decisions and free-run divergences in all."""
+    """Per model over seeds: means with 95 % intervals, ranks among every ranked model and
+    their stability, counts, shares of runs with exact intervals (the module docstring).
+
+    Args:
+        seed_rows: :func:`summarize_seeds`' rows (the point estimates).
+        models, kinds: the scored models (the baselines are added) and their kinds.
+        steering, estimation, curved_estimation: the per (seed, driver, model) rows the
+            bootstrap resamples; without any, it resamples the per-seed values only.
+    """
     frame = pd.DataFrame(list(seed_rows))
     if not len(frame):
         return []
-    names = list(models) + [b for b in BASELINES if b not in models]
-    rows = []
-    for name in names:
-        part = frame[frame["model"] == name]
-        if not len(part):
-            continue
-        row: dict[str, Any] = {
-            "model": name,
-            "kind": _kind(name, kinds),
-            "seeds": int(part["seed"].nunique()),
-            "drivers": int(part["drivers"].max()),
-            "runs": int(part["runs"].sum()),
-        }
-        for key in _VERDICT_KEYS:
-            mean, low, high = confidence_interval(part[key].tolist())
-            row[key] = mean
-            row[f"{key}_ci_low"] = low
-            row[f"{key}_ci_high"] = high
-        counts = ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged",
-                  "degenerate_runs", "curved_estimated_runs", *_SAFETY_COUNTS,
-                  *(f"curved_{k}" for k in _SAFETY_COUNTS))  # fmt: skip
-        for key in counts:
-            values = pd.to_numeric(part[key], errors="coerce")
-            row[key] = int(values.sum()) if values.notna().any() else None
-        rows.append(row)
-    table = pd.DataFrame(rows)
+    names = [n for n in [*models, *(b for b in BASELINES if b not in models)]
+             if (frame["model"] == n).any()]  # fmt: skip
+    table = pd.DataFrame(
+        [_verdict_row(n, frame[frame["model"] == n], _kind(n, kinds)) for n in names]
+    )
+    seeds = list(dict.fromkeys(frame["seed"]))
+    by_driver = {"steering": steering, "estimation": estimation,
+                 "curved_estimation": curved_estimation}  # fmt: skip
+    driver_level = any(by_driver.values())
+    replicates: dict[str, np.ndarray] = {}
+    for key, (source, column, median) in _VERDICT_KEYS.items():
+        rows, col = (by_driver[source], column) if driver_level else (seed_rows, key)
+        groups = _seed_groups(rows, seeds, col, names)
+        replicates[key] = hierarchical_bootstrap(groups, median=median and driver_level)
+        low, high = percentile_interval(replicates[key])
+        enough = sum(np.isfinite(g).sum(axis=0) for g in groups) >= 2  # something to resample
+        table[f"{key}_ci_low"] = np.where(enough, low, np.nan)
+        table[f"{key}_ci_high"] = np.where(enough, high, np.nan)
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
-        table[rank_key] = None
-        table[f"{rank_key}_stability"] = None
-        ranked = table[table["kind"].isin(_RANKED_KINDS) & table[key].notna()]
-        if not len(ranked):
-            continue
-        overall = ranked[key].rank(method="min").astype(int)
-        table.loc[overall.index, rank_key] = overall
-        for i in overall.index:
-            per_seed = frame[frame["model"] == table.loc[i, "model"]][rank_key]
-            per_seed = pd.to_numeric(per_seed, errors="coerce").dropna()
-            if len(per_seed):
-                table.loc[i, f"{rank_key}_stability"] = float(np.mean(per_seed == overall[i]))
+        _rank_stability(table, key, rank_key, replicates[key])
     return _records(table)

@@ -86,7 +86,7 @@ class BenchmarkResult:
         """The JSON document of ``results.json`` (NaN and infinities become null)."""
         doc = {
             "format": "hasa_bench.results",
-            "format_version": 2,
+            "format_version": 3,
             "config": self.config,
             "versions": self.versions,
             "executor": self.executor,
