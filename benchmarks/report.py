@@ -85,6 +85,15 @@ def _stability(row: dict[str, Any], rank: str) -> str:
     return shown if missing(share) else f"{shown} ({100 * share:.0f}%)"
 
 
+def _decision_time(row: dict[str, Any]) -> str:
+    """ "median / p90" of the time to decide; "never" for a quantile that is a run that never
+    decided."""
+    if not row.get("estimated_runs"):
+        return "-"
+    median, p90 = row.get("time_to_decide_median"), row.get("time_to_decide_p90")
+    return " / ".join("never" if missing(v) else f"{v:.1f}" for v in (median, p90))
+
+
 def _of(numerator: str, denominator: str) -> Any:
     def cell(row: dict[str, Any]) -> str:
         n, d = row.get(numerator), row.get(denominator)
@@ -114,6 +123,10 @@ _SAFETY_COLUMNS = [
     Column(count_share("wrong_lane_confident_runs", "estimated_runs"), "confident wrong lane"),
     Column(count_share("undecided_runs", "estimated_runs"), "undecided"),
     Column(count_share("model_mismatch_runs", "estimated_runs"), "model mismatch"),
+    Column(_decision_time, "decides in (s) median / p90"),
+    Column(count_share("never_decided_runs", "estimated_runs"), "never decided"),
+    Column(interval(percent, "decided_time_share"), "time decided [95% CI]"),
+    Column(interval(fixed(3), "lateral_rmse_after_decision"), "lat. RMSE after dec. (m) [95% CI]"),
     Column(interval(fixed(2), "lateral_nees"), "lat. NEES [95% CI]"),
     Column(interval(fixed(3), "curved_lateral_rmse"), "curved lat. RMSE (m) [95% CI]"),
     Column(
@@ -298,8 +311,12 @@ def _verdict_sections(result: BenchmarkResult) -> list[Section]:
             f"{float(cfg.get('weight_threshold', 0.95)):g} on a wrong lane, runs left undecided "
             "or with a model mismatch at the end (estimators.evidence), the lateral NEES "
             "(mean (y_hat - y)^2 / sigma^2; 1: the reported std is right), and the curved "
-            f"track with the road ahead as a known input; {shares}; other intervals as in "
-            "the verdict",
+            f"track with the road ahead as a known input; decides in = time until the true "
+            f"lane's weight first exceeds {float(cfg.get('weight_threshold', 0.95)):g}, median "
+            "and 90th percentile over runs (never: that quantile is a run that never did), "
+            "time decided = mean share of a run's time above it, lat. RMSE after dec. = over "
+            f"the steps from which it stays above (runs that settle); {shares}; other "
+            "intervals as in the verdict",
             [r for r in result.summary if r.get("estimated_runs")],
             _SAFETY_COLUMNS,
             None,

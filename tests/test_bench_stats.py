@@ -146,9 +146,38 @@ def test_a_recorded_study_gets_the_verdict_tables_and_the_headline(
     assert gen["seeds"] == 1 and gen["drivers"] == 3
     assert gen["lateral_rmse_ci_low"] is not None and gen["rank_lateral"] is not None
     assert gen["wrong_lane_confident_runs_share_ci_high"] is not None
+    oracle = summary["oracle"]  # decides at once, on every run
+    assert oracle["time_to_decide_median"] == 0.0 and oracle["never_decided_runs"] == 0
+    assert oracle["decided_time_share"] == pytest.approx(1.0, abs=0.05)
+    assert 0.0 <= oracle["lateral_rmse_after_decision"] < 0.05
     for title in ("Verdict over the recordings", "Lane decisions over the recordings",
                   "Per seed: means over drivers", "Headline (ours vs the paper)"):  # fmt: skip
         assert title in text
     assert "(no rows)" not in text
     report = (out / "report.md").read_text()
     assert "## Summary" in report and "(no rows)" not in report
+
+
+def test_decision_metrics_of_a_run() -> None:
+    from benchmarks.protocol.aggregate import _censored_quantile
+    from benchmarks.protocol.tasks import _decision_metrics
+
+    # run 0: passes 0.95 at step 2, drops back at step 3, stays above from step 4 on;
+    # run 1 never passes; run 2 is 3 steps long (the rest invalid) and decided at once
+    weight = np.array([[0.5, 0.9, 0.97, 0.6, 0.96, 0.99],
+                       [0.5, 0.5, 0.5, 0.5, 0.5, 0.5],
+                       [0.99, 0.99, 0.99, np.nan, np.nan, np.nan]])  # fmt: skip
+    valid = np.isfinite(weight)
+    time = np.where(valid, np.arange(6) * 0.1 + 1.0, np.nan)
+    error = np.array([[1.0, 1.0, 1.0, 1.0, 0.3, 0.4], [0.5] * 6, [0.1, 0.1, 0.1] + [np.nan] * 3])
+    m = _decision_metrics(weight, valid, time, error, 0.95)
+    assert m["time_to_decide"][0] == pytest.approx(0.2) and np.isnan(m["time_to_decide"][1])
+    assert m["time_to_decide"][2] == 0.0
+    assert m["decided_time_share"].tolist() == pytest.approx([0.5, 0.0, 1.0])
+    after = m["lateral_rmse_after_decision"]
+    assert after[0] == pytest.approx(np.sqrt((0.3**2 + 0.4**2) / 2)) and np.isnan(after[1])
+    assert after[2] == pytest.approx(0.1)
+    # quantiles with runs that never decided as infinite times; None (degenerate) dropped
+    assert _censored_quantile([0.2, np.inf, 0.0, None], 0.5) == 0.2
+    assert _censored_quantile([0.2, np.inf, np.inf], 0.5) is None
+    assert _censored_quantile([None], 0.5) is None

@@ -228,14 +228,41 @@ def _paper_steering(driver: str, model: str, track: str) -> dict[str, Any]:
     return keys
 
 
+_DECISION_COLUMNS = ("time_to_decide", "decided_time_share", "lateral_rmse_after_decision")
+"""The per-run decision metrics (:func:`benchmarks.protocol.tasks._decision_metrics`)."""
+
+
+def _censored_quantile(values: pd.Series | Sequence[Any], q: float) -> float | None:
+    """The ``q`` quantile of times to decide, ``inf`` for a run that never decided; None
+    (a run, or runs, left out: degenerate) are dropped. An observed value (inverted-CDF
+    quantile); None when it is a run that never decided or there are no runs."""
+    times = pd.to_numeric(pd.Series(values, dtype=object), errors="coerce").to_numpy(float)
+    times = times[~np.isnan(times)]
+    if not times.size:
+        return None
+    value = float(np.quantile(times, q, method="inverted_cdf"))
+    return value if math.isfinite(value) else None
+
+
+def _never(times: pd.Series) -> int:
+    """Runs whose true-lane weight never passed the threshold (an infinite time to decide)."""
+    return int(np.isposinf(pd.to_numeric(times, errors="coerce").to_numpy(float)).sum())
+
+
 def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (seed, driver, model): lateral RMSE mean/std/max over runs, decisions, paper values."""
     if not rows:
         return []
     frame = _frame(rows)
+    for column in _DECISION_COLUMNS:  # rows made before the decision metrics
+        if column not in frame:
+            frame[column] = np.nan
+    # never decided: an infinite time (NaN is left for the degenerate runs, left out)
+    frame["time_to_decide"] = pd.to_numeric(frame["time_to_decide"], errors="coerce").fillna(np.inf)
     frame = _without_degenerate(
         frame, "lateral_rmse",
-        ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight"),
+        ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight",
+         *_DECISION_COLUMNS),
     )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (
@@ -265,6 +292,10 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             undecided_runs=("final_decision", lambda v: int((v == "undecided").sum())),
             model_mismatch_runs=("final_decision", lambda v: int((v == "model_mismatch").sum())),
             lateral_nees=("lateral_nees", _finite_mean),
+            time_to_decide_median=("time_to_decide", lambda v: _censored_quantile(v, 0.5)),
+            never_decided_runs=("time_to_decide", _never),
+            decided_time_share=("decided_time_share", _finite_mean),
+            lateral_rmse_after_decision=("lateral_rmse_after_decision", _finite_mean),
             nis_speed=("nis_speed", _finite_mean),
             nis_camera=("nis_camera", _finite_mean),
             nis_steering=("nis_steering", _finite_mean),
@@ -311,7 +342,9 @@ def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
     return seeds.astype(object) == seed
 
 
-_SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs")
+_SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs",
+                  "never_decided_runs")  # fmt: skip
+_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision")
 
 
 def summarize_seeds(
@@ -364,6 +397,7 @@ def summarize_seeds(
                 "decided_runs": int(ee["decided_runs"].sum()) if len(ee) else None,
                 "estimated_runs": int(ee["n_runs"].sum()) if len(ee) else None,
                 "lateral_nees": _finite_mean(ee["lateral_nees"]) if len(ee) else None,
+                **{key: _finite_mean(ee[key]) if len(ee) else None for key in _DECISION_MEANS},
                 "nis_steering": _finite_mean(ee["nis_steering"]) if len(ee) else None,
                 "curved_lateral_rmse": _finite_mean(cc["lateral_rmse_mean"]) if len(cc) else None,
                 "curved_estimated_runs": int(cc["n_runs"].sum()) if len(cc) else None,
@@ -413,6 +447,8 @@ _VERDICT_KEYS = {
     "rmse_over_paper_median": ("steering", "rmse_over_paper", True),
     "curved_lateral_rmse": ("curved_estimation", "lateral_rmse_mean", False),
     "lateral_nees": ("estimation", "lateral_nees", False),
+    "decided_time_share": ("estimation", "decided_time_share", False),
+    "lateral_rmse_after_decision": ("estimation", "lateral_rmse_after_decision", False),
 }
 """Verdict key -> (per-driver table, its column, the per-seed statistic is the median over
 drivers) of the bootstrap; the point estimate is the mean of the per-seed summary's key."""
@@ -492,6 +528,24 @@ def _rank_stability(table: pd.DataFrame, key: str, rank_key: str, replicates: np
     )
 
 
+def _decision_times(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None:
+    """``time_to_decide_median`` / ``_p90`` (s) per model in ``table``: quantiles over its
+    runs (degenerate ones left out), a run that never decided counting as an infinite time
+    (None when the quantile is such a run; ``never_decided_runs`` counts them)."""
+    frame = pd.DataFrame(list(runs))
+    for q, key in ((0.5, "time_to_decide_median"), (0.9, "time_to_decide_p90")):
+        table[key] = None
+        if not len(frame) or "time_to_decide" not in frame:
+            continue
+        kept = frame["lateral_rmse"].apply(lambda v: v is not None and math.isfinite(float(v)))
+        if "degenerate" in frame:
+            kept &= frame["degenerate"].isna()
+        times = pd.to_numeric(frame["time_to_decide"], errors="coerce").fillna(np.inf)
+        for i, name in table["model"].items():
+            mine = times[kept & (frame["model"] == name)]
+            table.at[i, key] = _censored_quantile(mine, q) if len(mine) else None
+
+
 def verdict(
     seed_rows: Sequence[dict[str, Any]],
     models: Sequence[str],
@@ -500,6 +554,7 @@ def verdict(
     steering: Sequence[dict[str, Any]] = (),
     estimation: Sequence[dict[str, Any]] = (),
     curved_estimation: Sequence[dict[str, Any]] = (),
+    runs_estimation: Sequence[dict[str, Any]] = (),
 ) -> list[dict[str, Any]]:
     """Per model over seeds: means with 95 % intervals, ranks among every ranked model and
     their stability, counts, shares of runs with exact intervals (the module docstring).
@@ -509,6 +564,8 @@ def verdict(
         models, kinds: the scored models (the baselines are added) and their kinds.
         steering, estimation, curved_estimation: the per (seed, driver, model) rows the
             bootstrap resamples; without any, it resamples the per-seed values only.
+        runs_estimation: the per-run estimation rows of the main track: the quantiles of
+            the time to decide (:func:`_decision_times`).
     """
     frame = pd.DataFrame(list(seed_rows))
     if not len(frame):
@@ -533,4 +590,5 @@ def verdict(
         table[f"{key}_ci_high"] = np.where(enough, high, np.nan)
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
         _rank_stability(table, key, rank_key, replicates[key])
+    _decision_times(table, runs_estimation)
     return _records(table)

@@ -320,6 +320,7 @@ def run_protocol(
     summary = verdict(
         seed_summary, estimators, kinds, steering=steering_rows, estimation=estimation_rows,
         curved_estimation=curved_estimation_rows,
+        runs_estimation=[r for r in runs_estimation if r["track"] == config.track],
     )  # fmt: skip
     plots = plot_data(
         [c for c in chunk_results if c.traces or c.acf or c.early_errors],
