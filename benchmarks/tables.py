@@ -69,10 +69,12 @@ def count_share(count: str, total: str) -> Callable[[dict[str, Any]], str]:
     ``{count}_share_ci_low`` / ``{count}_share_ci_high`` (``k/n`` alone without them)."""
 
     def cell(row: dict[str, Any]) -> str:
-        k, n = row.get(count), row.get(total)
+        k: Any = row.get(count)
+        n: Any = row.get(total)
         if missing(k) or missing(n):
             return "-"
-        low, high = row.get(f"{count}_share_ci_low"), row.get(f"{count}_share_ci_high")
+        low: Any = row.get(f"{count}_share_ci_low")
+        high: Any = row.get(f"{count}_share_ci_high")
         if missing(low) or missing(high):
             return f"{int(k)}/{int(n)}"
         return f"{int(k)}/{int(n)} [{100 * low:.1f}%, {100 * high:.1f}%]"

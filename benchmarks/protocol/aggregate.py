@@ -480,8 +480,10 @@ def _verdict_row(name: str, part: pd.DataFrame, kind: str) -> dict[str, Any]:
         row[key] = int(values.sum()) if values.notna().any() else None
     for key, total in _SHARES.items():
         count, runs = row.get(key), row.get(total)
-        share = count / runs if count is not None and runs else None
-        low, high = clopper_pearson(count, runs) if share is not None else (None, None)
+        share, low, high = None, None, None
+        if count is not None and runs:
+            share = count / runs
+            low, high = clopper_pearson(count, runs)
         row |= {f"{key}_share": share, f"{key}_share_ci_low": low, f"{key}_share_ci_high": high}
     return row
 
