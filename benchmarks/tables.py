@@ -17,6 +17,7 @@ from typing import Any
 
 __all__ = [
     "Column",
+    "count_share",
     "fixed",
     "interval",
     "missing",
@@ -59,6 +60,24 @@ def interval(fmt: Callable[[Any], str], key: str) -> Callable[[dict[str, Any]], 
         if missing(low) or missing(high):
             return fmt(mean)
         return f"{fmt(mean)} [{fmt(low)}, {fmt(high)}]"
+
+    return cell
+
+
+def count_share(count: str, total: str) -> Callable[[dict[str, Any]], str]:
+    """A cell ``k/n [low%, high%]`` from a row's ``count``, ``total`` and the share's interval
+    ``{count}_share_ci_low`` / ``{count}_share_ci_high`` (``k/n`` alone without them)."""
+
+    def cell(row: dict[str, Any]) -> str:
+        k: Any = row.get(count)
+        n: Any = row.get(total)
+        if missing(k) or missing(n):
+            return "-"
+        low: Any = row.get(f"{count}_share_ci_low")
+        high: Any = row.get(f"{count}_share_ci_high")
+        if missing(low) or missing(high):
+            return f"{int(k)}/{int(n)}"
+        return f"{int(k)}/{int(n)} [{100 * low:.1f}%, {100 * high:.1f}%]"
 
     return cell
 

@@ -7,16 +7,22 @@ Three levels, all with pandas ``groupby``:
 2. per (seed, model): means over drivers (:func:`summarize_seeds`), the
    ranks of the models on that seed;
 3. per model, over seeds (:func:`verdict`): the mean of the per-seed values
-   and a 95 % confidence interval from Student's t over the seeds::
+   with a 95 % hierarchical percentile-bootstrap interval (seeds, then drivers
+   within seeds; participants for recordings; :mod:`benchmarks.protocol.intervals`)::
 
-       mean = (1/S) sum_s x_s
-       half = t_{0.975, S-1} * sd(x_s) / sqrt(S)         (no interval with S = 1)
+       mean = (1/S) sum_s x_s,    x_s = mean over the seed's drivers
+       [low, high] = 2.5 / 97.5 percentiles of the same mean over resampled
+                     seeds and drivers (fixed generator seed)
 
-   Each seed draws a new population of drivers and new runs, so the per-seed
-   values are independent draws of what the benchmark measures and the
-   interval says how much a verdict depends on the draw. ``rank_stability``
-   is the share of seeds on which a model holds its overall rank (the rank
-   of its mean over seeds).
+   and exact (Clopper-Pearson) intervals of the shares of runs counted
+   (decided, confidently in a wrong lane, undecided, model mismatch).
+   Recordings have one "seed" (``None``): their interval is over participants.
+
+Ranks: every steering model and estimator of kind builtin, user or baseline
+is ranked against all the others (smallest RMSE first), overall by the mean
+over seeds and on each seed; stress models and the estimators without the
+evidence checks are not ranked. ``rank_*_stability`` is the share of bootstrap
+replicates on which a model holds its overall rank among all of them.
 
 Degenerate runs are counted per row (``degenerate_runs``), left out of the
 means and of ``n_runs``: a run whose rows carry a ``degenerate`` reason
@@ -37,12 +43,20 @@ from scipy import stats
 
 from benchmarks import paper_values
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
+from benchmarks.protocol.intervals import (
+    clopper_pearson,
+    hierarchical_bootstrap,
+    percentile_interval,
+    replicate_ranks,
+)
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = [
+    "RANKED_KINDS",
     "aggregate_estimation",
     "aggregate_steering",
     "confidence_interval",
+    "same_seed",
     "summarize_seeds",
     "verdict",
 ]
@@ -214,14 +228,41 @@ def _paper_steering(driver: str, model: str, track: str) -> dict[str, Any]:
     return keys
 
 
+_DECISION_COLUMNS = ("time_to_decide", "decided_time_share", "lateral_rmse_after_decision")
+"""The per-run decision metrics (:func:`benchmarks.protocol.tasks._decision_metrics`)."""
+
+
+def _censored_quantile(values: pd.Series | Sequence[Any], q: float) -> float | None:
+    """The ``q`` quantile of times to decide, ``inf`` for a run that never decided; None
+    (a run, or runs, left out: degenerate) are dropped. An observed value (inverted-CDF
+    quantile); None when it is a run that never decided or there are no runs."""
+    times = pd.to_numeric(pd.Series(values, dtype=object), errors="coerce").to_numpy(float)
+    times = times[~np.isnan(times)]
+    if not times.size:
+        return None
+    value = float(np.quantile(times, q, method="inverted_cdf"))
+    return value if math.isfinite(value) else None
+
+
+def _never(times: pd.Series) -> int:
+    """Runs whose true-lane weight never passed the threshold (an infinite time to decide)."""
+    return int(np.isposinf(pd.to_numeric(times, errors="coerce").to_numpy(float)).sum())
+
+
 def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (seed, driver, model): lateral RMSE mean/std/max over runs, decisions, paper values."""
     if not rows:
         return []
     frame = _frame(rows)
+    for column in _DECISION_COLUMNS:  # rows made before the decision metrics
+        if column not in frame:
+            frame[column] = np.nan
+    # never decided: an infinite time (NaN is left for the degenerate runs, left out)
+    frame["time_to_decide"] = pd.to_numeric(frame["time_to_decide"], errors="coerce").fillna(np.inf)
     frame = _without_degenerate(
         frame, "lateral_rmse",
-        ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight"),
+        ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight",
+         *_DECISION_COLUMNS),
     )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (
@@ -251,6 +292,10 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             undecided_runs=("final_decision", lambda v: int((v == "undecided").sum())),
             model_mismatch_runs=("final_decision", lambda v: int((v == "model_mismatch").sum())),
             lateral_nees=("lateral_nees", _finite_mean),
+            time_to_decide_median=("time_to_decide", lambda v: _censored_quantile(v, 0.5)),
+            never_decided_runs=("time_to_decide", _never),
+            decided_time_share=("decided_time_share", _finite_mean),
+            lateral_rmse_after_decision=("lateral_rmse_after_decision", _finite_mean),
             nis_speed=("nis_speed", _finite_mean),
             nis_camera=("nis_camera", _finite_mean),
             nis_steering=("nis_steering", _finite_mean),
@@ -284,11 +329,22 @@ def _kind(name: str, kinds: Mapping[str, str] | None = None) -> str:
     return "baseline" if name in BASELINES else "user"
 
 
-_RANKED_KINDS = ("builtin", "user")
-"""The kinds of models ranked against each other (not baselines, stress models, or the
-models' estimators without the evidence checks)."""
+RANKED_KINDS = ("builtin", "user", "baseline")
+"""The kinds of models ranked against each other: every steering model and estimator but the
+stress models and the estimators without the evidence checks (diagnostics, not candidates)."""
 
-_SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs")
+
+def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
+    """Rows of ``seeds`` equal to ``seed``; ``None`` (recordings: no population seed) and NaN
+    are one seed."""
+    if seed is None or (isinstance(seed, float) and math.isnan(seed)):
+        return seeds.isna()
+    return seeds.astype(object) == seed
+
+
+_SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs",
+                  "never_decided_runs")  # fmt: skip
+_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision")
 
 
 def summarize_seeds(
@@ -314,9 +370,9 @@ def summarize_seeds(
     rows = []
     for seed in seeds:
         for name in names:
-            ss = s[(s["seed"].astype(object) == seed) & (s["model"] == name)] if len(s) else s
-            ee = e[(e["seed"].astype(object) == seed) & (e["model"] == name)] if len(e) else e
-            cc = c[(c["seed"].astype(object) == seed) & (c["model"] == name)] if len(c) else c
+            ss = s[same_seed(s["seed"], seed) & (s["model"] == name)] if len(s) else s
+            ee = e[same_seed(e["seed"], seed) & (e["model"] == name)] if len(e) else e
+            cc = c[same_seed(c["seed"], seed) & (c["model"] == name)] if len(c) else c
             if not len(ss) and not len(ee):
                 continue
             row: dict[str, Any] = {
@@ -341,6 +397,7 @@ def summarize_seeds(
                 "decided_runs": int(ee["decided_runs"].sum()) if len(ee) else None,
                 "estimated_runs": int(ee["n_runs"].sum()) if len(ee) else None,
                 "lateral_nees": _finite_mean(ee["lateral_nees"]) if len(ee) else None,
+                **{key: _finite_mean(ee[key]) if len(ee) else None for key in _DECISION_MEANS},
                 "nis_steering": _finite_mean(ee["nis_steering"]) if len(ee) else None,
                 "curved_lateral_rmse": _finite_mean(cc["lateral_rmse_mean"]) if len(cc) else None,
                 "curved_estimated_runs": int(cc["n_runs"].sum()) if len(cc) else None,
@@ -360,8 +417,8 @@ def summarize_seeds(
         table[rank_key] = None
         if not len(table):
             continue
-        ranked = table[table["kind"].isin(_RANKED_KINDS) & table[key].notna()]
-        ranks = ranked.groupby("seed")[key].rank(method="min")
+        ranked = table[table["kind"].isin(RANKED_KINDS) & table[key].notna()]
+        ranks = ranked.groupby("seed", dropna=False)[key].rank(method="min")
         table.loc[ranks.index, rank_key] = ranks.astype(int)
     return _records(table)
 
@@ -382,57 +439,158 @@ def confidence_interval(values: Sequence[float], level: float = 0.95) -> tuple[f
     return mean, mean - half, mean + half
 
 
-_VERDICT_KEYS = ("rmse", "r2_increments", "rmse_decrease_vs_two_point", "lateral_rmse",
-                 "rmse_over_paper_median", "curved_lateral_rmse", "lateral_nees")  # fmt: skip
+_VERDICT_KEYS = {
+    "rmse": ("steering", "rmse", False),
+    "r2_increments": ("steering", "r2_increments", False),
+    "rmse_decrease_vs_two_point": ("steering", "rmse_decrease_vs_two_point", False),
+    "lateral_rmse": ("estimation", "lateral_rmse_mean", False),
+    "rmse_over_paper_median": ("steering", "rmse_over_paper", True),
+    "curved_lateral_rmse": ("curved_estimation", "lateral_rmse_mean", False),
+    "lateral_nees": ("estimation", "lateral_nees", False),
+    "decided_time_share": ("estimation", "decided_time_share", False),
+    "lateral_rmse_after_decision": ("estimation", "lateral_rmse_after_decision", False),
+}
+"""Verdict key -> (per-driver table, its column, the per-seed statistic is the median over
+drivers) of the bootstrap; the point estimate is the mean of the per-seed summary's key."""
+
+_COUNTS = ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged", "degenerate_runs",
+           "curved_estimated_runs", *_SAFETY_COUNTS, *(f"curved_{k}" for k in _SAFETY_COUNTS))  # fmt: skip
+_SHARES = {
+    "decided_runs": "estimated_runs",
+    **{key: "estimated_runs" for key in _SAFETY_COUNTS},
+    **{f"curved_{key}": "curved_estimated_runs" for key in _SAFETY_COUNTS},
+}
+"""Count -> its number of runs: ``{count}_share`` with its Clopper-Pearson interval."""
+
+
+def _verdict_row(name: str, part: pd.DataFrame, kind: str) -> dict[str, Any]:
+    """One model's verdict row without intervals and ranks: means over seeds, sums of counts,
+    the shares of runs counted with their exact binomial intervals."""
+    row: dict[str, Any] = {
+        "model": name,
+        "kind": kind,
+        "seeds": int(part["seed"].nunique(dropna=False)),
+        "drivers": int(part["drivers"].max()),
+        "runs": int(part["runs"].sum()),
+    }
+    for key in _VERDICT_KEYS:
+        row[key] = _finite_mean(part[key]) if key in part else float("nan")
+    for key in _COUNTS:
+        values = pd.to_numeric(part[key], errors="coerce") if key in part else pd.Series()
+        row[key] = int(values.sum()) if values.notna().any() else None
+    for key, total in _SHARES.items():
+        count, runs = row.get(key), row.get(total)
+        share, low, high = None, None, None
+        if count is not None and runs:
+            share = count / runs
+            low, high = clopper_pearson(count, runs)
+        row |= {f"{key}_share": share, f"{key}_share_ci_low": low, f"{key}_share_ci_high": high}
+    return row
+
+
+def _seed_groups(
+    rows: Sequence[dict[str, Any]], seeds: Sequence[Any], column: str, names: Sequence[str]
+) -> list[np.ndarray]:
+    """Per seed, the ``(drivers, models)`` array of ``column`` (NaN where a model has no row;
+    a table without drivers is one driver per seed: the per-seed summary)."""
+    frame = pd.DataFrame(list(rows))
+    groups = []
+    for seed in seeds:
+        part = frame[same_seed(frame["seed"], seed)] if len(frame) else frame
+        if not len(part) or column not in part:
+            groups.append(np.full((1, len(names)), np.nan))
+            continue
+        part = part.assign(_value=pd.to_numeric(part[column], errors="coerce"))
+        if "driver" not in part:
+            part = part.assign(driver="")
+        wide = part.pivot_table(
+            index="driver", columns="model", values="_value", aggfunc="mean", dropna=False
+        )
+        groups.append(wide.reindex(columns=list(names)).to_numpy(dtype=np.float64))
+    return groups
+
+
+def _rank_stability(table: pd.DataFrame, key: str, rank_key: str, replicates: np.ndarray) -> None:
+    """``rank_key`` (the overall rank of the mean among every ranked model), ``rank_key_models``
+    (how many) and ``rank_key_stability`` (the share of bootstrap replicates on which the model
+    holds that rank among all of them), in ``table`` (rows in the replicates' column order)."""
+    table[rank_key] = None
+    table[f"{rank_key}_models"] = None
+    table[f"{rank_key}_stability"] = None
+    ranked = table["kind"].isin(RANKED_KINDS).to_numpy() & table[key].notna().to_numpy()
+    if not ranked.any():
+        return
+    index = table.index[ranked]
+    overall = table.loc[index, key].astype(float).rank(method="min").astype(int)
+    table.loc[index, rank_key] = overall
+    table.loc[index, f"{rank_key}_models"] = int(ranked.sum())
+    ranks = replicate_ranks(replicates[:, ranked])
+    table.loc[index, f"{rank_key}_stability"] = np.mean(
+        ranks == overall.to_numpy()[None, :], axis=0
+    )
+
+
+def _decision_times(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None:
+    """``time_to_decide_median`` / ``_p90`` (s) per model in ``table``: quantiles over its
+    runs (degenerate ones left out), a run that never decided counting as an infinite time
+    (None when the quantile is such a run; ``never_decided_runs`` counts them)."""
+    frame = pd.DataFrame(list(runs))
+    for q, key in ((0.5, "time_to_decide_median"), (0.9, "time_to_decide_p90")):
+        table[key] = None
+        if not len(frame) or "time_to_decide" not in frame:
+            continue
+        kept = frame["lateral_rmse"].apply(lambda v: v is not None and math.isfinite(float(v)))
+        if "degenerate" in frame:
+            kept &= frame["degenerate"].isna()
+        times = pd.to_numeric(frame["time_to_decide"], errors="coerce").fillna(np.inf)
+        for i, name in table["model"].items():
+            mine = times[kept & (frame["model"] == name)]
+            table.at[i, key] = _censored_quantile(mine, q) if len(mine) else None
 
 
 def verdict(
     seed_rows: Sequence[dict[str, Any]],
     models: Sequence[str],
     kinds: Mapping[str, str] | None = None,
+    *,
+    steering: Sequence[dict[str, Any]] = (),
+    estimation: Sequence[dict[str, Any]] = (),
+    curved_estimation: Sequence[dict[str, Any]] = (),
+    runs_estimation: Sequence[dict[str, Any]] = (),
 ) -> list[dict[str, Any]]:
-    """Per model over seeds: means with 95 % intervals (see the module docstring), ranks,
-    rank stability, decisions and free-run divergences in all."""
+    """Per model over seeds: means with 95 % intervals, ranks among every ranked model and
+    their stability, counts, shares of runs with exact intervals (the module docstring).
+
+    Args:
+        seed_rows: :func:`summarize_seeds`' rows (the point estimates).
+        models, kinds: the scored models (the baselines are added) and their kinds.
+        steering, estimation, curved_estimation: the per (seed, driver, model) rows the
+            bootstrap resamples; without any, it resamples the per-seed values only.
+        runs_estimation: the per-run estimation rows of the main track: the quantiles of
+            the time to decide (:func:`_decision_times`).
+    """
     frame = pd.DataFrame(list(seed_rows))
     if not len(frame):
         return []
-    names = list(models) + [b for b in BASELINES if b not in models]
-    rows = []
-    for name in names:
-        part = frame[frame["model"] == name]
-        if not len(part):
-            continue
-        row: dict[str, Any] = {
-            "model": name,
-            "kind": _kind(name, kinds),
-            "seeds": int(part["seed"].nunique()),
-            "drivers": int(part["drivers"].max()),
-            "runs": int(part["runs"].sum()),
-        }
-        for key in _VERDICT_KEYS:
-            mean, low, high = confidence_interval(part[key].tolist())
-            row[key] = mean
-            row[f"{key}_ci_low"] = low
-            row[f"{key}_ci_high"] = high
-        counts = ("decided_runs", "estimated_runs", "white_runs", "free_run_diverged",
-                  "degenerate_runs", "curved_estimated_runs", *_SAFETY_COUNTS,
-                  *(f"curved_{k}" for k in _SAFETY_COUNTS))  # fmt: skip
-        for key in counts:
-            values = pd.to_numeric(part[key], errors="coerce")
-            row[key] = int(values.sum()) if values.notna().any() else None
-        rows.append(row)
-    table = pd.DataFrame(rows)
+    names = [n for n in [*models, *(b for b in BASELINES if b not in models)]
+             if (frame["model"] == n).any()]  # fmt: skip
+    table = pd.DataFrame(
+        [_verdict_row(n, frame[frame["model"] == n], _kind(n, kinds)) for n in names]
+    )
+    seeds = list(dict.fromkeys(frame["seed"]))
+    by_driver = {"steering": steering, "estimation": estimation,
+                 "curved_estimation": curved_estimation}  # fmt: skip
+    driver_level = any(by_driver.values())
+    replicates: dict[str, np.ndarray] = {}
+    for key, (source, column, median) in _VERDICT_KEYS.items():
+        rows, col = (by_driver[source], column) if driver_level else (seed_rows, key)
+        groups = _seed_groups(rows, seeds, col, names)
+        replicates[key] = hierarchical_bootstrap(groups, median=median and driver_level)
+        low, high = percentile_interval(replicates[key])
+        enough = sum(np.isfinite(g).sum(axis=0) for g in groups) >= 2  # something to resample
+        table[f"{key}_ci_low"] = np.where(enough, low, np.nan)
+        table[f"{key}_ci_high"] = np.where(enough, high, np.nan)
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
-        table[rank_key] = None
-        table[f"{rank_key}_stability"] = None
-        ranked = table[table["kind"].isin(_RANKED_KINDS) & table[key].notna()]
-        if not len(ranked):
-            continue
-        overall = ranked[key].rank(method="min").astype(int)
-        table.loc[overall.index, rank_key] = overall
-        for i in overall.index:
-            per_seed = frame[frame["model"] == table.loc[i, "model"]][rank_key]
-            per_seed = pd.to_numeric(per_seed, errors="coerce").dropna()
-            if len(per_seed):
-                table.loc[i, f"{rank_key}_stability"] = float(np.mean(per_seed == overall[i]))
+        _rank_stability(table, key, rank_key, replicates[key])
+    _decision_times(table, runs_estimation)
     return _records(table)

@@ -41,9 +41,10 @@ class BenchmarkResult:
         estimation: rows per (seed, driver, model) incl. the baselines (paper table 2).
         curved_estimation: the same on the curved track.
         seed_summary: per (seed, model), means over drivers and the ranks.
-        summary: per model, the verdict over seeds: means with 95 % confidence
-            intervals, ranks and their stability
-            (:func:`benchmarks.protocol.aggregate.verdict`).
+        summary: per model, the verdict over seeds (or the participants of recordings):
+            means with 95 % hierarchical-bootstrap intervals, shares of runs with exact
+            binomial intervals, decision metrics, ranks among every ranked model and their
+            stability (:func:`benchmarks.protocol.aggregate.verdict`; format_version 3).
         runs_steering, runs_estimation: per-run rows (with their seed).
         errors: failed user models (:meth:`ModelError.to_dict`).
         drivers: the drivers (synthetic parameters or recording files).
@@ -86,7 +87,7 @@ class BenchmarkResult:
         """The JSON document of ``results.json`` (NaN and infinities become null)."""
         doc = {
             "format": "hasa_bench.results",
-            "format_version": 2,
+            "format_version": 3,
             "config": self.config,
             "versions": self.versions,
             "executor": self.executor,

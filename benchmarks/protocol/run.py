@@ -317,7 +317,11 @@ def run_protocol(
     seed_summary = summarize_seeds(
         steering_rows, estimation_rows, estimators, kinds, curved_estimation_rows
     )
-    summary = verdict(seed_summary, estimators, kinds)
+    summary = verdict(
+        seed_summary, estimators, kinds, steering=steering_rows, estimation=estimation_rows,
+        curved_estimation=curved_estimation_rows,
+        runs_estimation=[r for r in runs_estimation if r["track"] == config.track],
+    )  # fmt: skip
     plots = plot_data(
         [c for c in chunk_results if c.traces or c.acf or c.early_errors],
         fitted_by_seed[seeds[0]],

@@ -331,6 +331,42 @@ def _settle_steps(true_weight: np.ndarray, valid: np.ndarray, threshold: float) 
     return steps
 
 
+def _decision_metrics(
+    true_weight: np.ndarray,
+    valid: np.ndarray,
+    time: np.ndarray,
+    error: np.ndarray,
+    threshold: float,
+) -> dict[str, np.ndarray]:
+    """(R,) decision metrics of each run:
+
+    - ``time_to_decide`` (s): ``t(k*) - t(0)`` with ``k*`` the first step at which the true
+      lane's weight exceeds ``threshold`` (NaN: never);
+    - ``decided_time_share``: the share of the run's steps with that weight above ``threshold``;
+    - ``lateral_rmse_after_decision`` (m): ``sqrt(mean_{k >= k_s} e(k)^2)`` from the step
+      ``k_s`` from which the weight stays above ``threshold`` (:func:`_settle_steps`; NaN:
+      never settled).
+    """
+    above = (true_weight > threshold) & valid
+    ever = above.any(axis=1)
+    first = np.argmax(above, axis=1)
+    rows = np.arange(len(valid))
+    time_to_decide = np.where(ever, time[rows, first] - time[:, 0], np.nan)
+    share = above.sum(axis=1) / np.maximum(valid.sum(axis=1), 1)
+    settle = _settle_steps(true_weight, valid, threshold)
+    after = valid & (
+        np.arange(valid.shape[1])[None, :] >= np.nan_to_num(settle, nan=np.inf)[:, None]
+    )
+    squared = np.where(after & np.isfinite(error), error * error, 0.0)
+    counts = (after & np.isfinite(error)).sum(axis=1)
+    rmse_after = np.where(counts > 0, np.sqrt(squared.sum(axis=1) / np.maximum(counts, 1)), np.nan)
+    return {
+        "time_to_decide": time_to_decide,
+        "decided_time_share": share,
+        "lateral_rmse_after_decision": rmse_after,
+    }
+
+
 def _estimate_model(
     task: ChunkTask,
     frames: Sequence[pd.DataFrame],
@@ -382,6 +418,9 @@ def _estimation_rows(
     bias0 = result.truth["bias"][:, 0]
     true_weight = result.true_lane_weight()  # (R, T): weight of the hypotheses equal to the bias
     steps = _settle_steps(true_weight, result.valid, task.weight_threshold)
+    decision = _decision_metrics(
+        true_weight, result.valid, result.time, error, task.weight_threshold
+    )
     final_true = result.picked_true_lane()
     last = result.lengths - 1
     final_weight = true_weight[np.arange(len(refs)), last]
@@ -409,6 +448,7 @@ def _estimation_rows(
                 "model": name,
                 "lateral_rmse": float(rmse[j]),
                 "steps_to_decide": None if not np.isfinite(steps[j]) else int(steps[j]),
+                **{key: float(values[j]) for key, values in decision.items()},
                 "true_lane_final": bool(final_true[j]),
                 "final_true_lane_weight": float(final_weight[j]),
                 "final_decision": str(final_decision[j]),
