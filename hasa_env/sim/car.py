@@ -156,7 +156,7 @@ def _read_sensors(
     noise = car.noise[car.noise_pos]
     car.noise_pos += 1
     car.curvature = kappa
-    car.sensors = sensor_readings(car.state, imu, car.bias, noise, setup.noise_std)
+    car.sensors = sensor_readings(car.state, imu, car.bias, noise, setup.noise_std, setup.params)
 
 
 _NO_READINGS = Sensors(*(0.0 for _ in Sensors._fields))
@@ -212,7 +212,9 @@ def start_cars(
     imu = road_frame_acceleration(start_state, 0.0, kappa, setup.params, ARRAY_OPS)
     noise = cars.noise[idx, 0]  # the new blocks' first rows
     cars.noise_pos[idx] = 1
-    readings = sensor_readings(start_state, imu, cars.bias[idx], noise.T, setup.noise_std)
+    readings = sensor_readings(
+        start_state, imu, cars.bias[idx], noise.T, setup.noise_std, setup.params
+    )
     cars.curvature[idx] = kappa
     for channel, reading in zip(cars.sensors, readings, strict=True):
         channel[idx] = reading
@@ -248,7 +250,9 @@ def advance_cars(
     n = len(pos)
     noise = cars.noise.reshape(-1, cars.noise.shape[2])[np.arange(n) * block + pos]
     cars.noise_pos += 1
-    readings = sensor_readings(state, outcome.imu, cars.bias, noise.T, setup.noise_std)
+    readings = sensor_readings(
+        state, outcome.imu, cars.bias, noise.T, setup.noise_std, setup.params
+    )
     cars.curvature = np.array(_broadcast(curvature(state.station), state.station.shape))
     for channel, reading in zip(cars.sensors, readings, strict=True):
         channel[:] = reading

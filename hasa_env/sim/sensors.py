@@ -27,7 +27,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from hasa_env.sim.dynamics import VehicleState
+from hasa_env.sim.dynamics import VehicleParams, VehicleState
 
 __all__ = [
     "SENSOR_NAMES",
@@ -88,6 +88,7 @@ def sensor_readings(
     bias: Any,
     noise: Any,
     noise_std: Sensors,
+    params: VehicleParams,
 ) -> Sensors:
     """Noisy sensor readings (the module docstring's equations).
 
@@ -97,6 +98,8 @@ def sensor_readings(
         bias: camera bias b (m): the camera reads y + b.
         noise: one standard-normal draw per channel (a sequence of floats, or of (N,) arrays).
         noise_std: each channel's noise standard deviation.
+        params: the vehicle's parameters (for sensors that read through them, e.g. a
+            yaw rate v tan(delta) / L; none of the six does).
     """
     return Sensors(
         state.speed + noise_std[0] * noise[0],
