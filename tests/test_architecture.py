@@ -6,7 +6,10 @@
   ``benchmarks`` or ``hasa_cli``, at module level or inside a function;
 - imports inside functions are kept for optional or heavy dependencies
   (pygame on paths that must stay headless, the optional extras), each with a
-  one-line reason on the import's line.
+  one-line reason on the import's line;
+- no module imports another module's private (``_name``) names: what is shared
+  is public and documented (a private *module* such as ``hasa_env._lazy`` may be
+  imported whole).
 """
 
 from __future__ import annotations
@@ -111,6 +114,57 @@ def test_the_checks_above_can_fail(tmp_path):
     tree = ast.parse(module)
     ((node, in_function),) = _imports(tree)
     assert in_function and _imported_names(node) == ["estimators"]
+
+
+def _private_names_imported(tree: ast.AST, package_dir: Path) -> list[tuple[int, str]]:
+    """(line, "module._name") of each ``from module import _name`` that takes a private
+    name: not ``__future__``, not a dunder, not a private module (``from pkg import _lazy``
+    where ``pkg/_lazy.py`` exists). ``package_dir``: the directory of the importing module,
+    for relative imports."""
+    found = []
+    for node, _ in _imports(tree):
+        if not isinstance(node, ast.ImportFrom) or node.module == "__future__":
+            continue
+        if node.level:
+            base = package_dir
+            for _ in range(node.level - 1):
+                base = base.parent
+        else:
+            base = ROOT
+        source = base.joinpath(*(node.module or "").split(".")) if node.module else base
+        for alias in node.names:
+            name = alias.name
+            if not name.startswith("_") or (name.startswith("__") and name.endswith("__")):
+                continue
+            if (source / f"{name}.py").is_file() or (source / name / "__init__.py").is_file():
+                continue  # a private module of the package, imported whole
+            found.append((node.lineno, f"{'.' * node.level}{node.module or ''}.{name}"))
+    return found
+
+
+def test_no_module_imports_a_private_name_of_another():
+    """``from x import _y`` is an error in every package: share public, documented names."""
+    offenders = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for package in PACKAGES
+        for path in _modules(package)
+        for line, name in _private_names_imported(
+            ast.parse(path.read_text(encoding="utf-8")), path.parent
+        )
+    ]
+    assert not offenders, "private names imported across modules:\n" + "\n".join(offenders)
+
+
+def test_the_private_import_check_can_fail():
+    """It flags a private function and allows a private module, dunders and __future__."""
+    module = (
+        "from __future__ import annotations\n"
+        "from hasa_env import _lazy\n"
+        "from hasa_env.recording.format import __all__, _versions\n"
+        "def f():\n    from .format import _json_default  # hidden\n"
+    )
+    found = _private_names_imported(ast.parse(module), ROOT / "hasa_env" / "recording")
+    assert found == [(3, "hasa_env.recording.format._versions"), (5, ".format._json_default")]
 
 
 def test_long_modules_say_why():

@@ -527,16 +527,16 @@ def test_a_loaded_sidecar_keeps_its_fields_and_converts_nothing_it_does_not_know
 
 
 def test_writer_checks_run_on_the_validator():
-    from hasa_env.recording.format import _check_json_able, _check_seed
+    from hasa_env.recording.format import check_json_able, check_seed
 
-    assert _check_json_able("metadata", {"a": (np.float32(0.5), np.int64(2))}) == {"a": [0.5, 2]}
+    assert check_json_able("metadata", {"a": (np.float32(0.5), np.int64(2))}) == {"a": [0.5, 2]}
     with pytest.raises(ValueError, match=r"^metadata.a\[0\] must be JSON data"):
-        _check_json_able("metadata", {"a": [float("nan")]})
+        check_json_able("metadata", {"a": [float("nan")]})
     with pytest.raises(ValueError, match="nested more than 16 levels"):
-        _check_json_able("metadata", {"a": _deep(5000)})
-    assert _check_seed(np.int64(3), "seed") == 3
+        check_json_able("metadata", {"a": _deep(5000)})
+    assert check_seed(np.int64(3), "seed") == 3
     with pytest.raises(ValueError, match=r"^seed must be a non-negative integer, got True"):
-        _check_seed(True, "seed")
+        check_seed(True, "seed")
 
 
 # ------------------------------------------------------- protocol settings

@@ -56,11 +56,11 @@ from hasa_env.steering.regression import (
     ILL_CONDITIONED,
     CrossValidation,
     LinearSolution,
-    _check_shape,
-    _standardize,
+    check_regression_shapes,
     choose_ridge_lambda,
     least_squares,
     ridge_regression,
+    standardize_columns,
 )
 
 __all__ = [
@@ -391,7 +391,7 @@ def fit_model(
         raise ValueError(
             f"{model.name}: design has {X.shape[1]} columns for {len(names)} parameters"
         )
-    _check_shape(X, y)
+    check_regression_shapes(X, y)
     cross_validation = None
     if isinstance(ridge, str):
         if ridge != "cv":
@@ -416,7 +416,7 @@ def fit_model(
                 break
     condition = solution.condition_number
     if solution.ridge_lambda > 0 and X.shape[1]:
-        Z, _ = _standardize(X, names)
+        Z, _ = standardize_columns(X, names)
         singular = np.linalg.svd(Z, compute_uv=False)
         condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
     n, p = X.shape
