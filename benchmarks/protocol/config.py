@@ -160,7 +160,7 @@ class ProtocolConfig:
             ``"<model> (no checks)"``: what the checks cost or buy.
         estimate: run the lane estimation (paper table 2); False: steering
             scores and driving statistics only (the population calibration,
-            :mod:`benchmarks.calibration`).
+            :mod:`benchmarks.population_tuning`).
         filter_settings: fields of :class:`estimators.settings.FilterSettings`
             for every estimator (e.g. ``{"forgetting_time": 10.0}``), over the
             run's sensor noise; the steering residual level stays the fitted

@@ -275,7 +275,7 @@ _HUMAN_MOTOR = MotorRanges(
 )
 # A foot on a pedal is no cruise control: a held speed wanders by a few tenths of a m/s
 # (about +-1 km/h) over a 30 s run (docs/design.md §7.4). Chosen as a plain human figure, not
-# fitted to any benchmark number; the sensitivity to it is in docs/calibration.md.
+# fitted to any benchmark number; the sensitivity to it is in docs/population_tuning.md.
 _HUMAN_PEDAL = PedalRanges(noise=_Range(0.2, 0.5), time_constant=_Range(1.0, 3.0))
 _WHEEL_STUDY = {
     # what a G29 study measures: the wheel's own (quantized) reading, no automotive sensor noise
