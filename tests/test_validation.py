@@ -626,7 +626,7 @@ def test_validate_fields_stores_converted_values_also_on_frozen_dataclasses():
         Settings(runs=0)
 
 
-# The specs FilterSettings (estimators/settings.py) and DriverParams / SpeedProfile /
+# The specs FilterSettings (estimators/settings.py) and TwoPointParams / SpeedProfile /
 # MotorParams (hasa_env/drivers) will be migrated to: they must accept what the classes accept and
 # refuse what they refuse (both checked here against the classes' own validation).
 def _positive(unit: str = "") -> Field:
@@ -772,17 +772,17 @@ def test_the_driver_params_spec_agrees_with_driver_params(where, name, value):
 
     from hasa_env.drivers.base import SpeedProfile
     from hasa_env.drivers.motor import MotorParams
-    from hasa_env.drivers.synthetic import DriverParams
+    from hasa_env.drivers.two_point import TwoPointParams
 
-    values = dataclasses.asdict(DriverParams())
+    values = dataclasses.asdict(TwoPointParams())
     assert _accepts(DRIVER_PARAMS, values)
     part = {"speed": SpeedProfile, "motor": MotorParams}.get(where)
     if part is not None:
         values[where][name] = value
-        accepted = _constructs(lambda: DriverParams(**{where: part(**{name: value})}))
+        accepted = _constructs(lambda: TwoPointParams(**{where: part(**{name: value})}))
     else:
         values[name] = value
-        accepted = _constructs(lambda: DriverParams(**{name: value}))
+        accepted = _constructs(lambda: TwoPointParams(**{name: value}))
     assert _accepts(DRIVER_PARAMS, values) == accepted
 
 
