@@ -191,18 +191,32 @@ def test_no_module_cites_a_design_document_outside_the_repository():
     assert not citing, f"cite docs/design.md instead of DESIGN.md in: {citing}"
 
 
-def _design_sections() -> set[str]:
-    sections = set()
-    for line in (ROOT / "docs" / "design.md").read_text(encoding="utf-8").splitlines():
+def _design_section_numbers(text: str) -> list[str]:
+    """The number of every ``## N.`` / ``### N.M`` heading of ``text``, in order."""
+    numbers = []
+    for line in text.splitlines():
         match = re.match(r"#{2,3} (\d+(?:\.\d+)?)[. ]", line)
         if match:
-            sections.add(match.group(1))
-    return sections
+            numbers.append(match.group(1))
+    return numbers
+
+
+def _duplicated(numbers: list[str]) -> list[str]:
+    return sorted({n for n in numbers if numbers.count(n) > 1})
+
+
+def test_the_duplicate_section_check_can_fail():
+    text = "## 9. Bench\n### 9.7 Bad input\n### 9.8 Safety\n### 9.7 Studies\n#### 9.7.1 x\n"
+    assert _design_section_numbers(text) == ["9", "9.7", "9.8", "9.7"]
+    assert _duplicated(_design_section_numbers(text)) == ["9.7"]
 
 
 def test_every_design_citation_resolves_to_a_section():
-    """Each ``docs/design.md §N`` / ``§N.M`` (ranges and lists too) names a section that exists."""
-    sections = _design_sections()
+    """Each ``docs/design.md §N`` / ``§N.M`` (ranges and lists too) names a section that exists,
+    and no two sections share a number (a citation must name one section)."""
+    numbers = _design_section_numbers((ROOT / "docs" / "design.md").read_text(encoding="utf-8"))
+    assert not _duplicated(numbers), f"section numbers used twice: {_duplicated(numbers)}"
+    sections = set(numbers)
     assert {"2", "3", "5.7", "8.5", "10", "11"} <= sections
     citation = re.compile(r"docs/design\.md((?:[ ,;]*(?:and )?§\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?)+)")
     files = [p for package in PACKAGES for p in _modules(package)]
