@@ -18,6 +18,10 @@ A recording is a pair of files in one directory:
 
 Writing: :mod:`hasa_env.recording.writer`; reading: :mod:`hasa_env.recording.reader`;
 re-simulating: :mod:`hasa_env.recording.replay`.
+
+Why this module is long: it is the one definition of the files on disk (columns, units, value
+formatting and parsing, the sidecar's schema, atomic writes, safe reads), which the writer,
+the reader, the replay and the Parquet export share through its documented public names.
 """
 
 from __future__ import annotations

@@ -530,6 +530,7 @@ class DriveSession:
             if self.state != "driving":
                 break
             reading = self.inputs.read(self.dt)
+            assert self.info is not None  # the run's reset set it
             acceleration = self.settings.applied_acceleration(
                 reading.acceleration, float(self.info["speed"]), self.dt
             )
