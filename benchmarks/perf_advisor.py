@@ -42,7 +42,7 @@ import gymnasium as gym
 import numpy as np
 
 import advisor_tasks  # noqa: F401 - registers the advisor ids (and hasa_env's)
-from benchmarks.perf_env import _sample_actions
+from benchmarks.perf_env import sample_box_actions
 
 __all__ = ["run", "main", "format_table", "TARGETS", "MEASURES"]
 
@@ -83,7 +83,7 @@ _PLAN_QUICK = {
 
 def _single_timer(env: gym.Env, steps: int, warmup: int, seed: int) -> Callable[[], float]:
     """A function timing ``steps`` env.step calls (resets included): env-steps per second."""
-    actions = _sample_actions(env.action_space, (steps,), seed)
+    actions = sample_box_actions(env.action_space, (steps,), seed)
     env.reset(seed=seed)
     for a in actions[:warmup]:
         _, _, terminated, truncated, _ = env.step(a)
@@ -108,7 +108,7 @@ def _vector_timer(
 ) -> Callable[[], float]:
     """A function timing ``steps`` vector step calls (the env autoresets): env-steps/s."""
     n = env.num_envs
-    actions = _sample_actions(env.single_action_space, (steps, n), seed)
+    actions = sample_box_actions(env.single_action_space, (steps, n), seed)
     env.reset(seed=seed)
     for k in range(warmup):
         env.step(actions[k % steps])

@@ -87,7 +87,7 @@ _WARMUP = 20  # untimed steps before a single-env measurement
 _WARMUP_VECTOR = 400
 
 
-def _sample_actions(space: gym.Space, shape: tuple[int, ...], seed: int) -> np.ndarray:
+def sample_box_actions(space: gym.Space, shape: tuple[int, ...], seed: int) -> np.ndarray:
     """Uniform actions over a bounded Box, shape ``shape + space.shape``, in the space's dtype."""
     if not isinstance(space, gym.spaces.Box):
         raise TypeError(f"the benchmark samples Box action spaces, got {space}")
@@ -99,7 +99,7 @@ def _sample_actions(space: gym.Space, shape: tuple[int, ...], seed: int) -> np.n
 
 def _time_single(env: gym.Env, steps: int, repeats: int, seed: int) -> dict[str, Any]:
     """Time ``steps`` env.step calls (resetting at episode ends), ``repeats`` times."""
-    actions = _sample_actions(env.action_space, (steps,), seed)
+    actions = sample_box_actions(env.action_space, (steps,), seed)
     env.reset(seed=seed)
     for a in actions[:_WARMUP]:
         _, _, terminated, truncated, _ = env.step(a)
@@ -126,7 +126,7 @@ def _time_vector(env: gym.vector.VectorEnv, steps: int, repeats: int, seed: int)
     Rates are in env-steps per second (``num_envs`` per call).
     """
     n = env.num_envs
-    actions = _sample_actions(env.single_action_space, (steps, n), seed)
+    actions = sample_box_actions(env.single_action_space, (steps, n), seed)
     env.reset(seed=seed)
     for k in range(_WARMUP_VECTOR):
         env.step(actions[k % steps])

@@ -5,8 +5,8 @@ configuration (:mod:`hasa_env.sim.config`), steering-model files
 (:mod:`hasa_env.steering.model_file`), input-device calibrations
 (:mod:`hasa_env.devices.calibration`), recording sidecars
 (:mod:`hasa_env.recording.format`), drive settings
-(:mod:`hasa_env.session.settings`) and the benchmark's protocol settings
-(``benchmarks.protocol.config``). A schema is a tree of :class:`Field` specs;
+(:mod:`hasa_env.session.settings`) and, in the layers above, the benchmark's protocol
+settings. A schema is a tree of :class:`Field` specs;
 :func:`validate` walks a nested document against it, fills in defaults,
 rejects unknown keys (naming the allowed ones), converts what it accepts
 (numpy scalars to Python numbers, integral floats to ``int`` for integer

@@ -6,7 +6,10 @@
   ``advisor_tasks``, ``benchmarks`` or ``hasa_cli``, at module level or inside a function;
 - imports inside functions are kept for optional or heavy dependencies
   (pygame on paths that must stay headless, the optional extras), each with a
-  one-line reason on the import's line.
+  one-line reason on the import's line;
+- no module imports another module's private (``_name``) names: what is shared
+  is public and documented (a private *module* such as ``hasa_env._lazy`` may be
+  imported whole).
 """
 
 from __future__ import annotations
@@ -115,6 +118,57 @@ def test_the_checks_above_can_fail(tmp_path):
     assert in_function and _imported_names(node) == ["estimators"]
 
 
+def _private_names_imported(tree: ast.AST, package_dir: Path) -> list[tuple[int, str]]:
+    """(line, "module._name") of each ``from module import _name`` that takes a private
+    name: not ``__future__``, not a dunder, not a private module (``from pkg import _lazy``
+    where ``pkg/_lazy.py`` exists). ``package_dir``: the directory of the importing module,
+    for relative imports."""
+    found = []
+    for node, _ in _imports(tree):
+        if not isinstance(node, ast.ImportFrom) or node.module == "__future__":
+            continue
+        if node.level:
+            base = package_dir
+            for _ in range(node.level - 1):
+                base = base.parent
+        else:
+            base = ROOT
+        source = base.joinpath(*(node.module or "").split(".")) if node.module else base
+        for alias in node.names:
+            name = alias.name
+            if not name.startswith("_") or (name.startswith("__") and name.endswith("__")):
+                continue
+            if (source / f"{name}.py").is_file() or (source / name / "__init__.py").is_file():
+                continue  # a private module of the package, imported whole
+            found.append((node.lineno, f"{'.' * node.level}{node.module or ''}.{name}"))
+    return found
+
+
+def test_no_module_imports_a_private_name_of_another():
+    """``from x import _y`` is an error in every package: share public, documented names."""
+    offenders = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for package in PACKAGES
+        for path in _modules(package)
+        for line, name in _private_names_imported(
+            ast.parse(path.read_text(encoding="utf-8")), path.parent
+        )
+    ]
+    assert not offenders, "private names imported across modules:\n" + "\n".join(offenders)
+
+
+def test_the_private_import_check_can_fail():
+    """It flags a private function and allows a private module, dunders and __future__."""
+    module = (
+        "from __future__ import annotations\n"
+        "from hasa_env import _lazy\n"
+        "from hasa_env.recording.format import __all__, _versions\n"
+        "def f():\n    from .format import _json_default  # hidden\n"
+    )
+    found = _private_names_imported(ast.parse(module), ROOT / "hasa_env" / "recording")
+    assert found == [(3, "hasa_env.recording.format._versions"), (5, ".format._json_default")]
+
+
 def test_long_modules_say_why():
     """No module over about 600 lines without a stated reason in its docstring."""
     long = []
@@ -139,18 +193,32 @@ def test_no_module_cites_a_design_document_outside_the_repository():
     assert not citing, f"cite docs/design.md instead of DESIGN.md in: {citing}"
 
 
-def _design_sections() -> set[str]:
-    sections = set()
-    for line in (ROOT / "docs" / "design.md").read_text(encoding="utf-8").splitlines():
+def _design_section_numbers(text: str) -> list[str]:
+    """The number of every ``## N.`` / ``### N.M`` heading of ``text``, in order."""
+    numbers = []
+    for line in text.splitlines():
         match = re.match(r"#{2,3} (\d+(?:\.\d+)?)[. ]", line)
         if match:
-            sections.add(match.group(1))
-    return sections
+            numbers.append(match.group(1))
+    return numbers
+
+
+def _duplicated(numbers: list[str]) -> list[str]:
+    return sorted({n for n in numbers if numbers.count(n) > 1})
+
+
+def test_the_duplicate_section_check_can_fail():
+    text = "## 9. Bench\n### 9.7 Bad input\n### 9.8 Safety\n### 9.7 Studies\n#### 9.7.1 x\n"
+    assert _design_section_numbers(text) == ["9", "9.7", "9.8", "9.7"]
+    assert _duplicated(_design_section_numbers(text)) == ["9.7"]
 
 
 def test_every_design_citation_resolves_to_a_section():
-    """Each ``docs/design.md §N`` / ``§N.M`` (ranges and lists too) names a section that exists."""
-    sections = _design_sections()
+    """Each ``docs/design.md §N`` / ``§N.M`` (ranges and lists too) names a section that exists,
+    and no two sections share a number (a citation must name one section)."""
+    numbers = _design_section_numbers((ROOT / "docs" / "design.md").read_text(encoding="utf-8"))
+    assert not _duplicated(numbers), f"section numbers used twice: {_duplicated(numbers)}"
+    sections = set(numbers)
     assert {"2", "3", "5.7", "8.5", "10", "11"} <= sections
     citation = re.compile(r"docs/design\.md((?:[ ,;]*(?:and )?§\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?)+)")
     files = [p for package in PACKAGES for p in _modules(package)]

@@ -10,11 +10,11 @@ import pytest
 import hasa_env  # noqa: F401  (registers the env ids)
 from hasa_env.drivers import (
     Driver,
-    DriverParams,
     ModelDriver,
     ReplayDriver,
     SpeedProfile,
     SyntheticDriver,
+    TwoPointParams,
     population,
     run_driver,
     run_population,
@@ -31,7 +31,11 @@ SHORT = {"time_limit": 3.0}
 
 def test_drivers_implement_the_protocol():
     model = GeneralizedModel.paper()
-    for driver in (SyntheticDriver(DriverParams()), ModelDriver(model), ReplayDriver([[0.0, 0.0]])):
+    for driver in (
+        SyntheticDriver(TwoPointParams()),
+        ModelDriver(model),
+        ReplayDriver([[0.0, 0.0]]),
+    ):
         assert isinstance(driver, Driver)
 
 
@@ -53,16 +57,16 @@ def test_population_is_reproducible_by_name_and_seed():
     assert any(p.noise_time_constant == 0 for p in first)  # white motor noise
     assert any(0.2 <= p.noise_time_constant <= 0.4 for p in first)  # OU motor noise
     assert len(population("paper-pi", size=4)) == 4
-    assert DriverParams.from_dict(first[3].to_dict()) == first[3]
+    assert TwoPointParams.from_dict(first[3].to_dict()) == first[3]
     with pytest.raises(ValueError, match="unknown population 'nope'; allowed: paper, paper-pi"):
         population("nope")
 
 
 def test_loop_design_places_the_lateral_poles():
-    params = DriverParams.from_loop(1.1, 0.6, 0.3, near_time=0.4, far_time=1.2)
+    params = TwoPointParams.from_loop(1.1, 0.6, 0.3, near_time=0.4, far_time=1.2)
     c = params.reference_speed / 2.8
     k_n, k_f, k_i = params.near_gain, params.far_gain, params.integral_gain
-    # y''' + A1 y'' + A0 y' + AI y = 0 (see DriverParams.from_loop)
+    # y''' + A1 y'' + A0 y' + AI y = 0 (see TwoPointParams.from_loop)
     actual = [1.0, c * (k_n + k_f), c * (k_n / 0.4 + k_f / 1.2 + k_i), c * k_i / 0.4]
     desired = np.poly([-0.3 * 1.1, *np.roots([1.0, 2 * 0.6 * 1.1, 1.1**2])])
     np.testing.assert_allclose(actual, desired.real, rtol=1e-12)
@@ -185,7 +189,7 @@ def test_model_driver_checks_its_arguments():
     with pytest.raises(ValueError, match="Ts = 0.01"):
         run_driver(driver, config={"sim_frequency": 50.0, **SHORT})
     with pytest.raises(ValueError, match="speed_exponent"):
-        DriverParams(speed_exponent=float("nan"))
+        TwoPointParams(speed_exponent=float("nan"))
 
 
 def test_speed_profiles_ramp_and_slow_for_bends():

@@ -12,7 +12,6 @@ from hasa_env.drivers import (
     ARCHETYPES,
     G29_RESOLUTION,
     POPULATIONS,
-    DriverParams,
     IntermittentDriver,
     IntermittentParams,
     MotorParams,
@@ -20,6 +19,8 @@ from hasa_env.drivers import (
     PreviewParams,
     SpeedProfile,
     SyntheticDriver,
+    TwoPointDriver,
+    TwoPointParams,
     make_batch,
     make_driver,
     params_from_dict,
@@ -38,7 +39,7 @@ STRAIGHT = "hasa_env/LaneKeeping-v0"
 def quiet(p, **speed):
     """The driver without remnant, quantization or its own noise (its control law alone)."""
     changes = {"motor": MotorParams(), "speed": SpeedProfile.hold(**speed)}
-    if isinstance(p, DriverParams):
+    if isinstance(p, TwoPointParams):
         changes["noise_std"] = 0.0
     return dataclasses.replace(p, **changes)
 
@@ -52,15 +53,24 @@ def by_archetype(params, frames):
 
 def test_make_driver_and_the_archetypes():
     assert list(ARCHETYPES) == ["two-point", "preview", "intermittent"]
-    kinds = {DriverParams: SyntheticDriver, PreviewParams: PreviewDriver,
+    kinds = {TwoPointParams: TwoPointDriver, PreviewParams: PreviewDriver,
              IntermittentParams: IntermittentDriver}  # fmt: skip
+    road = curved_road()
+    info = {"time": 0.0, "station": 140.0, "lateral_offset": 0.3, "heading": 0.01,
+            "speed": 15.0, "steering": 0.0}  # fmt: skip
     for params_type, driver_type in kinds.items():
         params = params_type(name="x")
         driver = make_driver(params)
         assert type(driver) is driver_type and driver.name == "x"
-        assert isinstance(SyntheticDriver(params), SyntheticDriver)  # drives every archetype
-    with pytest.raises(TypeError, match="PreviewDriver needs PreviewParams, got DriverParams"):
-        PreviewDriver(DriverParams())
+        # SyntheticDriver drives every archetype, exactly as the archetype's own driver does
+        synthetic = SyntheticDriver(params)
+        synthetic.reset(5, dt=0.01)
+        driver.reset(5, dt=0.01)
+        actions = [synthetic.act(info, road) for _ in range(60)]
+        assert actions == [driver.act(info, road) for _ in range(60)]
+        assert any(steering != 0.0 for steering, _ in actions), params_type.__name__
+    with pytest.raises(TypeError, match="PreviewDriver needs PreviewParams, got TwoPointParams"):
+        PreviewDriver(TwoPointParams())
     with pytest.raises(TypeError, match="not synthetic driver parameters: dict"):
         make_driver({"name": "x"})
 
@@ -72,7 +82,7 @@ def test_make_driver_and_the_archetypes():
     (lambda: IntermittentParams(correction_duration=0.0), r"IntermittentParams\.correction_duration must be in \[0.05, 2\]"),
     (lambda: IntermittentParams(neuromuscular_damping=-1.0), r"IntermittentParams\.neuromuscular_damping must be in \(0, 5\]"),
     (lambda: PreviewParams(motor=None), r"PreviewParams\.motor must be a MotorParams"),
-    (lambda: DriverParams(motor={}), r"DriverParams\.motor must be a MotorParams"),
+    (lambda: TwoPointParams(motor={}), r"TwoPointParams\.motor must be a MotorParams"),
 ])  # fmt: skip
 def test_parameters_name_the_bad_field_and_its_range(build, message):
     with pytest.raises((ValueError, TypeError), match=message):
@@ -88,9 +98,9 @@ def test_every_params_type_survives_a_json_round_trip():
         assert params_from_dict(data) == p
         assert type(p).from_dict(data) == p
     # results.json written before the archetypes existed: no "archetype", no "motor"
-    old = DriverParams(name="7").to_dict()
+    old = TwoPointParams(name="7").to_dict()
     del old["archetype"], old["motor"]
-    assert params_from_dict(old) == DriverParams(name="7")
+    assert params_from_dict(old) == TwoPointParams(name="7")
     with pytest.raises(ValueError, match="unknown driver archetype 'nope'"):
         params_from_dict({"archetype": "nope"})
     with pytest.raises(ValueError, match="archetype 'preview' is not 'intermittent'"):
@@ -138,7 +148,7 @@ def test_the_preview_design_tracks_a_steady_bend_at_every_speed():
 def test_the_loops_are_the_same_at_every_speed():
     """Speed-normalised design: from y = -0.5 m the preview and intermittent drivers' lateral
     response does not depend on the speed (5 to 45 m/s)."""
-    drivers = [p for p in population("paper", seed=0) if not isinstance(p, DriverParams)]
+    drivers = [p for p in population("paper", seed=0) if not isinstance(p, TwoPointParams)]
     response = {}
     for speed in (5.0, 45.0):
         frames = run_drivers(
@@ -204,7 +214,7 @@ def test_intermittent_steering_comes_in_bursts():
                 assert holding > 0.05 and spread > 0.4 and still > 0.3
             else:
                 assert holding == 0.0 and spread < 0.3
-    pi_noise = [p for p in population("paper", seed=0) if isinstance(p, DriverParams)]
+    pi_noise = [p for p in population("paper", seed=0) if isinstance(p, TwoPointParams)]
     frames = run_drivers(
         [make_driver(dataclasses.replace(p, motor=MotorParams())) for p in pi_noise],
         [(0, 0)] * 3,

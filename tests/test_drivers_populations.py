@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import hasa_env  # noqa: F401  (registers the env ids)
-from hasa_env.drivers import POPULATIONS, DriverParams, population, run_population
+from hasa_env.drivers import POPULATIONS, TwoPointParams, population, run_population
 from hasa_env.drivers.archetypes import archetype_of
 
 SEEDS = range(5)
@@ -50,7 +50,7 @@ def test_remnant_scale_multiplies_the_remnant_of_the_same_drivers(monkeypatch):
 
 def test_the_pi_populations_keep_the_old_drivers():
     old, human = population("paper-pi", 4), population("paper-pi-human", 4)
-    assert all(isinstance(p, DriverParams) for p in old + human)
+    assert all(isinstance(p, TwoPointParams) for p in old + human)
     assert all(not p.motor.has_remnant and p.motor.wheel_resolution == 0 for p in old)
     for a, b in zip(old, human, strict=True):
         assert dataclasses.replace(b, motor=a.motor) == a and b.motor.has_remnant

@@ -97,7 +97,7 @@ def test_a_failed_sidecar_update_keeps_the_recording_loadable_as_incomplete(tmp_
     def full_disk(*args, **kwargs):  # noqa: ANN002, ANN003
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(writer_module, "_write_atomic", full_disk)
+    monkeypatch.setattr(writer_module, "write_atomic", full_disk)
     with pytest.raises(RecordingError, match="stays incomplete"):
         env.close()
     rec = load_recording(tmp_path / "run_000.csv")

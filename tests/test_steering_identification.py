@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-from hasa_env.drivers import DriverParams, ModelDriver, SpeedProfile, SyntheticDriver, run_driver
+from hasa_env.drivers import ModelDriver, SpeedProfile, SyntheticDriver, TwoPointParams, run_driver
 from hasa_env.steering import (
     ARXForm,
     GeneralizedModel,
@@ -27,7 +27,7 @@ from hasa_env.steering.fitting import choose_ridge_lambda, design_blocks, ridge_
 def constant_speed_run():
     """A closed-loop run at a constant 15 m/s: the collinear case of docs/design.md §6.5."""
     driver = SyntheticDriver(
-        DriverParams.from_loop(1.0, 0.7, 0.3, noise_std=8e-4, speed=SpeedProfile.hold())
+        TwoPointParams.from_loop(1.0, 0.7, 0.3, noise_std=8e-4, speed=SpeedProfile.hold())
     )
     return run_driver(driver, runs=1, seed=3, options={"bias_index": 0})[0]
 
@@ -52,7 +52,7 @@ def test_a_constant_speed_run_flags_collinear_features_and_a_ramp_does_not(const
     assert checks.feature_collinearity["lateral_velocity"] < 1e-4
     assert set(checks.feature_collinearity) == {"delta", "phi", "omega", "lateral_velocity"}
     ramp = SpeedProfile(target_speed=40.0, ramp_rate=2.0, start_time=2.0)
-    driver = SyntheticDriver(DriverParams.from_loop(1.0, 0.7, 0.3, noise_std=8e-4, speed=ramp))
+    driver = SyntheticDriver(TwoPointParams.from_loop(1.0, 0.7, 0.3, noise_std=8e-4, speed=ramp))
     run = run_driver(driver, runs=1, seed=3, options={"bias_index": 0})[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SteeringFitWarning)
@@ -93,7 +93,7 @@ def test_the_penalty_comes_from_the_training_data_alone(constant_speed_run):
     assert cv.mean_error[cv.chosen] == np.min(cv.mean_error)
     # the chosen penalty is the training data's: a different training run chooses again
     other = run_driver(
-        SyntheticDriver(DriverParams.from_loop(1.1, 0.6, 0.3, noise_std=2e-3)),
+        SyntheticDriver(TwoPointParams.from_loop(1.1, 0.6, 0.3, noise_std=2e-3)),
         runs=1,
         seed=8,
     )[0]

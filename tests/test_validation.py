@@ -527,16 +527,16 @@ def test_a_loaded_sidecar_keeps_its_fields_and_converts_nothing_it_does_not_know
 
 
 def test_writer_checks_run_on_the_validator():
-    from hasa_env.recording.format import _check_json_able, _check_seed
+    from hasa_env.recording.format import check_json_able, check_seed
 
-    assert _check_json_able("metadata", {"a": (np.float32(0.5), np.int64(2))}) == {"a": [0.5, 2]}
+    assert check_json_able("metadata", {"a": (np.float32(0.5), np.int64(2))}) == {"a": [0.5, 2]}
     with pytest.raises(ValueError, match=r"^metadata.a\[0\] must be JSON data"):
-        _check_json_able("metadata", {"a": [float("nan")]})
+        check_json_able("metadata", {"a": [float("nan")]})
     with pytest.raises(ValueError, match="nested more than 16 levels"):
-        _check_json_able("metadata", {"a": _deep(5000)})
-    assert _check_seed(np.int64(3), "seed") == 3
+        check_json_able("metadata", {"a": _deep(5000)})
+    assert check_seed(np.int64(3), "seed") == 3
     with pytest.raises(ValueError, match=r"^seed must be a non-negative integer, got True"):
-        _check_seed(True, "seed")
+        check_seed(True, "seed")
 
 
 # ------------------------------------------------------- protocol settings
@@ -626,7 +626,7 @@ def test_validate_fields_stores_converted_values_also_on_frozen_dataclasses():
         Settings(runs=0)
 
 
-# The specs FilterSettings (estimators/settings.py) and DriverParams / SpeedProfile /
+# The specs FilterSettings (estimators/settings.py) and TwoPointParams / SpeedProfile /
 # MotorParams (hasa_env/drivers) will be migrated to: they must accept what the classes accept and
 # refuse what they refuse (both checked here against the classes' own validation).
 def _positive(unit: str = "") -> Field:
@@ -772,17 +772,17 @@ def test_the_driver_params_spec_agrees_with_driver_params(where, name, value):
 
     from hasa_env.drivers.base import SpeedProfile
     from hasa_env.drivers.motor import MotorParams
-    from hasa_env.drivers.synthetic import DriverParams
+    from hasa_env.drivers.two_point import TwoPointParams
 
-    values = dataclasses.asdict(DriverParams())
+    values = dataclasses.asdict(TwoPointParams())
     assert _accepts(DRIVER_PARAMS, values)
     part = {"speed": SpeedProfile, "motor": MotorParams}.get(where)
     if part is not None:
         values[where][name] = value
-        accepted = _constructs(lambda: DriverParams(**{where: part(**{name: value})}))
+        accepted = _constructs(lambda: TwoPointParams(**{where: part(**{name: value})}))
     else:
         values[name] = value
-        accepted = _constructs(lambda: DriverParams(**{name: value}))
+        accepted = _constructs(lambda: TwoPointParams(**{name: value}))
     assert _accepts(DRIVER_PARAMS, values) == accepted
 
 

@@ -45,7 +45,8 @@ DEFAULT_SEEDS = (0, 1, 2, 3, 4)
 """Population seeds of the default protocol."""
 DEFAULT_MODEL_TIME_LIMIT = 600.0
 """Default time limit (s) of one call into a user model: import, one fit, one batch scored."""
-_ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
+TRACK_ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
+"""Gymnasium env id of each main track."""
 _NOISE_UNITS = {"speed": "m/s", "camera": "m", "camera_heading": "rad", "imu": "m/s^2",
                 "steering": "rad"}  # fmt: skip
 
@@ -69,7 +70,7 @@ _SCHEMA = schema(
         "runs": _count("Runs per driver on the main track.", 1),
         "ill_runs": _count("Runs of the illustrative driver (null: runs + 4).", 1, True),
         "duration": Field("number", doc="Length of each run.", unit="s", low=1.0),
-        "track": Field("choice", doc="The main track.", choices=tuple(_ENV_IDS)),
+        "track": Field("choice", doc="The main track.", choices=tuple(TRACK_ENV_IDS)),
         "curved_runs": _count("Runs on the curved track.", 0),
         "noise": Field(
             "mapping",
@@ -159,7 +160,7 @@ class ProtocolConfig:
             ``"<model> (no checks)"``: what the checks cost or buy.
         estimate: run the lane estimation (paper table 2); False: steering
             scores and driving statistics only (the population calibration,
-            :mod:`benchmarks.calibration`).
+            :mod:`benchmarks.population_tuning`).
         filter_settings: fields of :class:`estimators.settings.FilterSettings`
             for every estimator (e.g. ``{"forgetting_time": 10.0}``), over the
             run's sensor noise; the steering residual level stays the fitted

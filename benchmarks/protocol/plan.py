@@ -10,7 +10,7 @@ from typing import Any
 
 import pandas as pd
 
-from benchmarks.protocol.config import _ENV_IDS, ILLUSTRATIVE, BenchmarkError, ProtocolConfig
+from benchmarks.protocol.config import ILLUSTRATIVE, TRACK_ENV_IDS, BenchmarkError, ProtocolConfig
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
 from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
@@ -363,4 +363,4 @@ def load_frames(
             drivers[ref.driver] = SyntheticDriver(params[ref.driver])
         cars.append(drivers[ref.driver])
     seeds = [(int(r.env_seed), int(r.driver_seed)) for r in runs]  # type: ignore[arg-type]
-    return run_drivers(cars, seeds, _ENV_IDS[track], dict(env_config))
+    return run_drivers(cars, seeds, TRACK_ENV_IDS[track], dict(env_config))

@@ -75,8 +75,8 @@ from benchmarks.protocol.aggregate import (
     verdict,
 )
 from benchmarks.protocol.config import (
-    _ENV_IDS,
     BASELINES,
+    TRACK_ENV_IDS,
     UNCHECKED_SUFFIX,
     BenchmarkError,
     ProtocolConfig,
@@ -206,7 +206,7 @@ def run_protocol(
             fitted = check_lane_keeping(
                 fitted,
                 fit_info,
-                env_id=_ENV_IDS[config.track],
+                env_id=TRACK_ENV_IDS[config.track],
                 config=train_frame.attrs["config"],
                 speed=(
                     plan["params"][illustrative].speed if seed is not None else SpeedProfile.hold()

@@ -5,7 +5,7 @@
   ``info``, never the biased camera.
 - Synthetic humans of three archetypes (docs/design.md §7.2 and §7.7), all
   with delay, neuromuscular lag, remnant after the lag and wheel
-  quantization (:class:`MotorParams`): two-point PI (:class:`DriverParams`),
+  quantization (:class:`MotorParams`): two-point PI (:class:`TwoPointParams`),
   preview optimal control (:class:`PreviewParams`), intermittent control
   (:class:`IntermittentParams`). :func:`make_driver` makes the driver of
   any of them (:class:`SyntheticDriver` drives them all);
@@ -18,7 +18,7 @@
   :func:`save_runs` writes them in the recording format.
 """
 
-from hasa_env.drivers.archetypes import ARCHETYPES, make_driver, params_from_dict
+from hasa_env.drivers.archetypes import ARCHETYPES, SyntheticDriver, make_driver, params_from_dict
 from hasa_env.drivers.base import BatchDriver, Driver, SpeedProfile, make_batch
 from hasa_env.drivers.closed_loop import (
     LANE_CHECK_CONFIG,
@@ -40,7 +40,7 @@ from hasa_env.drivers.runner import (
     run_seeds,
     save_runs,
 )
-from hasa_env.drivers.synthetic import DriverParams, SyntheticDriver
+from hasa_env.drivers.two_point import TwoPointDriver, TwoPointParams
 
 __all__ = [
     "LANE_CHECK_CONFIG",
@@ -51,7 +51,6 @@ __all__ = [
     "ARCHETYPES",
     "BatchDriver",
     "Driver",
-    "DriverParams",
     "G29_RESOLUTION",
     "IntermittentDriver",
     "IntermittentParams",
@@ -63,6 +62,8 @@ __all__ = [
     "ReplayDriver",
     "SpeedProfile",
     "SyntheticDriver",
+    "TwoPointDriver",
+    "TwoPointParams",
     "make_batch",
     "make_driver",
     "params_from_dict",

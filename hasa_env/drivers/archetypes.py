@@ -3,7 +3,7 @@
 ============  ================================================  =====================
 archetype     parameters                                        driver
 ============  ================================================  =====================
-two-point     :class:`~hasa_env.drivers.synthetic.DriverParams`  :class:`~hasa_env.drivers.synthetic.SyntheticDriver`
+two-point     :class:`~hasa_env.drivers.two_point.TwoPointParams`  :class:`~hasa_env.drivers.two_point.TwoPointDriver`
 preview       :class:`~hasa_env.drivers.preview.PreviewParams`   :class:`~hasa_env.drivers.preview.PreviewDriver`
 intermittent  :class:`~hasa_env.drivers.intermittent.IntermittentParams`  :class:`~hasa_env.drivers.intermittent.IntermittentDriver`
 ============  ================================================  =====================
@@ -12,7 +12,8 @@ intermittent  :class:`~hasa_env.drivers.intermittent.IntermittentParams`  :class
 :func:`params_from_dict` reads back any ``params.to_dict()`` (the
 ``"archetype"`` field says which; dicts without it are two-point, as written
 before the other archetypes existed), and :func:`~hasa_env.drivers.human.human_batch` vectorizes
-a mixed list of parameters (one batch per archetype).
+a mixed list of parameters (one batch per archetype). :class:`SyntheticDriver`
+drives parameters of any archetype.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from hasa_env.drivers import intermittent, preview, synthetic
+from hasa_env.drivers import intermittent, preview, two_point
 from hasa_env.drivers.base import Driver
 from hasa_env.drivers.human import HumanBatch, HumanDriver, human_batch
 
@@ -29,13 +30,14 @@ __all__ = [
     "ARCHETYPES",
     "Archetype",
     "HumanParams",
+    "SyntheticDriver",
     "archetype_of",
     "human_batch",
     "make_driver",
     "params_from_dict",
 ]
 
-HumanParams = synthetic.DriverParams | preview.PreviewParams | intermittent.IntermittentParams
+HumanParams = two_point.TwoPointParams | preview.PreviewParams | intermittent.IntermittentParams
 """Parameters of any synthetic driver archetype."""
 
 
@@ -53,10 +55,10 @@ ARCHETYPES: dict[str, Archetype] = {
     a.name: a
     for a in (
         Archetype(
-            synthetic.ARCHETYPE,
-            synthetic.DriverParams,
-            synthetic.SyntheticDriver,
-            synthetic.SyntheticBatch,
+            two_point.ARCHETYPE,
+            two_point.TwoPointParams,
+            two_point.TwoPointDriver,
+            two_point.TwoPointBatch,
         ),
         Archetype(
             preview.ARCHETYPE, preview.PreviewParams, preview.PreviewDriver, preview.PreviewBatch
@@ -72,6 +74,22 @@ ARCHETYPES: dict[str, Archetype] = {
 """The archetypes by name: "two-point", "preview", "intermittent"."""
 
 
+class SyntheticDriver(HumanDriver):
+    """A synthetic human driver of any archetype, seeded and reproducible.
+
+    ``SyntheticDriver(params)`` drives parameters of any archetype:
+    :class:`~hasa_env.drivers.two_point.TwoPointParams` (two-point PI),
+    :class:`~hasa_env.drivers.preview.PreviewParams` or
+    :class:`~hasa_env.drivers.intermittent.IntermittentParams`, so every
+    member of a :func:`~hasa_env.drivers.populations.population` is a
+    ``SyntheticDriver``. ``reset(seed, dt=0.01)`` then ``act(info, road)``
+    each env step. Runs are identical whether the driver acts alone or
+    vectorized with others (:meth:`make_batch`, one part per archetype).
+    """
+
+    accepts = tuple(a.params for a in ARCHETYPES.values())
+
+
 def archetype_of(params: Any) -> Archetype:
     """The :class:`Archetype` of a parameter object (TypeError for anything else)."""
     for archetype in ARCHETYPES.values():
@@ -84,13 +102,13 @@ def archetype_of(params: Any) -> Archetype:
 
 
 def make_driver(params: HumanParams) -> Driver:
-    """The driver of ``params`` (any archetype): SyntheticDriver, PreviewDriver or IntermittentDriver."""
+    """The driver of ``params`` (any archetype): TwoPointDriver, PreviewDriver or IntermittentDriver."""
     return archetype_of(params).driver(params)
 
 
 def params_from_dict(data: Mapping[str, Any]) -> HumanParams:
     """Parameters of any archetype from their ``to_dict()`` (no "archetype": two-point)."""
-    name = data.get("archetype", synthetic.ARCHETYPE)
+    name = data.get("archetype", two_point.ARCHETYPE)
     try:
         archetype = ARCHETYPES[name]
     except KeyError:

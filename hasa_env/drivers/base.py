@@ -31,6 +31,7 @@ __all__ = [
     "CompositeBatch",
     "make_batch",
     "speed_command",
+    "speed_profile_arrays",
     "info_arrays",
 ]
 
@@ -150,7 +151,9 @@ class SpeedProfile:
         return asdict(self)
 
 
-def _profile_arrays(profiles: Sequence[SpeedProfile]) -> dict[str, np.ndarray]:
+def speed_profile_arrays(profiles: Sequence[SpeedProfile]) -> dict[str, np.ndarray]:
+    """The fields of one :class:`SpeedProfile` per car as arrays of shape (n,), keyed as
+    :func:`speed_command` reads them (``target`` NaN: no target speed)."""
     return {
         "target": np.array(
             [np.nan if p.target_speed is None else p.target_speed for p in profiles]

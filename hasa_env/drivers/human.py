@@ -32,9 +32,9 @@ from hasa_env.drivers.base import (
     CompositeBatch,
     PartialBatchDriver,
     SpeedProfile,
-    _profile_arrays,
     info_arrays,
     speed_command,
+    speed_profile_arrays,
 )
 from hasa_env.drivers.motor import MotorParams, MotorStage, NoiseBlocks, ou_coefficients
 from hasa_env.sim.road import Road, lane_centre_bearing
@@ -168,7 +168,7 @@ class HumanBatch(ABC):
             raise TypeError(f"{name} needs {self.params_type.__name__}, got {wrong[0]}")
         self.num_cars = len(self.params)
         self.max_steering = self.arr("max_steering")
-        self.profile = _profile_arrays([p.speed for p in self.params])
+        self.profile = speed_profile_arrays([p.speed for p in self.params])
         self.motor = MotorStage(
             self.arr("neuromuscular_frequency"),
             self.arr("neuromuscular_damping"),

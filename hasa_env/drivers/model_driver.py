@@ -11,9 +11,9 @@ import pandas as pd
 from hasa_env.drivers.base import (
     LoopBatch,
     SpeedProfile,
-    _profile_arrays,
     info_arrays,
     speed_command,
+    speed_profile_arrays,
 )
 from hasa_env.sim.road import Road
 from hasa_env.steering.base import SteeringModel
@@ -155,7 +155,7 @@ class ModelBatch:
         self.far = np.array([f.far_distance for f in forms])
         self.noise_std = np.array([d.noise_std for d in self.drivers])
         self.ratio = np.array([d.steering_ratio for d in self.drivers])
-        self.profile = _profile_arrays([d.speed for d in self.drivers])
+        self.profile = speed_profile_arrays([d.speed for d in self.drivers])
         self._ready = False
 
     def reset(self, seeds: Sequence[int | None], dt: float) -> None:
@@ -246,7 +246,7 @@ class _GenericModelState:
         self.window = self.model.max_lag + 1
         self.rows: list[list[float]] = []
         self.initial_speed: float | None = None
-        self.profile = _profile_arrays([driver.speed])
+        self.profile = speed_profile_arrays([driver.speed])
 
     def act(self, info: Mapping[str, Any], road: Road) -> tuple[float, float]:
         model = self.model

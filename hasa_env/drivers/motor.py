@@ -104,7 +104,7 @@ class MotorParams:
 
     The neuromuscular lag belongs to each driver's own parameters
     (``neuromuscular_frequency``, ``neuromuscular_damping``), as it always did
-    for :class:`~hasa_env.drivers.synthetic.DriverParams`.
+    for :class:`~hasa_env.drivers.two_point.TwoPointParams`.
 
     Attributes:
         command_std: sigma_c, std of the command noise before the lag at 15 m/s
@@ -404,8 +404,3 @@ class MotorStage:
             return clipped
         steps = np.clip(np.round(self.ratio * raw / self._q), -self._levels, self._levels)
         return np.where(self.quantized, steps * self._q / self.ratio, clipped)
-
-    @property
-    def lag_output(self) -> np.ndarray:
-        """delta_n(k): the lag's output before remnant and wheel (rad)."""
-        return self._angle

@@ -33,7 +33,7 @@ from hasa_env.drivers.intermittent import IntermittentParams
 from hasa_env.drivers.lqr import PreviewCost
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
 from hasa_env.drivers.preview import PreviewParams
-from hasa_env.drivers.synthetic import DriverParams
+from hasa_env.drivers.two_point import TwoPointParams
 
 __all__ = [
     "IntermittentRanges",
@@ -57,7 +57,7 @@ class _Range:
 
 @dataclass(frozen=True)
 class TwoPointRanges:
-    """Trait ranges of two-point PI drivers (see :meth:`DriverParams.from_loop`)."""
+    """Trait ranges of two-point PI drivers (see :meth:`TwoPointParams.from_loop`)."""
 
     bandwidth: _Range
     damping: _Range
@@ -275,7 +275,7 @@ _HUMAN_MOTOR = MotorRanges(
 )
 # A foot on a pedal is no cruise control: a held speed wanders by a few tenths of a m/s
 # (about +-1 km/h) over a 30 s run (docs/design.md §7.4). Chosen as a plain human figure, not
-# fitted to any benchmark number; the sensitivity to it is in docs/calibration.md.
+# fitted to any benchmark number; the sensitivity to it is in docs/population_tuning.md.
 _HUMAN_PEDAL = PedalRanges(noise=_Range(0.2, 0.5), time_constant=_Range(1.0, 3.0))
 _WHEEL_STUDY = {
     # what a G29 study measures: the wheel's own (quantized) reading, no automotive sensor noise
@@ -375,7 +375,7 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanP
     Returns:
         The drivers' parameters (of their archetypes), in name order; drive
         them with :func:`~hasa_env.drivers.archetypes.make_driver` or
-        :class:`~hasa_env.drivers.synthetic.SyntheticDriver`.
+        :class:`~hasa_env.drivers.archetypes.SyntheticDriver`.
     """
     try:
         spec = POPULATIONS[name]
@@ -450,9 +450,11 @@ def _two_point_traits(r: TwoPointRanges, rng: np.random.Generator) -> dict:
     }
 
 
-def _draw_two_point(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> DriverParams:
+def _draw_two_point(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> TwoPointParams:
     traits = _two_point_traits(spec.two_point, rng)
-    return DriverParams.from_loop(**traits, noise_std=spec.two_point.noise_std.draw(rng), **common)
+    return TwoPointParams.from_loop(
+        **traits, noise_std=spec.two_point.noise_std.draw(rng), **common
+    )
 
 
 def _draw_preview(spec: PopulationSpec, rng: np.random.Generator, common: dict) -> PreviewParams:
@@ -507,7 +509,7 @@ def _legacy_population(spec: PopulationSpec, seed: int, key: int, size: int) -> 
     for index, driver_name in enumerate(_driver_names(size)):
         speed = _draw_speed(behaviours[int(order[index])], spec, rng)
         traits = _two_point_traits(r, rng)
-        params = DriverParams.from_loop(
+        params = TwoPointParams.from_loop(
             **traits,
             name=driver_name,
             delay=spec.delay.draw(rng),

@@ -288,6 +288,107 @@ def _env_id(recordings: Sequence[Recording], track: str) -> str:
     return _ID_FOR_TRACK[track]
 
 
+def _check_export_arguments(
+    dataset_id: str, action_type: str, observation_type: str | None
+) -> None:
+    """``ValueError`` for a malformed Minari dataset id or an unknown action or observation
+    type (the arguments of :func:`export_minari`)."""
+    # minari is the optional 'minari' extra: imported only when exporting
+    from minari.dataset.minari_dataset import parse_dataset_id  # optional extra
+
+    try:
+        if not re.fullmatch(r"[^/]+(/[^/]+)?-v[0-9]+", dataset_id):
+            raise ValueError(dataset_id)
+        parse_dataset_id(dataset_id)
+    except (ValueError, TypeError):  # minari 0.5.4 raises TypeError when the version is missing
+        raise ValueError(
+            f"dataset id {dataset_id!r} is malformed: use (namespace/)name-v<version>, "
+            "e.g. 'hasa/drives-v0'"
+        ) from None
+    if action_type not in ACTION_TYPES:
+        raise ValueError(f"action_type must be one of {ACTION_TYPES}, got {action_type!r}")
+    if observation_type is not None and observation_type not in OBSERVATION_TYPES:
+        raise ValueError(
+            f"observation_type must be one of {OBSERVATION_TYPES} or None, got {observation_type!r}"
+        )
+
+
+def _exportable(
+    recordings: Sequence[Recording],
+    skipped: list[tuple[Path | None, str]],
+    action_type: str,
+    observation_type: str | None,
+) -> list[tuple[Recording, dict[str, Any]]]:
+    """The recordings with steps whose config matches the first such recording's (apart
+    from ``render``), each with its :func:`episode_arrays`; the others are appended to
+    ``skipped`` with the reason."""
+    reference: dict[str, Any] | None = None
+    chosen: list[tuple[Recording, dict[str, Any]]] = []
+    for rec in recordings:
+        if reference is None and len(rec.data) > 1:
+            reference = _comparable(rec.config)
+        if len(rec.data) < 2:
+            skipped.append((rec.path, "no steps (only the reset row)"))
+            continue
+        differences = _config_differences(reference, _comparable(rec.config))
+        if differences:
+            skipped.append(
+                (
+                    rec.path,
+                    "config differs from the dataset's (first recording's) in "
+                    + ", ".join(differences),
+                )
+            )
+            continue
+        chosen.append((rec, episode_arrays(rec, action_type, observation_type)))
+    return chosen
+
+
+def _episode_buffers(chosen: Sequence[tuple[Recording, dict[str, Any]]]) -> list[Any]:
+    """One Minari ``EpisodeBuffer`` per exported recording (id = its place in ``chosen``)."""
+    # minari is the optional 'minari' extra: imported only when exporting
+    from minari.data_collector.episode_buffer import EpisodeBuffer  # optional extra
+
+    buffers = []
+    for i, (rec, arrays) in enumerate(chosen):
+        options = rec.meta.get("reset_options")
+        buffers.append(
+            EpisodeBuffer(
+                id=i,
+                seed=rec.seed,
+                options=dict(options) if options else None,
+                observations=arrays["observations"],
+                actions=arrays["actions"],
+                rewards=arrays["rewards"].tolist(),
+                terminations=arrays["terminations"].tolist(),
+                truncations=arrays["truncations"].tolist(),
+                # lists, not 1-D arrays: minari 0.5's arrow storage cannot decode the
+                # empty shape it writes for per-step scalar arrays
+                infos={k: v.tolist() for k, v in arrays["infos"].items()},
+            )
+        )
+    return buffers
+
+
+def _default_description(
+    chosen: Sequence[tuple[Recording, dict[str, Any]]],
+    env_id: str,
+    config: dict[str, Any],
+    action_type: str,
+) -> str:
+    """The dataset description when none is given: count, env, road, step rate, action and
+    observation types, infos and the drivers named in the recordings' metadata."""
+    sources = sorted({str(rec.meta.get("metadata", {}).get("driver", "")) for rec, _ in chosen})
+    sources = [s for s in sources if s]
+    return (
+        f"{len(chosen)} hasa_env recording(s) of {env_id} ({config['track']} road, "
+        f"{config['sim_frequency'] / config['action_repeat']:g} Hz env steps); "
+        f"{action_type} actions [road-wheel angle, acceleration]; "
+        f"{config['observation']['type']} observations; infos: {', '.join(INFO_KEYS)}"
+        + (f"; drivers: {', '.join(sources)}" if sources else "")
+    )
+
+
 def export_minari(
     source: str | os.PathLike[str] | Sequence[Recording | str | os.PathLike[str]],
     dataset_id: str,
@@ -330,45 +431,9 @@ def export_minari(
             without ``overwrite``, or no exportable recording.
     """
     minari = require_minari()
-    # minari is the optional 'minari' extra: imported only when exporting
-    from minari.data_collector.episode_buffer import EpisodeBuffer  # optional extra
-    from minari.dataset.minari_dataset import parse_dataset_id  # optional extra
-
-    try:
-        if not re.fullmatch(r"[^/]+(/[^/]+)?-v[0-9]+", dataset_id):
-            raise ValueError(dataset_id)
-        parse_dataset_id(dataset_id)
-    except (ValueError, TypeError):  # minari 0.5.4 raises TypeError when the version is missing
-        raise ValueError(
-            f"dataset id {dataset_id!r} is malformed: use (namespace/)name-v<version>, "
-            "e.g. 'hasa/drives-v0'"
-        ) from None
-    if action_type not in ACTION_TYPES:
-        raise ValueError(f"action_type must be one of {ACTION_TYPES}, got {action_type!r}")
-    if observation_type is not None and observation_type not in OBSERVATION_TYPES:
-        raise ValueError(
-            f"observation_type must be one of {OBSERVATION_TYPES} or None, got {observation_type!r}"
-        )
+    _check_export_arguments(dataset_id, action_type, observation_type)
     recordings, skipped = _load_sources(source)
-    reference: dict[str, Any] | None = None
-    chosen: list[tuple[Recording, dict[str, Any]]] = []
-    for rec in recordings:
-        if reference is None and len(rec.data) > 1:
-            reference = _comparable(rec.config)
-        if len(rec.data) < 2:
-            skipped.append((rec.path, "no steps (only the reset row)"))
-            continue
-        differences = _config_differences(reference, _comparable(rec.config))
-        if differences:
-            skipped.append(
-                (
-                    rec.path,
-                    "config differs from the dataset's (first recording's) in "
-                    + ", ".join(differences),
-                )
-            )
-            continue
-        chosen.append((rec, episode_arrays(rec, action_type, observation_type)))
+    chosen = _exportable(recordings, skipped, action_type, observation_type)
     for path, reason in skipped:
         warnings.warn(f"not exported: {path}: {reason}", RecordingWarning, stacklevel=2)
     if not chosen:
@@ -380,33 +445,8 @@ def export_minari(
     config = dataset_config(first.config, action_type, observation_type)
     env_id = _env_id([rec for rec, _ in chosen], config["track"])
     spec = dataclasses.replace(gym.spec(env_id), kwargs={"config": config})
-    buffers = []
-    for i, (rec, arrays) in enumerate(chosen):
-        options = rec.meta.get("reset_options")
-        buffers.append(
-            EpisodeBuffer(
-                id=i,
-                seed=rec.seed,
-                options=dict(options) if options else None,
-                observations=arrays["observations"],
-                actions=arrays["actions"],
-                rewards=arrays["rewards"].tolist(),
-                terminations=arrays["terminations"].tolist(),
-                truncations=arrays["truncations"].tolist(),
-                # lists, not 1-D arrays: minari 0.5's arrow storage cannot decode the
-                # empty shape it writes for per-step scalar arrays
-                infos={k: v.tolist() for k, v in arrays["infos"].items()},
-            )
-        )
-    sources = sorted({str(rec.meta.get("metadata", {}).get("driver", "")) for rec, _ in chosen})
-    sources = [s for s in sources if s]
-    default_description = (
-        f"{len(chosen)} hasa_env recording(s) of {env_id} ({config['track']} road, "
-        f"{config['sim_frequency'] / config['action_repeat']:g} Hz env steps); "
-        f"{action_type} actions [road-wheel angle, acceleration]; "
-        f"{config['observation']['type']} observations; infos: {', '.join(INFO_KEYS)}"
-        + (f"; drivers: {', '.join(sources)}" if sources else "")
-    )
+    buffers = _episode_buffers(chosen)
+    default_description = _default_description(chosen, env_id, config, action_type)
     with _minari_path(data_path):
         if overwrite:
             with contextlib.suppress(FileNotFoundError):

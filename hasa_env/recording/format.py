@@ -18,6 +18,10 @@ A recording is a pair of files in one directory:
 
 Writing: :mod:`hasa_env.recording.writer`; reading: :mod:`hasa_env.recording.reader`;
 re-simulating: :mod:`hasa_env.recording.replay`.
+
+Why this module is long: it is the one definition of the files on disk (columns, units, value
+formatting and parsing, the sidecar's schema, atomic writes, safe reads), which the writer,
+the reader, the replay and the Parquet export share through its documented public names.
 """
 
 from __future__ import annotations
@@ -78,10 +82,14 @@ COLUMN_UNITS: dict[str, str] = {
 }
 """Unit of every recording column ("1": dimensionless count or index)."""
 
-_INT_COLUMNS = frozenset({"step", "bias_index"})
-_BOOL_COLUMNS = frozenset({"terminated", "truncated"})
+INT_COLUMNS = frozenset({"step", "bias_index"})
+"""Columns written and read as integers (int64 in a loaded frame)."""
+
+BOOL_COLUMNS = frozenset({"terminated", "truncated"})
+"""Columns written as ``true`` / ``false`` and read as bool."""
+
 _INT_RE = re.compile(r"[+-]?[0-9]+")
-_SIDECAR_KEYS = (
+SIDECAR_KEYS = (
     "config",
     "seed",
     "env_id",
@@ -91,7 +99,10 @@ _SIDECAR_KEYS = (
     "end_reason",
     "created",
 )
-_END_REASONS = ("terminated", "truncated", "stopped")
+"""Sidecar fields a caller may set through ``save_recording(..., meta=...)``."""
+
+END_REASONS = ("terminated", "truncated", "stopped")
+"""Allowed values of the sidecar field ``end_reason``."""
 
 
 # --------------------------------------------------------------------- errors
@@ -204,7 +215,8 @@ def _versions() -> dict[str, str]:
     )
 
 
-def _now() -> str:
+def utc_now_text() -> str:
+    """The current UTC time as ISO 8601 text with milliseconds and a ``Z`` suffix."""
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
@@ -218,11 +230,13 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} {value!r} is not JSON serializable")
 
 
-def _to_json(obj: Any) -> str:
+def to_json_text(obj: Any) -> str:
+    """``obj`` as indented JSON text ending in a newline; numpy values and paths converted,
+    NaN and infinities refused (``ValueError``)."""
     return json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
 
 
-def _new_temporary(path: Path) -> tuple[int, Path]:
+def new_temporary_file(path: Path) -> tuple[int, Path]:
     """A new, randomly named file next to ``path`` (``O_CREAT | O_EXCL``, mode 0o666 & ~umask).
 
     ``O_EXCL`` never opens an existing file, so a pre-placed file or symlink
@@ -238,11 +252,11 @@ def _new_temporary(path: Path) -> tuple[int, Path]:
     raise FileExistsError(f"no free temporary file name next to {path}")
 
 
-def _write_atomic(path: Path, text: str, fsync: bool = True) -> None:
-    """Write ``text`` to ``path`` via a new temporary file (:func:`_new_temporary`) and
+def write_atomic(path: Path, text: str, fsync: bool = True) -> None:
+    """Write ``text`` to ``path`` via a new temporary file (:func:`new_temporary_file`) and
     ``os.replace``; on any failure the temporary file is removed and ``path`` is left as it
     was."""
-    fd, tmp = _new_temporary(path)
+    fd, tmp = new_temporary_file(path)
     try:
         with open(fd, "w", encoding="utf-8", newline="\n") as f:
             f.write(text)
@@ -260,7 +274,7 @@ MAX_FILE_BYTES = 2**31
 """Largest recording file read (2 GiB; a 30 s drive at 100 Hz is about 1.3 MB)."""
 
 
-def _read_regular(path: Path, what: str) -> str:
+def read_regular_file(path: Path, what: str) -> str:
     """The text of ``path`` if it is a regular file, read without blocking on a FIFO or device.
 
     Raises:
@@ -271,7 +285,7 @@ def _read_regular(path: Path, what: str) -> str:
     try:
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise OSError(f"{what} is {_file_kind(info.st_mode)}, not a regular file")
+            raise OSError(f"{what} is {file_kind(info.st_mode)}, not a regular file")
         if info.st_size > MAX_FILE_BYTES:
             raise OSError(f"{what} is {info.st_size} bytes, more than the {MAX_FILE_BYTES} read")
     except BaseException:
@@ -282,7 +296,8 @@ def _read_regular(path: Path, what: str) -> str:
     return data.decode("utf-8")
 
 
-def _file_kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a non-regular file of ``st_mode`` ``mode`` is, for an error message ("a FIFO ...")."""
     if stat.S_ISFIFO(mode):
         return "a FIFO (named pipe)"
     if stat.S_ISDIR(mode):
@@ -294,15 +309,15 @@ def _file_kind(mode: int) -> str:
     return "a special file"
 
 
-def _format_value(column: str, value: Any) -> str:
+def format_value(column: str, value: Any) -> str:
     """One CSV field; raises ValueError/TypeError with a reason on a bad value."""
-    if column in _BOOL_COLUMNS:
+    if column in BOOL_COLUMNS:
         if isinstance(value, bool | np.bool_) or (
             isinstance(value, int | np.integer | float | np.floating) and value in (0, 1)
         ):
             return "true" if value else "false"
         raise ValueError(f"expected a bool, got {value!r}")
-    if column in _INT_COLUMNS:
+    if column in INT_COLUMNS:
         if isinstance(value, bool | np.bool_):
             raise ValueError(f"expected an integer, got {value!r}")
         if isinstance(value, float | np.floating):
@@ -314,16 +329,19 @@ def _format_value(column: str, value: Any) -> str:
     return repr(float(value))
 
 
-def _format_row(values: Sequence[Any]) -> str:
+def format_row(values: Sequence[Any]) -> str:
+    """One CSV line (with newline) of ``values`` in :data:`RECORDING_COLUMNS` order."""
     return (
-        ",".join(_format_value(c, v) for c, v in zip(RECORDING_COLUMNS, values, strict=True)) + "\n"
+        ",".join(format_value(c, v) for c, v in zip(RECORDING_COLUMNS, values, strict=True)) + "\n"
     )
 
 
-_HEADER = ",".join(RECORDING_COLUMNS) + "\n"
+CSV_HEADER = ",".join(RECORDING_COLUMNS) + "\n"
+"""The CSV header line: the column names in :data:`RECORDING_COLUMNS` order."""
 
 
-def _base_sidecar(csv_name: str) -> dict[str, Any]:
+def base_sidecar(csv_name: str) -> dict[str, Any]:
+    """A new sidecar for the CSV file ``csv_name``: every field, incomplete, created now."""
     return {
         "schema_version": SCHEMA_VERSION,
         "format": "hasa_env recording",
@@ -336,7 +354,7 @@ def _base_sidecar(csv_name: str) -> dict[str, Any]:
         "versions": _versions(),
         "columns": list(RECORDING_COLUMNS),
         "units": {c: COLUMN_UNITS.get(c, "unknown") for c in RECORDING_COLUMNS},
-        "created": _now(),
+        "created": utc_now_text(),
         "finished": None,
         "complete": False,
         "steps": None,
@@ -349,7 +367,7 @@ def _python_error(path: str, message: str) -> ValueError:
     return ValueError(message)
 
 
-def _check_json_able(name: str, value: Any) -> Any:
+def check_json_able(name: str, value: Any) -> Any:
     """A fresh JSON-able copy of ``value`` (numpy values and tuples converted), so the sidecar
     holds exactly what was given; ``name`` names it in the ``ValueError``."""
     return validate(value, ANY_JSON, describe=lambda path: path, error=_python_error, path=name)
@@ -358,7 +376,8 @@ def _check_json_able(name: str, value: Any) -> Any:
 _SEED = Field("integer", doc="A seed of numpy's generators.", low=0)
 
 
-def _check_seed(seed: Any, what: str) -> int:
+def check_seed(seed: Any, what: str) -> int:
+    """``seed`` as an int >= 0 (numpy integers accepted); ``what`` names it in the ``ValueError``."""
     return validate(seed, _SEED, describe=lambda path: path, error=_python_error, path=what)
 
 
@@ -377,7 +396,8 @@ MAX_MAGNITUDE_LONG = 1e10
 _LONG_COLUMNS = frozenset({"time", "station"})
 
 
-def _parse_float(text: str, limit: float = math.inf) -> float:
+def parse_float(text: str, limit: float = math.inf) -> float:
+    """A finite float of plain ASCII ``text`` with ``|value| <= limit``; else ``ValueError``."""
     if not text.isascii():
         raise ValueError(f"not a number: {text!r} (only ASCII digits are numbers here)")
     try:
@@ -395,7 +415,9 @@ def _parse_float(text: str, limit: float = math.inf) -> float:
     return value
 
 
-def _magnitude_limit(column: str) -> float:
+def magnitude_limit(column: str) -> float:
+    """Largest |value| of a float cell of ``column``: :data:`MAX_MAGNITUDE_LONG` for ``time``
+    and ``station``, :data:`MAX_MAGNITUDE` otherwise."""
     return MAX_MAGNITUDE_LONG if column in _LONG_COLUMNS else MAX_MAGNITUDE
 
 
@@ -417,15 +439,17 @@ def _parse_bool(text: str) -> bool:
 
 
 def _parser(column: str):  # noqa: ANN202
-    if column in _INT_COLUMNS:
+    if column in INT_COLUMNS:
         return _parse_int
-    if column in _BOOL_COLUMNS:
+    if column in BOOL_COLUMNS:
         return _parse_bool
-    limit = _magnitude_limit(column)
-    return lambda text: _parse_float(text, limit)
+    limit = magnitude_limit(column)
+    return lambda text: parse_float(text, limit)
 
 
-def _check_header(names: list[str], source: Path | str) -> None:
+def check_header(names: list[str], source: Path | str) -> None:
+    """Raise :class:`RecordingError` (line 1) unless ``names`` are exactly the recording columns,
+    each once, in any order."""
     seen: set[str] = set()
     dup = []
     for n in names:
@@ -451,12 +475,12 @@ def _check_header(names: list[str], source: Path | str) -> None:
         )
 
 
-def _parse_lines(lines: list[str], source: Path | str) -> dict[str, list[Any]]:
+def parse_lines(lines: list[str], source: Path | str) -> dict[str, list[Any]]:
     """Parse header + data lines (without newlines) into columns; line 1 is the header."""
     if not lines:
         raise RecordingError("empty file: no header", source, 1)
     names = lines[0].split(",")
-    _check_header(names, source)
+    check_header(names, source)
     parsers = [_parser(n) for n in names]
     columns: list[list[Any]] = [[] for _ in names]
     ncols = len(names)
@@ -480,19 +504,20 @@ def _parse_lines(lines: list[str], source: Path | str) -> dict[str, list[Any]]:
     return dict(zip(names, columns, strict=True))
 
 
-def _frame(columns: Mapping[str, Sequence[Any]]) -> pd.DataFrame:
+def columns_frame(columns: Mapping[str, Sequence[Any]]) -> pd.DataFrame:
+    """A DataFrame of the recording columns in order, with their dtypes (int64, bool, float64)."""
     data = {}
     for c in RECORDING_COLUMNS:
-        if c in _INT_COLUMNS:
+        if c in INT_COLUMNS:
             data[c] = np.asarray(columns[c], dtype=np.int64)
-        elif c in _BOOL_COLUMNS:
+        elif c in BOOL_COLUMNS:
             data[c] = np.asarray(columns[c], dtype=bool)
         else:
             data[c] = np.asarray(columns[c], dtype=np.float64)
     return pd.DataFrame(data)
 
 
-def _check_table(
+def check_table(
     frame: pd.DataFrame, config: Mapping[str, Any], source: Path | str, first_line: int
 ) -> None:
     """Consistency checks on parsed rows; row i is on line ``first_line + i``."""
@@ -552,7 +577,7 @@ _SIDECAR = schema(
         "complete": Field("bool", doc="False until the recording is finalized."),
         "steps": Field("integer", ABSENT, "Rows after row 0.", low=0, optional=True),
         "end_reason": Field(
-            "choice", ABSENT, "Why the episode ended.", choices=_END_REASONS, optional=True
+            "choice", ABSENT, "Why the episode ended.", choices=END_REASONS, optional=True
         ),
         "metadata": Field("mapping", ABSENT, "Free-form information.", each=ANY_JSON),
     }
@@ -560,7 +585,7 @@ _SIDECAR = schema(
 """Every field of a sidecar (``recordings/README.md``); a field that is left out stays out."""
 
 
-def _validate_meta(meta: Any, source: Path) -> dict[str, Any]:
+def validate_sidecar(meta: Any, source: Path) -> dict[str, Any]:
     """The validated sidecar: every field's type, a valid config (made full), the columns."""
 
     def fail(path: str, message: str) -> RecordingError:
@@ -586,9 +611,11 @@ def _validate_meta(meta: Any, source: Path) -> dict[str, Any]:
     return checked
 
 
-def _read_sidecar(path: Path) -> dict[str, Any]:
+def read_sidecar(path: Path) -> dict[str, Any]:
+    """The validated sidecar read from ``path`` (:func:`validate_sidecar`); a missing, unreadable
+    or invalid file raises :class:`RecordingError`."""
     try:
-        text = _read_regular(path, "the sidecar")
+        text = read_regular_file(path, "the sidecar")
     except FileNotFoundError:
         raise RecordingError("missing sidecar (the JSON file next to the CSV)", path) from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -601,10 +628,11 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
         ) from None
     except (ValueError, RecursionError) as exc:  # an integer of > 4300 digits, deep nesting
         raise RecordingError(f"sidecar cannot be read as JSON: {exc}", path) from None
-    return _validate_meta(meta, path)
+    return validate_sidecar(meta, path)
 
 
-def _paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
+def recording_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
+    """The (CSV, sidecar) paths of a recording given either file or the name without suffix."""
     p = Path(path)
     if p.suffix == ".json":
         return p.with_suffix(".csv"), p

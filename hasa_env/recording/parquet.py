@@ -11,7 +11,7 @@ import json
 import os
 from pathlib import Path
 
-from hasa_env.recording.format import Recording, _new_temporary
+from hasa_env.recording.format import Recording, new_temporary_file
 from hasa_env.recording.reader import (
     PARQUET_METADATA_KEY,
     load_recording,
@@ -61,7 +61,7 @@ def to_parquet(
     if not overwrite and path.exists():
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = _new_temporary(path)  # O_EXCL: no pre-placed file or symlink is followed
+    fd, tmp = new_temporary_file(path)  # O_EXCL: no pre-placed file or symlink is followed
     try:
         with open(fd, "wb") as f:
             pq.write_table(table, f)

@@ -19,15 +19,15 @@ from hasa_env.recording.format import (
     RecordingError,
     RecordingList,
     RecordingWarning,
-    _check_table,
-    _file_kind,
-    _frame,
-    _magnitude_limit,
-    _parse_lines,
-    _paths,
-    _read_regular,
-    _read_sidecar,
-    _validate_meta,
+    check_table,
+    columns_frame,
+    file_kind,
+    magnitude_limit,
+    parse_lines,
+    read_regular_file,
+    read_sidecar,
+    recording_paths,
+    validate_sidecar,
 )
 from hasa_env.sim.setup import RECORDING_COLUMNS
 
@@ -67,18 +67,18 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         # the checks above name every problem they know; anything else a file can
         # cause is still this file's error, never a crash of the caller's batch
         raise RecordingError(
-            f"invalid recording ({type(exc).__name__}: {exc})", _paths(path)[0]
+            f"invalid recording ({type(exc).__name__}: {exc})", recording_paths(path)[0]
         ) from exc
 
 
 def _load_recording(path: str | os.PathLike[str]) -> Recording:
-    csv_path, json_path = _paths(path)
+    csv_path, json_path = recording_paths(path)
     if not os.path.lexists(csv_path) and not os.path.lexists(json_path):
         raise RecordingError(
             f"no such recording (neither it nor {json_path.name} exists)", csv_path
         )
     try:
-        meta = _read_sidecar(json_path)
+        meta = read_sidecar(json_path)
     except RecordingError as exc:
         if exc.reason.startswith("missing sidecar") and _is_started_episode(csv_path):
             raise RecordingError(
@@ -88,7 +88,7 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
             ) from None
         raise
     try:
-        text = _read_regular(csv_path, "the CSV")
+        text = read_regular_file(csv_path, "the CSV")
     except FileNotFoundError:
         raise RecordingError("missing CSV file (the sidecar exists)", csv_path) from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -113,9 +113,9 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
         notes.append(note)
         warnings.warn(note, RecordingWarning, stacklevel=2)
     lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
-    columns = _parse_lines(lines, csv_path)
-    frame = _frame(columns)
-    _check_table(frame, meta["config"], csv_path, 2)
+    columns = parse_lines(lines, csv_path)
+    frame = columns_frame(columns)
+    check_table(frame, meta["config"], csv_path, 2)
     if meta["complete"]:
         steps = meta.get("steps")
         if steps != len(frame) - 1:
@@ -143,7 +143,7 @@ def _other_document(path: Path) -> bool:
     """A JSON file that says it is something else than a recording's sidecar (a study's
     session file, a calibration, a model file: its ``format`` names another document)."""
     try:
-        doc = json.loads(_read_regular(path, "the file"))
+        doc = json.loads(read_regular_file(path, "the file"))
     except (OSError, ValueError, RecursionError):
         return False
     fmt = doc.get("format") if isinstance(doc, dict) else None
@@ -153,7 +153,7 @@ def _other_document(path: Path) -> bool:
 def _is_started_episode(csv_path: Path) -> bool:
     """A CSV that a recorder had only begun: empty, or at most the header and row 0."""
     try:
-        text = _read_regular(csv_path, "the CSV")
+        text = read_regular_file(csv_path, "the CSV")
     except (OSError, UnicodeDecodeError):
         return False
     return text.count("\n") <= 2 and (not text or text.startswith(RECORDING_COLUMNS[0] + ","))
@@ -246,7 +246,7 @@ def load_paths(paths: Sequence[str | os.PathLike[str]]) -> RecordingList:
                     recordings.append(read_parquet(p))
                 except (RecordingError, ImportError) as exc:
                     problems.append(_as_recording_error(exc, p))
-        elif not os.path.lexists(path) and not any(map(os.path.lexists, _paths(path))):
+        elif not os.path.lexists(path) and not any(map(os.path.lexists, recording_paths(path))):
             problems.append(RecordingError("no such file or directory", path))
         else:
             try:
@@ -322,7 +322,7 @@ def read_parquet(path: str | os.PathLike[str]) -> Recording:
         decoded = json.loads(raw.decode("utf-8"))
     except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError too
         raise RecordingError(f"sidecar metadata is not valid JSON: {exc}", path) from None
-    meta = _validate_meta(decoded, path)
+    meta = validate_sidecar(decoded, path)
     names = list(table.column_names)
     if names != list(RECORDING_COLUMNS):
         missing = [c for c in RECORDING_COLUMNS if c not in names]
@@ -348,7 +348,7 @@ def read_parquet(path: str | os.PathLike[str]) -> Recording:
             )
         if expected is np.float64:
             values = frame[column].to_numpy()
-            limit = _magnitude_limit(column)
+            limit = magnitude_limit(column)
             bad = np.flatnonzero(~(np.abs(values) <= limit))
             if bad.size:
                 raise RecordingError(
@@ -360,7 +360,7 @@ def read_parquet(path: str | os.PathLike[str]) -> Recording:
     if not len(frame):
         raise RecordingError("no rows (row 0, the reset state, is required)", path)
     try:
-        _check_table(frame, meta["config"], path, 0)
+        check_table(frame, meta["config"], path, 0)
     except RecordingError as exc:  # rows, not lines, in a Parquet file
         raise RecordingError(f"row {exc.line}: {exc.reason}", path, column=exc.column) from None
     if meta["complete"] and meta.get("steps") != len(frame) - 1:
@@ -377,4 +377,4 @@ def _check_regular(path: Path, what: str) -> None:
     """Raise OSError unless ``path`` is a regular file (a FIFO would block the reader)."""
     info = os.stat(path)
     if not stat.S_ISREG(info.st_mode):
-        raise OSError(f"{what} is {_file_kind(info.st_mode)}, not a regular file")
+        raise OSError(f"{what} is {file_kind(info.st_mode)}, not a regular file")

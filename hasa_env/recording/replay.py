@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
-from hasa_env.recording.format import Recording, _frame
+from hasa_env.recording.format import Recording, columns_frame
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.setup import (
     RECORDING_COLUMNS,
@@ -108,7 +108,7 @@ def replay(recording: Recording) -> pd.DataFrame:
                 break
     finally:
         env.close()
-    return _frame(dict(zip(RECORDING_COLUMNS, zip(*rows, strict=True), strict=True)))
+    return columns_frame(dict(zip(RECORDING_COLUMNS, zip(*rows, strict=True), strict=True)))
 
 
 def compare_recordings(

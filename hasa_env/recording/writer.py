@@ -27,27 +27,27 @@ import pandas as pd
 from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording.format import (
-    _BOOL_COLUMNS,
-    _END_REASONS,
-    _HEADER,
-    _INT_COLUMNS,
-    _SIDECAR_KEYS,
+    BOOL_COLUMNS,
+    CSV_HEADER,
+    END_REASONS,
+    INT_COLUMNS,
+    SIDECAR_KEYS,
     RecordingError,
-    _base_sidecar,
-    _check_header,
-    _check_json_able,
-    _check_seed,
-    _check_table,
-    _format_row,
-    _format_value,
-    _frame,
-    _magnitude_limit,
-    _now,
-    _parse_float,
-    _parse_lines,
-    _paths,
-    _to_json,
-    _write_atomic,
+    base_sidecar,
+    check_header,
+    check_json_able,
+    check_seed,
+    check_table,
+    columns_frame,
+    format_row,
+    format_value,
+    magnitude_limit,
+    parse_float,
+    parse_lines,
+    recording_paths,
+    to_json_text,
+    utc_now_text,
+    write_atomic,
 )
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.setup import RECORDING_COLUMNS, recording_row
@@ -126,14 +126,14 @@ class RecordingWrapper(gym.Wrapper):
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.prefix = prefix
-        self.recording_metadata: dict[str, Any] = _check_json_able("metadata", dict(metadata or {}))
+        self.recording_metadata: dict[str, Any] = check_json_able("metadata", dict(metadata or {}))
         spec_id = env.spec.id if env.spec is not None else None
         self.env_id = env_id if env_id is not None else spec_id
         self.fsync = bool(fsync)
         self._seed_entropy: int | None = None
         self._seed_rng: np.random.Generator | None = None
         if seed is not None:
-            self._init_seed_sequence(_check_seed(seed, "seed"))
+            self._init_seed_sequence(check_seed(seed, "seed"))
         self._fd: int | None = None
         self._offset = 0
         self._write_error: RecordingError | None = None
@@ -162,7 +162,7 @@ class RecordingWrapper(gym.Wrapper):
     ) -> tuple[Any, dict[str, Any]]:
         self._finalize("stopped")
         if seed is not None:
-            episode_seed = _check_seed(seed, "reset(seed=...)")
+            episode_seed = check_seed(seed, "reset(seed=...)")
             source = "reset"
             if self._seed_rng is None:
                 self._init_seed_sequence(episode_seed)
@@ -172,9 +172,7 @@ class RecordingWrapper(gym.Wrapper):
             assert self._seed_rng is not None
             episode_seed = int(self._seed_rng.integers(0, 2**53))
             source = "wrapper"
-        reset_options = (
-            None if options is None else _check_json_able("reset options", dict(options))
-        )
+        reset_options = None if options is None else check_json_able("reset options", dict(options))
         obs, info = self.env.reset(seed=episode_seed, options=options)
         self.episode_seed = episode_seed
         self._start_episode(episode_seed, source, reset_options, info)
@@ -240,7 +238,7 @@ class RecordingWrapper(gym.Wrapper):
         self._warned_after_end = False
         self.paths.append(csv_path)
         self._sidecar_path = csv_path.with_suffix(".json")
-        sidecar = _base_sidecar(csv_path.name)
+        sidecar = base_sidecar(csv_path.name)
         sidecar.update(
             env_id=self.env_id,
             seed=seed,
@@ -255,10 +253,10 @@ class RecordingWrapper(gym.Wrapper):
             # header and row 0 in one write, then the sidecar: a process killed in between
             # leaves a CSV of at most its reset row and no sidecar, which the loader names
             # as an episode that was being started (nothing of it had been returned yet)
-            self._write_text(_HEADER + _format_row(recording_row(0, info, 0.0, False, False)),
+            self._write_text(CSV_HEADER + format_row(recording_row(0, info, 0.0, False, False)),
                              "the header and row 0")  # fmt: skip
             self._rows = 1
-            _write_atomic(self._sidecar_path, _to_json(sidecar))
+            write_atomic(self._sidecar_path, to_json_text(sidecar))
         except (OSError, RecordingError):
             # nothing of this episode is recorded: leave no half-made recording behind
             fd, self._fd = self._fd, None
@@ -273,7 +271,7 @@ class RecordingWrapper(gym.Wrapper):
 
     def _write(self, row: Sequence[Any]) -> None:
         try:
-            text = _format_row(row)
+            text = format_row(row)
         except (TypeError, ValueError) as exc:  # pragma: no cover - env info is always valid
             raise RecordingError(f"row {self._rows}: {exc}", self.path) from exc
         self._write_text(text, f"row {self._rows}")
@@ -309,10 +307,10 @@ class RecordingWrapper(gym.Wrapper):
         finally:
             assert self._sidecar is not None and self._sidecar_path is not None
             self._sidecar.update(
-                complete=True, steps=self._rows - 1, end_reason=reason, finished=_now()
+                complete=True, steps=self._rows - 1, end_reason=reason, finished=utc_now_text()
             )
             try:
-                _write_atomic(self._sidecar_path, _to_json(self._sidecar))
+                write_atomic(self._sidecar_path, to_json_text(self._sidecar))
             except OSError as exc:  # the sidecar on disk still says "complete": false
                 raise RecordingError(
                     f"finalizing the sidecar failed ({exc}); the recording stays incomplete "
@@ -349,43 +347,43 @@ def save_recording(
         ValueError: an unknown ``meta`` key or a non-JSON-serializable value.
     """
     meta = dict(meta or {})
-    unknown = [k for k in meta if k not in _SIDECAR_KEYS]
+    unknown = [k for k in meta if k not in SIDECAR_KEYS]
     if unknown:
         raise ValueError(
-            f"unknown meta key {unknown[0]!r}; allowed: {', '.join(_SIDECAR_KEYS)} "
+            f"unknown meta key {unknown[0]!r}; allowed: {', '.join(SIDECAR_KEYS)} "
             "(put free-form information in meta['metadata'])"
         )
-    csv_path, json_path = _paths(path)
+    csv_path, json_path = recording_paths(path)
     source = f"DataFrame for {csv_path}"
     if not isinstance(frame, pd.DataFrame):
         raise TypeError(f"frame must be a pandas DataFrame, got {type(frame).__name__}")
-    _check_header([str(c) for c in frame.columns], source)
+    check_header([str(c) for c in frame.columns], source)
     try:
         config = make_config(meta.get("config"))
     except ConfigError as exc:
         raise ValueError(f"meta['config'] is invalid: {exc}") from None
     seed = meta.get("seed")
     if seed is not None:
-        seed = _check_seed(seed, "meta['seed']")
+        seed = check_seed(seed, "meta['seed']")
     ordered = frame[list(RECORDING_COLUMNS)]
-    lines = [_HEADER]
+    lines = [CSV_HEADER]
     cols = [ordered[c].to_numpy() for c in RECORDING_COLUMNS]
     for i in range(len(ordered)):
         parts = []
         for c, col in zip(RECORDING_COLUMNS, cols, strict=True):
             value = col[i]
             try:
-                text = _format_value(c, value)
-                if c not in _INT_COLUMNS and c not in _BOOL_COLUMNS:
-                    _parse_float(text, _magnitude_limit(c))
+                text = format_value(c, value)
+                if c not in INT_COLUMNS and c not in BOOL_COLUMNS:
+                    parse_float(text, magnitude_limit(c))
             except (TypeError, ValueError) as exc:
                 raise RecordingError(f"row {i}: {exc}", source, column=c) from None
             parts.append(text)
         lines.append(",".join(parts) + "\n")
     if len(lines) < 2:
         raise RecordingError("no rows (row 0, the reset state, is required)", source)
-    parsed = _frame(_parse_lines([ln[:-1] for ln in lines], source))
-    _check_table(parsed, config, source, 2)
+    parsed = columns_frame(parse_lines([ln[:-1] for ln in lines], source))
+    check_table(parsed, config, source, 2)
     last = parsed.iloc[-1]
     default_reason = (
         "terminated" if last["terminated"] else "truncated" if last["truncated"] else "stopped"
@@ -393,26 +391,26 @@ def save_recording(
     complete = meta.get("complete", True)
     if not isinstance(complete, bool):
         raise ValueError(f"meta['complete'] must be a bool, got {complete!r}")
-    sidecar = _base_sidecar(csv_path.name)
+    sidecar = base_sidecar(csv_path.name)
     sidecar.update(
         env_id=meta.get("env_id"),
         seed=seed,
         seed_source=None if seed is None else "given",
-        reset_options=_check_json_able("meta['reset_options']", meta.get("reset_options")),
+        reset_options=check_json_able("meta['reset_options']", meta.get("reset_options")),
         config=config,
-        metadata=_check_json_able("meta['metadata']", dict(meta.get("metadata") or {})),
+        metadata=check_json_able("meta['metadata']", dict(meta.get("metadata") or {})),
         complete=complete,
         steps=len(parsed) - 1 if complete else None,
         end_reason=meta.get("end_reason", default_reason) if complete else None,
-        finished=_now() if complete else None,
+        finished=utc_now_text() if complete else None,
     )
     if "created" in meta:
         sidecar["created"] = str(meta["created"])
-    if sidecar["end_reason"] is not None and sidecar["end_reason"] not in _END_REASONS:
+    if sidecar["end_reason"] is not None and sidecar["end_reason"] not in END_REASONS:
         raise ValueError(
-            f"meta['end_reason'] must be one of {_END_REASONS}, got {sidecar['end_reason']!r}"
+            f"meta['end_reason'] must be one of {END_REASONS}, got {sidecar['end_reason']!r}"
         )
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic(csv_path, "".join(lines))
-    _write_atomic(json_path, _to_json(sidecar))
+    write_atomic(csv_path, "".join(lines))
+    write_atomic(json_path, to_json_text(sidecar))
     return csv_path

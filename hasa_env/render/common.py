@@ -68,7 +68,7 @@ sequence with one weight per ``markings.hypotheses`` entry, a callable
 
 INFO_WEIGHT_KEYS = ("estimate_weights", "estimator_weights", "hypothesis_weights")
 """``info`` keys searched, in order, for hypothesis weights when none are passed explicitly
-(``estimate_weights``: :class:`estimators.wrappers.EstimatorInfoWrapper`, one weight per
+(``estimate_weights``: what an estimator's info wrapper adds, one weight per
 ``markings.hypotheses`` entry)."""
 
 

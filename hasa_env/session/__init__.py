@@ -5,8 +5,8 @@ schedules; :mod:`~hasa_env.session.study_session`: a participant's session;
 driving through a virtual wheel, and a model of a person steering with keys
 (:mod:`~hasa_env.session.keyboard_person`).
 
-The command line is ``hasa-drive`` (:mod:`hasa_cli.drive`): ``hasa-drive study
-STUDY.toml --participant P07`` runs a study session.
+The command line is ``hasa-drive`` (the command-line layer above this package):
+``hasa-drive study STUDY.toml --participant P07`` runs a study session.
 """
 
 from hasa_env.session.loop import MAX_CATCH_UP, DriveSession, RunResult, RunSpec

@@ -15,7 +15,7 @@ frame, capped at ``fps`` (60). A pause (P, or the wheel unplugged) freezes
 the simulation clock; nothing is recorded while paused. Without
 ``realtime`` the same loop runs headless and as fast as possible, with a
 scripted driver turning a virtual wheel (:class:`hasa_env.session.scripted.VirtualWheelDriver`).
-The command line is ``hasa-drive`` (:mod:`hasa_cli.drive`).
+The command line is ``hasa-drive`` (the command-line layer above this package).
 
 Besides :meth:`DriveSession.run` (the plain session of ``hasa-drive``),
 :meth:`DriveSession.show` (a message screen until the driver confirms) and
@@ -482,28 +482,77 @@ class DriveSession:
             return None
         return self._drive_run(spec)
 
-    def _drive_run(self, spec: RunSpec) -> RunResult | None:
+    def _recorder(self, spec: RunSpec) -> RecordingWrapper:
+        """A new env (wrapped by ``env_wrapper`` if set) recording the run ``spec``."""
         s = self.settings
-        run_index, seed = spec.index, spec.seed
         env: Any = LaneKeepingEnv(config=self.config)
         if self.env_wrapper is not None:
             env = self.env_wrapper(env)
         env_id = (
             "hasa_env/LaneKeepingCurved-v0" if s.track == "curved" else "hasa_env/LaneKeeping-v0"
         )
-        recorder = RecordingWrapper(
+        return RecordingWrapper(
             env,
             s.directory,
             prefix=spec.prefix,
-            metadata=deep_merge(self._run_metadata(run_index, seed), dict(spec.metadata)),
+            metadata=deep_merge(self._run_metadata(spec.index, spec.seed), dict(spec.metadata)),
             env_id=env_id,
             fsync=s.fsync,
         )
+
+    def _steps_due(self) -> int:
+        """Env steps to take now: 1 per loop without ``realtime``; with it, the steps the wall
+        clock is due since the anchor (re-anchored to 1 step after a stall longer than
+        :data:`MAX_CATCH_UP`); 0 unless driving."""
+        if self.state != "driving":
+            return 0
+        if not self.realtime:
+            return 1
+        now = time.perf_counter()
+        due = int((now - self._anchor) / self.dt) - self.steps
+        if due * self.dt > MAX_CATCH_UP:
+            self.log(f"hasa-drive: fell {due * self.dt:.2f} s behind real time; re-anchoring")
+            self._anchor = now - (self.steps + 1) * self.dt
+            due = 1
+        return due
+
+    def _take_steps(
+        self, recorder: RecordingWrapper, raw: RawInputWriter, due: int, wall0: float
+    ) -> tuple[bool, str | None]:
+        """Up to ``due`` env steps of the driver's inputs, each recorded with its raw inputs
+        (``wall0``: the run's start on ``time.perf_counter``); stops early when the state
+        leaves "driving". Returns (whether a step was taken, "terminated" / "truncated" if the
+        episode ended, else None)."""
+        stepped = False
+        for _ in range(max(due, 0)):
+            self._call_hook()
+            self._handle(self.inputs.poll())
+            if self.state != "driving":
+                break
+            reading = self.inputs.read(self.dt)
+            assert self.info is not None  # the run's reset set it
+            acceleration = self.settings.applied_acceleration(
+                reading.acceleration, float(self.info["speed"]), self.dt
+            )
+            action = [reading.road_wheel_angle, acceleration]
+            _, _, terminated, truncated, info = recorder.step(action)
+            self.steps += 1
+            self.info = info
+            raw.write(self.steps, info["time"], time.perf_counter() - wall0, reading)
+            self._report()
+            stepped = True
+            if terminated or truncated:
+                return stepped, "terminated" if terminated else "truncated"
+        return stepped, None
+
+    def _drive_run(self, spec: RunSpec) -> RunResult | None:
+        s = self.settings
+        recorder = self._recorder(spec)
         raw: RawInputWriter | None = None
         end_reason = "stopped"
         self.steps = 0
         try:
-            _, info = recorder.reset(seed=seed, options=dict(spec.reset_options))
+            _, info = recorder.reset(seed=spec.seed, options=dict(spec.reset_options))
             self.info = info
             assert recorder.path is not None
             if self.on_recording is not None:
@@ -514,23 +563,8 @@ class DriveSession:
             self._anchor = wall0
             idle = 0
             last_frame_step = -1
-            while True:
-                if self.state == "quit":
-                    break
-                due = 0
-                if self.state == "driving":
-                    if self.realtime:
-                        now = time.perf_counter()
-                        due = int((now - self._anchor) / self.dt) - self.steps
-                        if due * self.dt > MAX_CATCH_UP:
-                            self.log(
-                                f"hasa-drive: fell {due * self.dt:.2f} s behind real time; "
-                                "re-anchoring"
-                            )
-                            self._anchor = now - (self.steps + 1) * self.dt
-                            due = 1
-                    else:
-                        due = 1
+            while self.state != "quit":
+                due = self._steps_due()
                 if due <= 0:
                     self._idle()
                     idle += 1
@@ -539,28 +573,11 @@ class DriveSession:
                             f"scripted drive stuck in state {self.state!r} for {idle} iterations "
                             f"(message: {self.message!r})"
                         )
-                done = False
-                for _ in range(max(due, 0)):
-                    self._call_hook()
-                    self._handle(self.inputs.poll())
-                    if self.state != "driving":
-                        break
-                    reading = self.inputs.read(self.dt)
-                    acceleration = s.applied_acceleration(
-                        reading.acceleration, float(self.info["speed"]), self.dt
-                    )
-                    action = [reading.road_wheel_angle, acceleration]
-                    _, _, terminated, truncated, info = recorder.step(action)
-                    self.steps += 1
-                    self.info = info
-                    raw.write(self.steps, info["time"], time.perf_counter() - wall0, reading)
-                    self._report()
+                stepped, ended = self._take_steps(recorder, raw, due, wall0)
+                if stepped:
                     idle = 0
-                    if terminated or truncated:
-                        end_reason = "terminated" if terminated else "truncated"
-                        done = True
-                        break
-                if done:
+                if ended is not None:
+                    end_reason = ended
                     break
                 if self.display is not None:
                     if (

@@ -52,7 +52,7 @@ __all__ = [
 
 # Everything but ARXForm loads on first use: the model and fitting modules pull
 # in pandas, scipy.signal and statsmodels (~1 s), which code that only needs
-# ARXForm (the estimators) should not pay for at import.
+# ARXForm (an estimator filtering with a model) should not pay for at import.
 _SUBMODULES = {
     "design": ("Design", "Regressor", "lagged"),
     "model_file": ("ModelFileError",),

@@ -107,6 +107,35 @@ class ModelDefinitionError(ValueError):
     do not list what its ``design()`` uses; the message names the model and the mismatch."""
 
 
+_PROBE_SCALES = {"delta": 0.02, "phi": 0.05, "omega": 0.05, "lateral_velocity": 0.3}
+"""Typical size of each feature (rad, m/s) in :meth:`SteeringModel.check_regressors`'s probe
+frame; the others 1."""
+
+
+def _rows_changed(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows where ``a`` and ``b`` differ (NaN equals NaN); 1-D or per row of a 2-D array."""
+    same = (a == b) | (np.isnan(a) & np.isnan(b))
+    return ~same if same.ndim == 1 else ~same.all(axis=1)
+
+
+def _lag_mismatches(feature: str, used: set[int], wanted: set[int]) -> list[str]:
+    """What :meth:`SteeringModel.check_regressors` reports for one feature: lags the design
+    uses but ``regressors`` does not list, and the reverse (a negative lag is a future sample)."""
+
+    def show(lags: set[int]) -> str:
+        return ", ".join(
+            str(Regressor(feature, lag)) if lag >= 0 else f"{feature}(k+{-lag})"
+            for lag in sorted(lags)
+        )
+
+    problems = []
+    if used - wanted:
+        problems.append(f"design() uses {show(used - wanted)}, which regressors does not list")
+    if wanted - used:
+        problems.append(f"regressors lists {show(wanted - used)}, which design() does not use")
+    return problems
+
+
 class SteeringModel(ABC):
     """Base class of all steering models (see the module docstring).
 
@@ -291,20 +320,8 @@ class SteeringModel(ABC):
         for r in self.regressors:
             declared.setdefault(r.feature, set()).add(int(r.lag))
         reach = self.max_lag + 8  # uses up to this many samples beyond the declared lags show
-        n = 2 * reach + 10
         j = reach + 4  # the perturbed sample
-        rng = np.random.default_rng(20240615)
-        scales = {"delta": 0.02, "phi": 0.05, "omega": 0.05, "lateral_velocity": 0.3}
-        columns = {f: scales.get(f, 1.0) * rng.standard_normal(n) for f in FEATURE_NAMES}
-        columns["speed"] = 15.0 + rng.standard_normal(n)
-        base = pd.DataFrame(columns)
-        base.attrs = {
-            "near_distance": self.near_distance,
-            "far_distance": self.far_distance,
-            "decision_lag": self.decision_lag,
-            "steering": "sensor_steering" if self.steering_signal == "measured" else "steering",
-            "dt": self.dt,
-        }
+        base = self._probe_frame(2 * reach + 10)
 
         def design_of(frame: pd.DataFrame) -> Design | None:
             try:
@@ -328,47 +345,44 @@ class SteeringModel(ABC):
                 "in parameter_names order"
             )
 
-        def changed(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-            same = (a == b) | (np.isnan(a) & np.isnan(b))
-            return ~same if same.ndim == 1 else ~same.all(axis=1)
-
         problems = []
         for feature in FEATURE_NAMES:
             used: set[int] = set()
             for step in (0.37, -0.61):
                 frame = base.copy()
                 values = frame[feature].to_numpy(copy=True)
-                values[j] += step * scales.get(feature, 1.0) + 1e-3
+                values[j] += step * _PROBE_SCALES.get(feature, 1.0) + 1e-3
                 frame[feature] = values
                 other = design_of(frame)
                 assert other is not None
                 rows = np.flatnonzero(
-                    changed(reference.offset, other.offset)
-                    | changed(reference.matrix, other.matrix)
+                    _rows_changed(reference.offset, other.offset)
+                    | _rows_changed(reference.matrix, other.matrix)
                 )
                 used |= {int(r) - j for r in rows}
-            wanted = declared.get(feature, set())
-
-            def show(lags: set[int], feature: str = feature) -> str:
-                return ", ".join(
-                    str(Regressor(feature, lag)) if lag >= 0 else f"{feature}(k+{-lag})"
-                    for lag in sorted(lags)
-                )
-
-            if used - wanted:
-                problems.append(
-                    f"design() uses {show(used - wanted)}, which regressors does not list"
-                )
-            if wanted - used:
-                problems.append(
-                    f"regressors lists {show(wanted - used)}, which design() does not use"
-                )
+            problems += _lag_mismatches(feature, used, declared.get(feature, set()))
         if problems:
             raise ModelDefinitionError(
                 f"{label}: regressors and design() disagree: " + "; ".join(problems) + ". "
                 "regressors must list exactly the features and lags design() reads (the fit's "
                 "checks, the estimator and the model file rely on it)"
             )
+
+    def _probe_frame(self, n: int) -> pd.DataFrame:
+        """The synthetic features frame :meth:`check_regressors` perturbs: ``n`` rows of
+        seeded noise of each feature's typical size (speed 15 +- 1 m/s), this model's attrs."""
+        rng = np.random.default_rng(20240615)
+        columns = {f: _PROBE_SCALES.get(f, 1.0) * rng.standard_normal(n) for f in FEATURE_NAMES}
+        columns["speed"] = 15.0 + rng.standard_normal(n)
+        base = pd.DataFrame(columns)
+        base.attrs = {
+            "near_distance": self.near_distance,
+            "far_distance": self.far_distance,
+            "decision_lag": self.decision_lag,
+            "steering": "sensor_steering" if self.steering_signal == "measured" else "steering",
+            "dt": self.dt,
+        }
+        return base
 
     def common_kwargs(self) -> dict[str, Any]:
         """Constructor keywords shared by every model (distances, dt, lag, name)."""

@@ -30,7 +30,6 @@ its recordings recovers the driver's coefficients.
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Mapping
 
@@ -122,6 +121,45 @@ def is_feature_frame(frame: pd.DataFrame) -> bool:
     return all(c in frame.columns for c in ("delta", "phi", "omega", "lateral_velocity"))
 
 
+def _road_of_run(frame: pd.DataFrame) -> Road | None:
+    """:func:`road_of_frame`, warning (at the caller of :func:`steering_features`) when it
+    is None although the frame's ``road_curvature`` is not zero."""
+    road = road_of_frame(frame)
+    if road is None and "road_curvature" in frame.columns:
+        curvature = frame["road_curvature"].to_numpy(dtype=np.float64)
+        if np.any(np.abs(curvature[np.isfinite(curvature)]) > 0):
+            warnings.warn(
+                "the run has non-zero road_curvature but no road was given; using the "
+                "straight-road bearing formula (pass road=... for curved tracks)",
+                stacklevel=3,
+            )
+    return road
+
+
+def _seen_per_row(
+    frame: pd.DataFrame, road: Road | None, near: float, far: float, exact: bool
+) -> dict[str, np.ndarray]:
+    """What the driver sees at each row: ``phi``, ``omega`` (rad, :func:`near_far_bearings`),
+    ``lateral_velocity`` (m/s; the frame's, else v sin theta) and ``speed`` (m/s)."""
+    y = frame["lateral_offset"].to_numpy(dtype=np.float64)
+    theta = frame["heading"].to_numpy(dtype=np.float64)
+    speed = frame["speed"].to_numpy(dtype=np.float64)
+    if road is not None and not road.is_straight and exact:
+        if "station" not in frame.columns:
+            raise ValueError(
+                "frame lacks the 'station' column needed for bearings on a curved road"
+            )
+        station = frame["station"].to_numpy(dtype=np.float64)
+    else:
+        station = np.zeros_like(y)
+    phi, omega = near_far_bearings(road, station, y, theta, near, far, exact)
+    if "lateral_velocity" in frame.columns:
+        lateral_velocity = frame["lateral_velocity"].to_numpy(dtype=np.float64)
+    else:
+        lateral_velocity = speed * np.sin(theta)
+    return {"phi": phi, "omega": omega, "lateral_velocity": lateral_velocity, "speed": speed}
+
+
 def steering_features(
     frame: pd.DataFrame,
     road: Road | None = None,
@@ -173,37 +211,8 @@ def steering_features(
             f"{needed} (+ station on curved roads); see hasa_env.sim.setup.RECORDING_COLUMNS"
         )
     if road is None:
-        road = road_of_frame(frame)
-        if road is None and "road_curvature" in frame.columns:
-            curvature = frame["road_curvature"].to_numpy(dtype=np.float64)
-            if np.any(np.abs(curvature[np.isfinite(curvature)]) > 0):
-                warnings.warn(
-                    "the run has non-zero road_curvature but no road was given; using the "
-                    "straight-road bearing formula (pass road=... for curved tracks)",
-                    stacklevel=2,
-                )
-    y = frame["lateral_offset"].to_numpy(dtype=np.float64)
-    theta = frame["heading"].to_numpy(dtype=np.float64)
-    speed = frame["speed"].to_numpy(dtype=np.float64)
-    if road is not None and not road.is_straight and exact:
-        if "station" not in frame.columns:
-            raise ValueError(
-                "frame lacks the 'station' column needed for bearings on a curved road"
-            )
-        station = frame["station"].to_numpy(dtype=np.float64)
-    else:
-        station = np.zeros_like(y)
-    phi, omega = near_far_bearings(road, station, y, theta, near, far, exact)
-    if "lateral_velocity" in frame.columns:
-        lateral_velocity = frame["lateral_velocity"].to_numpy(dtype=np.float64)
-    else:
-        lateral_velocity = speed * np.sin(theta)
-    seen = {
-        "phi": phi,
-        "omega": omega,
-        "lateral_velocity": lateral_velocity,
-        "speed": speed,
-    }
+        road = _road_of_run(frame)
+    seen = _seen_per_row(frame, road, near, far, exact)
     lag = int(decision_lag)
     if steering not in STEERING_SIGNALS:
         raise ValueError(
@@ -230,8 +239,3 @@ def steering_features(
         if steps.size and np.all(np.isfinite(steps)):
             features.attrs["dt"] = float(np.median(steps))
     return features
-
-
-def straight_bearing(lateral_offset: float, heading: float, distance: float) -> float:
-    """The paper's straight-road bearing ``-(theta + atan(y / distance))`` for one car (rad)."""
-    return -(heading + math.atan(lateral_offset / distance))

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -56,11 +56,11 @@ from hasa_env.steering.regression import (
     ILL_CONDITIONED,
     CrossValidation,
     LinearSolution,
-    _check_shape,
-    _standardize,
+    check_regression_shapes,
     choose_ridge_lambda,
     least_squares,
     ridge_regression,
+    standardize_columns,
 )
 
 __all__ = [
@@ -391,7 +391,52 @@ def fit_model(
         raise ValueError(
             f"{model.name}: design has {X.shape[1]} columns for {len(names)} parameters"
         )
-    _check_shape(X, y)
+    check_regression_shapes(X, y)
+    solution, cross_validation, cv_lambda = _regression_solution(
+        model, blocks, X, y, ridge=ridge, folds=folds, lambdas=lambdas, rule=rule, stable=stable
+    )
+    condition = _condition_number(X, names, solution)
+    result = _fit_result(model, blocks, X.shape, solution, cross_validation)
+    fitted = model.with_parameters(solution.parameters, solution.standard_errors, fit_result=result)
+    report = check_identifiability(
+        fitted,
+        solution.covariance,
+        residual_std=math.sqrt(solution.sigma2),
+        sensor_std=sensor_std,
+    )
+    try:
+        regressor_features = [r.feature for r in getattr(model, "regressors", ())]
+    except Exception:  # noqa: BLE001 - a user model's regressors need not match its design
+        regressor_features = []
+    collinearity = (
+        feature_collinearity(X, regressor_features) if len(regressor_features) == X.shape[1] else {}
+    )
+    checks = _checks(fitted, solution, report, condition, cv_lambda, collinearity)
+    result = replace(result, identifiability=report, checks=checks)
+    fitted.fit_result = result
+    fitted.training_curvature = training_curvature(runs, road)
+    fitted.training_speed_range = training_speed_range(runs)
+    if warn:
+        _warn_about_fit(model.name, report, checks)
+    return fitted
+
+
+def _regression_solution(
+    model: SteeringModel,
+    blocks: Sequence[Mapping[str, np.ndarray]],
+    X: np.ndarray,
+    y: np.ndarray,
+    *,
+    ridge: str | float,
+    folds: int,
+    lambdas: Sequence[float],
+    rule: str,
+    stable: bool,
+) -> tuple[LinearSolution, CrossValidation | None, float]:
+    """The regression of :func:`fit_model` (its arguments of the same names): (solution, the
+    cross-validation or None, the penalty cross-validation chose, before any raise for
+    stability)."""
+    names = model.parameter_names
     cross_validation = None
     if isinstance(ridge, str):
         if ridge != "cv":
@@ -407,25 +452,42 @@ def fit_model(
     else:
         ridge_lambda = float(ridge)
     solution = ridge_regression(X, y, ridge_lambda, names)
-    cv_lambda = ridge_lambda
     if cross_validation is not None and stable and not _stable(model, solution):
         for candidate in sorted(v for v in lambdas if v > ridge_lambda):
             trial = ridge_regression(X, y, candidate, names)
             if _stable(model, trial):
                 solution = trial
                 break
-    condition = solution.condition_number
+    return solution, cross_validation, ridge_lambda
+
+
+def _condition_number(X: np.ndarray, names: Sequence[str], solution: LinearSolution) -> float:
+    """The condition number sigma_max / sigma_min of the design with unit-RMS columns for a
+    ridge fit (inf if singular), the solution's own otherwise."""
     if solution.ridge_lambda > 0 and X.shape[1]:
-        Z, _ = _standardize(X, names)
+        Z, _ = standardize_columns(X, names)
         singular = np.linalg.svd(Z, compute_uv=False)
-        condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
-    n, p = X.shape
+        return float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
+    return solution.condition_number
+
+
+def _fit_result(
+    model: SteeringModel,
+    blocks: Sequence[Mapping[str, np.ndarray]],
+    shape: tuple[int, ...],
+    solution: LinearSolution,
+    cross_validation: CrossValidation | None,
+) -> FitResult:
+    """The :class:`FitResult` of ``solution`` (without identifiability and checks): R^2 of
+    the steering and of its increments (rows with a previous sample), AIC and BIC; ``shape``:
+    the design's (rows, columns)."""
+    n, p = shape
     log_likelihood, aic, bic = criteria(solution.rss, n, solution.effective_parameters)
     increments_all = np.concatenate([b["increment"] for b in blocks])
     has_previous = np.isfinite(increments_all)
     residuals_with_previous = solution.residuals[has_previous]
-    result = FitResult(
-        parameter_names=names,
+    return FitResult(
+        parameter_names=model.parameter_names,
         parameters=solution.parameters,
         standard_errors=solution.standard_errors,
         covariance=solution.covariance,
@@ -445,47 +507,29 @@ def fit_model(
         cross_validation=cross_validation,
         steering_signal=getattr(model, "steering_signal", "measured"),
     )
-    fitted = model.with_parameters(solution.parameters, solution.standard_errors, fit_result=result)
-    report = check_identifiability(
-        fitted,
-        solution.covariance,
-        residual_std=math.sqrt(solution.sigma2),
-        sensor_std=sensor_std,
-    )
-    try:
-        regressor_features = [r.feature for r in getattr(model, "regressors", ())]
-    except Exception:  # noqa: BLE001 - a user model's regressors need not match its design
-        regressor_features = []
-    collinearity = (
-        feature_collinearity(X, regressor_features) if len(regressor_features) == p else {}
-    )
-    checks = _checks(fitted, solution, report, condition, cv_lambda, collinearity)
-    result = replace(result, identifiability=report, checks=checks)
-    fitted.fit_result = result
-    fitted.training_curvature = training_curvature(runs, road)
-    fitted.training_speed_range = training_speed_range(runs)
-    if warn:
-        if report is not None and not report.ok:
-            warnings.warn(
-                f"{model.name} fit: {report.message}", IdentifiabilityWarning, stacklevel=3
-            )
-        collinear = {k: v for k, v in checks.feature_collinearity.items() if v < COLLINEAR}
-        if collinear:
-            shown = ", ".join(f"{k} (1 - R^2 = {v:.1e})" for k, v in collinear.items())
-            warnings.warn(
-                f"{model.name} fit: the training data do not tell {shown} apart from the "
-                "other features: their coefficients are not identified, and predictions where "
-                "the features vary differently (e.g. at other speeds) are extrapolations",
-                IdentifiabilityWarning,
-                stacklevel=3,
-            )
-        if checks.stable is False:
-            warnings.warn(
-                f"{model.name} fit: its AR part has a pole of magnitude "
-                f"{checks.ar_poles_max_abs:.3g} outside the unit circle (ridge lambda "
-                f"{checks.ridge_lambda:.3g}, condition number {checks.condition_number:.3g}): "
-                "its own steering diverges in free run",
-                StabilityWarning,
-                stacklevel=3,
-            )
-    return fitted
+
+
+def _warn_about_fit(name: str, report: IdentifiabilityReport | None, checks: FitChecks) -> None:
+    """Warn (at the caller of ``model.fit``) when the lane offset is not identified, features
+    are collinear, or the AR part is unstable."""
+    if report is not None and not report.ok:
+        warnings.warn(f"{name} fit: {report.message}", IdentifiabilityWarning, stacklevel=4)
+    collinear = {k: v for k, v in checks.feature_collinearity.items() if v < COLLINEAR}
+    if collinear:
+        shown = ", ".join(f"{k} (1 - R^2 = {v:.1e})" for k, v in collinear.items())
+        warnings.warn(
+            f"{name} fit: the training data do not tell {shown} apart from the "
+            "other features: their coefficients are not identified, and predictions where "
+            "the features vary differently (e.g. at other speeds) are extrapolations",
+            IdentifiabilityWarning,
+            stacklevel=4,
+        )
+    if checks.stable is False:
+        warnings.warn(
+            f"{name} fit: its AR part has a pole of magnitude "
+            f"{checks.ar_poles_max_abs:.3g} outside the unit circle (ridge lambda "
+            f"{checks.ridge_lambda:.3g}, condition number {checks.condition_number:.3g}): "
+            "its own steering diverges in free run",
+            StabilityWarning,
+            stacklevel=4,
+        )

@@ -44,9 +44,11 @@ __all__ = [
     "ILL_CONDITIONED",
     "CrossValidation",
     "LinearSolution",
+    "check_regression_shapes",
     "choose_ridge_lambda",
     "least_squares",
     "ridge_regression",
+    "standardize_columns",
 ]
 
 DEFAULT_LAMBDAS = tuple(float(v) for v in np.logspace(-9.0, 1.0, 21))
@@ -87,8 +89,10 @@ class LinearSolution:
     condition_number: float
 
 
-def _standardize(matrix: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(matrix with unit-RMS columns, the column scales); an all-zero column is an error."""
+def standardize_columns(matrix: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(Z, s) with s_j = sqrt(mean_i X_ij^2) and Z = X / s (unit-RMS columns).
+
+    An all-zero column (s_j = 0) is a ``ValueError`` naming it (``names[j]``)."""
     scale = np.sqrt(np.mean(matrix * matrix, axis=0))
     dead = np.flatnonzero(scale == 0)
     if dead.size:
@@ -99,7 +103,10 @@ def _standardize(matrix: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, 
     return matrix / scale, scale
 
 
-def _check_shape(matrix: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def check_regression_shapes(
+    matrix: np.ndarray, target: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(X, y) as float64 arrays; ``ValueError`` unless X is (n, p) and y is (n,) with n > p."""
     X = np.asarray(matrix, dtype=np.float64)
     y = np.asarray(target, dtype=np.float64)
     if X.ndim != 2 or y.shape != (X.shape[0],):
@@ -120,14 +127,14 @@ def least_squares(
     all zeros, or the columns are linearly dependent in the data (naming the
     regressor).
     """
-    X, y = _check_shape(matrix, target)
+    X, y = check_regression_shapes(matrix, target)
     n, p = X.shape
     if p == 0:
         rss = float(y @ y)
         return LinearSolution(
             np.zeros(0), np.zeros((0, 0)), np.zeros(0), y.copy(), rss, rss / n, 0.0, 0.0, 1.0
         )
-    Z, scale = _standardize(X, names)
+    Z, scale = standardize_columns(X, names)
     singular = np.linalg.svd(Z, compute_uv=False)
     if singular[-1] < 1e-12 * singular[0]:
         _, r = np.linalg.qr(Z)
@@ -165,9 +172,9 @@ def ridge_regression(
         raise ValueError(f"ridge_lambda must be a finite number >= 0, got {ridge_lambda!r}")
     if ridge_lambda == 0:
         return least_squares(matrix, target, names)
-    X, y = _check_shape(matrix, target)
+    X, y = check_regression_shapes(matrix, target)
     n, p = X.shape
-    Z, scale = _standardize(X, names)
+    Z, scale = standardize_columns(X, names)
     u, sigma, vt = np.linalg.svd(Z, full_matrices=False)
     penalty = n * ridge_lambda
     shrink = sigma / (sigma * sigma + penalty)

@@ -1,6 +1,6 @@
 """How overconfident the raw lane evidence is, and what the evidence checks do about it.
 
-``python -m benchmarks.evidence_calibration [--population paper] [--seed 0] [--runs 3]``
+``python -m benchmarks.evidence_dispersion [--population paper] [--seed 0] [--runs 3]``
 
 The paper's generalized model (:meth:`GeneralizedModel.paper`) filters runs of
 every driver of a population, with and without the evidence checks
@@ -34,7 +34,7 @@ from estimators.gm_ekf import GaussianMixtureEKF
 from hasa_env.drivers import population, run_population
 from hasa_env.steering import GeneralizedModel
 
-__all__ = ["calibration_table", "main"]
+__all__ = ["evidence_dispersion_table", "main"]
 
 HYPOTHESES = (0.0, -1.8)
 BLOCK = 100  # samples per batch-means block (1 s at 100 Hz)
@@ -48,7 +48,7 @@ def _settle_time(weight: np.ndarray, dt: float, threshold: float = 0.99) -> floa
     return float("nan") if below[-1] + 1 >= weight.size else (below[-1] + 1) * dt
 
 
-def calibration_table(
+def evidence_dispersion_table(
     population_name: str = "paper", seed: int = 0, runs: int = 3
 ) -> list[dict[str, float | str]]:
     """One row per run (see the module docstring); the true lane is hypothesis 0."""
@@ -105,14 +105,14 @@ def calibration_table(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.evidence_calibration")
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.evidence_dispersion")
     parser.add_argument("--population", default="paper")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--runs", type=int, default=3, help="runs per driver")
     args = parser.parse_args(argv)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        rows = calibration_table(args.population, args.seed, args.runs)
+        rows = evidence_dispersion_table(args.population, args.seed, args.runs)
     keys = list(rows[0])
     print("  ".join(f"{k:>14}" for k in keys))
     for row in rows:

@@ -1,7 +1,7 @@
-"""The synthetic population's calibration to human steering statistics (paper table 1).
+"""Tuning the synthetic population's steering noise to human statistics (paper table 1).
 
-``python -m benchmarks.calibration [--population paper] [--seeds 0,1,2]
-[--grid 0.5,1,2] [--pedal-grid 0,0.5,2] [--write docs/calibration.md]``
+``python -m benchmarks.population_tuning [--population paper] [--seeds 0,1,2]
+[--grid 0.5,1,2] [--pedal-grid 0,0.5,2] [--write docs/population_tuning.md]``
 
 What is matched: the one-step steering RMSE of the two fitted models (two-point
 and generalized, fitted on each seed's training run like ``hasa-bench paper``),
@@ -21,7 +21,7 @@ visible. ``--pedal-grid`` does the same for the pedal remnant (the speed's
 wander, :class:`hasa_env.drivers.SpeedProfile`; 0 removes it), which is not
 calibrated but chosen as a plain human figure (docs/design.md §7.4): the grid
 shows what the numbers owe to it. ``--write`` writes the Markdown report with a JSON block of every
-number, which ``tests/test_calibration.py`` checks by rerunning one seed.
+number, which ``tests/test_population_tuning.py`` checks by rerunning one seed.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ __all__ = ["RANGE", "evaluate", "main", "write_report"]
 RANGE = (1.0 / 3.0, 3.0)
 """The accepted range of the median ours / paper one-step RMSE (issue 10)."""
 MODELS = ("two_point", "generalized")
-JSON_START = "<!-- calibration-json"
+JSON_START = "<!-- population-tuning-json"
 JSON_END = "-->"
 
 
@@ -161,29 +161,29 @@ def _row(entry: dict[str, Any], label: str) -> str:
     )
 
 
-def write_report(
-    chosen: dict[str, Any],
-    grid: Sequence[dict[str, Any]],
-    path: Path,
-    pedal_grid: Sequence[dict[str, Any]] = (),
-) -> None:
-    """The Markdown calibration report with its numbers as a JSON block."""
+_TABLE_HEADER = (
+    "| | two-point: ours / paper | generalized: ours / paper | SDLP (m) | max abs(y) (m) "
+    "| runs off the road | flagged fits |\n|---|---|---|---|---|---|---|"
+)
+"""The header of every table of the report (one :func:`_row` per line below it)."""
+
+
+def _report_introduction(
+    chosen: dict[str, Any], grid: Sequence[dict[str, Any]], pedal_grid: Sequence[dict[str, Any]]
+) -> list[str]:
+    """The report's title, how to rerun it, what is matched and the knob turned."""
     seeds = ",".join(str(s) for s in chosen["seeds"])
     factors = ",".join(f"{g['command_scale']:g}" for g in grid)
     pedal_factors = ",".join(f"{g['pedal_scale']:g}" for g in pedal_grid)
     pedal_option = f" --pedal-grid {pedal_factors}" if pedal_grid else ""
-    header = (
-        "| | two-point: ours / paper | generalized: ours / paper | SDLP (m) | max abs(y) (m) "
-        "| runs off the road | flagged fits |\n|---|---|---|---|---|---|---|"
-    )
     spec = POPULATIONS[chosen["population"]]
-    lines = [
-        "# Calibration of the synthetic population",
+    return [
+        "# Tuning the synthetic population to the paper's table 1",
         "",
-        "Written by `python -m benchmarks.calibration --seeds "
+        "Written by `python -m benchmarks.population_tuning --seeds "
         f"{seeds} --grid {factors}{pedal_option} --write "
-        "docs/calibration.md`; rerun it to check every number here "
-        "(`tests/test_calibration.py` reruns one seed).",
+        "docs/population_tuning.md`; rerun it to check every number here "
+        "(`tests/test_population_tuning.py` reruns one seed).",
         "",
         "**What is matched.** The one-step steering RMSE of the two fitted models (two-point "
         "and generalized, paper orders, fitted on each seed's training run of driver 'Ill' as "
@@ -204,10 +204,18 @@ def write_report(
         f"`{json.dumps(dict(spec.env_config), sort_keys=True)}` (a wheel study's steering "
         "signal without automotive sensor noise; crosswind and road camber exciting the loop).",
         "",
+    ]
+
+
+def _shipped_section(chosen: dict[str, Any]) -> list[str]:
+    """The table of the population as shipped (mean over seeds, then each seed), whether it
+    is within :data:`RANGE`, and what the pedal remnant does for a training run."""
+    seeds = ",".join(str(s) for s in chosen["seeds"])
+    return [
         f"## The population as shipped (seeds {seeds}; means over seeds with 95 % Student-t "
         "intervals)",
         "",
-        header,
+        _TABLE_HEADER,
         _row(chosen, "shipped"),
         *(_row(e, f"seed {e['seed']}") for e in chosen["per_seed"]),
         "",
@@ -224,9 +232,17 @@ def write_report(
         "the range. One training run without speed changes remains the protocol's weak point: "
         "shown here, not calibrated away.",
         "",
+    ]
+
+
+def _sensitivity_sections(
+    grid: Sequence[dict[str, Any]], pedal_grid: Sequence[dict[str, Any]]
+) -> list[str]:
+    """The tables of the command noise and (if scored) the pedal remnant scaled."""
+    return [
         "## Sensitivity: the command noise scaled (same drivers and runs otherwise)",
         "",
-        header,
+        _TABLE_HEADER,
         *(_row(g, f"x {g['command_scale']:g}") for g in grid),
         "",
         *(
@@ -238,13 +254,21 @@ def write_report(
                 "Scaled by 0 (every driver holds its speed exactly, as before it existed), 0.5 "
                 "and 2:",
                 "",
-                header,
+                _TABLE_HEADER,
                 *(_row(g, f"pedal x {g['pedal_scale']:g}") for g in pedal_grid),
                 "",
             ]
             if pedal_grid
             else []
         ),
+    ]
+
+
+def _report_conclusion(
+    chosen: dict[str, Any], grid: Sequence[dict[str, Any]], pedal_grid: Sequence[dict[str, Any]]
+) -> list[str]:
+    """What the numbers support, then every number as the JSON block :func:`read_report` reads."""
+    return [
         "## What this does and does not support",
         "",
         "The population reproduces the paper's one-step steering error magnitudes (table 1) "
@@ -262,6 +286,21 @@ def write_report(
         JSON_END,
         "",
     ]
+
+
+def write_report(
+    chosen: dict[str, Any],
+    grid: Sequence[dict[str, Any]],
+    path: Path,
+    pedal_grid: Sequence[dict[str, Any]] = (),
+) -> None:
+    """The Markdown tuning report with its numbers as a JSON block."""
+    lines = [
+        *_report_introduction(chosen, grid, pedal_grid),
+        *_shipped_section(chosen),
+        *_sensitivity_sections(grid, pedal_grid),
+        *_report_conclusion(chosen, grid, pedal_grid),
+    ]
     path.write_text("\n".join(lines), encoding="utf-8")
 
 
@@ -273,7 +312,7 @@ def read_report(path: Path) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.calibration")
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.population_tuning")
     parser.add_argument("--population", default="paper")
     parser.add_argument("--seeds", default="0,1,2,3,4", help="population seeds (comma-separated)")
     parser.add_argument("--grid", default="", help="command-noise factors, e.g. 0.5,1,2")

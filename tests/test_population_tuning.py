@@ -1,4 +1,4 @@
-"""The calibration numbers in docs/calibration.md come from benchmarks.calibration (rerun here)."""
+"""The numbers in docs/population_tuning.md come from benchmarks.population_tuning (rerun here)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.calibration import RANGE, evaluate, read_report
+from benchmarks.population_tuning import RANGE, evaluate, read_report
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "calibration.md"
+DOC = Path(__file__).resolve().parent.parent / "docs" / "population_tuning.md"
 
 pytestmark = pytest.mark.slow
 
@@ -35,4 +35,4 @@ def test_the_documented_calibration_meets_its_target():
         assert entry["left_road_runs"] == 0
     assert chosen["within_range_unflagged"] is True
     text = DOC.read_text(encoding="utf-8")
-    assert "python -m benchmarks.calibration" in text  # how to rerun it
+    assert "python -m benchmarks.population_tuning" in text  # how to rerun it

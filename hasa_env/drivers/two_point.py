@@ -1,4 +1,4 @@
-"""The two-point PI synthetic driver (docs/design.md §7.2 and §7.7).
+"""The two-point PI archetype of the synthetic drivers (docs/design.md §7.2 and §7.7).
 
 The paper's fitted models are one-step predictors, not drivers (in closed
 loop the generalized one only stabilises the car at Ts <= 0.02 s, the
@@ -37,7 +37,7 @@ for the others) combines:
 6. A speed behaviour (:class:`~hasa_env.drivers.base.SpeedProfile`): hold
    15 m/s, or ramps reaching up to 45 m/s; slowing for bends on curved roads.
 
-:meth:`DriverParams.from_loop` chooses the three gains from a desired
+:meth:`TwoPointParams.from_loop` chooses the three gains from a desired
 lateral closed loop (bandwidth, damping, integral share) instead of by hand;
 :func:`hasa_env.drivers.populations.population` draws seeded populations.
 """
@@ -61,20 +61,18 @@ from hasa_env.drivers.human import (
     params_from_dict,
     params_to_dict,
 )
-from hasa_env.drivers.intermittent import IntermittentParams
 from hasa_env.drivers.motor import MotorParams, NoiseBlocks, ou_coefficients
-from hasa_env.drivers.preview import PreviewParams
 from hasa_env.sim.road import Road
 
-__all__ = ["ARCHETYPE", "DriverParams", "SyntheticDriver", "SyntheticBatch"]
+__all__ = ["ARCHETYPE", "TwoPointParams", "TwoPointDriver", "TwoPointBatch"]
 
 ARCHETYPE = "two-point"
-"""The archetype name of :class:`DriverParams` in dicts (``to_dict()["archetype"]``)."""
+"""The archetype name of :class:`TwoPointParams` in dicts (``to_dict()["archetype"]``)."""
 
 
 @dataclass(frozen=True)
-class DriverParams:
-    """Parameters of one synthetic driver (SI units, radians).
+class TwoPointParams:
+    """Parameters of one two-point PI driver (SI units, radians).
 
     Attributes:
         name: label ("Ill", "1", ...).
@@ -120,22 +118,24 @@ class DriverParams:
             value = getattr(self, key)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(
-                    f"DriverParams.{key} must be a finite positive number, got {value!r}"
+                    f"TwoPointParams.{key} must be a finite positive number, got {value!r}"
                 )
         for key in ("near_gain", "far_gain", "integral_gain", "speed_exponent"):
             if not math.isfinite(getattr(self, key)):
-                raise ValueError(f"DriverParams.{key} must be finite, got {getattr(self, key)!r}")
+                raise ValueError(f"TwoPointParams.{key} must be finite, got {getattr(self, key)!r}")
         for key in ("delay", "noise_std", "noise_time_constant"):
             value = getattr(self, key)
             if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"DriverParams.{key} must be a finite number >= 0, got {value!r}")
+                raise ValueError(
+                    f"TwoPointParams.{key} must be a finite number >= 0, got {value!r}"
+                )
         if not isinstance(self.speed, SpeedProfile):
             raise TypeError(
-                f"DriverParams.speed must be a SpeedProfile, got {type(self.speed).__name__}"
+                f"TwoPointParams.speed must be a SpeedProfile, got {type(self.speed).__name__}"
             )
         if not isinstance(self.motor, MotorParams):
             raise TypeError(
-                f"DriverParams.motor must be a MotorParams, got {type(self.motor).__name__}"
+                f"TwoPointParams.motor must be a MotorParams, got {type(self.motor).__name__}"
             )
 
     @classmethod
@@ -149,7 +149,7 @@ class DriverParams:
         wheelbase: float = 2.8,
         reference_speed: float = 15.0,
         **kwargs: Any,
-    ) -> DriverParams:
+    ) -> TwoPointParams:
         """Gains that give a chosen lateral closed loop (small angles, no delay or lag).
 
         With phi ~ -(v_y + y / t_n) / v, omega ~ -(v_y + y / t_f) / v and gains
@@ -166,7 +166,7 @@ class DriverParams:
             near_time, far_time: look-ahead times (s).
             wheelbase: L (m).
             reference_speed: v_ref (m/s).
-            **kwargs: the other :class:`DriverParams` fields.
+            **kwargs: the other :class:`TwoPointParams` fields.
         """
         w, z, a = bandwidth, damping, integral_share
         c = reference_speed / wheelbase
@@ -189,7 +189,7 @@ class DriverParams:
             **kwargs,
         )
 
-    def with_speed(self, speed: SpeedProfile) -> DriverParams:
+    def with_speed(self, speed: SpeedProfile) -> TwoPointParams:
         """The same driver with another speed behaviour."""
         return replace(self, speed=speed)
 
@@ -198,31 +198,24 @@ class DriverParams:
         return params_to_dict(self, ARCHETYPE)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> DriverParams:
+    def from_dict(cls, data: Mapping[str, Any]) -> TwoPointParams:
         """Inverse of :meth:`to_dict` (dicts without "archetype" or "motor" are accepted)."""
         return params_from_dict(cls, data, ARCHETYPE)
 
 
-class SyntheticDriver(HumanDriver):
-    """A synthetic human driver, seeded and reproducible.
+class TwoPointDriver(HumanDriver):
+    """A two-point PI driver (see the module docstring), seeded and reproducible.
 
-    ``SyntheticDriver(params)`` drives parameters of any archetype:
-    :class:`DriverParams` (two-point PI, described in the module docstring),
-    :class:`~hasa_env.drivers.preview.PreviewParams` or
-    :class:`~hasa_env.drivers.intermittent.IntermittentParams`, so every
-    member of a :func:`~hasa_env.drivers.populations.population` is a
-    ``SyntheticDriver``. ``reset(seed, dt=0.01)`` then ``act(info, road)``
-    each env step. Runs are identical whether the driver acts alone or
-    vectorized with others (:meth:`make_batch`, one part per archetype).
+    :class:`~hasa_env.drivers.archetypes.SyntheticDriver` drives parameters of any archetype.
     """
 
-    accepts = (DriverParams, PreviewParams, IntermittentParams)
+    accepts = (TwoPointParams,)
 
 
-class SyntheticBatch(HumanBatch):
-    """N two-point PI drivers acting on N cars' info arrays (see :class:`DriverParams`)."""
+class TwoPointBatch(HumanBatch):
+    """N two-point PI drivers acting on N cars' info arrays (see :class:`TwoPointParams`)."""
 
-    params_type = DriverParams
+    params_type = TwoPointParams
 
     # Per-run state, set by _reset() / _start().
     _noise: NoiseBlocks
@@ -232,7 +225,7 @@ class SyntheticBatch(HumanBatch):
     _command_state: np.ndarray
     _command_noise: np.ndarray
 
-    def __init__(self, params: Sequence[DriverParams]) -> None:
+    def __init__(self, params: Sequence[TwoPointParams]) -> None:
         super().__init__(params)
         self.near_time, self.far_time = self.arr("near_time"), self.arr("far_time")
         self.near_gain, self.far_gain = self.arr("near_gain"), self.arr("far_gain")
