@@ -92,6 +92,19 @@ def test_hasa_env_never_imports_the_layers_above_it(path):
     assert not above, f"{path.relative_to(ROOT)} imports an upper layer: {above}"
 
 
+def test_hasa_env_names_no_package_above_it():
+    """Not even in a string, a docstring or an entry point: the bottom layer knows nothing
+    of the layers above (the advisor task registers its own ids)."""
+    pattern = re.compile(r"\b(" + "|".join(ABOVE_HASA_ENV) + r")\b")
+    naming = [
+        f"{path.relative_to(ROOT)}:{n}: {line.strip()}"
+        for path in _modules("hasa_env")
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if pattern.search(line)
+    ]
+    assert not naming, "hasa_env names a package above it:\n" + "\n".join(naming)
+
+
 def test_function_level_imports_are_few_and_say_why():
     offenders = []
     for package in PACKAGES:
