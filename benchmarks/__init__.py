@@ -6,8 +6,8 @@
 - :mod:`benchmarks.report`: tables, CSV files, the Markdown report, figures.
 - :mod:`benchmarks.executor`: independent tasks on local processes or Dask.
 - :mod:`benchmarks.paper_values`: the paper's published numbers.
-- :mod:`benchmarks.perf_env`, :mod:`benchmarks.perf_estimators`,
-  :mod:`benchmarks.perf_render`: performance benchmarks.
+- :mod:`benchmarks.perf`: performance benchmarks (env, estimators, views,
+  advisor task).
 
 The command line is ``hasa-bench`` (:mod:`hasa_cli.bench`).
 """

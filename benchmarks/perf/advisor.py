@@ -42,7 +42,7 @@ import gymnasium as gym
 import numpy as np
 
 import hasa_env  # noqa: F401 - registers the ids
-from benchmarks.perf_env import _sample_actions
+from benchmarks.perf.env import _sample_actions
 
 __all__ = ["run", "main", "format_table", "TARGETS", "MEASURES"]
 
