@@ -31,8 +31,6 @@ import argparse
 import json
 import math
 import os
-import secrets
-import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -42,6 +40,7 @@ from typing import Any
 from tqdm import tqdm
 
 from benchmarks.executor import SchedulerError, check_scheduler
+from benchmarks.output import output_problem, write_result_folder
 from benchmarks.perf import (
     BENCHMARKS,
     benchmark_names,
@@ -50,7 +49,7 @@ from benchmarks.perf import (
 )
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
 from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
-from benchmarks.report import format_tables, write_outputs
+from benchmarks.report import format_tables
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -68,6 +67,15 @@ PROG = "hasa-bench"
 
 
 def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``paper`` and ``score``: runs, sensor noise, models, recordings,
+    execution and output."""
+    _add_run_options(parser)
+    _add_recording_options(parser)
+    _add_execution_options(parser)
+
+
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    """The synthetic runs, the sensor noise and ``--model``."""
     data = parser.add_argument_group("runs (synthetic population)")
     data.add_argument("--population", default="paper", help="population name (default: paper)")
     seeds = data.add_mutually_exclusive_group()
@@ -139,6 +147,10 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
         "subclass, fitted on the training run like the built-ins) or a saved model file "
         "(scored with its own parameters); repeatable",
     )
+
+
+def _add_recording_options(parser: argparse.ArgumentParser) -> None:
+    """Recorded drives instead of the synthetic population."""
     rec = parser.add_argument_group("recorded drives instead")
     rec.add_argument(
         "--recordings",
@@ -177,6 +189,10 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also score recordings whose writer stopped early (crash, failed write)",
     )
+
+
+def _add_execution_options(parser: argparse.ArgumentParser) -> None:
+    """Workers, the Dask scheduler, batches, the time limit of user models, the output."""
     run = parser.add_argument_group("execution and output")
     run.add_argument(
         "--workers", type=int, default=None, metavar="N", help="local processes (default: CPUs)"
@@ -372,58 +388,12 @@ class _Progress:
             self.bar = None
 
 
-def _check_output(out: Path, overwrite: bool) -> str | None:
-    """What is wrong with writing the results to ``out``, or None (checked before any run)."""
-    if out.exists() and not out.is_dir():
-        return f"--out {out}: exists and is not a folder"
-    if out.is_dir() and any(out.iterdir()):
-        previous = out / "results.json"
-        try:
-            ours = json.loads(previous.read_text(encoding="utf-8")).get("format")
-        except (OSError, ValueError, AttributeError):
-            ours = None
-        if ours != "hasa_bench.results":
-            return (
-                f"--out {out}: is a folder that holds no hasa-bench result; "
-                "choose another --out (it is never replaced)"
-            )
-        if not overwrite:
-            return f"--out {out}: holds a previous result; --overwrite replaces it, or choose another --out"
-    parent = out.resolve().parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        probe = parent / f".{out.name}.probe-{secrets.token_hex(4)}"
-        probe.mkdir()
-        probe.rmdir()
-    except OSError as exc:
-        return f"--out {out}: cannot write there ({exc.strerror or exc})"
-    return None
-
-
-def _write_results(result: Any, out: Path, figures: bool) -> dict[str, Path]:
-    """Write into a new folder beside ``out``, then swap it in: a failure leaves ``out`` as it was."""
-    fresh = out.with_name(f".{out.name}.new-{secrets.token_hex(4)}")
-    try:
-        written = write_outputs(result, fresh, figures=figures)
-        old = None
-        if out.exists():
-            old = out.with_name(f".{out.name}.old-{secrets.token_hex(4)}")
-            os.replace(out, old)
-        os.replace(fresh, out)
-    except BaseException:
-        shutil.rmtree(fresh, ignore_errors=True)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return {name: out / path.relative_to(fresh) for name, path in written.items()}
-
-
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     if args.workers is not None and args.workers < 1:
         error(PROG, f"--workers must be >= 1, got {args.workers}")
         return EXIT_USAGE
     out = Path(args.out)
-    problem = _check_output(out, args.overwrite)
+    problem = output_problem(out, args.overwrite)
     if problem is not None:
         error(PROG, problem)
         return EXIT_USAGE
@@ -451,7 +421,7 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         return EXIT_USAGE
     progress("writing results, tables and figures", 0, 0)
     try:
-        written = _write_results(result, out, figures=not args.no_plots)
+        written = write_result_folder(result, out, figures=not args.no_plots)
     except OSError as exc:
         progress.close()
         error(PROG, f"cannot write the results to {out}: {exc}")
