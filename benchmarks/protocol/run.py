@@ -266,27 +266,29 @@ def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list
     traces (of its plot run and first curved run) and the illustrative driver's details."""
     plan = fit.plan
     trace_runs = {fit.plot_run.key} | ({plan.curved[0].key} if plan.curved else set())
-    common = {
-        "seed": plan.seed,
-        "env_config": plan.env_config,
-        "driver_params": plan.params,
-        "models": tuple(fit.models),
-        "ljung_box_lags": config.ljung_box_lags,
-        "acf_lags": config.acf_lags,
-        "weight_threshold": config.weight_threshold,
-        "error_window": config.error_window,
-        "trace_runs": frozenset(trace_runs) if detailed else frozenset(),
-        "detail_driver": plan.illustrative if detailed else "",
-        "compare_checks": config.compare_checks,
-        "filter_settings": dict(config.filter_settings),
-        "time_limit": config.model_time_limit,
-    }
-    return [
-        ChunkTask(runs=tuple(chunk), track="curved", estimate=config.estimate, **common)
-        for chunk in chunks(plan.curved, config.batch_size)
-    ] + [
-        ChunkTask(runs=tuple(chunk), track=config.track, estimate=config.estimate, **common)
-        for chunk in chunks(fit.validation, config.batch_size)
+
+    def task(runs: Sequence[RunRef], track: str) -> ChunkTask:
+        return ChunkTask(
+            runs=tuple(runs),
+            track=track,
+            estimate=config.estimate,
+            seed=plan.seed,
+            env_config=plan.env_config,
+            driver_params=plan.params,
+            models=tuple(fit.models),
+            ljung_box_lags=config.ljung_box_lags,
+            acf_lags=config.acf_lags,
+            weight_threshold=config.weight_threshold,
+            error_window=config.error_window,
+            trace_runs=frozenset(trace_runs) if detailed else frozenset(),
+            detail_driver=plan.illustrative if detailed else "",
+            compare_checks=config.compare_checks,
+            filter_settings=dict(config.filter_settings),
+            time_limit=config.model_time_limit,
+        )
+
+    return [task(chunk, "curved") for chunk in chunks(plan.curved, config.batch_size)] + [
+        task(chunk, config.track) for chunk in chunks(fit.validation, config.batch_size)
     ]
 
 
