@@ -4,10 +4,13 @@
   sections 3.3 and 4.3; docs/design.md §9): runs, fits, steering and
   estimation scores, for the built-in and any user steering model.
 - :mod:`benchmarks.report`: tables, CSV files, the Markdown report, figures.
+- :mod:`benchmarks.output`: the result folder of ``hasa-bench``, replaced only when complete.
+- :mod:`benchmarks.recordings`: recordings replayed and checked, a steering model and
+  the estimator scored on them (``hasa-replay``).
 - :mod:`benchmarks.executor`: independent tasks on local processes or Dask.
 - :mod:`benchmarks.paper_values`: the paper's published numbers.
-- :mod:`benchmarks.perf_env`, :mod:`benchmarks.perf_estimators`,
-  :mod:`benchmarks.perf_render`: performance benchmarks.
+- :mod:`benchmarks.perf`: performance benchmarks (env, estimators, views,
+  advisor task).
 
 The command line is ``hasa-bench`` (:mod:`hasa_cli.bench`).
 """

@@ -28,12 +28,9 @@ work itself is in :mod:`benchmarks`.
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import math
 import os
-import secrets
-import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -43,10 +40,16 @@ from typing import Any
 from tqdm import tqdm
 
 from benchmarks.executor import SchedulerError, check_scheduler
+from benchmarks.output import output_problem, write_result_folder
+from benchmarks.perf import (
+    BENCHMARKS,
+    benchmark_names,
+    format_perf_table,
+    run_benchmarks,
+)
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
 from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
-from benchmarks.report import format_tables, write_outputs
-from benchmarks.tables import Column, render_text
+from benchmarks.report import format_tables
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -58,17 +61,21 @@ from hasa_cli import (
     warn,
 )
 
-__all__ = ["main", "build_parser", "perf_rows", "format_perf_table", "PERF_MODULES"]
-
-PERF_MODULES = ("perf_env", "perf_estimators", "perf_render", "perf_advisor")
-"""Performance benchmark modules of :mod:`benchmarks` run by ``hasa-bench perf``."""
+__all__ = ["main", "build_parser"]
 
 PROG = "hasa-bench"
-EXIT_MODEL_FAILED = EXIT_PARTIAL
-"""Exit status when a user model failed (the partial status of every program)."""
 
 
 def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``paper`` and ``score``: runs, sensor noise, models, recordings,
+    execution and output."""
+    _add_run_options(parser)
+    _add_recording_options(parser)
+    _add_execution_options(parser)
+
+
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    """The synthetic runs, the sensor noise and ``--model``."""
     data = parser.add_argument_group("runs (synthetic population)")
     data.add_argument("--population", default="paper", help="population name (default: paper)")
     seeds = data.add_mutually_exclusive_group()
@@ -140,6 +147,10 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
         "subclass, fitted on the training run like the built-ins) or a saved model file "
         "(scored with its own parameters); repeatable",
     )
+
+
+def _add_recording_options(parser: argparse.ArgumentParser) -> None:
+    """Recorded drives instead of the synthetic population."""
     rec = parser.add_argument_group("recorded drives instead")
     rec.add_argument(
         "--recordings",
@@ -178,6 +189,10 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also score recordings whose writer stopped early (crash, failed write)",
     )
+
+
+def _add_execution_options(parser: argparse.ArgumentParser) -> None:
+    """Workers, the Dask scheduler, batches, the time limit of user models, the output."""
     run = parser.add_argument_group("execution and output")
     run.add_argument(
         "--workers", type=int, default=None, metavar="N", help="local processes (default: CPUs)"
@@ -282,15 +297,15 @@ def build_parser() -> argparse.ArgumentParser:
     perf = sub.add_parser(
         "perf",
         help="the performance benchmarks, one table of ratios",
-        description="Run benchmarks.perf_env, perf_estimators and perf_render (those present) "
-        "and print their measured ratios against the targets.",
+        description="Run the performance benchmarks of benchmarks.perf (env, estimators, "
+        "render, advisor; those present) and print their measured ratios against the targets.",
     )
     perf.add_argument("--quick", action="store_true", help="seconds-long runs, rough numbers")
     perf.add_argument("--json", metavar="FILE", help="also write every number as JSON")
     perf.add_argument(
         "--only",
         metavar="NAMES",
-        help=f"comma-separated subset of {', '.join(m.removeprefix('perf_') for m in PERF_MODULES)}",
+        help=f"comma-separated subset of {', '.join(m.removeprefix('perf_') for m in BENCHMARKS)}",
     )
     perf.add_argument("--strict", action="store_true", help="exit 1 if a target fails")
     return parser
@@ -373,58 +388,12 @@ class _Progress:
             self.bar = None
 
 
-def _check_output(out: Path, overwrite: bool) -> str | None:
-    """What is wrong with writing the results to ``out``, or None (checked before any run)."""
-    if out.exists() and not out.is_dir():
-        return f"--out {out}: exists and is not a folder"
-    if out.is_dir() and any(out.iterdir()):
-        previous = out / "results.json"
-        try:
-            ours = json.loads(previous.read_text(encoding="utf-8")).get("format")
-        except (OSError, ValueError, AttributeError):
-            ours = None
-        if ours != "hasa_bench.results":
-            return (
-                f"--out {out}: is a folder that holds no hasa-bench result; "
-                "choose another --out (it is never replaced)"
-            )
-        if not overwrite:
-            return f"--out {out}: holds a previous result; --overwrite replaces it, or choose another --out"
-    parent = out.resolve().parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        probe = parent / f".{out.name}.probe-{secrets.token_hex(4)}"
-        probe.mkdir()
-        probe.rmdir()
-    except OSError as exc:
-        return f"--out {out}: cannot write there ({exc.strerror or exc})"
-    return None
-
-
-def _write_results(result: Any, out: Path, figures: bool) -> dict[str, Path]:
-    """Write into a new folder beside ``out``, then swap it in: a failure leaves ``out`` as it was."""
-    fresh = out.with_name(f".{out.name}.new-{secrets.token_hex(4)}")
-    try:
-        written = write_outputs(result, fresh, figures=figures)
-        old = None
-        if out.exists():
-            old = out.with_name(f".{out.name}.old-{secrets.token_hex(4)}")
-            os.replace(out, old)
-        os.replace(fresh, out)
-    except BaseException:
-        shutil.rmtree(fresh, ignore_errors=True)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return {name: out / path.relative_to(fresh) for name, path in written.items()}
-
-
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     if args.workers is not None and args.workers < 1:
         error(PROG, f"--workers must be >= 1, got {args.workers}")
         return EXIT_USAGE
     out = Path(args.out)
-    problem = _check_output(out, args.overwrite)
+    problem = output_problem(out, args.overwrite)
     if problem is not None:
         error(PROG, problem)
         return EXIT_USAGE
@@ -452,7 +421,7 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         return EXIT_USAGE
     progress("writing results, tables and figures", 0, 0)
     try:
-        written = _write_results(result, out, figures=not args.no_plots)
+        written = write_result_folder(result, out, figures=not args.no_plots)
     except OSError as exc:
         progress.close()
         error(PROG, f"cannot write the results to {out}: {exc}")
@@ -478,155 +447,22 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
 
 
 # -------------------------------------------------------------------------- perf
-def perf_rows(name: str, results: dict[str, Any], module: Any = None) -> list[dict[str, Any]]:
-    """One row per measured ratio of a performance benchmark's ``run()`` result.
-
-    Rows: ``benchmark``, ``measure``, ``value``, ``target`` (minimum, or None),
-    ``ratio_to_target`` (value / target) and ``passed`` (None without target).
-    """
-    rows: list[dict[str, Any]] = []
-    if "targets" in results:
-        for key, t in results["targets"].items():
-            value, minimum = t.get("value"), t.get("minimum")
-            ratio = value / minimum if value is not None and minimum else None
-            rows.append(
-                {
-                    "benchmark": name,
-                    "measure": t.get("description", key),
-                    "value": value,
-                    "target": minimum,
-                    "ratio_to_target": ratio,
-                    "passed": t.get("passed"),
-                }
-            )
-        for key, value in (results.get("ratios") or {}).items():
-            if key not in results["targets"]:
-                rows.append(
-                    {
-                        "benchmark": name,
-                        "measure": key.replace("_", " "),
-                        "value": value,
-                        "target": None,
-                        "ratio_to_target": None,
-                        "passed": None,
-                    }
-                )
-    elif "ratios_to_target" in results:
-        targets = getattr(module, "TARGETS", {}) if module is not None else {}
-        for key, ratio in results["ratios_to_target"].items():
-            text, minimum = targets.get(key, (key, None))
-            measured = (results.get("results") or {}).get(key, {}).get("frames_per_second")
-            rows.append(
-                {
-                    "benchmark": name,
-                    "measure": f"{key} ({text})",
-                    "value": measured,
-                    "target": minimum,
-                    "ratio_to_target": ratio,
-                    "passed": None if ratio is None else bool(ratio >= 1.0),
-                }
-            )
-        for key, value in (results.get("ratios") or {}).items():
-            rows.append(
-                {
-                    "benchmark": name,
-                    "measure": f"{key.replace('_', ' ')} (ratio, same run)",
-                    "value": value,
-                    "target": None,
-                    "ratio_to_target": None,
-                    "passed": None,
-                }
-            )
-    return rows
-
-
-def _number(x: Any) -> str:
-    if x is None:
-        return "-"
-    return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.2f}"
-
-
-_PERF_COLUMNS = [
-    Column("benchmark", "benchmark", left=True),
-    Column("measure", "measure", left=True),
-    Column("value", "measured", _number),
-    Column(lambda r: ">= " + _number(r["target"]) if r["target"] is not None else "-", "target"),
-    Column(
-        lambda r: "-" if r["ratio_to_target"] is None else f"{r['ratio_to_target']:.2f}x",
-        "measured/target",
-    ),
-    Column(
-        lambda r: (
-            "ERROR"
-            if r.get("error")
-            else {True: "PASS", False: "FAIL", None: ""}.get(r["passed"], str(r["passed"]))
-        ),
-        "result",
-    ),
-]
-
-
-def format_perf_table(rows: Sequence[dict[str, Any]]) -> str:
-    """The rows of :func:`perf_rows` as one plain-text table."""
-    return render_text(rows, _PERF_COLUMNS)
-
-
 def _perf(args: argparse.Namespace) -> int:
-    names = list(PERF_MODULES)
-    if args.only:
-        wanted = [f"perf_{n.strip().removeprefix('perf_')}" for n in args.only.split(",") if n]
-        unknown = [w for w in wanted if w not in PERF_MODULES]
-        if unknown:
-            error(
-                f"{PROG} perf",
-                f"unknown benchmark(s) {unknown}; "
-                f"allowed: {', '.join(m.removeprefix('perf_') for m in PERF_MODULES)}",
-            )
-            return EXIT_USAGE
-        names = wanted
-    rows: list[dict[str, Any]] = []
-    everything: dict[str, Any] = {}
-    failed = False
-    for name in names:
-        try:
-            module = importlib.import_module(f"benchmarks.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"benchmarks.{name}":
-                everything[name] = {"status": "not present"}
-                continue
-            raise
-        print(f"running benchmarks.{name}{' (quick)' if args.quick else ''} ...", file=sys.stderr)
-        start = time.perf_counter()
-        try:
-            results = module.run(quick=args.quick)
-        except Exception as exc:  # noqa: BLE001 - report and continue with the others
-            failed = True
-            message = f"{type(exc).__name__}: {exc}"
-            everything[name] = {"status": "error", "error": message}
-            rows.append(
-                {
-                    "benchmark": name,
-                    "measure": message[:80],
-                    "value": None,
-                    "target": None,
-                    "ratio_to_target": None,
-                    "passed": None,
-                    "error": True,
-                }
-            )
-            continue
-        everything[name] = {"seconds": time.perf_counter() - start, "results": results}
-        rows += perf_rows(name, results, module)
-    print(format_perf_table(rows))
+    try:
+        names = benchmark_names(args.only)
+    except ValueError as exc:
+        error(f"{PROG} perf", str(exc))
+        return EXIT_USAGE
+    measured = run_benchmarks(names, args.quick, lambda message: print(message, file=sys.stderr))
+    print(format_perf_table(measured.rows))
     if args.quick:
         print("(quick mode: few steps, rough numbers)")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump({"rows": rows, "benchmarks": everything}, fh, indent=2, default=str)
+            doc = {"rows": measured.rows, "benchmarks": measured.benchmarks}
+            json.dump(doc, fh, indent=2, default=str)
             fh.write("\n")
-    if failed:
-        return EXIT_PARTIAL
-    if args.strict and any(r["passed"] is False for r in rows):
+    if measured.failed or (args.strict and measured.any_target_failed()):
         return EXIT_PARTIAL
     return EXIT_OK
 

@@ -122,33 +122,7 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         )
         return EXIT_NO_SCREEN
     try:
-        settings = DriveSettings(
-            participant=args.participant,
-            track=args.track,
-            bias=args.bias,
-            runs=args.runs,
-            seconds=args.seconds,
-            speed=args.speed,
-            lateral_offset=args.lateral_offset,
-            output=args.output,
-            seed=args.seed,
-            countdown=args.countdown,
-            fsync=args.fsync,
-        )
-        settings.env_config()
-        keyboard = (
-            load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
-        )
-        if not isinstance(keyboard, KeyboardCalibration):
-            raise CalibrationError(
-                str(args.keyboard), "device", "must be 'keyboard' for --keyboard"
-            )
-        profiles = _joystick_profiles(args.calibration, log)
-        env_wrapper = None
-        if args.estimator is not None:
-            env_wrapper = _estimator(
-                args.estimator, _probe_env(settings), lane_check=not args.no_lane_check
-            )
+        settings, keyboard, profiles, env_wrapper = _drive_setup(args, log)
     except (ValueError, ConfigError, ImportError, OSError) as exc:
         error("hasa-drive", str(exc))
         return EXIT_USAGE
@@ -191,6 +165,37 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         pg.display.quit()
     log(f"hasa-drive: {len(results)} run(s) recorded in {settings.directory}")
     return 0
+
+
+def _drive_setup(
+    args: argparse.Namespace, log: Callable[[str], None]
+) -> tuple[DriveSettings, KeyboardCalibration, list[JoystickCalibration], Any]:
+    """The drive's settings, keyboard calibration, joystick profiles and estimator wrapper
+    (None without ``--estimator``), checked before any window opens; raises the input errors."""
+    settings = DriveSettings(
+        participant=args.participant,
+        track=args.track,
+        bias=args.bias,
+        runs=args.runs,
+        seconds=args.seconds,
+        speed=args.speed,
+        lateral_offset=args.lateral_offset,
+        output=args.output,
+        seed=args.seed,
+        countdown=args.countdown,
+        fsync=args.fsync,
+    )
+    settings.env_config()
+    keyboard = load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
+    if not isinstance(keyboard, KeyboardCalibration):
+        raise CalibrationError(str(args.keyboard), "device", "must be 'keyboard' for --keyboard")
+    profiles = _joystick_profiles(args.calibration, log)
+    env_wrapper = None
+    if args.estimator is not None:
+        env_wrapper = _estimator(
+            args.estimator, _probe_env(settings), lane_check=not args.no_lane_check
+        )
+    return settings, keyboard, profiles, env_wrapper
 
 
 def _unwritable(directory: Path) -> str | None:
@@ -288,52 +293,39 @@ def _fields(cal: JoystickCalibration) -> dict[str, Any]:
     return {k: getattr(cal, k) for k in cal.__dataclass_fields__ if k != "device"}
 
 
-@console_script("hasa-drive")
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``hasa-drive`` (see the module docstring)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    log = print
-    if argv and argv[0] == "calibrate":
-        p = argparse.ArgumentParser(
-            prog="hasa-drive calibrate",
-            description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
-        )
-        add_version(p)
-        p.add_argument("--output", type=Path, default=user_calibration_path(), help="file to write")
-        p.add_argument(
-            "--wheel-range", type=float, default=900.0, help="lock-to-lock range in degrees"
-        )
-        p.add_argument(
-            "--steering-ratio", type=float, default=15.0, help="steering ratio (default 15)"
-        )
-        p.add_argument(
-            "--timeout", type=float, default=300.0, help="give up after this many seconds"
-        )
-        args = p.parse_args(argv[1:])
-        return calibrate(
-            args.output,
-            wheel_range_deg=args.wheel_range,
-            steering_ratio=args.steering_ratio,
-            timeout=args.timeout,
-        )
-    if argv and argv[0] == "study":
-        return study_main(argv[1:])
-    if argv and argv[0] == "synthetic":
-        p = argparse.ArgumentParser(
-            prog="hasa-drive synthetic",
-            description="Drive through hasa-drive's loop with a synthetic driver turning a "
-            "virtual G29 "
-            "(headless; the recordings are labelled synthetic).",
-        )
-        add_version(p)
-        _add_session_arguments(p, participant_required=False)
-        p.add_argument(
-            "--driver", default="Ill", help="driver name in the population (default Ill)"
-        )
-        p.add_argument("--population", default="paper", help="population name (default paper)")
-        p.add_argument("--population-seed", type=int, default=0, help="population seed (default 0)")
-        p.set_defaults(runs=1)  # the help shows it: "(default %(default)s)"
-        return _synthetic(p.parse_args(argv[1:]), log)
+def _calibrate_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasa-drive calibrate``."""
+    p = argparse.ArgumentParser(
+        prog="hasa-drive calibrate",
+        description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
+    )
+    add_version(p)
+    p.add_argument("--output", type=Path, default=user_calibration_path(), help="file to write")
+    p.add_argument("--wheel-range", type=float, default=900.0, help="lock-to-lock range in degrees")
+    p.add_argument("--steering-ratio", type=float, default=15.0, help="steering ratio (default 15)")
+    p.add_argument("--timeout", type=float, default=300.0, help="give up after this many seconds")
+    return p
+
+
+def _synthetic_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasa-drive synthetic``."""
+    p = argparse.ArgumentParser(
+        prog="hasa-drive synthetic",
+        description="Drive through hasa-drive's loop with a synthetic driver turning a "
+        "virtual G29 "
+        "(headless; the recordings are labelled synthetic).",
+    )
+    add_version(p)
+    _add_session_arguments(p, participant_required=False)
+    p.add_argument("--driver", default="Ill", help="driver name in the population (default Ill)")
+    p.add_argument("--population", default="paper", help="population name (default paper)")
+    p.add_argument("--population-seed", type=int, default=0, help="population seed (default 0)")
+    p.set_defaults(runs=1)  # the help shows it: "(default %(default)s)"
+    return p
+
+
+def _drive_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasa-drive`` (a human drive)."""
     p = argparse.ArgumentParser(
         prog="hasa-drive",
         description="Drive the lane-keeping env with a wheel (G29), a joystick or the keyboard; "
@@ -391,7 +383,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="STRENGTH",
         help="force feedback: wheel autocentre spring strength 0..1 (Linux, needs evdev)",
     )
-    return _drive(p.parse_args(argv), log)
+    return p
+
+
+@console_script("hasa-drive")
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``hasa-drive`` (see the module docstring)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    log = print
+    if argv and argv[0] == "calibrate":
+        args = _calibrate_parser().parse_args(argv[1:])
+        return calibrate(
+            args.output,
+            wheel_range_deg=args.wheel_range,
+            steering_ratio=args.steering_ratio,
+            timeout=args.timeout,
+        )
+    if argv and argv[0] == "study":
+        return study_main(argv[1:])
+    if argv and argv[0] == "synthetic":
+        return _synthetic(_synthetic_parser().parse_args(argv[1:]), log)
+    return _drive(_drive_parser().parse_args(argv), log)
 
 
 if __name__ == "__main__":

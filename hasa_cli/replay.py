@@ -25,6 +25,9 @@ recording in a directory and its subdirectories) it:
    and a video (``--video FILE.mp4``) if ``imageio`` with ffmpeg is
    installed (skipped with a message otherwise).
 
+The work is done by :mod:`benchmarks.recordings`; this module parses the
+arguments, calls it and prints.
+
 Paths may be recording CSVs (or their sidecars), Parquet files written by
 ``hasa-rec convert``, or folders (searched recursively).
 
@@ -44,9 +47,18 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-from estimators.offline import EstimatorRun, estimate_recording
-from estimators.settings import model_curvature_limit, model_speed_limits
+from benchmarks.recordings import (
+    LaneKeepingError,
+    ModelSetupError,
+    check_recordings,
+    describe_estimate,
+    estimate_recordings,
+    prepare_model,
+    render_recordings,
+    score_recordings,
+)
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -56,14 +68,9 @@ from hasa_cli import (
     console_script,
     error,
 )
-from hasa_env.drivers import require_lane_keeping
-from hasa_env.recording import check_replay
 from hasa_env.recording.reader import load_paths
-from hasa_env.render.frames import write_frames
-from hasa_env.steering import score
-from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -98,9 +105,11 @@ def _video_unavailable(video: Path) -> str | None:
     return None
 
 
-@console_script(PROG)
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``hasa-replay`` (see the module docstring)."""
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasa-replay``.
+
+    Long because it is an argparse option list: one option per statement, each with its help.
+    """
     p = argparse.ArgumentParser(
         prog=PROG,
         description="Replay recordings headlessly, check that they reproduce, "
@@ -165,6 +174,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--size", type=_size, default=(1280, 720), help="frame size WIDTHxHEIGHT (default 1280x720)"
     )
     p.add_argument("--show-points", action="store_true", help="draw the near and far points")
+    return p
+
+
+@console_script(PROG)
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``hasa-replay`` (see the module docstring)."""
+    p = build_parser()
     args = p.parse_args(argv)
     if args.frame_every < 1:
         p.error("--frame-every must be >= 1")
@@ -188,117 +204,58 @@ def main(argv: Sequence[str] | None = None) -> int:
         error(PROG, "no recordings to replay")
         return EXIT_USAGE
 
-    diverged = 0
-    for rec in recordings:
-        label = "synthetic" if (rec.meta.get("metadata") or {}).get("synthetic") else "recorded"
-        complete = "" if rec.complete else " (incomplete: its writer stopped early)"
-        try:
-            check = check_replay(rec, args.atol)
-            text = check.describe(args.atol)
-        except ValueError as exc:
-            check, text = None, f"cannot replay: {exc}"
-        print(f"{rec.path}: {label}, {rec.steps} steps{complete}: {text}")
-        if check is None or not check.matches:
-            diverged += 1
+    checks = check_recordings(recordings, args.atol)
+    for check in checks:
+        print(check.describe())
+    diverged = sum(not check.matches for check in checks)
 
-    model = None
+    prepared = None
     if args.model is not None or args.estimator:
         spec = args.model or "generalized"
         if ":" in spec and os.getcwd() not in sys.path:
             sys.path.insert(0, os.getcwd())  # user models in the working directory
         try:
-            model = load_model(spec, recordings[0].dt)
-        except (ValueError, OSError) as exc:
+            prepared = prepare_model(
+                spec,
+                recordings,
+                fit=args.fit,
+                steering=args.steering,
+                steering_ratio=args.steering_ratio,
+                lane_check=args.estimator and not args.no_lane_check,
+                say=print,
+            )
+        except LaneKeepingError as exc:
+            error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
+            return EXIT_USAGE
+        except ModelSetupError as exc:
             error(PROG, str(exc))
             return EXIT_USAGE
-        if not model.is_fitted and not args.fit:
-            error(
-                PROG,
-                f"model {spec!r} has no parameters: add --fit to fit it on the first "
-                "recording, or give a saved model file (model.save('model.json'))",
-            )
-            return EXIT_USAGE
-        road = recordings[0].road
-        if args.steering is not None:
-            model.steering_signal = args.steering
-        if args.fit:
-            model = model.fit(recordings[0].data, road)
-            print(f"model {spec}: fitted on {recordings[0].path}")
-        curvature_limit = model_curvature_limit(model)  # the roads it was fitted on
-        ratio = args.steering_ratio
-        if ratio is None:
-            ratio = default_steering_ratio(spec, args.fit)
-        print(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
-        if args.estimator and not args.no_lane_check:
-            try:  # a model that cannot keep a lane would give the estimator wrong evidence
-                require_lane_keeping(model, steering_ratio=ratio, what=f"model {spec!r}")
-            except ValueError as exc:
-                error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
-                return EXIT_USAGE
         if args.model is not None:
-            for rec in recordings:
-                scores = score(model, in_model_units(rec.data, ratio), rec.road)
-                shown = ", ".join(
-                    f"{k} {_fmt(v)}"
-                    for k, v in scores.items()
-                    if k in ("rmse", "r2", "r2_increments", "ljung_box_p")
-                )
+            for rec, scores in zip(recordings, score_recordings(prepared, recordings), strict=True):
+                shown = ", ".join(f"{k} {_fmt(v)}" for k, v in scores.items())
                 print(f"{rec.path}: model {spec}: {shown}")
 
-    runs: dict[int, EstimatorRun] = {}
-    if args.estimator and model is not None:  # (loaded above with --estimator)
-        for i, rec in enumerate(recordings):
-            try:
-                result = estimate_recording(
-                    rec,
-                    model,
-                    ratio,
-                    steering_curvature_limit=curvature_limit,
-                    speed_limits=model_speed_limits(model),
-                )
-            except ValueError as exc:  # e.g. sampled at another rate than the model
-                error(PROG, f"{rec.path}: cannot run the estimator: {exc}")
-                problems.append(str(exc))
+    weights: dict[int, Any] = {}
+    if args.estimator and prepared is not None:  # (loaded above with --estimator)
+        for outcome in estimate_recordings(prepared, recordings):
+            if outcome.error is not None:
+                error(PROG, f"{outcome.path}: cannot run the estimator: {outcome.error}")
+                problems.append(outcome.error)
                 continue
-            runs[i] = result
-            hyp = ", ".join(
-                f"{b:+g} m: {w:.3f}"
-                for b, w in zip(result.hypotheses, result.weights[-1], strict=True)
-            )
-            trusted = "never" if math.isnan(result.trusted_from) else f"{result.trusted_from:.2f} s"
-            print(
-                f"{rec.path}: estimator: lateral RMSE {result.lateral_rmse:.3f} m, "
-                f"final weights [{hyp}], "
-                f"true lane trusted (> 0.9) from {trusted}"
-            )
+            weights[outcome.index] = outcome.value.weights
+            print(f"{outcome.path}: estimator: {describe_estimate(outcome.value)}")
 
     if args.frames is not None or args.video is not None:
-        for i, rec in enumerate(recordings):
-            frames_dir = None
-            if args.frames is not None:
-                frames_dir = (
-                    args.frames / Path(rec.path).stem if len(recordings) > 1 else args.frames
-                )
-            video = args.video
-            if video is not None and len(recordings) > 1:
-                video = video.with_name(f"{video.stem}_{Path(rec.path).stem}{video.suffix}")
-            try:
-                written = write_frames(
-                    rec,
-                    frames_dir,
-                    every=args.frame_every,
-                    view=args.view,
-                    size=args.size,
-                    show_points=args.show_points,
-                    weights=runs[i].weights if i in runs else None,
-                    video=video,
-                )
-            except OSError as exc:  # a read-only or full output folder
-                error(PROG, f"{rec.path}: cannot write frames: {exc}")
-                problems.append(str(exc))
+        options = {"every": args.frame_every, "view": args.view, "size": args.size,
+                   "show_points": args.show_points}  # fmt: skip
+        for outcome in render_recordings(recordings, args.frames, args.video, weights, **options):
+            if outcome.error is not None:
+                error(PROG, f"{outcome.path}: cannot write frames: {outcome.error}")
+                problems.append(outcome.error)
                 continue
+            written, frames_dir = outcome.value
             if written:
-                print(f"{rec.path}: wrote {len(written)} frames to {frames_dir}")
+                print(f"{outcome.path}: wrote {len(written)} frames to {frames_dir}")
     return EXIT_PARTIAL if problems or diverged else EXIT_OK
 
 

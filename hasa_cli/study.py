@@ -25,7 +25,8 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -176,139 +177,223 @@ def _print_schedule(study: Study, participant: str, slot: int | None) -> None:
         )
 
 
+PROG = "hasa-drive study"
+
+
+class _Exit(Exception):
+    """Leave :func:`run` with this exit status (the message is already printed)."""
+
+    def __init__(self, status: int) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+@dataclass
+class _Setup:
+    """What the session needs, read and checked before any window or device opens."""
+
+    study: Study
+    synthetic: bool
+    headless: bool
+    keyboard: KeyboardCalibration
+    env_wrapper: Any
+    answers: dict[str, Any]
+
+
+def _setup(args: argparse.Namespace) -> _Setup:
+    """Read the study, the keyboard calibration and the estimator, check the screen and ask
+    the participant's questions. Raises the input errors (exit 2), :class:`_Exit` without a
+    screen."""
+    study = Study.load(args.study)
+    synthetic = args.synthetic is not None
+    headless = synthetic and not args.realtime
+    DriveSettings(participant=args.participant, output=args.output)  # a usable id
+    keyboard = load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
+    if not isinstance(keyboard, KeyboardCalibration):
+        raise CalibrationError(str(args.keyboard), "device", "must be 'keyboard' for --keyboard")
+    env_wrapper = None
+    if args.estimator is not None:
+        track = study.document["measured"]["track"]
+        env_wrapper = estimator_for(args.estimator, LaneKeepingEnv(config=study.env_config(track)))
+    # the input is checked first: a bad file is exit 2 with or without a screen
+    if not headless:
+        reason = no_screen_reason()
+        if reason is not None:
+            print(
+                f"{PROG}: no screen to drive on: {reason}.\n"
+                "A study session shows the road to its participant and needs a display "
+                "(for a test without one: xvfb-run hasa-drive study ...; a synthetic "
+                "participant can drive headless: --synthetic DRIVER without --realtime).",
+                file=sys.stderr,
+            )
+            raise _Exit(EXIT_NO_SCREEN)
+    folder = Path(args.output) / args.participant
+    resuming = (folder / SESSION_FILE).exists()
+    answers: dict[str, Any] = {}
+    if not resuming:
+        answers = _answers(study, dict(args.meta), not synthetic and sys.stdin.isatty())
+    return _Setup(study, synthetic, headless, keyboard, env_wrapper, answers)
+
+
+def _open_window(pg: Any, args: argparse.Namespace, study: Study) -> Any:
+    """The participant's window; :class:`_Exit` if pygame cannot open one."""
+    try:
+        flags = pg.FULLSCREEN if args.fullscreen else 0
+        display = pg.display.set_mode((args.width, args.height), flags)
+    except Exception as exc:  # noqa: BLE001 - pygame.error and friends: no usable screen
+        print(f"{PROG}: no screen to drive on: pygame could not open a window ({exc})",
+              file=sys.stderr)  # fmt: skip
+        raise _Exit(EXIT_NO_SCREEN) from None
+    pg.display.set_caption(study.document["study"]["title"] or f"hasa-drive: {study.name}")
+    return display
+
+
+@dataclass
+class _Participant:
+    """Who drives: the input profiles, and for a synthetic participant its virtual wheel,
+    the hook that steers and presses its button, and what the recordings say about it."""
+
+    profiles: list[Any]
+    wheel: Any = None
+    hook: Callable[[DriveSession], None] | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+def _synthetic_participant(args: argparse.Namespace) -> _Participant:
+    """A synthetic driver of ``--population`` turning a virtual G29 and pressing its button
+    through the screens; :class:`_Exit` for an unknown driver (2) or no virtual wheel (3)."""
+    drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
+    if args.synthetic not in drivers:
+        print(f"{PROG}: unknown driver {args.synthetic!r}; this population has "
+              f"{', '.join(drivers)}", file=sys.stderr)  # fmt: skip
+        raise _Exit(2)
+    try:
+        wheel = VirtualJoystick.g29()
+    except VirtualJoystickUnavailable as exc:
+        print(f"{PROG}: cannot create the virtual wheel: {exc}", file=sys.stderr)
+        raise _Exit(EXIT_ENVIRONMENT) from None
+    try:
+        g29 = shipped_calibration("g29")
+        assert isinstance(g29, JoystickCalibration)
+        profile = dataclasses.replace(g29, match_names=(wheel.name,))
+        params = drivers[args.synthetic]
+        steering = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
+        presser = WheelButtonPresser(wheel, after=0.2)
+    except BaseException:
+        wheel.detach()
+        raise
+
+    def hook(session: DriveSession) -> None:
+        steering(session)
+        presser(session)
+
+    metadata = {
+        "synthetic": True,
+        "synthetic_driver": {
+            "description": "Not a human: a synthetic driver (hasa_env.drivers."
+            "SyntheticDriver) turned an SDL virtual joystick laid out like a G29 and "
+            "pressed its button to go on through the study's screens.",
+            "population": args.population,
+            "population_seed": args.population_seed,
+            "driver": params.name,
+            "params": params.to_dict(),
+        },
+    }
+    return _Participant([profile], wheel, hook, metadata)
+
+
+def _print_outcome(outcome: Any) -> int:
+    """Say what the session recorded; the exit status (1 if it stopped before the end)."""
+    summary = outcome.session.summary()
+    print(
+        f"{PROG}: {summary['participant']}: {summary['practice_completed']} practice and "
+        f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs "
+        f"recorded ({summary['left_road']} left the road), {summary['aborted']} aborted; "
+        f"session file {outcome.session.path}"
+    )
+    if outcome.state == "quit":
+        print(f"{PROG}: stopped with {summary['remaining']} run(s) to go; the same command "
+              "resumes the session at the next run")  # fmt: skip
+        return EXIT_PARTIAL
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hasa-drive study`` with parsed arguments; returns the exit status."""
-    prog = "hasa-drive study"
     status = StatusLine()
     log = status.log
     try:
-        study = Study.load(args.study)
         if args.check:
-            _print_schedule(study, args.participant, args.slot)
+            _print_schedule(Study.load(args.study), args.participant, args.slot)
             return 0
-        synthetic = args.synthetic is not None
-        headless = synthetic and not args.realtime
-        DriveSettings(participant=args.participant, output=args.output)  # a usable id
-        keyboard = (
-            load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
-        )
-        if not isinstance(keyboard, KeyboardCalibration):
-            raise CalibrationError(
-                str(args.keyboard), "device", "must be 'keyboard' for --keyboard"
-            )
-        env_wrapper = None
-        if args.estimator is not None:
-            track = study.document["measured"]["track"]
-            env_wrapper = estimator_for(
-                args.estimator, LaneKeepingEnv(config=study.env_config(track))
-            )
-        # the input is checked first: a bad file is exit 2 with or without a screen
-        if not headless:
-            reason = no_screen_reason()
-            if reason is not None:
-                print(
-                    f"{prog}: no screen to drive on: {reason}.\n"
-                    "A study session shows the road to its participant and needs a display "
-                    "(for a test without one: xvfb-run hasa-drive study ...; a synthetic "
-                    "participant can drive headless: --synthetic DRIVER without --realtime).",
-                    file=sys.stderr,
-                )
-                return EXIT_NO_SCREEN
-        folder = Path(args.output) / args.participant
-        resuming = (folder / SESSION_FILE).exists()
-        answers: dict[str, Any] = {}
-        if not resuming:
-            answers = _answers(study, dict(args.meta), not synthetic and sys.stdin.isatty())
+        setup = _setup(args)
     except (StudyError, SessionError, ValueError, ConfigError, ImportError, OSError) as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
+        print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
-    if headless:
+    except _Exit as exit_:
+        return exit_.status
+    if setup.headless:
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     pg = init_pygame_input()
-    display = None
-    if not headless:
-        try:
-            flags = pg.FULLSCREEN if args.fullscreen else 0
-            display = pg.display.set_mode((args.width, args.height), flags)
-        except Exception as exc:  # noqa: BLE001 - pygame.error and friends: no usable screen
-            print(f"{prog}: no screen to drive on: pygame could not open a window ({exc})",
-                  file=sys.stderr)  # fmt: skip
-            return EXIT_NO_SCREEN
-        pg.display.set_caption(study.document["study"]["title"] or f"hasa-drive: {study.name}")
-    wheel = None
-    hook = None
-    run_metadata: dict[str, Any] = {"estimator_shown": args.estimator}
     try:
-        if synthetic:
-            drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
-            if args.synthetic not in drivers:
-                print(f"{prog}: unknown driver {args.synthetic!r}; this population has "
-                      f"{', '.join(drivers)}", file=sys.stderr)  # fmt: skip
-                return 2
-            try:
-                wheel = VirtualJoystick.g29()
-            except VirtualJoystickUnavailable as exc:
-                print(f"{prog}: cannot create the virtual wheel: {exc}", file=sys.stderr)
-                return EXIT_ENVIRONMENT
-            g29 = shipped_calibration("g29")
-            assert isinstance(g29, JoystickCalibration)
-            profile = dataclasses.replace(g29, match_names=(wheel.name,))
-            profiles = [profile]
-            params = drivers[args.synthetic]
-            steering = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
-            presser = WheelButtonPresser(wheel, after=0.2)
-
-            def hook(session: DriveSession) -> None:
-                steering(session)
-                presser(session)
-
-            run_metadata |= {
-                "synthetic": True,
-                "synthetic_driver": {
-                    "description": "Not a human: a synthetic driver (hasa_env.drivers."
-                    "SyntheticDriver) turned an SDL virtual joystick laid out like a G29 and "
-                    "pressed its button to go on through the study's screens.",
-                    "population": args.population,
-                    "population_seed": args.population_seed,
-                    "driver": params.name,
-                    "params": params.to_dict(),
-                },
-            }
-        else:
-            profiles = joystick_profiles(args.calibration, log)
-        inputs = InputManager(keyboard, profiles, use_joystick=not args.keyboard_only,
+        display = None if setup.headless else _open_window(pg, args, setup.study)
+        who = (
+            _synthetic_participant(args)
+            if setup.synthetic
+            else _Participant(joystick_profiles(args.calibration, log))
+        )
+    except _Exit as exit_:
+        return exit_.status
+    except (StudyError, SessionError, ValueError, OSError) as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return 2
+    try:
+        inputs = InputManager(setup.keyboard, who.profiles, use_joystick=not args.keyboard_only,
                               pygame_module=pg)  # fmt: skip
         session = StudySession(
-            study,
+            setup.study,
             args.participant,
             inputs,
             output=args.output,
-            metadata=answers,
+            metadata=setup.answers,
             slot=args.slot,
             display=display,
-            realtime=not headless,
-            hook=hook,
-            env_wrapper=env_wrapper,
+            realtime=not setup.headless,
+            hook=who.hook,
+            env_wrapper=setup.env_wrapper,
             status=None if args.no_status else status,
             fps=args.fps,
             log=log,
-            run_metadata=run_metadata,
+            run_metadata={"estimator_shown": args.estimator} | who.metadata,
             fsync=args.fsync,
         )
     except (StudyError, SessionError, ValueError, OSError) as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        if wheel is not None:
-            wheel.detach()
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        if who.wheel is not None:
+            who.wheel.detach()
         return 2
+    return _drive_session(args, session, inputs, status, who.wheel, display, pg)
+
+
+def _drive_session(
+    args: argparse.Namespace,
+    session: StudySession,
+    inputs: InputManager,
+    status: StatusLine,
+    wheel: Any,
+    display: Any,
+    pg: Any,
+) -> int:
+    """Run the session (SIGTERM aborts the run in progress, cleanly) and close everything."""
     previous = signal.signal(signal.SIGTERM, _raise_exit)
     autocentre = None
     try:
-        if args.autocentre is not None and not synthetic:
-            autocentre = start_autocentre(inputs, args.autocentre, log)
+        if args.autocentre is not None and args.synthetic is None:
+            autocentre = start_autocentre(inputs, args.autocentre, status.log)
         outcome = session.run()
     except (StudyError, SessionError) as exc:
         status.close()
-        print(f"{prog}: {exc}", file=sys.stderr)
+        print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
     finally:
         signal.signal(signal.SIGTERM, previous)
@@ -321,18 +406,7 @@ def run(args: argparse.Namespace) -> int:
             wheel.detach()
         if display is not None:
             pg.display.quit()
-    summary = outcome.session.summary()
-    print(
-        f"{prog}: {summary['participant']}: {summary['practice_completed']} practice and "
-        f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs "
-        f"recorded ({summary['left_road']} left the road), {summary['aborted']} aborted; "
-        f"session file {outcome.session.path}"
-    )
-    if outcome.state == "quit":
-        print(f"{prog}: stopped with {summary['remaining']} run(s) to go; the same command "
-              "resumes the session at the next run")  # fmt: skip
-        return EXIT_PARTIAL
-    return 0
+    return _print_outcome(outcome)
 
 
 def build_parser() -> argparse.ArgumentParser:

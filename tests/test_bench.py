@@ -22,6 +22,7 @@ import pandas as pd
 import pytest
 
 from benchmarks.figures import FIGURES
+from benchmarks.perf import format_perf_table, perf_rows
 from benchmarks.protocol import (
     BenchmarkError,
     ModelError,
@@ -30,7 +31,7 @@ from benchmarks.protocol import (
     run_protocol,
 )
 from benchmarks.report import CSV_TABLES, _unsafe_estimators, format_tables, write_outputs
-from hasa_cli.bench import format_perf_table, main, perf_rows
+from hasa_cli.bench import main
 
 # the all-PI drivers without remnant ("paper-pi") until the default population is calibrated
 SMALL = {"seeds": (0,), "drivers": 3, "runs": 2, "ill_runs": 3, "duration": 4.0, "curved_runs": 1,

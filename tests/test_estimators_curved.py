@@ -315,10 +315,10 @@ def test_a_straight_road_model_leaves_the_lane_alone_on_bends():
     from hasa_env.steering import GeneralizedModel
 
     plan = synthetic_plan(ProtocolConfig(seeds=(0,)), 0)
-    train_ref = next(r for r in plan["main"] if r.driver == plan["illustrative"] and r.index == 0)
-    train = load_frames([train_ref], "straight", plan["env_config"], plan["params"])[0]
+    train_ref = next(r for r in plan.main if r.driver == plan.illustrative and r.index == 0)
+    train = load_frames([train_ref], "straight", plan.env_config, plan.params)[0]
     model = GeneralizedModel().fit(train)
-    curved = load_frames(plan["curved"][:2], "curved", plan["env_config"], plan["params"])
+    curved = load_frames(plan.curved[:2], "curved", plan.env_config, plan.params)
     limit = steering_curvature_limit(train["road_curvature"].to_numpy())
     residual = steering_residual_std(model.arx(), train, decision_lag=model.decision_lag)
     settings = FilterSettings.from_env_config(

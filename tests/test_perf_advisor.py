@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from benchmarks import perf_advisor
+from benchmarks.perf import advisor as perf_advisor
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import perf_env
+from benchmarks.perf import env as perf_env
 
 ENV_KEYS = ("hasa_env", "pendulum", "highway_env", "vector_1", "vector_64", "vector_1024")
 
@@ -76,7 +76,7 @@ def test_cli_quick_writes_json(tmp_path, capsys):
 def test_cli_output_is_clean_in_a_fresh_process():
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYGAME_", "SDL_"))}
     proc = subprocess.run(
-        [sys.executable, "-m", "benchmarks.perf_env", "--quick"],
+        [sys.executable, "-m", "benchmarks.perf.env", "--quick"],
         capture_output=True,
         text=True,
         env=env,

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from benchmarks import perf_estimators
+from benchmarks.perf import estimators as perf_estimators
 
 
 def _positive(x: object) -> bool:

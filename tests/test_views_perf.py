@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from benchmarks import perf_render
+from benchmarks.perf import render as perf_render
 
 
 @pytest.mark.slow

@@ -2,7 +2,8 @@
 
 :func:`run_protocol` (:mod:`~benchmarks.protocol.run`) runs it end to end;
 the package's modules are its jobs: :mod:`~benchmarks.protocol.config`
-(what to run), :mod:`~benchmarks.protocol.plan` (which runs),
+(what to run), :mod:`~benchmarks.protocol.plan` (which runs: a
+:class:`~benchmarks.protocol.plan.Plan` per seed or folder of recordings),
 :mod:`~benchmarks.protocol.models` (user models, fitting),
 :mod:`~benchmarks.protocol.tasks` (scoring and estimating batches of runs in
 any process), :mod:`~benchmarks.protocol.aggregate` (tables),

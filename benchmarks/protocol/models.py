@@ -456,6 +456,23 @@ def _fit_one(
             name, "fit", f"the fitted model cannot be pickled for the workers: {describe(exc)}"
         ) from None
     fitted.name = name
+    info = _fit_description(fitted, fixed, caught)
+    has_arx, residual = _filter_residual(
+        name, fitted, train if residual_on is None else residual_on
+    )
+    info["arx"] = has_arx
+    info["filter_residual_std"] = residual
+    note = _fit_note(fixed, has_arx)
+    if note:
+        info["note"] = note
+    return fitted, info
+
+
+def _fit_description(
+    fitted: SteeringModel, fixed: bool, caught: Sequence[warnings.WarningMessage]
+) -> dict[str, Any]:
+    """A fitted model's description: type, parameters and standard errors, the training
+    statistics, identifiability and checks of its fit, the fit's warnings."""
     result = fitted.fit_result
     info: dict[str, Any] = {
         "model_type": getattr(fitted, "model_type", ""),
@@ -484,40 +501,48 @@ def _fit_one(
                 "identifiable": result.identifiability.ok,
                 "message": result.identifiability.message,
             }
+    return info
+
+
+def _filter_residual(
+    name: str, fitted: SteeringModel, run: pd.DataFrame
+) -> tuple[bool, float | None]:
+    """Whether the model has an ARX form, and the filter's steering-residual level on ``run``
+    (:func:`estimators.tuning.steering_residual_std`; None without ARX form); ModelError if
+    the ARX form fails or predicts non-finite steering."""
     try:
         arx = fitted.arx()
     except Exception as exc:  # noqa: BLE001
         raise ModelError(name, "fit", f"arx() raised {describe(exc)}") from None
-    residual = None
-    if arx is not None:
-        try:
-            residual = steering_residual_std(
-                arx, train if residual_on is None else residual_on, decision_lag=fitted.decision_lag
-            )
-        except Exception as exc:  # noqa: BLE001
-            raise ModelError(
-                name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
-            ) from None
-        if not (math.isfinite(residual) and residual >= 0):
-            raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
-    info["arx"] = arx is not None
-    info["filter_residual_std"] = residual
+    if arx is None:
+        return False, None
+    try:
+        residual = steering_residual_std(arx, run, decision_lag=fitted.decision_lag)
+    except Exception as exc:  # noqa: BLE001
+        raise ModelError(
+            name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
+        ) from None
+    if not (math.isfinite(residual) and residual >= 0):
+        raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
+    return True, residual
+
+
+def _fit_note(fixed: bool, has_arx: bool) -> str:
+    """What a reader of the results should know about how the model was scored ("" if nothing)."""
     notes = []
     if fixed:
         notes.append(
             "a saved model file: scored with the parameters of its file, not refitted on the "
             "training run"
         )
-    if arx is None:
+    if not has_arx:
         notes.append(
             "not an ARX model (its arx() returns None): scored on steering prediction only, so "
             "it has no rows in the lateral-estimation table (paper table 2): the "
             "Gaussian-mixture EKF builds its state from the model's ARX form; implement arx() "
             "(README 'Write a steering model') to have it estimated"
         )
-    if notes:
-        info["note"] = "; ".join(notes)
-    return fitted, info
+    return "; ".join(notes)
 
 
 LANE_CHECK_DURATION = 30.0

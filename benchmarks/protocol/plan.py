@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,9 +17,11 @@ from hasa_env.recording.reader import load_any
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
 __all__ = [
+    "Plan",
     "RunRef",
     "chunks",
     "load_frames",
+    "make_plan",
     "quality_problem",
     "recording_plan",
     "synthetic_plan",
@@ -54,7 +56,97 @@ def chunks(items: Sequence[RunRef], size: int) -> list[list[RunRef]]:
     return [list(items[i : i + size]) for i in range(0, len(items), size)]
 
 
-def synthetic_plan(config: ProtocolConfig, seed: int) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Plan:
+    """The runs the protocol scores for one population seed, or for a folder of recordings.
+
+    One type for both sources: a synthetic plan (:func:`synthetic_plan`) has a ``seed``,
+    the drivers' parameters and the env config its runs are generated with; a recording
+    plan (:func:`recording_plan`) has ``seed`` None, no parameters and no env config (each
+    recording carries its own), and may have ``notes`` and ``skipped`` files.
+
+    Attributes:
+        seed: the population seed (None: recordings).
+        track: the main track (``"straight"`` or ``"curved"``).
+        illustrative: the driver whose run ``training_run`` on the main track trains the models.
+        training_run: index of that run among the illustrative driver's main-track runs.
+        main: every run on the main track (the training run among them).
+        curved: the extra curved-track runs (empty when the main track is curved).
+        params: driver name -> :class:`hasa_env.drivers.DriverParams` (synthetic only).
+        env_config: the env config of the synthetic runs (``{}`` for recordings).
+        drivers: per driver its description in the results (``seed``, ``driver``, ``runs``,
+            ``curved_runs``, and ``parameters`` or ``recordings``, ``study_session``).
+        driver_order: the drivers in the order of the tables (the illustrative one first
+            for recordings, the population's order otherwise).
+        notes: what the plan wants said in the results (recordings only).
+        skipped: recordings left out, ``{"file", "reason"}`` each.
+    """
+
+    seed: int | None
+    track: str
+    illustrative: str
+    training_run: int
+    main: list[RunRef]
+    curved: list[RunRef]
+    params: dict[str, Any]
+    env_config: dict[str, Any]
+    drivers: list[dict[str, Any]]
+    driver_order: list[str]
+    notes: list[str] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+
+    @property
+    def recorded(self) -> bool:
+        """Recorded drives (not a synthetic population)."""
+        return self.seed is None
+
+    def training(self) -> RunRef:
+        """The run that trains the models.
+
+        Raises:
+            BenchmarkError: the illustrative driver has no such run.
+        """
+        found = next(
+            (
+                r
+                for r in self.main
+                if r.driver == self.illustrative and r.index == self.training_run
+            ),
+            None,
+        )
+        if found is None:
+            raise BenchmarkError(
+                f"no run {self.training_run} of the illustrative driver {self.illustrative!r} on "
+                f"the {self.track} track to train on{self._where()}"
+            )
+        return found
+
+    def validation(self) -> list[RunRef]:
+        """The main-track runs the models are scored on: all but the training run.
+
+        Raises:
+            BenchmarkError: there is no training run, or no other run.
+        """
+        training = self.training()
+        validation = [r for r in self.main if r is not training]
+        if not validation:
+            raise BenchmarkError(
+                f"no validation runs: found only the training run ({len(self.main)} run(s) on "
+                f"the {self.track} track){self._where()}; the protocol scores the models on the "
+                "other runs"
+            )
+        return validation
+
+    def _where(self) -> str:
+        return "" if self.seed is None else f" (seed {self.seed})"
+
+
+def make_plan(config: ProtocolConfig, seed: int | None) -> Plan:
+    """The plan of one entry of ``config.run_seeds``: a population seed, or None (recordings)."""
+    return recording_plan(config) if seed is None else synthetic_plan(config, seed)
+
+
+def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
     """The runs of population seed ``seed``: drivers, main-track and curved runs, env config."""
     try:
         params = population(config.population, seed, config.drivers)
@@ -84,15 +176,18 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> dict[str, Any]:
         }
         for p in params
     ]
-    return {
-        "illustrative": ILLUSTRATIVE,
-        "main": main,
-        "curved": curved,
-        "params": by_name,
-        "env_config": config.env_config(),
-        "drivers": drivers,
-        "driver_order": [p.name for p in params],
-    }
+    return Plan(
+        seed=seed,
+        track=config.track,
+        illustrative=ILLUSTRATIVE,
+        training_run=config.training_run,
+        main=main,
+        curved=curved,
+        params=by_name,
+        env_config=config.env_config(),
+        drivers=drivers,
+        driver_order=[p.name for p in params],
+    )
 
 
 def quality_problem(rec: Recording, config: ProtocolConfig) -> str | None:
@@ -198,24 +293,21 @@ def _study_sessions(root: Path) -> tuple[dict[Path, str], set[Path], dict[str, A
     return measured, excluded, details, notes
 
 
-def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
-    """The runs of a folder of recordings (one recording per run).
+@dataclass
+class _Scan:
+    """What a folder of recordings holds: the usable recordings per (driver, track), the
+    files skipped with their reasons, the training file's (driver, track), and what the
+    study session files say (:func:`_study_sessions`)."""
 
-    Every file is loaded and checked first (:func:`hasa_env.recording.load_paths`);
-    a file that does not load or fails a quality gate (:func:`quality_problem`)
-    is skipped and listed, with its reason, in the plan's ``skipped``
-    (``{"file", "reason"}``). Curved-track recordings of every driver are
-    scored on steering (the curved table); recordings of a track the protocol
-    does not score are listed in the notes.
+    found: dict[tuple[str, str], list[Path]]
+    skipped: list[dict[str, str]]
+    training: tuple[str, str] | None
+    session_details: dict[str, Any]
+    session_notes: list[str]
 
-    Folders with a study session file (``session.json`` of ``hasa-drive
-    study``) contribute their completed measured runs only: practice runs and
-    aborted attempts are left out and reported in the notes, and the drivers
-    are the sessions' participants, with their metadata.
-    """
-    root = Path(config.recordings or "")
-    if not root.is_dir():
-        raise BenchmarkError(f"recordings directory {str(root)!r} does not exist")
+
+def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | None) -> _Scan:
+    """Load and check every recording under ``root`` (quality gates, study sessions)."""
     loaded = load_paths([root])
     skipped = [
         {"file": str(e.path) if e.path is not None else str(root), "reason": e.reason or str(e)}
@@ -223,7 +315,6 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
         if not (e.path == root and not loaded)  # "no recordings here" is said below
     ]
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
-    training_file = Path(config.training_file).resolve() if config.training_file else None
     training: tuple[str, str] | None = None
     session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
     for rec in loaded:
@@ -248,10 +339,20 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
                 + "\n".join(f"  {s['file']}: {s['reason']}" for s in skipped)
             )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
-    names = sorted({d for d, _ in found})
+    return _Scan(found, skipped, training, session_details, session_notes)
+
+
+def _training_choice(
+    config: ProtocolConfig, root: Path, scan: _Scan, training_file: Path | None
+) -> tuple[str, int]:
+    """The illustrative driver and the index of its training run: ``training_file``'s, else
+    ``config.illustrative`` (default "Ill" if it drove, else the first driver by name) and
+    ``config.training_run``."""
+    names = sorted({d for d, _ in scan.found})
     illustrative = config.illustrative or (ILLUSTRATIVE if ILLUSTRATIVE in names else names[0])
     training_index = config.training_run
     if config.training_file is not None:
+        training = scan.training
         if training is None or training_file is None:  # (training is found with the file)
             where = "" if training_file is None else f" ({training_file})"
             raise BenchmarkError(
@@ -264,13 +365,39 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
                 f"the protocol trains on the main track ({config.track})"
             )
         illustrative = training[0]
-        paths = [p.resolve() for p in found[training]]
+        paths = [p.resolve() for p in scan.found[training]]
         training_index = paths.index(training_file)
     if illustrative not in names:
         raise BenchmarkError(
             f"illustrative driver {illustrative!r} has no usable recordings in {str(root)!r}; "
             f"drivers: {', '.join(names)}"
         )
+    return illustrative, training_index
+
+
+def recording_plan(config: ProtocolConfig) -> Plan:
+    """The runs of a folder of recordings (one recording per run).
+
+    Every file is loaded and checked first (:func:`hasa_env.recording.load_paths`);
+    a file that does not load or fails a quality gate (:func:`quality_problem`)
+    is skipped and listed, with its reason, in the plan's ``skipped``
+    (``{"file", "reason"}``). Curved-track recordings of every driver are
+    scored on steering (the curved table); recordings of a track the protocol
+    does not score are listed in the notes.
+
+    Folders with a study session file (``session.json`` of ``hasa-drive
+    study``) contribute their completed measured runs only: practice runs and
+    aborted attempts are left out and reported in the notes, and the drivers
+    are the sessions' participants, with their metadata.
+    """
+    root = Path(config.recordings or "")
+    if not root.is_dir():
+        raise BenchmarkError(f"recordings directory {str(root)!r} does not exist")
+    training_file = Path(config.training_file).resolve() if config.training_file else None
+    scan = _scan_recordings(root, config, training_file)
+    found = scan.found
+    illustrative, training_index = _training_choice(config, root, scan, training_file)
+    names = sorted({d for d, _ in found})
     order = [illustrative] + [n for n in names if n != illustrative]
     other_track = "curved" if config.track != "curved" else None
     main, curved, drivers = [], [], []
@@ -286,7 +413,11 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
                 "runs": len(main_paths),
                 "curved_runs": len(curved_paths),
                 "recordings": [str(p) for p in main_paths + list(curved_paths)],
-                **({"study_session": session_details[name]} if name in session_details else {}),
+                **(
+                    {"study_session": scan.session_details[name]}
+                    if name in scan.session_details
+                    else {}
+                ),
             }
         )
     notes = [f"recordings: {len(main) + len(curved)} runs of {len(names)} drivers from {root}"]
@@ -300,25 +431,27 @@ def recording_plan(config: ProtocolConfig) -> dict[str, Any]:
             f"{unused} recording(s) on another track than {config.track!r} not scored "
             "(--track chooses the main track)"
         )
-    notes += session_notes
-    notes += [f"skipped {s['file']}: {s['reason']}" for s in skipped]
+    notes += scan.session_notes
+    notes += [f"skipped {s['file']}: {s['reason']}" for s in scan.skipped]
     train_ref = next(
         (r for r in main if r.driver == illustrative and r.index == training_index), None
     )
     if train_ref is not None:
         notes.append(f"the models are trained on {train_ref.path} (driver {illustrative!r})")
-    return {
-        "illustrative": illustrative,
-        "training_run": training_index,
-        "main": main,
-        "curved": curved,
-        "params": {},
-        "env_config": {},
-        "drivers": drivers,
-        "driver_order": order,
-        "notes": notes,
-        "skipped": skipped,
-    }
+    return Plan(
+        seed=None,
+        track=config.track,
+        illustrative=illustrative,
+        training_run=training_index,
+        main=main,
+        curved=curved,
+        params={},
+        env_config={},
+        drivers=drivers,
+        driver_order=order,
+        notes=notes,
+        skipped=scan.skipped,
+    )
 
 
 def constant_speed_run(

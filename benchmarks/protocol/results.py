@@ -18,13 +18,17 @@ from benchmarks import paper_values
 from hasa_env._versions import installed_versions
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
-__all__ = ["BenchmarkResult", "versions"]
+__all__ = ["RESULTS_FORMAT", "BenchmarkResult", "versions"]
 
 
 _TABLE_1_KEYS = (
     "two_point_rmse", "two_point_r2_acc", "generalized_rmse", "generalized_r2_acc", "rmse_decrease"
 )  # fmt: skip
 _TABLE_2_KEYS = ("two_point_mean", "two_point_std", "generalized_mean", "generalized_std")
+
+
+RESULTS_FORMAT = "hasa_bench.results"
+"""The ``format`` of a ``results.json`` (what marks a folder as a previous result)."""
 
 
 @dataclass
@@ -86,7 +90,7 @@ class BenchmarkResult:
     def to_json_dict(self) -> dict[str, Any]:
         """The JSON document of ``results.json`` (NaN and infinities become null)."""
         doc = {
-            "format": "hasa_bench.results",
+            "format": RESULTS_FORMAT,
             "format_version": 3,
             "config": self.config,
             "versions": self.versions,

@@ -52,6 +52,14 @@ of workers), so results are identical on any executor and worker count. A
 different ``batch_size`` can change per-run numbers by floating-point
 rounding (batched arithmetic; in practice in their last digits).
 
+:func:`run_protocol` is four stages, each a function of this module with typed
+inputs and outputs: :func:`benchmarks.protocol.plan.make_plan` (which runs: a
+:class:`~benchmarks.protocol.plan.Plan` per seed), :func:`fit_and_check` (fit
+the models on the plan's training run and check that they keep a lane),
+:func:`schedule` (the plans' runs in tasks, mapped over the executor) and
+:func:`aggregate_result` (tables, verdict, figures: the
+:class:`~benchmarks.protocol.results.BenchmarkResult`).
+
 A user model that cannot be imported, does not implement
 :class:`hasa_env.steering.SteeringModel`, raises while fitting, predicting
 or filtering, or predicts NaN is reported in ``errors`` (naming the model
@@ -63,9 +71,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from benchmarks.executor import default_workers, map_tasks
 from benchmarks.protocol.aggregate import (
@@ -82,6 +92,7 @@ from benchmarks.protocol.config import (
     ProtocolConfig,
 )
 from benchmarks.protocol.models import (
+    Candidate,
     FittedModel,
     ModelError,
     check_lane_keeping,
@@ -90,19 +101,30 @@ from benchmarks.protocol.models import (
     load_models,
 )
 from benchmarks.protocol.plan import (
+    Plan,
     RunRef,
     chunks,
     constant_speed_run,
     load_frames,
-    recording_plan,
-    synthetic_plan,
+    make_plan,
 )
 from benchmarks.protocol.plots import plot_data
 from benchmarks.protocol.results import BenchmarkResult, versions
 from benchmarks.protocol.tasks import ChunkResult, ChunkTask, run_chunk
 from hasa_env.drivers import SpeedProfile
 
-__all__ = ["run_protocol"]
+__all__ = [
+    "FittedPlan",
+    "Schedule",
+    "aggregate_result",
+    "chunk_tasks",
+    "fit_and_check",
+    "run_protocol",
+    "schedule",
+]
+
+Progress = Callable[[str, int, int], None]
+"""``progress(phase, done, total)``: phase "runs" with done/total runs, or a message (total 0)."""
 
 
 def run_protocol(
@@ -111,7 +133,7 @@ def run_protocol(
     *,
     workers: int | None = None,
     scheduler: Any = None,
-    progress: Callable[[str, int, int], None] | None = None,
+    progress: Progress | None = None,
 ) -> BenchmarkResult:
     """Run the benchmark protocol (see the module docstring).
 
@@ -135,13 +157,8 @@ def run_protocol(
     """
     config = config or ProtocolConfig()
     say = progress or (lambda phase, done, total: None)
-    timing: dict[str, float] = {}
     start = time.perf_counter()
     errors: list[ModelError] = []
-    notes: list[str] = []
-    skipped: list[dict[str, str]] = []
-    paths: dict[tuple[int | None, str, str, int], str] = {}
-
     # 0. every model loads before any run is generated: one that does not is an input error
     candidates = load_models(
         user_models, errors, time_limit=config.model_time_limit, stress=config.stress
@@ -151,107 +168,155 @@ def run_protocol(
             f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
             "run:\n" + "\n".join(f"  {e}" for e in errors)
         )
-
     # 1.-2. per seed: the runs, the training run, the fits
-    tasks: list[ChunkTask] = []
-    fitted_by_seed: dict[int | None, list[FittedModel]] = {}
-    model_info: list[dict[str, Any]] = []
-    drivers: list[dict[str, Any]] = []
-    first: dict[str, Any] = {}
-    t_fit = 0.0
-    seeds = config.run_seeds
-    for seed in seeds:
-        plan = recording_plan(config) if seed is None else synthetic_plan(config, seed)
-        illustrative = plan["illustrative"]
-        main_runs: list[RunRef] = plan["main"]
-        curved_runs: list[RunRef] = plan["curved"]
-        training_index = plan.get("training_run", config.training_run)
-        training = next(
-            (r for r in main_runs if r.driver == illustrative and r.index == training_index),
-            None,
-        )
-        where = "" if seed is None else f" (seed {seed})"
-        if training is None:
-            raise BenchmarkError(
-                f"no run {training_index} of the illustrative driver {illustrative!r} on "
-                f"the {config.track} track to train on{where}"
-            )
-        validation = [r for r in main_runs if r is not training]
-        if not validation:
-            raise BenchmarkError(
-                f"no validation runs: found only the training run ({len(main_runs)} run(s) on "
-                f"the {config.track} track){where}; the protocol scores the models on the other runs"
-            )
-        notes.extend(plan.get("notes", []))
-        say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
-            else "loading the training run and fitting the models", 0, 0)  # fmt: skip
-        train_frame = load_frames([training], config.track, plan["env_config"], plan["params"])[0]
-        t0 = time.perf_counter()
-        sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
-        constant_speed = (
-            constant_speed_run(training, config.track, plan["env_config"], plan["params"])
-            if config.stress and seed is not None
-            else None
-        )
-        fitted, fit_info = fit_models(
-            train_frame,
-            candidates,
-            errors,
+    fits = [
+        fit_and_check(config, make_plan(config, seed), candidates, errors, say)
+        for seed in config.run_seeds
+    ]
+    tasks = [task for i, fit in enumerate(fits) for task in chunk_tasks(config, fit, i == 0)]
+    # 3. every seed's tasks at once
+    done = schedule(tasks, workers=workers, scheduler=scheduler, say=say)
+    # 4. aggregate
+    say("aggregating", 0, 0)
+    result = aggregate_result(config, user_models, candidates, errors, fits, done)
+    result.timing = {"fit": sum(f.seconds for f in fits)} | done.timing
+    result.timing["total"] = time.perf_counter() - start
+    return result
+
+
+@dataclass(frozen=True)
+class FittedPlan:
+    """A plan with its models fitted on its training run (stage 2's result).
+
+    Attributes:
+        plan: the runs.
+        training: the run the models are trained on; validation: the other main-track
+            runs (scored); train_frame: the training run's data.
+        models: the fitted models (with their lane-keeping outcome when estimating);
+            infos: their descriptions (``results.json`` ``models``), failed ones included.
+        seconds: time spent fitting and checking (s).
+    """
+
+    plan: Plan
+    training: RunRef
+    validation: list[RunRef]
+    train_frame: pd.DataFrame
+    models: list[FittedModel]
+    infos: list[dict[str, Any]]
+    seconds: float
+
+    @property
+    def plot_run(self) -> RunRef:
+        """The run of the figures: the illustrative driver's first validation run."""
+        illustrative = self.plan.illustrative
+        return next((r for r in self.validation if r.driver == illustrative), self.validation[0])
+
+
+def fit_and_check(
+    config: ProtocolConfig,
+    plan: Plan,
+    candidates: Sequence[Candidate],
+    errors: list[ModelError],
+    say: Progress,
+) -> FittedPlan:
+    """Fit every candidate on the plan's training run and, when estimating, let each drive
+    (:func:`~benchmarks.protocol.models.check_lane_keeping`). A user model that fails is
+    appended to ``errors``; a built-in one that fails raises BenchmarkError, as does a plan
+    without a training run or without validation runs."""
+    seed = plan.seed
+    training = plan.training()
+    validation = plan.validation()
+    say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
+        else "loading the training run and fitting the models", 0, 0)  # fmt: skip
+    train_frame = load_frames([training], config.track, plan.env_config, plan.params)[0]
+    t0 = time.perf_counter()
+    sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
+    constant_speed = (
+        constant_speed_run(training, config.track, plan.env_config, plan.params)
+        if config.stress and seed is not None
+        else None
+    )
+    fitted, fit_info = fit_models(
+        train_frame,
+        candidates,
+        errors,
+        seed=seed,
+        sensor_std=sensor_std,
+        constant_speed_train=constant_speed,
+        time_limit=config.model_time_limit,
+    )
+    if config.estimate:  # can each model drive? (no lane evidence from one that cannot)
+        speed = plan.params[plan.illustrative].speed if seed is not None else SpeedProfile.hold()
+        fitted = check_lane_keeping(
+            fitted,
+            fit_info,
+            env_id=TRACK_ENV_IDS[config.track],
+            config=train_frame.attrs["config"],
+            speed=speed,
             seed=seed,
-            sensor_std=sensor_std,
-            constant_speed_train=constant_speed,
             time_limit=config.model_time_limit,
         )
-        if config.estimate:  # can each model drive? (no lane evidence from one that cannot)
-            fitted = check_lane_keeping(
-                fitted,
-                fit_info,
-                env_id=TRACK_ENV_IDS[config.track],
-                config=train_frame.attrs["config"],
-                speed=(
-                    plan["params"][illustrative].speed if seed is not None else SpeedProfile.hold()
-                ),
-                seed=seed,
-                time_limit=config.model_time_limit,
-            )
-        skipped += plan.get("skipped", [])
-        t_fit += time.perf_counter() - t0
-        fitted_by_seed[seed] = fitted
-        model_info += fit_info
-        drivers += plan["drivers"]
-        is_first = not first
-        plot_run = next((r for r in validation if r.driver == illustrative), validation[0])
-        if is_first:
-            first = {"plan": plan, "plot_run": plot_run, "curved": curved_runs,
-                     "train": train_frame, "illustrative": illustrative}  # fmt: skip
-        trace_runs = {plot_run.key} | ({curved_runs[0].key} if curved_runs else set())
-        common = {
-            "seed": seed,
-            "env_config": plan["env_config"],
-            "driver_params": plan["params"],
-            "models": tuple(fitted),
-            "ljung_box_lags": config.ljung_box_lags,
-            "acf_lags": config.acf_lags,
-            "weight_threshold": config.weight_threshold,
-            "error_window": config.error_window,
-            "trace_runs": frozenset(trace_runs) if is_first else frozenset(),
-            "detail_driver": illustrative if is_first else "",
-            "compare_checks": config.compare_checks,
-            "filter_settings": dict(config.filter_settings),
-            "time_limit": config.model_time_limit,
-        }
-        tasks += [
-            ChunkTask(runs=tuple(chunk), track="curved", estimate=config.estimate, **common)
-            for chunk in chunks(curved_runs, config.batch_size)
-        ]
-        tasks += [
-            ChunkTask(runs=tuple(chunk), track=config.track, estimate=config.estimate, **common)
-            for chunk in chunks(validation, config.batch_size)
-        ]
-        paths.update({r.key: r.path for r in validation + curved_runs if r.path is not None})
-    timing["fit"] = t_fit
+    seconds = time.perf_counter() - t0
+    return FittedPlan(plan, training, validation, train_frame, fitted, fit_info, seconds)
 
-    # 3. every seed's tasks at once
+
+def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list[ChunkTask]:
+    """The tasks of one fitted plan: its curved runs, then its validation runs, in chunks of
+    ``config.batch_size``. A ``detailed`` plan (the first seed's) also records the figures'
+    traces (of its plot run and first curved run) and the illustrative driver's details."""
+    plan = fit.plan
+    trace_runs = {fit.plot_run.key} | ({plan.curved[0].key} if plan.curved else set())
+
+    def task(runs: Sequence[RunRef], track: str) -> ChunkTask:
+        return ChunkTask(
+            runs=tuple(runs),
+            track=track,
+            estimate=config.estimate,
+            seed=plan.seed,
+            env_config=plan.env_config,
+            driver_params=plan.params,
+            models=tuple(fit.models),
+            ljung_box_lags=config.ljung_box_lags,
+            acf_lags=config.acf_lags,
+            weight_threshold=config.weight_threshold,
+            error_window=config.error_window,
+            trace_runs=frozenset(trace_runs) if detailed else frozenset(),
+            detail_driver=plan.illustrative if detailed else "",
+            compare_checks=config.compare_checks,
+            filter_settings=dict(config.filter_settings),
+            time_limit=config.model_time_limit,
+        )
+
+    return [task(chunk, "curved") for chunk in chunks(plan.curved, config.batch_size)] + [
+        task(chunk, config.track) for chunk in chunks(fit.validation, config.batch_size)
+    ]
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The tasks run (stage 3's result).
+
+    Attributes:
+        results: one :class:`ChunkResult` per task, in the tasks' order.
+        timing: ``tasks`` (wall time, s) and ``task_cpu_seconds`` (summed over tasks).
+        executor: how they ran (``kind``, ``workers``, ``scheduler``, ``tasks``; the
+            batch size is added by :func:`aggregate_result`).
+    """
+
+    results: list[ChunkResult]
+    timing: dict[str, float]
+    executor: dict[str, Any]
+
+
+def schedule(
+    tasks: Sequence[ChunkTask], *, workers: int | None, scheduler: Any, say: Progress
+) -> Schedule:
+    """Run every task (:func:`run_chunk`) on local processes or the Dask ``scheduler``,
+    reporting the runs done to ``say``.
+
+    Raises:
+        BenchmarkError: the Dask scheduler fails (an OSError or a timeout on it).
+    """
     n_workers = default_workers() if workers is None else max(1, int(workers))
     total_runs = sum(len(t.runs) for t in tasks)
     done_runs = np.cumsum([len(t.runs) for t in tasks])
@@ -262,8 +327,8 @@ def run_protocol(
 
     t_tasks = time.perf_counter()
     try:
-        chunk_results: list[ChunkResult] = map_tasks(
-            run_chunk, tasks, workers=workers, scheduler=scheduler, progress=on_task
+        results: list[ChunkResult] = map_tasks(
+            run_chunk, list(tasks), workers=workers, scheduler=scheduler, progress=on_task
         )
     except (OSError, TimeoutError) as exc:
         if scheduler is None:
@@ -271,67 +336,10 @@ def run_protocol(
         raise BenchmarkError(
             f"cannot run the tasks on the Dask scheduler {scheduler!r}: {describe(exc)}"
         ) from None
-    timing["tasks"] = time.perf_counter() - t_tasks
-    timing["task_cpu_seconds"] = float(sum(c.seconds for c in chunk_results))
-
-    # 4. aggregate
-    say("aggregating", 0, 0)
-    failed: dict[str, ModelError] = {}
-    for error in errors:  # load and fit failures (one per model, whichever seed failed first)
-        failed.setdefault(error.model, error)
-    for chunk in chunk_results:
-        for failure in chunk.failures:
-            failed.setdefault(failure.model, failure)
-    errors = list(failed.values())
-    for info in model_info:
-        if info["name"] in failed and info.get("error") is None:
-            info["error"] = str(failed[info["name"]])
-    names = [c.name for c in candidates]
-    ok_models = [n for n in names if n not in failed]
-    kinds = {c.name: c.kind for c in candidates}
-    estimators = list(ok_models)
-    if config.compare_checks:
-        unchecked = [f"{n}{UNCHECKED_SUFFIX}" for n in ok_models]
-        kinds |= {u: "unchecked" for u in unchecked}
-        estimators += unchecked
-    order = _row_order(seeds, first["plan"]["driver_order"], estimators + list(BASELINES))
-    runs_steering = sorted(
-        (row for c in chunk_results for row in c.steering if row["model"] not in failed), key=order
-    )
-    runs_estimation = sorted(
-        (row for c in chunk_results for row in c.estimation if row["model"] not in failed),
-        key=order,
-    )
-    steering_rows = aggregate_steering(
-        [r for r in runs_steering if r["track"] == config.track], ok_models
-    )
-    curved_rows = (
-        aggregate_steering([r for r in runs_steering if r["track"] == "curved"], ok_models)
-        if config.track != "curved"
-        else []
-    )
-    estimation_all = aggregate_estimation(runs_estimation)
-    estimation_rows = [r for r in estimation_all if r["track"] == config.track]
-    curved_estimation_rows = [r for r in estimation_all if r["track"] != config.track]
-    degenerate = _degenerate_runs(runs_steering + runs_estimation, paths)
-    seed_summary = summarize_seeds(
-        steering_rows, estimation_rows, estimators, kinds, curved_estimation_rows
-    )
-    summary = verdict(
-        seed_summary, estimators, kinds, steering=steering_rows, estimation=estimation_rows,
-        curved_estimation=curved_estimation_rows,
-        runs_estimation=[r for r in runs_estimation if r["track"] == config.track],
-    )  # fmt: skip
-    plots = plot_data(
-        [c for c in chunk_results if c.traces or c.acf or c.early_errors],
-        fitted_by_seed[seeds[0]],
-        failed,
-        first["plot_run"],
-        first["curved"],
-        first["train"],
-        config,
-    )
-    timing["total"] = time.perf_counter() - start
+    timing = {
+        "tasks": time.perf_counter() - t_tasks,
+        "task_cpu_seconds": float(sum(c.seconds for c in results)),
+    }
     executor = {
         "kind": "dask" if scheduler is not None else "processes",
         "workers": None if scheduler is not None else n_workers,
@@ -339,30 +347,131 @@ def run_protocol(
         if scheduler is None
         else str(getattr(scheduler, "scheduler_address", scheduler)),
         "tasks": len(tasks),
-        "batch_size": config.batch_size,
     }
+    return Schedule(results, timing, executor)
+
+
+def _failures(
+    errors: Sequence[ModelError], results: Sequence[ChunkResult]
+) -> dict[str, ModelError]:
+    """Each failed model's first failure: load and fit failures (whichever seed failed
+    first), then those of the tasks."""
+    failed: dict[str, ModelError] = {}
+    for error in errors:
+        failed.setdefault(error.model, error)
+    for chunk in results:
+        for failure in chunk.failures:
+            failed.setdefault(failure.model, failure)
+    return failed
+
+
+def aggregate_result(
+    config: ProtocolConfig,
+    user_models: Sequence[str],
+    candidates: Sequence[Candidate],
+    errors: Sequence[ModelError],
+    fits: Sequence[FittedPlan],
+    done: Schedule,
+) -> BenchmarkResult:
+    """The result of the tasks: per-run rows of the models that did not fail, sorted
+    (seed, driver, track, model, run); the steering and estimation tables, the per-seed
+    summary and the verdict (:mod:`benchmarks.protocol.aggregate`); the figures' data of
+    the first seed. ``timing`` is left for the caller."""
+    failed = _failures(errors, done.results)
+    model_info = [info for fit in fits for info in fit.infos]
+    for info in model_info:
+        if info["name"] in failed and info.get("error") is None:
+            info["error"] = str(failed[info["name"]])
+    ok_models = [c.name for c in candidates if c.name not in failed]
+    kinds = {c.name: c.kind for c in candidates}
+    estimators = list(ok_models)
+    if config.compare_checks:
+        unchecked = [f"{n}{UNCHECKED_SUFFIX}" for n in ok_models]
+        kinds |= {u: "unchecked" for u in unchecked}
+        estimators += unchecked
+    first = fits[0]
+    seeds = [fit.plan.seed for fit in fits]
+    order = _row_order(seeds, first.plan.driver_order, estimators + list(BASELINES))
+    chunk_rows = done.results
+    runs_steering = sorted(
+        (row for c in chunk_rows for row in c.steering if row["model"] not in failed), key=order
+    )
+    runs_estimation = sorted(
+        (row for c in chunk_rows for row in c.estimation if row["model"] not in failed),
+        key=order,
+    )
+    steering_rows, curved_rows, estimation_rows, curved_estimation_rows = _tables(
+        config.track, runs_steering, runs_estimation, ok_models
+    )
+    paths = {
+        r.key: r.path
+        for fit in fits
+        for r in fit.validation + fit.plan.curved
+        if r.path is not None
+    }
+    seed_summary = summarize_seeds(
+        steering_rows, estimation_rows, estimators, kinds, curved_estimation_rows
+    )
+    plots = plot_data(
+        [c for c in chunk_rows if c.traces or c.acf or c.early_errors],
+        first.models,
+        failed,
+        first.plot_run,
+        first.plan.curved,
+        first.train_frame,
+        config,
+    )
     return BenchmarkResult(
         config=config.to_dict()
-        | {"illustrative": first["illustrative"], "user_models": list(user_models)},
+        | {"illustrative": first.plan.illustrative, "user_models": list(user_models)},
         models=model_info,
         steering=steering_rows,
         curved=curved_rows,
         estimation=estimation_rows,
         curved_estimation=curved_estimation_rows,
         seed_summary=seed_summary,
-        summary=summary,
+        summary=verdict(
+            seed_summary,
+            estimators,
+            kinds,
+            steering=steering_rows,
+            estimation=estimation_rows,
+            curved_estimation=curved_estimation_rows,
+            runs_estimation=[r for r in runs_estimation if r["track"] == config.track],
+        ),
         runs_steering=runs_steering,
         runs_estimation=runs_estimation,
-        errors=[e.to_dict() for e in errors],
-        drivers=drivers,
+        errors=[e.to_dict() for e in failed.values()],
+        drivers=[d for fit in fits for d in fit.plan.drivers],
         plots=plots,
-        timing=timing,
-        executor=executor,
+        timing={},
+        executor=done.executor | {"batch_size": config.batch_size},
         versions=versions(),
-        notes=notes,
-        skipped=skipped,
-        degenerate=degenerate,
+        notes=[n for fit in fits for n in fit.plan.notes],
+        skipped=[s for fit in fits for s in fit.plan.skipped],
+        degenerate=_degenerate_runs(runs_steering + runs_estimation, paths),
     )
+
+
+def _tables(
+    track: str,
+    runs_steering: Sequence[dict[str, Any]],
+    runs_estimation: Sequence[dict[str, Any]],
+    models: Sequence[str],
+) -> tuple[list[dict[str, Any]], ...]:
+    """The per-driver tables of the per-run rows: steering on the main ``track``, steering on
+    the curved track (none when it is the main track), estimation on the main track and on
+    the other one."""
+    steering_rows = aggregate_steering([r for r in runs_steering if r["track"] == track], models)
+    curved_rows = (
+        aggregate_steering([r for r in runs_steering if r["track"] == "curved"], models)
+        if track != "curved"
+        else []
+    )
+    estimation_all = aggregate_estimation(list(runs_estimation))
+    estimation_rows = [r for r in estimation_all if r["track"] == track]
+    curved_estimation_rows = [r for r in estimation_all if r["track"] != track]
+    return steering_rows, curved_rows, estimation_rows, curved_estimation_rows
 
 
 def _degenerate_runs(

@@ -23,9 +23,9 @@ the spread. Targets (issue 4): ``filterpy_2 / ours_2 >= 5`` and
 
 Usage::
 
-    python -m benchmarks.perf_estimators            # about 20 s on 2 cores
-    python -m benchmarks.perf_estimators --quick    # a few seconds, rough numbers
-    python -m benchmarks.perf_estimators --json perf.json
+    python -m benchmarks.perf.estimators            # about 20 s on 2 cores
+    python -m benchmarks.perf.estimators --quick    # a few seconds, rough numbers
+    python -m benchmarks.perf.estimators --json perf.json
 """
 
 from __future__ import annotations
@@ -223,7 +223,7 @@ def format_table(results: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m benchmarks.perf_estimators [--quick] [--json FILE]``."""
+    """Command line: ``python -m benchmarks.perf.estimators [--quick] [--json FILE]``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="few steps (rough numbers)")
     parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")

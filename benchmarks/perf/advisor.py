@@ -1,7 +1,7 @@
 """Advisor-task speed: steps per second of the human-as-advisor task against the plain
 lane-keeping env, as ratios measured in the same run.
 
-Measured, all with the method of :mod:`benchmarks.perf_env` (uniform random actions
+Measured, all with the method of :mod:`benchmarks.perf.env` (uniform random actions
 sampled before timing, resets at episode ends timed as part of running the env, the
 median of the repeats reported with its spread):
 
@@ -21,8 +21,8 @@ plain single env.
 
 Usage::
 
-    python -m benchmarks.perf_advisor            # about 20 s on 2 cores
-    python -m benchmarks.perf_advisor --quick    # seconds, rough numbers
+    python -m benchmarks.perf.advisor            # about 20 s on 2 cores
+    python -m benchmarks.perf.advisor --quick    # seconds, rough numbers
     hasa-bench perf --only advisor
 """
 
@@ -42,7 +42,7 @@ import gymnasium as gym
 import numpy as np
 
 import advisor_tasks  # noqa: F401 - registers the advisor ids (and hasa_env's)
-from benchmarks.perf_env import sample_box_actions
+from benchmarks.perf.env import sample_box_actions
 
 __all__ = ["run", "main", "format_table", "TARGETS", "MEASURES"]
 
@@ -237,7 +237,7 @@ def format_table(results: dict) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m benchmarks.perf_advisor [--quick] [--json FILE] [--strict]``."""
+    """Command line: ``python -m benchmarks.perf.advisor [--quick] [--json FILE] [--strict]``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="seconds, rough numbers")
     parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")

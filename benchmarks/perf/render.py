@@ -32,9 +32,9 @@ the flip also pays the copy to the screen, so the window numbers drop.
 
 Usage::
 
-    python -m benchmarks.perf_render            # about 35 s
-    python -m benchmarks.perf_render --quick    # a few seconds, rough numbers
-    python -m benchmarks.perf_render --json render.json
+    python -m benchmarks.perf.render            # about 35 s
+    python -m benchmarks.perf.render --quick    # a few seconds, rough numbers
+    python -m benchmarks.perf.render --json render.json
 """
 
 from __future__ import annotations
@@ -238,6 +238,14 @@ def run(quick: bool = False, progress: Callable[[str], None] | None = None) -> d
     env.close()
     say("hasa-drive loop (real time)")
     results["drive_loop"] = _drive_loop(1.5 if quick else 5.0)
+    return _report(quick, results, video_driver)
+
+
+def _report(quick: bool, results: dict[str, Any], video_driver: str) -> dict[str, Any]:
+    """:func:`run`'s report: the measured ``results``, each target's ratio (measured / target),
+    the participant-over-developer ratio and the machine."""
+    import pygame  # (imported by run, after the SDL drivers are chosen)
+
     ratios = {
         key: results[key]["frames_per_second"] / target
         for key, (_, target) in TARGETS.items()
@@ -297,9 +305,9 @@ def format_table(report: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m benchmarks.perf_render [--quick] [--json FILE]``."""
+    """``python -m benchmarks.perf.render [--quick] [--json FILE]``."""
     parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.perf_render", description=__doc__.splitlines()[0]
+        prog="python -m benchmarks.perf.render", description=__doc__.splitlines()[0]
     )
     parser.add_argument(
         "--quick", action="store_true", help="fewer frames and repeats (rough numbers)"

@@ -23,9 +23,9 @@ the median rate is reported, with the spread. Targets (issue 2): single env
 
 Usage::
 
-    python -m benchmarks.perf_env            # about 30 s on 2 cores
-    python -m benchmarks.perf_env --quick    # a few seconds, rough numbers
-    python -m benchmarks.perf_env --json perf.json
+    python -m benchmarks.perf.env            # about 30 s on 2 cores
+    python -m benchmarks.perf.env --quick    # a few seconds, rough numbers
+    python -m benchmarks.perf.env --json perf.json
 """
 
 from __future__ import annotations
@@ -319,7 +319,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns 0, or 1 with ``--strict`` when a measured target fails.
     """
     parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.perf_env",
+        prog="python -m benchmarks.perf.env",
         description="Steps per second of hasa_env vs Pendulum-v1 and highway-env lane-keeping-v0, "
         "and of the native vector env at N = 1, 64, 1024.",
     )

@@ -1,0 +1,254 @@
+"""Recordings checked and analysed one by one: replay, a steering model's scores, the estimator.
+
+The library side of ``hasa-replay`` (:mod:`hasa_cli.replay`), in four steps that
+each take a list of loaded recordings (:func:`hasa_env.recording.load_paths`):
+
+1. :func:`check_recordings`: replay each recording's actions through the env
+   (:func:`hasa_env.recording.check_replay`) and compare, bit for bit or within
+   ``atol``;
+2. :func:`prepare_model`: a steering model (:func:`hasa_env.steering.loading.load_model`),
+   optionally fitted on the first recording, with its steering ratio (model units
+   per recorded road-wheel rad) and the road curvatures it is trusted on, and
+   :func:`score_recordings`: its one-step-ahead scores on every recording
+   (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the increments, Ljung-Box p);
+3. :func:`estimate_recordings`: the Gaussian-mixture EKF with that model over each
+   recording's sensors (:func:`estimators.offline.estimate_recording`);
+4. :func:`render_recordings`: PNG frames and/or a video of each recording
+   (:func:`hasa_env.render.frames.write_frames`), with the estimator's weights.
+
+A recording that fails a step is reported with its reason and the others go on.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from estimators.offline import EstimatorRun, estimate_recording
+from estimators.settings import model_curvature_limit, model_speed_limits
+from hasa_env.drivers import require_lane_keeping
+from hasa_env.recording import check_replay
+from hasa_env.render.frames import write_frames
+from hasa_env.steering import SteeringModel, score
+from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
+
+__all__ = [
+    "SCORE_KEYS",
+    "LaneKeepingError",
+    "ModelSetupError",
+    "PreparedModel",
+    "RecordingOutcome",
+    "ReplayCheck",
+    "check_recordings",
+    "describe_estimate",
+    "estimate_recordings",
+    "prepare_model",
+    "render_recordings",
+    "score_recordings",
+]
+
+SCORE_KEYS = ("rmse", "r2", "r2_increments", "ljung_box_p")
+"""The scores :func:`score_recordings` keeps (of :func:`hasa_env.steering.score`)."""
+
+
+@dataclass(frozen=True)
+class ReplayCheck:
+    """One recording replayed: what it is and whether it reproduces.
+
+    Attributes:
+        path: the recording; label: "synthetic" or "recorded"; steps: its rows;
+        complete: its writer finalized it; matches: the replay reproduces it (False
+        when it cannot be replayed); text: the comparison (where it first diverges) or
+        why it cannot be replayed.
+    """
+
+    path: Path | None
+    label: str
+    steps: int
+    complete: bool
+    matches: bool
+    text: str
+
+    def describe(self) -> str:
+        """One line: ``<path>: <label>, <steps> steps[ (incomplete...)]: <text>``."""
+        complete = "" if self.complete else " (incomplete: its writer stopped early)"
+        return f"{self.path}: {self.label}, {self.steps} steps{complete}: {self.text}"
+
+
+def check_recordings(recordings: Sequence[Any], atol: float = 0.0) -> list[ReplayCheck]:
+    """Replay every recording and compare the replayed trajectory with the recorded one
+    (``|replayed - recorded| <= atol``; 0: bit for bit)."""
+    checks = []
+    for rec in recordings:
+        label = "synthetic" if (rec.meta.get("metadata") or {}).get("synthetic") else "recorded"
+        try:
+            check = check_replay(rec, atol)
+            matches, text = bool(check.matches), check.describe(atol)
+        except ValueError as exc:
+            matches, text = False, f"cannot replay: {exc}"
+        checks.append(ReplayCheck(rec.path, label, rec.steps, rec.complete, matches, text))
+    return checks
+
+
+class ModelSetupError(ValueError):
+    """The steering model cannot be used: it does not load, or has no parameters to score."""
+
+
+class LaneKeepingError(ValueError):
+    """The steering model drives off the road when it steers itself (no lane evidence)."""
+
+
+@dataclass(frozen=True)
+class PreparedModel:
+    """A steering model ready to score and estimate recordings.
+
+    Attributes:
+        spec: how it was named (a preset, a model file, ``package.module:Class``);
+        model: the model (fitted); steering_ratio: model units per recorded road-wheel
+        rad; curvature_limit: largest road curvature (1/m) it is trusted on (its
+        fitted roads'; inf: any); fitted_on: the recording it was fitted on (None: as
+        loaded).
+    """
+
+    spec: str
+    model: SteeringModel
+    steering_ratio: float
+    curvature_limit: float
+    fitted_on: Path | None = None
+
+
+def prepare_model(
+    spec: str,
+    recordings: Sequence[Any],
+    *,
+    fit: bool = False,
+    steering: str | None = None,
+    steering_ratio: float | None = None,
+    lane_check: bool = False,
+    say: Callable[[str], None] = lambda message: None,
+) -> PreparedModel:
+    """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
+    first recording (its ``steering`` signal: "measured" or "applied"; None: the model's);
+    the steering ratio is ``steering_ratio`` or the default of the spec
+    (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
+    ``lane_check`` the model must keep a lane when it steers itself
+    (:func:`hasa_env.drivers.require_lane_keeping`: 4 cars, 30 s, the straight track).
+    ``say`` hears what was fitted and the ratio used.
+
+    Raises:
+        ModelSetupError: the model does not load, or has no parameters and ``fit`` is off.
+        LaneKeepingError: ``lane_check`` and it drives off the road.
+    """
+    try:
+        model = load_model(spec, recordings[0].dt)
+    except (ValueError, OSError) as exc:
+        raise ModelSetupError(str(exc)) from None
+    if not model.is_fitted and not fit:
+        raise ModelSetupError(
+            f"model {spec!r} has no parameters: add --fit to fit it on the first "
+            "recording, or give a saved model file (model.save('model.json'))"
+        )
+    road = recordings[0].road
+    if steering is not None:
+        model.steering_signal = steering
+    fitted_on = None
+    if fit:
+        model = model.fit(recordings[0].data, road)
+        fitted_on = recordings[0].path
+        say(f"model {spec}: fitted on {fitted_on}")
+    curvature_limit = model_curvature_limit(model)  # the roads it was fitted on
+    ratio = default_steering_ratio(spec, fit) if steering_ratio is None else steering_ratio
+    say(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
+    if lane_check:
+        try:  # a model that cannot keep a lane would give the estimator wrong evidence
+            require_lane_keeping(model, steering_ratio=ratio, what=f"model {spec!r}")
+        except ValueError as exc:
+            raise LaneKeepingError(str(exc)) from None
+    return PreparedModel(spec, model, ratio, curvature_limit, fitted_on)
+
+
+def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[dict[str, float]]:
+    """Per recording the model's one-step-ahead scores of :data:`SCORE_KEYS` (steering in
+    model units: the recorded steering times the ratio)."""
+    out = []
+    for rec in recordings:
+        scores = score(prepared.model, in_model_units(rec.data, prepared.steering_ratio), rec.road)
+        out.append({k: v for k, v in scores.items() if k in SCORE_KEYS})
+    return out
+
+
+@dataclass(frozen=True)
+class RecordingOutcome:
+    """What a step produced for one recording (by its index), or why it failed."""
+
+    index: int
+    path: Path | None
+    value: Any = None
+    error: str | None = None
+
+
+def estimate_recordings(
+    prepared: PreparedModel, recordings: Sequence[Any]
+) -> list[RecordingOutcome]:
+    """The Gaussian-mixture EKF with the model over each recording: outcomes whose ``value``
+    is an :class:`~estimators.offline.EstimatorRun`, or whose ``error`` says why it could not
+    run (e.g. a recording sampled at another rate than the model)."""
+    out = []
+    for i, rec in enumerate(recordings):
+        try:
+            run: EstimatorRun = estimate_recording(
+                rec,
+                prepared.model,
+                prepared.steering_ratio,
+                steering_curvature_limit=prepared.curvature_limit,
+                speed_limits=model_speed_limits(prepared.model),
+            )
+        except ValueError as exc:
+            out.append(RecordingOutcome(i, rec.path, error=str(exc)))
+            continue
+        out.append(RecordingOutcome(i, rec.path, value=run))
+    return out
+
+
+def describe_estimate(run: EstimatorRun) -> str:
+    """The estimator's result in one phrase: lateral RMSE, final weights, when trusted."""
+    hyp = ", ".join(
+        f"{b:+g} m: {w:.3f}" for b, w in zip(run.hypotheses, run.weights[-1], strict=True)
+    )
+    trusted = "never" if math.isnan(run.trusted_from) else f"{run.trusted_from:.2f} s"
+    return (
+        f"lateral RMSE {run.lateral_rmse:.3f} m, final weights [{hyp}], "
+        f"true lane trusted (> 0.9) from {trusted}"
+    )
+
+
+def render_recordings(
+    recordings: Sequence[Any],
+    frames: Path | None,
+    video: Path | None,
+    weights: dict[int, Any],
+    **options: Any,
+) -> list[RecordingOutcome]:
+    """PNG frames into ``frames`` and/or a video ``video`` of every recording (several
+    recordings: a subfolder per recording, ``<video stem>_<recording stem>`` videos), the
+    estimator's ``weights`` (by recording index) in the HUD. ``options``: those of
+    :func:`hasa_env.render.frames.write_frames` (``every``, ``view``, ``size``,
+    ``show_points``). Outcomes: ``value`` (frames written, folder) or the write error."""
+    out = []
+    several = len(recordings) > 1
+    for i, rec in enumerate(recordings):
+        stem = Path(rec.path).stem
+        frames_dir = None if frames is None else (frames / stem if several else frames)
+        target = video
+        if target is not None and several:
+            target = target.with_name(f"{target.stem}_{stem}{target.suffix}")
+        try:
+            written = write_frames(rec, frames_dir, weights=weights.get(i), video=target, **options)
+        except OSError as exc:  # a read-only or full output folder
+            out.append(RecordingOutcome(i, rec.path, error=str(exc)))
+            continue
+        out.append(RecordingOutcome(i, rec.path, value=(written, frames_dir)))
+    return out
