@@ -262,7 +262,7 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
     frame = _without_degenerate(
         frame, "lateral_rmse",
         ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight",
-         *_DECISION_COLUMNS),
+         "final_decision", "wrong_lane_confident", *_DECISION_COLUMNS),
     )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (

@@ -365,6 +365,20 @@ def _failures(
     return failed
 
 
+def _estimators(
+    config: ProtocolConfig, candidates: Sequence[Candidate], ok_models: list[str]
+) -> tuple[list[str], dict[str, str]]:
+    """The estimators scored (the models that did not fail, and with ``compare_checks``
+    each of them without its checks) and every name's kind."""
+    kinds = {c.name: c.kind for c in candidates}
+    estimators = list(ok_models)
+    if config.compare_checks:
+        unchecked = [f"{n}{UNCHECKED_SUFFIX}" for n in ok_models]
+        kinds |= {u: "unchecked" for u in unchecked}
+        estimators += unchecked
+    return estimators, kinds
+
+
 def aggregate_result(
     config: ProtocolConfig,
     user_models: Sequence[str],
@@ -383,12 +397,7 @@ def aggregate_result(
         if info["name"] in failed and info.get("error") is None:
             info["error"] = str(failed[info["name"]])
     ok_models = [c.name for c in candidates if c.name not in failed]
-    kinds = {c.name: c.kind for c in candidates}
-    estimators = list(ok_models)
-    if config.compare_checks:
-        unchecked = [f"{n}{UNCHECKED_SUFFIX}" for n in ok_models]
-        kinds |= {u: "unchecked" for u in unchecked}
-        estimators += unchecked
+    estimators, kinds = _estimators(config, candidates, ok_models)
     first = fits[0]
     seeds = [fit.plan.seed for fit in fits]
     order = _row_order(seeds, first.plan.driver_order, estimators + list(BASELINES))
