@@ -24,9 +24,9 @@ import pandas as pd
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.evidence import DECISIONS
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
-from estimators.settings import speed_settings
+from estimators.settings import FilterSettings, speed_settings
 from estimators.timing import check_sample_time, recording_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.recording.format import Recording
