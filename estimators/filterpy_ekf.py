@@ -93,12 +93,12 @@ class FilterpyGMEKF:
     ``log_likelihood`` the full multivariate normal of the innovation. Missing
     (non-finite) measurements drop their rows from z, H and R; so do the
     channels the outlier gate rejects and, below ``min_speed``, the steering
-    (the rules of :class:`estimators.gm_ekf.FilterSettings`, written out per
+    (the rules of :class:`estimators.settings.FilterSettings`, written out per
     run and hypothesis).
 
     Args:
         steering_model: the steering model's ARX description (None: no steering).
-        settings: :class:`estimators.gm_ekf.FilterSettings`.
+        settings: :class:`estimators.settings.FilterSettings`.
         dt: sample time (s); default ``steering_model.dt``.
         decision_lag: see :class:`estimators.gm_ekf.GaussianMixtureEKF`.
         **overrides: fields of the settings to replace.
