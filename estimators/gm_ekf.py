@@ -570,25 +570,15 @@ class GaussianMixtureEKF:
         off = state.channel_off
         any_off = bool(off.any())
         x_pred, cov_pred = self._predict(state, acc, off if any_off else None)
-        if any_off:  # no steering evidence while the channel is off
-            z = z.copy()
-            z[off, 2] = np.nan
-            all_observed = False
+        if any_off:
+            z, all_observed = _without_steering(z, off), False
         x_post, cov_post, log_lik, gated, normalized = self._update(
             x_pred, cov_pred, z, all_observed, state.log_w, points
         )
-        n_runs, n_comp = state.log_w.shape
-        normalized = normalized.reshape(n_runs, n_comp, 3)
+        normalized = normalized.reshape(*state.log_w.shape, 3)
         all_active = bool(state.active.all())
-        innovation_log_w = (
-            state.log_w if all_active else np.where(state.active, state.log_w, -np.inf)
-        )
-        log_w, evidence, stats = weigh_evidence(
-            self._rule,
-            innovation_log_w,
-            log_lik.reshape(n_runs, n_comp),
-            normalized[:, :, 2],
-            state.evidence,
+        innovation_log_w, log_w, evidence, stats = self._weigh(
+            state, all_active, log_lik, normalized
         )
         if not all_active:
             x_post, cov_post = _freeze_pruned(state, x_post, cov_post)
@@ -682,6 +672,32 @@ class GaussianMixtureEKF:
             gate=self.settings.innovation_gate,
             log_weights=log_w,
         )
+
+    def _weigh(
+        self,
+        state: MixtureState,
+        all_active: bool,
+        log_lik: np.ndarray,
+        normalized: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Evidence (paper eq. 19, tempered by the consistency checks of
+        :func:`estimators.evidence.weigh_evidence`; pruned hypotheses have weight 0)::
+
+            log w_i = log w_i + l_i / tau,   l_i = -1/2 (nu_i^T S_i^-1 nu_i + log det S_i + m log 2 pi)
+            log w_i = log w_i - logsumexp_j(log w_j)
+
+        Returns the log weights before the update (pruned: -inf), the new log weights (R, C),
+        the rule's new statistics and its per-run ``decision``, ``model_error``,
+        ``autocorrelation`` and ``evidence_scale``."""
+        log_w = state.log_w if all_active else np.where(state.active, state.log_w, -np.inf)
+        new_log_w, evidence, stats = weigh_evidence(
+            self._rule,
+            log_w,
+            log_lik.reshape(log_w.shape),
+            normalized[:, :, 2],
+            state.evidence,
+        )
+        return log_w, new_log_w, evidence, stats
 
     def _prune(
         self, active: np.ndarray, all_active: bool, log_w: np.ndarray
@@ -791,6 +807,14 @@ class GaussianMixtureEKF:
         cov[flat, mem, :] = 0.0
         cov[flat, :, mem] = 0.0
         cov[flat, mem, mem] = self.matrices.initial_covariance[mem, mem]
+
+
+def _without_steering(z: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """No steering evidence while the channel is off: a copy of ``z`` (R, 3) with
+    ``z_3`` missing (NaN) in the ``off`` runs (R,) bool."""
+    z = z.copy()
+    z[off, 2] = np.nan
+    return z
 
 
 def _freeze_pruned(
