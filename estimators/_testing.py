@@ -72,7 +72,7 @@ def drive_arx(
         u_hist = np.roll(u_hist, 1, axis=1)
         u_hist[:, 0] = _features(info, arx.near_distance, arx.far_distance)
         for i in np.flatnonzero(~done):
-            rows[i].append(_row(step, info, i, reward, terminated, truncated))
+            rows[i].append(_row(step, info, int(i), reward, terminated, truncated))
         done |= terminated | truncated
     env.close()
     frames = []

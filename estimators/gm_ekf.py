@@ -13,6 +13,10 @@ method each, whose docstrings state their equations: missing inputs, predict,
 update with the outlier gate, evidence, pruning, the steering channel off by
 speed or curvature and its memory restart. The arithmetic itself is in
 :mod:`estimators.filter_matrices` and :mod:`estimators.evidence`.
+
+Why this module is long: the filter's docstring states its equations, its robustness rules
+and every deviation from the paper (as filterpy's filters do), each rule's docstring states
+its own equations, and the state record sits next to the rules that read and replace it.
 """
 
 from __future__ import annotations
