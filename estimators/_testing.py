@@ -47,47 +47,16 @@ def drive_arx(
     options = None if bias_index is None else {"bias_index": int(bias_index)}
     _, info = env.reset(seed=seed, options=options)
     rng = np.random.default_rng(seed + 10_000)
-    near, far = arx.near_distance, arx.far_distance
-    n_a, n_u = len(arx.a), max(len(arx.b), len(arx.c), len(arx.d))
-    beta = np.zeros((n_u, 3))
-    for column, coefficients in enumerate((arx.b, arx.c, arx.d)):
-        beta[: len(coefficients), column] = coefficients
-    a = np.asarray(arx.a)
+    a, beta = _arx_coefficients(arx)
+    n_a, n_u = len(a), beta.shape[0]
     delta_hist = np.zeros((runs, max(n_a, 1)))  # delta_model(k), delta_model(k-1), ...
     delta_hist[:] = (np.asarray(info["steering"]) * steering_ratio)[:, None]
     u_hist = np.zeros((runs, n_u, 3))  # u(k), u(k-1), ...
-    rows: list[list[list]] = [[] for _ in range(runs)]
+    u_hist[:] = _features(info, arx.near_distance, arx.far_distance)[:, None, :]
     max_steering = env.setup.steering_limit
-
-    def features(inf: dict) -> np.ndarray:
-        y = np.asarray(inf["lateral_offset"])
-        th = np.asarray(inf["heading"])
-        return np.stack(
-            [
-                -(th + np.arctan(y / near)),
-                -(th + np.arctan(y / far)),
-                np.asarray(inf["lateral_velocity"]),
-            ],
-            axis=1,
-        )
-
-    u = features(info)
-    u_hist[:] = u[:, None, :]
-
-    def record(step: int, inf: dict, reward, terminated, truncated) -> None:
-        for i in range(runs):
-            rows[i].append(
-                [
-                    step,
-                    *(inf[key][i] for key in INFO_KEYS),
-                    float(reward[i]),
-                    bool(terminated[i]),
-                    bool(truncated[i]),
-                ]
-            )
-
     zeros = np.zeros(runs)
-    record(0, info, zeros, zeros.astype(bool), zeros.astype(bool))
+    no = zeros.astype(bool)
+    rows = [[_row(0, info, i, zeros, no, no)] for i in range(runs)]
     done = np.zeros(runs, dtype=bool)
     step = 0
     while not done.all():
@@ -101,17 +70,9 @@ def drive_arx(
         delta_hist = np.roll(delta_hist, 1, axis=1)
         delta_hist[:, 0] = action[:, 0] * steering_ratio
         u_hist = np.roll(u_hist, 1, axis=1)
-        u_hist[:, 0] = features(info)
+        u_hist[:, 0] = _features(info, arx.near_distance, arx.far_distance)
         for i in np.flatnonzero(~done):
-            rows[i].append(
-                [
-                    step,
-                    *(info[key][i] for key in INFO_KEYS),
-                    float(reward[i]),
-                    bool(terminated[i]),
-                    bool(truncated[i]),
-                ]
-            )
+            rows[i].append(_row(step, info, int(i), reward, terminated, truncated))
         done |= terminated | truncated
     env.close()
     frames = []
@@ -120,3 +81,45 @@ def drive_arx(
         frame["bias_index"] = frame["bias_index"].astype(int)
         frames.append(frame)
     return frames
+
+
+def _arx_coefficients(arx: ARXForm) -> tuple[np.ndarray, np.ndarray]:
+    """The autoregressive coefficients a_j (n_a,) and the input coefficients
+    beta_j = [b_j, c_j, d_j] (n_u, 3) (zero beyond each list's length)."""
+    n_u = max(len(arx.b), len(arx.c), len(arx.d))
+    beta = np.zeros((n_u, 3))
+    for column, coefficients in enumerate((arx.b, arx.c, arx.d)):
+        beta[: len(coefficients), column] = coefficients
+    return np.asarray(arx.a), beta
+
+
+def _features(info: dict, near: float, far: float) -> np.ndarray:
+    """The ARX inputs u = [-(theta + atan(y / near)), -(theta + atan(y / far)), v_y], (R, 3)."""
+    y = np.asarray(info["lateral_offset"])
+    th = np.asarray(info["heading"])
+    return np.stack(
+        [
+            -(th + np.arctan(y / near)),
+            -(th + np.arctan(y / far)),
+            np.asarray(info["lateral_velocity"]),
+        ],
+        axis=1,
+    )
+
+
+def _row(
+    step: int,
+    info: dict,
+    run: int,
+    reward: np.ndarray,
+    terminated: np.ndarray,
+    truncated: np.ndarray,
+) -> list:
+    """Run ``run``'s recording row at ``step`` (:data:`RECORDING_COLUMNS` order)."""
+    return [
+        step,
+        *(info[key][run] for key in INFO_KEYS),
+        float(reward[run]),
+        bool(terminated[run]),
+        bool(truncated[run]),
+    ]

@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from estimators.base import Estimate
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
 __all__ = ["NoSteeringEKF", "SingleHypothesisEKF", "OracleEKF"]

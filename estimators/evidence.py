@@ -311,33 +311,12 @@ def _weigh(
     score: np.ndarray,
     state: dict[str, np.ndarray],
 ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
-    alpha = rule.alpha
-    keep = 1.0 - alpha
+    """:func:`weigh_evidence` for R runs: the statistics, then the weights."""
     all_active = math.isfinite(log_w.sum())  # pruned (or zero-prior) hypotheses do not count
     active = None if all_active else np.isfinite(log_w)
-    weight, weight_sq = state["_evidence_weight"], state["_evidence_weight_sq"]
-    nis, lag = state["_nis"], state["_lag_product"]
-    # a normalized innovation beyond 1e3 is as inconsistent as it gets (no overflow)
-    u = np.minimum(np.maximum(score if active is None else np.where(active, score, 0.0), -1e3), 1e3)
-    if math.isfinite(u.sum()):  # the steering channel was used in every run (the common case)
-        weight = keep * weight + alpha
-        weight_sq = (keep * keep) * weight_sq + alpha * alpha
-        nis = keep * nis + alpha * (u * u)
-        lag = keep * lag + alpha * (u * state["_last_score"])
-    else:
-        used = ~np.isnan(u).any(axis=1)  # missing, gated and low-speed steps: NaN
-        rows = used[:, None] if active is None else used[:, None] & active
-        u = np.where(rows, u, 0.0)  # 0 where not used: the next lag product is 0 (a gap)
-        weight = np.where(used, keep * weight + alpha, weight)
-        weight_sq = np.where(used, (keep * keep) * weight_sq + alpha * alpha, weight_sq)
-        nis = np.where(rows, keep * nis + alpha * (u * u), nis)
-        lag = np.where(rows, keep * lag + alpha * (u * state["_last_score"]), lag)
-    new_state = dict(state)
-    new_state["_evidence_weight"] = weight
-    new_state["_evidence_weight_sq"] = weight_sq
-    new_state["_nis"] = nis
-    new_state["_lag_product"] = lag
-    new_state["_last_score"] = u
+    new_state = _updated_statistics(rule, score, active, state)
+    weight, weight_sq = new_state["_evidence_weight"], new_state["_evidence_weight_sq"]
+    nis, lag = new_state["_nis"], new_state["_lag_product"]
     # lambda and rho of the best-fitting active hypothesis (NaN before any data)
     best = np.argmin(nis if active is None else np.where(active, nis, np.inf), axis=1)
     rows_index = np.arange(nis.shape[0])
@@ -352,21 +331,7 @@ def _weigh(
     scale = np.fmax(model_error, 1.0) * inflation  # (NaN lambda: 1)
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
-        increment = log_lik / scale[:, None]
-        if any_mismatch:
-            increment = np.where(mismatch[:, None], 0.0, increment)
-        new_log_w = log_w + increment
-        if rule.forgetting > 0:
-            beta = np.where(mismatch, 0.0, rule.forgetting)[:, None]
-            forgotten = (1.0 - beta) * new_log_w + beta * state["_log_prior"]
-            new_log_w = forgotten if active is None else np.where(active, forgotten, -np.inf)
-        new_log_w = normalize_log_weights(new_log_w, log_w)
-        if math.isfinite(rule.log_floor):
-            floored = np.maximum(new_log_w, rule.log_floor)
-            floored = floored if active is None else np.where(active, floored, -np.inf)
-            new_log_w = normalize_log_weights(floored, new_log_w)
-        if any_mismatch:
-            new_log_w = np.where(mismatch[:, None], state["_verified_log_w"], new_log_w)
+        new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
         checked = samples >= MIN_CHECKED_SAMPLES
         if any_mismatch:
             checked &= ~mismatch
@@ -391,6 +356,79 @@ def _weigh(
         "evidence_scale": scale,
     }
     return new_log_w, new_state, stats
+
+
+def _updated_statistics(
+    rule: EvidenceRule,
+    score: np.ndarray,
+    active: np.ndarray | None,
+    state: dict[str, np.ndarray],
+) -> dict[str, np.ndarray]:
+    """The statistics n, s, e_i, c_i and the last score u_i after one sample (module
+    docstring), in a copy of ``state``; unchanged in the runs that did not use the steering
+    channel (NaN ``score``), whose next lag product is 0 (a gap). ``active``: (R, C) bool
+    (None: all)."""
+    alpha = rule.alpha
+    keep = 1.0 - alpha
+    weight, weight_sq = state["_evidence_weight"], state["_evidence_weight_sq"]
+    nis, lag = state["_nis"], state["_lag_product"]
+    # a normalized innovation beyond 1e3 is as inconsistent as it gets (no overflow)
+    u = np.minimum(np.maximum(score if active is None else np.where(active, score, 0.0), -1e3), 1e3)
+    if math.isfinite(u.sum()):  # the steering channel was used in every run (the common case)
+        weight = keep * weight + alpha
+        weight_sq = (keep * keep) * weight_sq + alpha * alpha
+        nis = keep * nis + alpha * (u * u)
+        lag = keep * lag + alpha * (u * state["_last_score"])
+    else:
+        used = ~np.isnan(u).any(axis=1)  # missing, gated and low-speed steps: NaN
+        rows = used[:, None] if active is None else used[:, None] & active
+        u = np.where(rows, u, 0.0)  # 0 where not used: the next lag product is 0 (a gap)
+        weight = np.where(used, keep * weight + alpha, weight)
+        weight_sq = np.where(used, (keep * keep) * weight_sq + alpha * alpha, weight_sq)
+        nis = np.where(rows, keep * nis + alpha * (u * u), nis)
+        lag = np.where(rows, keep * lag + alpha * (u * state["_last_score"]), lag)
+    new_state = dict(state)
+    new_state["_evidence_weight"] = weight
+    new_state["_evidence_weight_sq"] = weight_sq
+    new_state["_nis"] = nis
+    new_state["_lag_product"] = lag
+    new_state["_last_score"] = u
+    return new_state
+
+
+def _tempered_log_weights(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    log_lik: np.ndarray,
+    scale: np.ndarray,
+    mismatch: np.ndarray,
+    active: np.ndarray | None,
+    state: dict[str, np.ndarray],
+) -> np.ndarray:
+    """The tempered weights (module docstring)::
+
+        log w_i <- log w_i + l_i / tau                   (no increment on a mismatch)
+        log w_i <- (1 - beta) log w_i + beta log pi_i    (forgetting; not on a mismatch)
+        log w_i <- max(log w_i - logsumexp_j log w_j, log weight_floor), normalized again
+
+    and, on a mismatch, the last verified weights."""
+    any_mismatch = bool(mismatch.any())
+    increment = log_lik / scale[:, None]
+    if any_mismatch:
+        increment = np.where(mismatch[:, None], 0.0, increment)
+    new_log_w = log_w + increment
+    if rule.forgetting > 0:
+        beta = np.where(mismatch, 0.0, rule.forgetting)[:, None]
+        forgotten = (1.0 - beta) * new_log_w + beta * state["_log_prior"]
+        new_log_w = forgotten if active is None else np.where(active, forgotten, -np.inf)
+    new_log_w = normalize_log_weights(new_log_w, log_w)
+    if math.isfinite(rule.log_floor):
+        floored = np.maximum(new_log_w, rule.log_floor)
+        floored = floored if active is None else np.where(active, floored, -np.inf)
+        new_log_w = normalize_log_weights(floored, new_log_w)
+    if any_mismatch:
+        new_log_w = np.where(mismatch[:, None], state["_verified_log_w"], new_log_w)
+    return new_log_w
 
 
 def normalize_log_weights(log_w: np.ndarray, fallback: np.ndarray) -> np.ndarray:

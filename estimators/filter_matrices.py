@@ -268,6 +268,31 @@ class FilterMatrices:
         np.divide(inverse, 1.0 + ratio * ratio, out=deriv[:, 2:])
         return w, deriv
 
+    def _transition_variants(
+        self, n_runs: int, previous_steering: np.ndarray, held: np.ndarray | None
+    ) -> tuple[np.ndarray | None, str]:
+        """Which transition each run's prediction uses (:data:`_VARIANTS`): ``decorrelated``
+        (``full`` without a correlated steering error) with a steering reading at k;
+        without one ``full`` (``held`` if the memory is unstable); ``held`` for the ``held``
+        runs (R,) bool. Returns (None, the variant) when all runs share one, else the
+        (R,) codes and ``"mixed"``."""
+        if held is not None and not held.any():
+            held = None
+        known = None
+        if self.decorrelates and math.isnan(previous_steering.sum()):
+            known = ~np.isnan(previous_steering)
+        if held is None and known is None:
+            return None, "decorrelated" if self.decorrelates else "full"
+        # per run: 0 plain, 1 decorrelated, 2 memory held
+        codes = np.full(n_runs, 1 if self.decorrelates else 0)
+        if known is not None:
+            codes[~known] = 2 if self.unstable_memory else 0
+        if held is not None:
+            codes[held] = 2
+        if np.all(codes == codes[0]):
+            return None, _VARIANTS[codes[0]]
+        return codes, "mixed"
+
     def predict_batch(
         self,
         x: np.ndarray,
@@ -296,24 +321,7 @@ class FilterMatrices:
         if any_missing_acc:
             missing_acc = np.isnan(acceleration)
             acceleration = np.where(missing_acc, 0.0, acceleration)
-        if held is not None and not held.any():
-            held = None
-        known = None
-        if self.decorrelates and math.isnan(previous_steering.sum()):
-            known = ~np.isnan(previous_steering)
-        if held is None and known is None:
-            codes = None
-            variant = "decorrelated" if self.decorrelates else "full"
-        else:
-            # per run: 0 plain, 1 decorrelated, 2 memory held
-            codes = np.full(n_runs, 1 if self.decorrelates else 0)
-            if known is not None:
-                codes[~known] = 2 if self.unstable_memory else 0
-            if held is not None:
-                codes[held] = 2
-            variant = _VARIANTS[codes[0]] if np.all(codes == codes[0]) else "mixed"
-            if variant != "mixed":
-                codes = None
+        codes, variant = self._transition_variants(n_runs, previous_steering, held)
         has_memory = self.model.n_memory > 0
         if has_memory and variant != "held":
             points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)

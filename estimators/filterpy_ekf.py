@@ -93,12 +93,12 @@ class FilterpyGMEKF:
     ``log_likelihood`` the full multivariate normal of the innovation. Missing
     (non-finite) measurements drop their rows from z, H and R; so do the
     channels the outlier gate rejects and, below ``min_speed``, the steering
-    (the rules of :class:`estimators.gm_ekf.FilterSettings`, written out per
+    (the rules of :class:`estimators.settings.FilterSettings`, written out per
     run and hypothesis).
 
     Args:
         steering_model: the steering model's ARX description (None: no steering).
-        settings: :class:`estimators.gm_ekf.FilterSettings`.
+        settings: :class:`estimators.settings.FilterSettings`.
         dt: sample time (s); default ``steering_model.dt``.
         decision_lag: see :class:`estimators.gm_ekf.GaussianMixtureEKF`.
         **overrides: fields of the settings to replace.
@@ -147,19 +147,7 @@ class FilterpyGMEKF:
         n_runs, n_comp = hyp.shape
         points = road_point_rows(road_points, n_runs)
         x0 = self.matrices.initial_state(z, hyp, road_points=points)
-        banks = []
-        for r in range(n_runs):
-            bank: list[ARXExtendedKalmanFilter | None] = []
-            for c in range(n_comp):
-                if not np.isfinite(log_w[r, c]):
-                    bank.append(None)
-                    continue
-                ekf = ARXExtendedKalmanFilter(self.matrices)
-                ekf.x = x0[r, c][:, None].copy()
-                ekf.P = self.matrices.initial_covariance.copy()
-                ekf.R = np.diag(self.matrices.measurement_var)
-                bank.append(ekf)
-            banks.append(bank)
+        banks = [self._new_bank(x0[r], log_w[r]) for r in range(n_runs)]
         steering = z[:, 2] * self.settings.steering_ratio
         steering = np.where(np.isfinite(steering), steering, np.nan)
         min_speed = self.settings.min_speed if self.model.has_steering else 0.0
@@ -266,11 +254,26 @@ class FilterpyGMEKF:
         """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.low_speed`."""
         return self._slow[0].copy() if self._single else self._slow.copy()
 
+    def _new_bank(self, x0: np.ndarray, log_w: np.ndarray) -> list[ARXExtendedKalmanFilter | None]:
+        """One run's filters at reset: x_i(0) = ``x0[i]`` (C, n), P_i(0) the prior
+        covariance (None where the prior weight is 0)."""
+        bank: list[ARXExtendedKalmanFilter | None] = []
+        for c in range(log_w.size):
+            if not np.isfinite(log_w[c]):
+                bank.append(None)
+                continue
+            ekf = ARXExtendedKalmanFilter(self.matrices)
+            ekf.x = x0[c][:, None].copy()
+            ekf.P = self.matrices.initial_covariance.copy()
+            ekf.R = np.diag(self.matrices.measurement_var)
+            bank.append(ekf)
+        return bank
+
     def _step_run(
         self, r: int, z: np.ndarray, acceleration: np.ndarray, points: np.ndarray | None
     ) -> None:
+        """One step of run ``r``: predict, gate, update, evidence, prune, low speed."""
         model = self.model
-        mats = self.matrices
         settings = self.settings
         z = z.copy()
         z[2] *= settings.steering_ratio
@@ -294,30 +297,74 @@ class FilterpyGMEKF:
         for ekf in bank:
             if ekf is not None:
                 ekf.predict(u=u)
-        # the outlier gate: channels no hypothesis explains (weighed by its log-odds) are dropped
+        rows = self._gate(r, bank, z, log_w, points)
+        log_lik, score = self._update_bank(r, bank, z, rows, points)
+        evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
+        new_log_w, evidence, stats = weigh_evidence(
+            self._rule, log_w[None], log_lik[None], score[None], evidence
+        )
+        for name, value in evidence.items():
+            self._evidence[name][r] = value[0]
+        for name, value in stats.items():
+            self._stats[name][r] = value[0]
+        log_w = self._prune(bank, new_log_w[0])
+        restart = self._leave_low_speed(r, bank, log_w, slow, steering)
+        if self._gated[r, 2] and not restart:
+            steering = np.nan  # an outlier must not enter the memory at the next prediction
+        if restart:
+            self._restart_memory(r, bank, steering, points)
+        self._log_w[r] = log_w
+        self._steering[r] = steering
+        self._points[r] = np.nan if points is None else points
+
+    def _gate(
+        self,
+        r: int,
+        bank: list[ARXExtendedKalmanFilter | None],
+        z: np.ndarray,
+        log_w: np.ndarray,
+        points: np.ndarray | None,
+    ) -> np.ndarray:
+        """The outlier gate: the channels no hypothesis explains (weighed by its log-odds),
+        ``min_i [nu_ic^2 / S_i,cc + 2 (max_j log w_j - log w_i)] > g^2``, are dropped and
+        counted; returns the measurement rows kept (observed and not gated)."""
+        model = self.model
+        mats = self.matrices
         rows = np.flatnonzero(~np.isnan(z))
-        if rows.size and math.isfinite(settings.innovation_gate):
-            score = np.full(rows.size, np.inf)
-            for c, ekf in enumerate(bank):
-                if ekf is None:
-                    continue
-                xc = ekf.x[:, 0]
-                hc = model.measurement_jacobian(xc, points)[rows]
-                s_diag = np.diag(hc @ ekf.P @ hc.T) + mats.measurement_var[rows]
-                nu = z[rows] - model.measurement(xc, points)[rows]
-                odds = np.max(log_w) - log_w[c]
-                with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
-                    score = np.minimum(score, nu * nu / s_diag + 2.0 * odds)
-            gated = score > settings.innovation_gate**2
-            self._gated_count[r, rows[gated]] += 1
-            self._gated[r] = False
-            self._gated[r, rows[gated]] = True
-            rows = rows[~gated]
-        else:
-            self._gated[r] = False
-        r_matrix = np.diag(mats.measurement_var[rows])
-        log_lik = np.zeros(log_w.size)
-        score = np.full(log_w.size, np.nan)  # normalized steering innovations
+        self._gated[r] = False
+        if not (rows.size and math.isfinite(self.settings.innovation_gate)):
+            return rows
+        score = np.full(rows.size, np.inf)
+        for c, ekf in enumerate(bank):
+            if ekf is None:
+                continue
+            xc = ekf.x[:, 0]
+            hc = model.measurement_jacobian(xc, points)[rows]
+            s_diag = np.diag(hc @ ekf.P @ hc.T) + mats.measurement_var[rows]
+            nu = z[rows] - model.measurement(xc, points)[rows]
+            odds = np.max(log_w) - log_w[c]
+            with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated
+                score = np.minimum(score, nu * nu / s_diag + 2.0 * odds)
+        gated = score > self.settings.innovation_gate**2
+        self._gated_count[r, rows[gated]] += 1
+        self._gated[r, rows[gated]] = True
+        return rows[~gated]
+
+    def _update_bank(
+        self,
+        r: int,
+        bank: list[ARXExtendedKalmanFilter | None],
+        z: np.ndarray,
+        rows: np.ndarray,
+        points: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The EKF update of each hypothesis with the measurement ``rows`` (paper eq. 15-18);
+        returns log N(nu_i; 0, S_i) (C,) and the normalized steering innovations
+        ``nu_i,3 / sqrt(S_i,33)`` (C,) (NaN: not used)."""
+        model = self.model
+        r_matrix = np.diag(self.matrices.measurement_var[rows])
+        log_lik = np.zeros(len(bank))
+        score = np.full(len(bank), np.nan)  # normalized steering innovations
         steering_row = np.flatnonzero(rows == 2)
         for c, ekf in enumerate(bank):
             if ekf is None:
@@ -335,46 +382,66 @@ class FilterpyGMEKF:
                     score[c] = ekf.y[j, 0] / math.sqrt(ekf.S[j, j])
             self._last_x[r, c] = ekf.x[:, 0]  # a hypothesis pruned now stays at this posterior
             self._last_P[r, c] = ekf.P
-        evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
-        new_log_w, evidence, stats = weigh_evidence(
-            self._rule, log_w[None], log_lik[None], score[None], evidence
+        return log_lik, score
+
+    def _prune(self, bank: list[ARXExtendedKalmanFilter | None], log_w: np.ndarray) -> np.ndarray:
+        """Hypotheses other than the most likely with ``w_i < prune_threshold`` are dropped
+        (their filter removed, weight 0) and the weights normalized again."""
+        threshold = self.settings.prune_threshold
+        if threshold <= 0:
+            return log_w
+        best_index = int(np.argmax(log_w))
+        pruned = [
+            c
+            for c in range(log_w.size)
+            if c != best_index and np.isfinite(log_w[c]) and log_w[c] < math.log(threshold)
+        ]
+        if not pruned:
+            return log_w
+        for c in pruned:
+            bank[c] = None
+            log_w[c] = -np.inf
+        return log_w - logsumexp(log_w)
+
+    def _leave_low_speed(
+        self,
+        r: int,
+        bank: list[ARXExtendedKalmanFilter | None],
+        log_w: np.ndarray,
+        slow: bool,
+        steering: float,
+    ) -> bool:
+        """Low speed: the steering channel is off while ``sum_i w_i |v_i| < min_speed``, and
+        stays off until a steering reading comes; returns whether the memory restarts now."""
+        min_speed = self.settings.min_speed if self.model.has_steering else 0.0
+        if min_speed <= 0:
+            return False
+        speed = sum(
+            math.exp(log_w[c]) * math.hypot(ekf.x[0, 0], ekf.x[2, 0])
+            for c, ekf in enumerate(bank)
+            if ekf is not None
         )
-        for name, value in evidence.items():
-            self._evidence[name][r] = value[0]
-        for name, value in stats.items():
-            self._stats[name][r] = value[0]
-        log_w = new_log_w[0]
-        threshold = settings.prune_threshold
-        if threshold > 0:
-            best_index = int(np.argmax(log_w))
-            pruned = [
-                c
-                for c in range(log_w.size)
-                if c != best_index and np.isfinite(log_w[c]) and log_w[c] < math.log(threshold)
-            ]
-            if pruned:
-                for c in pruned:
-                    bank[c] = None
-                    log_w[c] = -np.inf
-                log_w = log_w - logsumexp(log_w)
+        now_slow = speed < min_speed
         restart = False
-        min_speed = settings.min_speed if model.has_steering else 0.0
-        if min_speed > 0:
-            speed = sum(
-                math.exp(log_w[c]) * math.hypot(ekf.x[0, 0], ekf.x[2, 0])
-                for c, ekf in enumerate(bank)
-                if ekf is not None
-            )
-            now_slow = speed < min_speed
-            if slow and not now_slow:
-                if math.isnan(steering):
-                    now_slow = True  # restart only from a steering reading
-                else:
-                    restart = True
-            self._slow[r] = now_slow
-        if self._gated[r, 2] and not restart:
-            steering = np.nan  # an outlier must not enter the memory at the next prediction
-        if restart and model.n_memory:
+        if slow and not now_slow:
+            if math.isnan(steering):
+                now_slow = True  # restart only from a steering reading
+            else:
+                restart = True
+        self._slow[r] = now_slow
+        return restart
+
+    def _restart_memory(
+        self,
+        r: int,
+        bank: list[ARXExtendedKalmanFilter | None],
+        steering: float,
+        points: np.ndarray | None,
+    ) -> None:
+        """The memory restart after low speed: ``m_i = steady_memory(z_3, x_i)``,
+        ``P_mm = memory_std^2 I``, uncorrelated with the vehicle states."""
+        model = self.model
+        if model.n_memory:
             mem = slice(4, model.n_states)
             for ekf in bank:
                 if ekf is not None:
@@ -382,15 +449,11 @@ class FilterpyGMEKF:
                     ekf.x[mem, 0] = model.steady_memory(np.array(steering), x, points)
                     ekf.P[mem, :] = 0.0
                     ekf.P[:, mem] = 0.0
-                    ekf.P[mem, mem] = mats.initial_covariance[mem, mem]
-        if restart:
-            for c, ekf in enumerate(bank):
-                if ekf is not None:
-                    self._last_x[r, c] = ekf.x[:, 0]
-                    self._last_P[r, c] = ekf.P
-        self._log_w[r] = log_w
-        self._steering[r] = steering
-        self._points[r] = np.nan if points is None else points
+                    ekf.P[mem, mem] = self.matrices.initial_covariance[mem, mem]
+        for c, ekf in enumerate(bank):
+            if ekf is not None:
+                self._last_x[r, c] = ekf.x[:, 0]
+                self._last_P[r, c] = ekf.P
 
     def estimate(self) -> Estimate:
         """The current estimate (mixture and hypotheses)."""

@@ -3,19 +3,27 @@
 Vectorized over lane hypotheses and over many runs at once: states are
 (runs, components, n), covariances (runs, components, n, n). Its settings
 live in :mod:`estimators.settings`, its matrices and batched predict/update
-in :mod:`estimators.filter_matrices`; both names are re-exported here.
+in :mod:`estimators.filter_matrices` (:class:`FilterMatrices` is re-exported
+here).
+
+The filter's per-run state is one record, :class:`MixtureState` (a subset of
+runs is a slice of it: :meth:`MixtureState.take`, :meth:`MixtureState.put`),
+and one step, :meth:`GaussianMixtureEKF._step`, is the list of its rules, one
+method each, whose docstrings state their equations: missing inputs, predict,
+update with the outlier gate, evidence, pruning, the steering channel off by
+speed or curvature and its memory restart. The arithmetic itself is in
+:mod:`estimators.filter_matrices` and :mod:`estimators.evidence`.
 
 Why this module is long: the filter's docstring states its equations, its robustness rules
-and every deviation from the paper (as filterpy's filters do), and one step keeps those rules
-(missing inputs, the outlier gate, the evidence rule, pruning, the steering channel off at low
-speed or outside the model's road curvature) in one sequence a reader can follow; the
-arithmetic itself is in :mod:`estimators.filter_matrices` and :mod:`estimators.evidence`.
+and every deviation from the paper (as filterpy's filters do), each rule's docstring states
+its own equations, and the state record sits next to the rules that read and replace it.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,7 +38,6 @@ from estimators.arx_state_space import (
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     DECIDED,
-    EVIDENCE_STATE,
     UNDECIDED,
     EvidenceRule,
     decision_names,
@@ -43,10 +50,124 @@ from estimators.road_geometry import straight_road_points
 from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
-__all__ = ["FilterSettings", "GaussianMixtureEKF", "FilterMatrices"]
+__all__ = ["GaussianMixtureEKF", "FilterMatrices", "MixtureState"]
 
-_STEPPED = ("_log_w", "_active", "_steering", "_slow", "_gated_count", *EVIDENCE_STATE)
-"""Per-run arrays of :class:`GaussianMixtureEKF` that a step reads (and may replace)."""
+
+@dataclass(slots=True)
+class MixtureState:
+    """The per-run state of :class:`GaussianMixtureEKF`: R runs x C hypotheses of n states.
+
+    Rows of ``x`` and ``P`` are run-major (hypothesis i of run r is row ``r C + i``).
+    A step replaces the record (or the part of it that :meth:`take` gave); arrays are
+    never changed in place once stored, so an :class:`Estimate` keeps its values.
+
+    Attributes:
+        x: (R C, n) hypothesis means x_i(k|k).
+        P: (R C, n, n) covariances P_i(k|k).
+        log_w: (R, C) log weights log w_i (-inf: zero weight).
+        active: (R, C) bool: not pruned.
+        hypotheses: (R, C) lane-centre hypotheses b_i (m).
+        steering: (R,) steering reading z_3(k) for the next prediction's memory
+            update (model units; NaN: none, or gated).
+        channel_off: (R,) bool: the steering channel is off (speed or road curvature).
+        gated: (R, 3) bool: channels gated at the last step.
+        gated_count: (R, 3) int: samples gated since reset.
+        evidence: the evidence rule's statistics (:data:`estimators.evidence.EVIDENCE_STATE`).
+        decision: (R,) int decision codes (:data:`estimators.evidence.DECISIONS`).
+        model_error: (R,) lambda; autocorrelation: (R,) rho; evidence_scale: (R,) tau.
+        innovation_log_w: (R, C) log weights the last update's innovations were weighed with.
+        normalized_innovation: (R, C, 3) nu_c / sqrt(S_cc) of the last update (NaN: unused).
+        road_points: (R, 4) road points of the last sample; None: a straight road for all.
+        straight_points: (4,) the road points of a straight road (a run stepped without
+            road points while others have them).
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    log_w: np.ndarray
+    active: np.ndarray
+    hypotheses: np.ndarray
+    steering: np.ndarray
+    channel_off: np.ndarray
+    gated: np.ndarray
+    gated_count: np.ndarray
+    evidence: dict[str, np.ndarray]
+    decision: np.ndarray
+    model_error: np.ndarray
+    autocorrelation: np.ndarray
+    evidence_scale: np.ndarray
+    innovation_log_w: np.ndarray
+    normalized_innovation: np.ndarray
+    road_points: np.ndarray | None
+    straight_points: np.ndarray
+
+    @property
+    def num_runs(self) -> int:
+        """R."""
+        return self.log_w.shape[0]
+
+    def rows(self, idx: np.ndarray) -> np.ndarray:
+        """The rows of ``x`` and ``P`` of runs ``idx`` (R',): ``r C + i`` for i < C."""
+        n_comp = self.log_w.shape[1]
+        return (idx[:, None] * n_comp + np.arange(n_comp)).ravel()
+
+    def take(self, idx: np.ndarray) -> MixtureState:
+        """The state of runs ``idx`` (R',) (copies)."""
+        rows = self.rows(idx)
+        return MixtureState(
+            x=self.x[rows],
+            P=self.P[rows],
+            road_points=None if self.road_points is None else self.road_points[idx],
+            evidence={name: value[idx] for name, value in self.evidence.items()},
+            straight_points=self.straight_points,
+            **{name: getattr(self, name)[idx] for name in _RUN_ARRAYS},
+        )
+
+    def put(self, idx: np.ndarray, part: MixtureState) -> None:
+        """Store ``part`` (from :meth:`take`, or a reset of R' runs) as runs ``idx`` (R',):
+        every array is replaced by a copy with those rows set."""
+        rows = self.rows(idx)
+        self.x, self.P = _set_rows(self.x, rows, part.x), _set_rows(self.P, rows, part.P)
+        for name in _RUN_ARRAYS:
+            setattr(self, name, _set_rows(getattr(self, name), idx, getattr(part, name)))
+        self.evidence = {
+            name: _set_rows(value, idx, part.evidence[name])
+            for name, value in self.evidence.items()
+        }
+        if part.road_points is None and self.road_points is None:
+            return
+        stored = (
+            np.tile(self.straight_points, (self.num_runs, 1))
+            if self.road_points is None
+            else self.road_points
+        )
+        new = self.straight_points if part.road_points is None else part.road_points
+        self.road_points = _set_rows(stored, idx, new)
+
+
+_RUN_ARRAYS = (
+    "log_w",
+    "active",
+    "hypotheses",
+    "steering",
+    "channel_off",
+    "gated",
+    "gated_count",
+    "decision",
+    "model_error",
+    "autocorrelation",
+    "evidence_scale",
+    "innovation_log_w",
+    "normalized_innovation",
+)
+"""The fields of :class:`MixtureState` with one row per run (besides ``evidence``)."""
+
+
+def _set_rows(array: np.ndarray, rows: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """A copy of ``array`` with ``array[rows] = value``."""
+    array = array.copy()
+    array[rows] = value
+    return array
 
 
 class GaussianMixtureEKF:
@@ -161,23 +282,8 @@ class GaussianMixtureEKF:
 
     uses_true_bias = False
 
-    # Per-run state, set by reset() (and replaced by step()) through setattr;
-    # shapes: R runs, C hypotheses.
-    _P: np.ndarray  # (R*C, n, n) covariances
-    _points: np.ndarray | None  # (R, 4) road points of the last sample; None: straight
-    _log_w: np.ndarray  # (R, C) log weights
-    _active: np.ndarray  # (R, C) bool: not pruned
-    _hyp: np.ndarray  # (R, C) hypotheses (m)
-    _steering: np.ndarray  # (R,) last steering reading (model units; NaN: none)
-    _slow: np.ndarray  # (R,) bool: steering channel off (low speed)
-    _gated: np.ndarray  # (R, 3) bool: channels gated at the last step
-    _gated_count: np.ndarray  # (R, 3) int
-    _decision: np.ndarray  # (R,) int codes of estimators.evidence
-    _model_error: np.ndarray  # (R,)
-    _autocorrelation: np.ndarray  # (R,)
-    _evidence_scale: np.ndarray  # (R,)
-    _innovation_log_w: np.ndarray  # (R, C)
-    _normalized_innovation: np.ndarray  # (R, C, 3)
+    _state: MixtureState | None
+    """The per-run state (None before reset)."""
 
     def __init__(
         self,
@@ -207,7 +313,7 @@ class GaussianMixtureEKF:
         self._straight_points = straight_road_points(
             self.model.near_distance, self.model.far_distance
         )
-        self._x: np.ndarray | None = None
+        self._state = None
         self._single = False
         self._n_comp = 0
 
@@ -224,18 +330,18 @@ class GaussianMixtureEKF:
     @property
     def num_runs(self) -> int:
         """Number of runs in the current batch (0 before reset)."""
-        return 0 if self._x is None else self._log_w.shape[0]
+        return 0 if self._state is None else self._state.num_runs
 
     @property
     def gated_counts(self) -> np.ndarray:
         """Samples gated as outliers since reset, per run and channel
         [speed, camera, steering]: (R, 3) int (a single run: (3,))."""
-        return self._run_view(self._gated_count)
+        return self._run_view(self._checked_state().gated_count)
 
     @property
     def last_gated(self) -> np.ndarray:
         """Channels gated at the last step, (R, 3) bool (a single run: (3,))."""
-        return self._run_view(self._gated)
+        return self._run_view(self._checked_state().gated)
 
     @property
     def channel_nis(self) -> np.ndarray:
@@ -243,8 +349,10 @@ class GaussianMixtureEKF:
         last step, averaged over the hypotheses with their weights before the update,
         ``sum_i w_i nu_ic^2 / S_i,cc``: (R, 3) (a single run: (3,); NaN: channel not used).
         A consistent filter averages 1 per channel."""
-        clipped = np.minimum(np.maximum(self._normalized_innovation, -1e3), 1e3)  # (NaN stays)
-        nis = np.einsum("rc,rcm->rm", np.exp(self._innovation_log_w), clipped * clipped)
+        state = self._checked_state()
+        normalized = state.normalized_innovation
+        clipped = np.minimum(np.maximum(normalized, -1e3), 1e3)  # (NaN stays)
+        nis = np.einsum("rc,rcm->rm", np.exp(state.innovation_log_w), clipped * clipped)
         return nis[0] if self._single else nis
 
     @property
@@ -252,7 +360,7 @@ class GaussianMixtureEKF:
         """Runs whose steering channel is off (speed estimate below ``min_speed``, or the
         road ahead more curved than ``steering_curvature_limit``): (R,) bool (a single run:
         one bool)."""
-        return self._run_view(self._slow)
+        return self._run_view(self._checked_state().channel_off)
 
     # ------------------------------------------------------------------ API
     def reset(
@@ -285,51 +393,14 @@ class GaussianMixtureEKF:
         z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
         n_runs, n_comp = hyp.shape
         points = road_point_rows(road_points, n_runs)
-        if points is None:
-            x = self.matrices.initial_state(z, hyp)
-        else:
-            x = self.matrices.initial_state(z, hyp, road_points=points)
-        n = x.shape[-1]
-        cov: np.ndarray = np.empty(x.shape + (n,))
-        cov[:] = self.matrices.initial_covariance
-        x, cov = x.reshape(-1, n), cov.reshape(-1, n, n)
-        steering = z[:, 2] * self.settings.steering_ratio
-        steering = np.where(np.isfinite(steering), steering, np.nan)
-        state = {
-            "_log_w": log_w,
-            "_active": np.isfinite(log_w),
-            "_hyp": hyp.copy(),
-            "_steering": steering,
-            "_slow": self._channel_off_at_reset(z, points),
-            "_gated": np.zeros((n_runs, 3), dtype=bool),
-            "_gated_count": np.zeros((n_runs, 3), dtype=np.int64),
-            **initial_evidence_state(log_w),
-            "_decision": np.where(
-                log_w.max(axis=1) >= math.log(self.settings.decision_threshold), DECIDED, UNDECIDED
-            ),
-            "_model_error": np.full(n_runs, np.nan),
-            "_autocorrelation": np.full(n_runs, np.nan),
-            "_evidence_scale": np.ones(n_runs),
-            "_innovation_log_w": log_w.copy(),
-            "_normalized_innovation": np.full((n_runs, n_comp, 3), np.nan),
-        }
+        state = self._initial_state(z, hyp, log_w, points)
         if runs is None:
             self._single = single
             self._n_comp = n_comp
-            self._x, self._P, self._points = x, cov, points
-            for name, value in state.items():
-                setattr(self, name, value)
+            self._state = state
         else:
             idx = self._check_runs(runs, n_runs, n_comp)
-            assert self._x is not None  # (_check_runs raises before the first reset)
-            flat = self._flat_index(idx)
-            self._x, self._P = self._x.copy(), self._P.copy()
-            self._x[flat], self._P[flat] = x, cov
-            self._store_points(idx, points)
-            for name, value in state.items():
-                array = getattr(self, name).copy()
-                array[idx] = value
-                setattr(self, name, array)
+            self._checked_state().put(idx, state)
         return self.estimate()
 
     def step(
@@ -355,8 +426,9 @@ class GaussianMixtureEKF:
             road_points: (R, 4) or (4,) lane-centre points ahead at k (m; see
                 :meth:`reset`); None: a straight road.
         """
-        if self._x is None:
+        if self._state is None:
             raise RuntimeError("call reset() before step()")
+        state = self._state
         z = np.asarray(measurement, dtype=np.float64)
         acc = np.asarray(acceleration, dtype=np.float64)
         if z.ndim == 1:
@@ -364,104 +436,74 @@ class GaussianMixtureEKF:
         if acc.ndim == 1:
             acc = acc.reshape(1, -1)
         if runs is None:
-            if z.shape != (self._log_w.shape[0], 3) or acc.shape != (self._log_w.shape[0], 2):
+            if z.shape != (state.num_runs, 3) or acc.shape != (state.num_runs, 2):
                 raise ValueError(
                     f"expected measurement ({self.num_runs}, 3) and acceleration "
                     f"({self.num_runs}, 2), got {np.shape(measurement)} and "
                     f"{np.shape(acceleration)}"
                 )
             points = road_point_rows(road_points, z.shape[0])
-            run_state = {name: getattr(self, name) for name in _STEPPED}
-            self._x, self._P, new = self._step(
-                self._x, self._P, run_state, self._points, z, acc, points
-            )
-            for name, value in new.items():
-                setattr(self, name, value)
-            self._points = points
+            self._state = self._step(state, z, acc, points)
         else:
             idx = self._check_runs(runs, z.shape[0], None)
             if acc.shape != (idx.size, 2) or z.shape != (idx.size, 3):
                 raise ValueError("measurement and acceleration must have one row per selected run")
             points = road_point_rows(road_points, idx.size)
-            flat = self._flat_index(idx)
-            run_state = {name: getattr(self, name)[idx] for name in _STEPPED}
-            previous = None if self._points is None else self._points[idx]
-            x, cov, new = self._step(
-                self._x[flat], self._P[flat], run_state, previous, z, acc, points
-            )
-            self._x, self._P = self._x.copy(), self._P.copy()
-            self._x[flat], self._P[flat] = x, cov
-            for name, value in new.items():
-                array = getattr(self, name).copy()
-                array[idx] = value
-                setattr(self, name, array)
-            self._store_points(idx, points)
+            state.put(idx, self._step(state.take(idx), z, acc, points))
         return self.estimate()
 
     def estimate(self) -> Estimate:
         """The current estimate (mixture and hypotheses)."""
-        if self._x is None:
+        if self._state is None:
             raise RuntimeError("call reset() first")
-        n_runs, n_comp = self._log_w.shape
-        n = self._x.shape[1]
-        w = np.exp(self._log_w)
+        state = self._state
+        n_runs, n_comp = state.log_w.shape
+        n = state.x.shape[1]
+        w = np.exp(state.log_w)
         if self._single:
-            x = self._x  # (C, n) for the single run
-            log_w = self._log_w[0]
+            x = state.x  # (C, n) for the single run
+            log_w = state.log_w[0]
             return Estimate(
                 w[0] @ x,
                 x,
-                self._P,
+                state.P,
                 w[0],
                 log_w,
                 int(np.argmax(log_w)),
-                self._hyp[0],
+                state.hypotheses[0],
                 self.state_names,
-                decision_names(int(self._decision[0])),
-                float(self._model_error[0]),
-                float(self._autocorrelation[0]),
-                float(self._evidence_scale[0]),
+                decision_names(int(state.decision[0])),
+                float(state.model_error[0]),
+                float(state.autocorrelation[0]),
+                float(state.evidence_scale[0]),
             )
-        x = self._x.reshape(n_runs, n_comp, n)
+        x = state.x.reshape(n_runs, n_comp, n)
         return Estimate(
             (w[:, None, :] @ x)[:, 0, :],
             x,
-            self._P.reshape(n_runs, n_comp, n, n),
+            state.P.reshape(n_runs, n_comp, n, n),
             w,
-            self._log_w,
-            np.argmax(self._log_w, axis=1),
-            self._hyp,
+            state.log_w,
+            np.argmax(state.log_w, axis=1),
+            state.hypotheses,
             self.state_names,
-            decision_names(self._decision),
-            self._model_error,
-            self._autocorrelation,
-            self._evidence_scale,
+            decision_names(state.decision),
+            state.model_error,
+            state.autocorrelation,
+            state.evidence_scale,
         )
 
     # ------------------------------------------------------------- internals
-    def _run_view(self, array: np.ndarray) -> np.ndarray:
-        if self._x is None:
+    def _checked_state(self) -> MixtureState:
+        if self._state is None:
             raise RuntimeError("call reset() first")
+        return self._state
+
+    def _run_view(self, array: np.ndarray) -> np.ndarray:
         return array[0].copy() if self._single else array.copy()
 
-    def _store_points(self, idx: np.ndarray, points: np.ndarray | None) -> None:
-        """Keep the road points of runs ``idx`` (None: straight) for their next prediction."""
-        if points is None and self._points is None:
-            return
-        stored = (
-            np.tile(self._straight_points, (self.num_runs, 1))
-            if self._points is None
-            else self._points.copy()
-        )
-        stored[idx] = self._straight_points if points is None else points
-        self._points = stored
-
-    def _flat_index(self, idx: np.ndarray) -> np.ndarray:
-        c = self._n_comp
-        return (idx[:, None] * c + np.arange(c)).ravel()
-
     def _check_runs(self, runs: np.ndarray, n_rows: int, n_comp: int | None) -> np.ndarray:
-        if self._x is None:
+        if self._state is None:
             raise RuntimeError("reset the whole batch (runs=None) before resetting single runs")
         idx = np.asarray(runs)
         if idx.dtype == bool:
@@ -477,132 +519,250 @@ class GaussianMixtureEKF:
             raise ValueError(f"the batch has {self._n_comp} hypotheses per run; got {n_comp}")
         return idx
 
+    def _initial_state(
+        self, z: np.ndarray, hyp: np.ndarray, log_w: np.ndarray, points: np.ndarray | None
+    ) -> MixtureState:
+        """The state at reset: x_i(0) from :meth:`FilterMatrices.initial_state` (each
+        hypothesis' own bearings), ``P_i(0)`` the prior covariance, ``w_i`` the prior, the
+        steering channel off when ``z_1 < min_speed``, ``z_1 > steering_max_speed`` or the
+        road ahead too curved, and the decision ``decided`` when ``max_i w_i`` reaches
+        ``decision_threshold``."""
+        n_runs, n_comp = hyp.shape
+        if points is None:
+            x = self.matrices.initial_state(z, hyp)
+        else:
+            x = self.matrices.initial_state(z, hyp, road_points=points)
+        n = x.shape[-1]
+        cov: np.ndarray = np.empty(x.shape + (n,))
+        cov[:] = self.matrices.initial_covariance
+        steering = z[:, 2] * self.settings.steering_ratio
+        log_decision_threshold = math.log(self.settings.decision_threshold)
+        return MixtureState(
+            x=x.reshape(-1, n),
+            P=cov.reshape(-1, n, n),
+            log_w=log_w,
+            active=np.isfinite(log_w),
+            hypotheses=hyp.copy(),
+            steering=np.where(np.isfinite(steering), steering, np.nan),
+            channel_off=self._channel_off_at_reset(z, points),
+            gated=np.zeros((n_runs, 3), dtype=bool),
+            gated_count=np.zeros((n_runs, 3), dtype=np.int64),
+            evidence=initial_evidence_state(log_w),
+            decision=np.where(log_w.max(axis=1) >= log_decision_threshold, DECIDED, UNDECIDED),
+            model_error=np.full(n_runs, np.nan),
+            autocorrelation=np.full(n_runs, np.nan),
+            evidence_scale=np.ones(n_runs),
+            innovation_log_w=log_w.copy(),
+            normalized_innovation=np.full((n_runs, n_comp, 3), np.nan),
+            road_points=points,
+            straight_points=self._straight_points,
+        )
+
+    # ------------------------------------------------------------ the rules
     def _step(
         self,
-        x: np.ndarray,
-        cov: np.ndarray,
-        run: dict[str, np.ndarray],
-        previous_points: np.ndarray | None,
+        state: MixtureState,
         z: np.ndarray,
         acc: np.ndarray,
         points: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """One step of runs whose per-run state ``run`` holds the :data:`_STEPPED` arrays;
-        returns x(k|k), P(k|k) and the new values of those that changed (and ``_gated``)."""
-        mats = self.matrices
-        settings = self.settings
-        log_w, active, slow = run["_log_w"], run["_active"], run["_slow"]
-        n_runs, n_comp = log_w.shape
-        z = z * self._measurement_scale  # steering in model units (NaN without a model)
+    ) -> MixtureState:
+        """One step k-1 -> k of the runs of ``state``: the rules in order (class docstring);
+        ``points`` are the road points at k (None: straight)."""
+        z, all_observed = self._observed(z)
+        acc = _plausible_acceleration(acc, self.settings.max_acceleration)
+        steering = z[:, 2]
+        off = state.channel_off
+        any_off = bool(off.any())
+        x_pred, cov_pred = self._predict(state, acc, off if any_off else None)
+        if any_off:
+            z, all_observed = _without_steering(z, off), False
+        x_post, cov_post, log_lik, gated, normalized = self._update(
+            x_pred, cov_pred, z, all_observed, state.log_w, points
+        )
+        normalized = normalized.reshape(*state.log_w.shape, 3)
+        all_active = bool(state.active.all())
+        innovation_log_w, log_w, evidence, stats = self._weigh(
+            state, all_active, log_lik, normalized
+        )
+        if not all_active:
+            x_post, cov_post = _freeze_pruned(state, x_post, cov_post)
+        active, log_w = self._prune(state.active, all_active, log_w)
+        channel_off, restart = self._switch_channel(off, any_off, x_post, log_w, steering, points)
+        if restart is not None and restart.any():
+            self._restart_memory(x_post, cov_post, restart, active, steering, points)
+        any_gated = bool(gated.any())
+        if any_gated:
+            steering = _memory_steering(steering, gated, restart)
+        return MixtureState(
+            x=x_post,
+            P=cov_post,
+            log_w=log_w,
+            active=active,
+            hypotheses=state.hypotheses,
+            steering=steering,
+            channel_off=channel_off,
+            gated=gated,
+            gated_count=state.gated_count + gated if any_gated else state.gated_count,
+            evidence=evidence,
+            decision=stats["decision"],
+            model_error=stats["model_error"],
+            autocorrelation=stats["autocorrelation"],
+            evidence_scale=stats["evidence_scale"],
+            innovation_log_w=innovation_log_w,  # for channel_nis, computed when asked
+            normalized_innovation=normalized,
+            road_points=points,
+            straight_points=state.straight_points,
+        )
+
+    def _observed(self, z: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Missing measurements: ``z`` (R, 3) with the steering in model units
+        (``z_3 steering_ratio``; NaN without a model) and every non-finite entry NaN
+        (missing: its row of H, nu and R is dropped), and whether none is missing."""
+        z = z * self._measurement_scale
         all_observed = math.isfinite(z.sum())
         if not all_observed:  # NaN and +-inf are missing
             z = np.where(np.isfinite(z), z, np.nan)
-        acc = _plausible_acceleration(acc, settings.max_acceleration)
-        steering = z[:, 2]
-        any_slow = bool(slow.any())
-        x_pred, cov_pred = mats.predict_batch(
-            x,
-            cov,
+        return z, all_observed
+
+    def _predict(
+        self, state: MixtureState, acc: np.ndarray, held: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Predict (paper eq. 11 and 13, :meth:`FilterMatrices.predict_batch`)::
+
+            x_i(k|k-1) = F(x_i(k-1|k-1)) + B_D a(k) [+ J (z_3(k-1) - h_3(x_i(k-1|k-1)))]
+            P_i(k|k-1) = F'_i P_i(k-1|k-1) F'_i^T + Q
+
+        with the road points of k-1; the memory of the ``held`` runs (R,) bool (steering
+        channel off) is held, and a NaN ``a`` (missing) is 0 with its large process noise."""
+        return self.matrices.predict_batch(
+            state.x,
+            state.P,
             acc,
-            run["_steering"],
-            n_comp,
-            road_points=previous_points,
-            held=slow if any_slow else None,
+            state.steering,
+            state.log_w.shape[1],
+            road_points=state.road_points,
+            held=held,
         )
-        if any_slow:  # no steering evidence at low speed
-            z = z.copy()
-            z[slow, 2] = np.nan
-            all_observed = False
-        x_post, cov_post, log_lik, gated, normalized = mats.gated_update_batch(
+
+    def _update(
+        self,
+        x_pred: np.ndarray,
+        cov_pred: np.ndarray,
+        z: np.ndarray,
+        all_observed: bool,
+        log_w: np.ndarray,
+        points: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Update with the outlier gate (paper eq. 15-18, Joseph form;
+        :meth:`FilterMatrices.gated_update_batch`)::
+
+            nu_i = z(k) - h(x_i(k|k-1)),  S_i = H_i P_i H_i^T + R,  K_i = P_i H_i^T S_i^-1
+            x_i  = x_i + K_i nu_i,  P_i = (I - K_i H_i) P_i (I - K_i H_i)^T + K_i R K_i^T
+
+        Gate: channel c of a run is dropped for all its hypotheses when
+        ``min_i [nu_ic^2 / S_i,cc + 2 ln(w_max / w_i)] > innovation_gate^2``.
+
+        Returns:
+            x(k|k), P(k|k), log N(nu_i; 0, S_i), the (R, 3) gated channels and the
+            normalized innovations ``nu_c / sqrt(S_cc)`` (R C, 3).
+        """
+        return self.matrices.gated_update_batch(
             x_pred,
             cov_pred,
             z,
-            n_comp,
+            log_w.shape[1],
             all_observed,
             road_points=points,
-            gate=settings.innovation_gate,
+            gate=self.settings.innovation_gate,
             log_weights=log_w,
         )
-        # ---- weights (log space), through the consistency checks of estimators.evidence
-        all_active = active.all()
-        normalized = normalized.reshape(n_runs, n_comp, 3)
-        evidence_log_w = log_w if all_active else np.where(active, log_w, -np.inf)
+
+    def _weigh(
+        self,
+        state: MixtureState,
+        all_active: bool,
+        log_lik: np.ndarray,
+        normalized: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Evidence (paper eq. 19, tempered by the consistency checks of
+        :func:`estimators.evidence.weigh_evidence`; pruned hypotheses have weight 0)::
+
+            log w_i = log w_i + l_i / tau,   l_i = -1/2 (nu_i^T S_i^-1 nu_i + log det S_i + m log 2 pi)
+            log w_i = log w_i - logsumexp_j(log w_j)
+
+        Returns the log weights before the update (pruned: -inf), the new log weights (R, C),
+        the rule's new statistics and its per-run ``decision``, ``model_error``,
+        ``autocorrelation`` and ``evidence_scale``."""
+        log_w = state.log_w if all_active else np.where(state.active, state.log_w, -np.inf)
         new_log_w, evidence, stats = weigh_evidence(
             self._rule,
-            evidence_log_w,
+            log_w,
             log_lik.reshape(log_w.shape),
             normalized[:, :, 2],
-            {name: run[name] for name in EVIDENCE_STATE},
+            state.evidence,
         )
-        # ---- prune
+        return log_w, new_log_w, evidence, stats
+
+    def _prune(
+        self, active: np.ndarray, all_active: bool, log_w: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Pruning: an active hypothesis other than its run's most likely one with
+        ``w_i < prune_threshold`` is pruned (inactive; weight 0 from now on), and the
+        weights of a run that pruned are normalized again,
+        ``log w_i = log w_i - logsumexp_{j active} log w_j``. Returns (active, log_w)."""
+        if self._log_prune_threshold is None:
+            return active, log_w
+        newly = log_w < self._log_prune_threshold
         if not all_active:
-            # pruned earlier: frozen at their last posterior
-            keep = active.reshape(-1)
-            x_post = np.where(keep[:, None], x_post, x)
-            cov_post = np.where(keep[:, None, None], cov_post, cov)
-        new_active = active
-        if self._log_prune_threshold is not None:
-            newly = new_log_w < self._log_prune_threshold
-            if not all_active:
-                newly &= active
-            if newly.any():
-                newly[np.arange(newly.shape[0]), new_log_w.argmax(axis=1)] = False
-                new_active = active & ~newly
-                # renormalize only the runs that pruned: a run's weights never depend on
-                # what the other runs of the batch did
-                pruned = newly.any(axis=1, keepdims=True)
-                new_log_w = np.where(
-                    pruned,
-                    normalize_log_weights(np.where(new_active, new_log_w, -np.inf), new_log_w),
-                    new_log_w,
-                )
-        # ---- steering channel off below min_speed or on a road ahead more curved than
-        # steering_curvature_limit; its memory restarts when the channel comes back
-        new_slow = slow
-        restart = None
-        speed_check = self._min_speed > 0 and (any_slow or x_post[:, VX].min() < self._min_speed)
+            newly &= active
+        if not newly.any():
+            return active, log_w
+        newly[np.arange(newly.shape[0]), log_w.argmax(axis=1)] = False
+        new_active = active & ~newly
+        # renormalize only the runs that pruned: a run's weights never depend on
+        # what the other runs of the batch did
+        pruned = newly.any(axis=1, keepdims=True)
+        renormalized = normalize_log_weights(np.where(new_active, log_w, -np.inf), log_w)
+        return new_active, np.where(pruned, renormalized, log_w)
+
+    def _switch_channel(
+        self,
+        off: np.ndarray,
+        any_off: bool,
+        x: np.ndarray,
+        log_w: np.ndarray,
+        steering: np.ndarray,
+        points: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The steering channel off by speed or curvature, for step k+1::
+
+            v     = sum_i w_i sqrt(v_x,i^2 + v_y,i^2)                   (x(k|k), w(k))
+            off   = v < min_speed  or  v > steering_max_speed  or  curved(k)
+            off   = off  or  (off(k-1) and z_3(k) missing)    (leave only with a reading)
+
+        where ``curved`` is :meth:`_curved`. Returns the new ``off`` (R,) and the runs
+        whose memory restarts, ``off(k-1) and not off and z_3(k) finite`` (None: none can).
+        The speed test is skipped when bounds on every hypothesis' speed already decide
+        it (``|v_i| >= v_x,i``; ``|v_i| <= |v_x,i| + |v_y,i|``)."""
+        speed_check = self._min_speed > 0 and (any_off or x[:, VX].min() < self._min_speed)
         if not speed_check and self._max_speed < math.inf:
-            # (|v_i| <= |v_x,i| + |v_y,i| <= steering_max_speed for all i: no run is too fast)
-            fastest = np.abs(x_post[:, VX]).max() + np.abs(x_post[:, VY]).max()
-            speed_check = any_slow or fastest > self._max_speed
+            fastest = np.abs(x[:, VX]).max() + np.abs(x[:, VY]).max()
+            speed_check = any_off or fastest > self._max_speed
         curved = self._curved(points)
-        if speed_check or curved is not None:
-            if speed_check:
-                # (|v_i| >= v_x,i >= min_speed for all i: no run is slow)
-                speed = np.hypot(x_post[:, VX], x_post[:, VY]).reshape(log_w.shape)
-                mixture_speed = np.einsum("rc,rc->r", np.exp(new_log_w), speed)
-                new_slow = (mixture_speed < self._min_speed) | (mixture_speed > self._max_speed)
-            else:
-                new_slow = np.zeros(n_runs, dtype=bool)
-            if curved is not None:
-                new_slow = new_slow | curved
-            if any_slow:
-                # leave the mode only with a steering reading to restart from
-                restart = slow & ~new_slow & ~np.isnan(steering)
-                new_slow = new_slow | (slow & np.isnan(steering))
-        if restart is not None and restart.any():
-            self._restart_memory(x_post, cov_post, restart, new_active, steering, points)
-        any_gated = bool(gated.any())
-        if any_gated and gated[:, 2].any():  # an outlier must not enter the next memory update
-            dropped = gated[:, 2] if restart is None else gated[:, 2] & ~restart
-            steering = np.where(dropped, np.nan, steering)
-        new = {
-            "_log_w": new_log_w,
-            "_active": new_active,
-            "_steering": steering,
-            "_slow": new_slow,
-            "_gated": gated,
-            **evidence,
-            "_decision": stats["decision"],
-            "_model_error": stats["model_error"],
-            "_autocorrelation": stats["autocorrelation"],
-            "_evidence_scale": stats["evidence_scale"],
-            "_innovation_log_w": evidence_log_w,  # for channel_nis, computed when asked
-            "_normalized_innovation": normalized,
-        }
-        if any_gated:
-            new["_gated_count"] = run["_gated_count"] + gated
-        return x_post, cov_post, new
+        if not speed_check and curved is None:
+            return off, None
+        if speed_check:
+            speed = np.hypot(x[:, VX], x[:, VY]).reshape(log_w.shape)
+            mixture_speed = np.einsum("rc,rc->r", np.exp(log_w), speed)
+            new_off = (mixture_speed < self._min_speed) | (mixture_speed > self._max_speed)
+        else:
+            new_off = np.zeros(log_w.shape[0], dtype=bool)
+        if curved is not None:
+            new_off = new_off | curved
+        if not any_off:
+            return new_off, None
+        restart = off & ~new_off & ~np.isnan(steering)
+        return new_off | (off & np.isnan(steering)), restart
 
     def _curved(self, points: np.ndarray | None) -> np.ndarray | None:
         """(R,) bool: the road ahead curves more than ``steering_curvature_limit`` (None when
@@ -629,10 +789,13 @@ class GaussianMixtureEKF:
         steering: np.ndarray,
         points: np.ndarray | None,
     ) -> None:
-        """In place: the memory states of the active hypotheses of ``runs`` (R,) bool
-        restart as at reset (:meth:`FilterMatrices.initial_state`): the
-        constant-past memory of the measured ``steering`` (R,) and each
-        hypothesis' own bearings, covariance ``memory_std^2 I``, uncorrelated."""
+        """Memory restart, in place: the memory states of the active hypotheses of ``runs``
+        (R,) bool restart as at reset (:meth:`FilterMatrices.initial_state`)::
+
+            m_i = steady_memory(z_3(k), x_i(k|k)),  P_mm = memory_std^2 I,  P_m,phys = 0
+
+        the constant-past memory of the measured ``steering`` (R,) and each hypothesis'
+        own bearings, uncorrelated with the vehicle states."""
         model = self.model
         if not model.n_memory:
             return
@@ -640,7 +803,7 @@ class GaussianMixtureEKF:
         flat = np.flatnonzero(rows)
         if not flat.size:
             return
-        run_of = flat // self._n_comp
+        run_of = flat // active.shape[1]
         mem = slice(N_PHYSICAL, model.n_states)
         x[flat, mem] = model.steady_memory(
             steering[run_of], x[flat], None if points is None else points[run_of]
@@ -648,6 +811,38 @@ class GaussianMixtureEKF:
         cov[flat, mem, :] = 0.0
         cov[flat, :, mem] = 0.0
         cov[flat, mem, mem] = self.matrices.initial_covariance[mem, mem]
+
+
+def _without_steering(z: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """No steering evidence while the channel is off: a copy of ``z`` (R, 3) with
+    ``z_3`` missing (NaN) in the ``off`` runs (R,) bool."""
+    z = z.copy()
+    z[off, 2] = np.nan
+    return z
+
+
+def _freeze_pruned(
+    state: MixtureState, x: np.ndarray, cov: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pruned hypotheses stay frozen at their last posterior: ``x_i(k|k) = x_i(k-1|k-1)``,
+    ``P_i(k|k) = P_i(k-1|k-1)`` where ``state.active`` is False."""
+    keep = state.active.reshape(-1)
+    return (
+        np.where(keep[:, None], x, state.x),
+        np.where(keep[:, None, None], cov, state.P),
+    )
+
+
+def _memory_steering(
+    steering: np.ndarray, gated: np.ndarray, restart: np.ndarray | None
+) -> np.ndarray:
+    """The steering reading z_3(k) for the next prediction's memory update: NaN (none) where
+    the steering channel was gated as an outlier (but kept where the memory just restarted
+    from it)."""
+    if not gated[:, 2].any():
+        return steering
+    dropped = gated[:, 2] if restart is None else gated[:, 2] & ~restart
+    return np.where(dropped, np.nan, steering)
 
 
 def _plausible_acceleration(acc: np.ndarray, limit: float) -> np.ndarray:

@@ -24,9 +24,9 @@ import pandas as pd
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.evidence import DECISIONS
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
-from estimators.settings import speed_settings
+from estimators.settings import FilterSettings, speed_settings
 from estimators.timing import check_sample_time, recording_sample_time
 from estimators.tuning import steering_residual_std
 from hasa_env.recording.format import Recording
@@ -260,9 +260,39 @@ def run_estimator(
     if isinstance(frames, pd.DataFrame):
         frames = [frames]
     frames = list(frames)
+    _check_recordings(estimator, frames)
+    n_runs = len(frames)
+    lengths = np.array([len(f) for f in frames])
+    n_steps = int(lengths.max())
+    z, acc, time, truth = _stacked_recordings(frames, lengths, n_steps)
+    valid = np.arange(n_steps)[None, :] < lengths[:, None]
+    hyp = _run_hypotheses(frames, hypotheses, n_runs)
+    true_bias = None
+    if getattr(estimator, "uses_true_bias", False):
+        if "bias" not in truth:
+            raise ValueError(
+                "this estimator needs the true bias: the recordings lack a 'bias' column"
+            )
+        true_bias = truth["bias"][:, 0]
+    points = _road_points(estimator, frames, roads, n_steps) if road_geometry else None
+
+    def road(k: int) -> dict[str, np.ndarray]:
+        return {} if points is None else {"road_points": points[:, k]}
+
+    est = estimator.reset(z[:, 0], hyp, prior=prior, true_bias=true_bias, **road(0))
+    trace = _Trace(estimator, est, n_runs, n_steps, store_components)
+    trace.store(0, est)
+    for k in range(1, n_steps):
+        est = estimator.step(z[:, k], acc[:, k], **road(k))
+        trace.store(k, est)
+    return trace.result(est, time, valid, lengths, truth)
+
+
+def _check_recordings(estimator: LaneEstimator, frames: list[pd.DataFrame]) -> None:
+    """Raise ValueError for no recordings, a recording without the sensor columns, an
+    empty one, or one sampled at another rate than the estimator's."""
     if not frames:
         raise ValueError("no recordings given")
-    n_runs = len(frames)
     for i, frame in enumerate(frames):
         missing = [c for c in (*MEASUREMENT_KEYS, *ACCELERATION_KEYS) if c not in frame.columns]
         if missing:
@@ -276,8 +306,15 @@ def run_estimator(
             check_sample_time(
                 estimator, step, source=source, sim_frequency=frequency, action_repeat=repeat
             )
-    lengths = np.array([len(f) for f in frames])
-    n_steps = int(lengths.max())
+
+
+def _stacked_recordings(
+    frames: list[pd.DataFrame], lengths: np.ndarray, n_steps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """The recordings as padded arrays (R, T, ...): measurements (NaN after a run's end),
+    accelerations (0 after), time (NaN after) and the truth columns all recordings have
+    (NaN after; ``bias_index`` -1)."""
+    n_runs = len(frames)
     z = np.full((n_runs, n_steps, 3), np.nan)
     acc = np.zeros((n_runs, n_steps, 2))
     time = np.full((n_runs, n_steps), np.nan)
@@ -295,94 +332,115 @@ def run_estimator(
             truth[key][r, :length] = frame[key].to_numpy()
     if "bias_index" in truth:
         truth["bias_index"] = truth["bias_index"].astype(np.int64)
-    valid = np.arange(n_steps)[None, :] < lengths[:, None]
+    return z, acc, time, truth
+
+
+def _run_hypotheses(
+    frames: list[pd.DataFrame], hypotheses: Sequence[float] | np.ndarray | None, n_runs: int
+) -> np.ndarray:
+    """The lane hypotheses (R, C): ``hypotheses`` ((C,) or (R, C)), or each recording's."""
     if hypotheses is None:
         per_run = [hypotheses_of(f) for f in frames]
         if len({len(h) for h in per_run}) != 1:
             raise ValueError(
                 "the recordings have different numbers of lane hypotheses; pass hypotheses"
             )
-        hyp = np.array(per_run)
-    else:
-        hyp = np.asarray(hypotheses, dtype=np.float64)
-        if hyp.ndim == 1:
-            hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
-    true_bias = None
-    if getattr(estimator, "uses_true_bias", False):
-        if "bias" not in truth:
-            raise ValueError(
-                "this estimator needs the true bias: the recordings lack a 'bias' column"
-            )
-        true_bias = truth["bias"][:, 0]
-    points = _road_points(estimator, frames, roads, n_steps) if road_geometry else None
+        return np.array(per_run)
+    hyp = np.asarray(hypotheses, dtype=np.float64)
+    if hyp.ndim == 1:
+        hyp = np.broadcast_to(hyp, (n_runs, hyp.size))
+    return hyp
 
-    def road(k: int) -> dict[str, np.ndarray]:
-        return {} if points is None else {"road_points": points[:, k]}
 
-    est = estimator.reset(z[:, 0], hyp, prior=prior, true_bias=true_bias, **road(0))
-    n_states = est.mean.shape[-1]
-    n_comp = est.weights.shape[-1]
-    mean = np.empty((n_runs, n_steps, n_states))
-    std = np.empty((n_runs, n_steps, n_states))
-    weights = np.empty((n_runs, n_steps, n_comp))
-    most_likely = np.empty((n_runs, n_steps), dtype=np.int64)
-    components = np.empty((n_runs, n_steps, n_comp, n_states)) if store_components else None
-    # the optional diagnostics of the estimators that have them
-    gating = estimator if isinstance(estimator, _Gating) else None
-    slowing = estimator if isinstance(estimator, _LowSpeed) else None
-    checking = estimator if isinstance(estimator, _ChannelNIS) else None
-    gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if gating is not None else None
-    low_speed = np.zeros((n_runs, n_steps), dtype=bool) if slowing is not None else None
-    decision = np.full((n_runs, n_steps), -1, dtype=np.int8)
-    model_error = np.full((n_runs, n_steps), np.nan)
-    channel_nis = np.full((n_runs, n_steps, 3), np.nan) if checking is not None else None
+class _Trace:
+    """The estimates of :func:`run_estimator`, sample after sample, and the optional
+    diagnostics of the estimators that have them (gating, low speed, channel NIS)."""
 
-    def store(k: int, e: Estimate) -> None:
-        mean[:, k] = e.mean
+    def __init__(
+        self,
+        estimator: LaneEstimator,
+        first: Estimate,
+        n_runs: int,
+        n_steps: int,
+        store_components: bool,
+    ) -> None:
+        n_states = first.mean.shape[-1]
+        n_comp = first.weights.shape[-1]
+        self.mean = np.empty((n_runs, n_steps, n_states))
+        self.std = np.empty((n_runs, n_steps, n_states))
+        self.weights = np.empty((n_runs, n_steps, n_comp))
+        self.most_likely = np.empty((n_runs, n_steps), dtype=np.int64)
+        self.components = (
+            np.empty((n_runs, n_steps, n_comp, n_states)) if store_components else None
+        )
+        self.gating = estimator if isinstance(estimator, _Gating) else None
+        self.slowing = estimator if isinstance(estimator, _LowSpeed) else None
+        self.checking = estimator if isinstance(estimator, _ChannelNIS) else None
+        self.gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if self.gating is not None else None
+        self.low_speed = (
+            np.zeros((n_runs, n_steps), dtype=bool) if self.slowing is not None else None
+        )
+        self.decision = np.full((n_runs, n_steps), -1, dtype=np.int8)
+        self.model_error = np.full((n_runs, n_steps), np.nan)
+        self.channel_nis = (
+            np.full((n_runs, n_steps, 3), np.nan) if self.checking is not None else None
+        )
+
+    def store(self, k: int, e: Estimate) -> None:
+        """Keep the estimate at sample k: the mixture mean, its std
+        ``sqrt(sum_i w_i (P_i,nn + (x_i,n - x_n)^2))``, the weights and the diagnostics."""
+        self.mean[:, k] = e.mean
         w = e.weights
         spread = (
             np.diagonal(e.component_covariances, axis1=-2, axis2=-1)
             + (e.component_means - e.mean[:, None, :]) ** 2
         )
-        std[:, k] = np.sqrt(np.einsum("rc,rcn->rn", w, spread))
-        weights[:, k] = w
-        most_likely[:, k] = e.most_likely
-        if components is not None:
-            components[:, k] = e.component_means
-        if gated is not None and gating is not None and k:
-            gated[:, k] = gating.last_gated
-        if low_speed is not None and slowing is not None:
-            low_speed[:, k] = slowing.low_speed
+        self.std[:, k] = np.sqrt(np.einsum("rc,rcn->rn", w, spread))
+        self.weights[:, k] = w
+        self.most_likely[:, k] = e.most_likely
+        if self.components is not None:
+            self.components[:, k] = e.component_means
+        if self.gated is not None and self.gating is not None and k:
+            self.gated[:, k] = self.gating.last_gated
+        if self.low_speed is not None and self.slowing is not None:
+            self.low_speed[:, k] = self.slowing.low_speed
         names = np.asarray(e.decision)
-        decision[:, k] = np.select([names == name for name in DECISIONS], range(len(DECISIONS)), -1)
-        model_error[:, k] = e.model_error
-        if channel_nis is not None and checking is not None and k:
-            channel_nis[:, k] = checking.channel_nis
+        self.decision[:, k] = np.select(
+            [names == name for name in DECISIONS], range(len(DECISIONS)), -1
+        )
+        self.model_error[:, k] = e.model_error
+        if self.channel_nis is not None and self.checking is not None and k:
+            self.channel_nis[:, k] = self.checking.channel_nis
 
-    store(0, est)
-    for k in range(1, n_steps):
-        est = estimator.step(z[:, k], acc[:, k], **road(k))
-        store(k, est)
-    return EstimationResult(
-        state_names=tuple(est.state_names),
-        hypotheses=np.array(est.hypotheses, copy=True),
-        time=time,
-        valid=valid,
-        lengths=lengths,
-        mean=mean,
-        std=std,
-        weights=weights,
-        most_likely=most_likely,
-        truth=truth,
-        component_means=components,
-        gated=None if gated is None else gated & valid[:, :, None],
-        low_speed=None if low_speed is None else low_speed & valid,
-        decision=np.where(valid, decision, -1),
-        model_error=np.where(valid, model_error, np.nan),
-        channel_nis=None
-        if channel_nis is None
-        else np.where(valid[:, :, None], channel_nis, np.nan),
-    )
+    def result(
+        self,
+        last: Estimate,
+        time: np.ndarray,
+        valid: np.ndarray,
+        lengths: np.ndarray,
+        truth: dict[str, np.ndarray],
+    ) -> EstimationResult:
+        """The :class:`EstimationResult` (samples after a run's end masked out)."""
+        return EstimationResult(
+            state_names=tuple(last.state_names),
+            hypotheses=np.array(last.hypotheses, copy=True),
+            time=time,
+            valid=valid,
+            lengths=lengths,
+            mean=self.mean,
+            std=self.std,
+            weights=self.weights,
+            most_likely=self.most_likely,
+            truth=truth,
+            component_means=self.components,
+            gated=None if self.gated is None else self.gated & valid[:, :, None],
+            low_speed=None if self.low_speed is None else self.low_speed & valid,
+            decision=np.where(valid, self.decision, -1),
+            model_error=np.where(valid, self.model_error, np.nan),
+            channel_nis=None
+            if self.channel_nis is None
+            else np.where(valid[:, :, None], self.channel_nis, np.nan),
+        )
 
 
 @dataclass(frozen=True)

@@ -48,9 +48,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
 from estimators.evidence import DECISIONS
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances
-from estimators.settings import speed_settings
+from estimators.settings import FilterSettings, speed_settings
 from estimators.timing import check_sample_time, config_sample_time
 from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.sim.road import Road

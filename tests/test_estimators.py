@@ -16,8 +16,9 @@ from estimators._testing import drive_arx
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, LaneEstimator
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.filterpy_ekf import FilterpyGMEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.offline import run_estimator
+from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
 from hasa_env.steering.arx import ARXForm
 

@@ -22,7 +22,7 @@ import hasa_env  # noqa: F401  (registers the env ids)
 from estimators._testing import drive_arx
 from estimators.arx_state_space import ARXStateSpace
 from estimators.filterpy_ekf import FilterpyGMEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.offline import run_estimator
 from estimators.road_geometry import (
     lane_centre_bearing_error,
@@ -30,6 +30,7 @@ from estimators.road_geometry import (
     road_point_bearings,
     straight_road_points,
 )
+from estimators.settings import FilterSettings
 from estimators.wrappers import EstimatorInfoWrapper
 from hasa_env.drivers import ModelDriver, population, run_driver, run_population
 from hasa_env.sim.road import curved_road, lane_centre_bearing, straight_road

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimators.arx_state_space import ARXStateSpace
-from estimators.gm_ekf import FilterMatrices, FilterSettings
+from estimators.gm_ekf import FilterMatrices
+from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
 PAPER = ARXForm(a=(1.47, -0.51), b=(-5.73, 17.32, -17.65, 6.12), c=(0.11,), d=(-0.02, 0.02))

@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 from estimators._testing import drive_arx
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS
 from estimators.filterpy_ekf import FilterpyGMEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
 PAPER = ARXForm(a=(1.47, -0.51), b=(-5.73, 17.32, -17.65, 6.12), c=(0.11,), d=(-0.02, 0.02))

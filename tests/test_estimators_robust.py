@@ -17,8 +17,9 @@ import pytest
 from estimators._testing import drive_arx
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS
 from estimators.filterpy_ekf import FilterpyGMEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.offline import run_estimator
+from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import SyntheticDriver, population, run_driver
 from hasa_env.steering import GeneralizedModel
@@ -163,7 +164,7 @@ def test_a_wrong_favourite_cannot_veto_the_evidence_against_it():
         mats = ekf.matrices
         for k in range(1, 20):
             x, cov = est.component_means, est.component_covariances
-            x_pred, cov_pred = mats.predict_batch(x, cov, a[k : k + 1], ekf._steering, 2)
+            x_pred, cov_pred = mats.predict_batch(x, cov, a[k : k + 1], ekf._state.steering, 2)
             h = ekf.model.measurement(x_pred[1])
             jac = ekf.model.measurement_jacobian(x_pred[1])
             s33 = jac[2] @ cov_pred[1] @ jac[2] + mats.measurement_var[2]

@@ -13,8 +13,9 @@ from gymnasium.vector import AutoresetMode
 
 import hasa_env  # noqa: F401  (registers the env ids)
 from estimators.baselines import NoSteeringEKF, OracleEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.offline import run_estimator
+from estimators.settings import FilterSettings
 from estimators.wrappers import (
     EstimatorInfoWrapper,
     EstimatorObservationWrapper,

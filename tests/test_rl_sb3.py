@@ -49,7 +49,8 @@ def test_check_env_every_id_and_type(env_id, observation, action):
 
 
 def _ekf(config):
-    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+    from estimators.gm_ekf import GaussianMixtureEKF
+    from estimators.settings import FilterSettings
     from hasa_env.steering.models import GeneralizedModel
 
     return GaussianMixtureEKF(

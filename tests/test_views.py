@@ -195,7 +195,8 @@ def test_driver_view_human_mode_opens_a_window_headless():
 
 def test_hud_shows_the_weights_an_estimator_wrapper_puts_in_info():
     wrappers = pytest.importorskip("estimators.wrappers")
-    from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+    from estimators.gm_ekf import GaussianMixtureEKF
+    from estimators.settings import FilterSettings
     from hasa_env.steering import GeneralizedModel
 
     env = LaneKeepingEnv(

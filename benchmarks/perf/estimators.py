@@ -44,7 +44,8 @@ import numpy as np
 
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS
 from estimators.filterpy_ekf import FilterpyGMEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.settings import FilterSettings
 from hasa_env.drivers import SyntheticDriver, population, run_driver
 from hasa_env.steering import GeneralizedModel
 

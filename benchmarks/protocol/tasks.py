@@ -25,9 +25,9 @@ from benchmarks.protocol.models import (
 )
 from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
-from estimators.gm_ekf import FilterSettings, GaussianMixtureEKF
+from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.offline import run_estimator
-from estimators.settings import speed_settings
+from estimators.settings import FilterSettings, speed_settings
 from hasa_env.steering import residual_diagnostics, score_runs
 
 __all__ = [
