@@ -61,7 +61,7 @@ class Sensors(NamedTuple):
 
 
 SENSOR_NAMES: tuple[str, ...] = Sensors._fields
-"""Sensor channels, in observation order (units: m/s, m, rad, m/s^2, m/s^2, rad)."""
+"""Sensor channels, in observation order (their units: :data:`SENSOR_UNITS`)."""
 
 SENSOR_UNITS = Sensors("m/s", "m", "rad", "m/s^2", "m/s^2", "rad")
 """Each channel's unit (SI)."""
