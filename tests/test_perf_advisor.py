@@ -25,6 +25,11 @@ def test_every_env_is_measured_and_the_ratios_are_of_the_same_run(results):
     assert results["ratios"]["advisor_over_plain_single"] == (
         rate["advisor_single"] / rate["plain_single"]
     )
+    # real time: simulated seconds (one 100 Hz sample per step by default) per wall second
+    assert results["envs"]["advisor_single"]["env_step_seconds"] == 0.01
+    assert results["ratios"]["advisor_single_real_time_factor"] == pytest.approx(
+        rate["advisor_single"] * 0.01
+    )
     for key, t in results["targets"].items():
         assert t["minimum"] == perf_advisor.TARGETS[key][1]
         assert t["passed"] == (t["value"] >= t["minimum"])
