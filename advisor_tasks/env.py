@@ -8,7 +8,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -23,7 +22,7 @@ from advisor_tasks.setup import (
     pop_advisor_option,
 )
 from hasa_env.drivers.human import human_batch
-from hasa_env.envs.base import RendersOneCar, check_render_mode, started
+from hasa_env.envs.base import SingleCarShell, started
 from hasa_env.sim.car import Car, advance_car, car_info_values, start_car, truncated
 from hasa_env.sim.dynamics import SCALAR_OPS, VehicleState
 from hasa_env.sim.setup import INFO_KEYS
@@ -35,7 +34,7 @@ ADVISOR_RESET_OPTIONS = ("advisor_index",)
 """Reset options of the advisor task besides the lane-keeping env's (``bias_index``, ...)."""
 
 
-class LaneKeepingAdvisorEnv(RendersOneCar, gym.Env):
+class LaneKeepingAdvisorEnv(SingleCarShell, gym.Env):
     """Lane keeping with ambiguous markings, where the estimate comes from a human's advice.
 
     ## Description
@@ -127,21 +126,12 @@ class LaneKeepingAdvisorEnv(RendersOneCar, gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
 
-    def __init__(
-        self,
-        config: Mapping[str, Any] | None = None,
-        render_mode: str | None = None,
-        track: str | None = None,
-    ) -> None:
-        check_render_mode(render_mode, self.metadata["render_modes"])
-        self.setup: AdvisorSetup = build_advisor_setup(config, track)
-        self.config = self.setup.config
-        self.render_mode = render_mode
-        self.metadata = {**self.metadata, "render_fps": self.config["render"]["fps"]}
-        self.action_space = self.setup.action_space()
-        self.observation_space = self.setup.observation_space()
+    setup: AdvisorSetup
+    make_setup = staticmethod(build_advisor_setup)
+    scene_of = staticmethod(lambda setup: setup.env)
+
+    def _init_env(self) -> None:
         env = self.setup.env
-        self._curvature = env.curvature_scalar()
         self._bounds = self.setup.observation_bounds()
         self._estimator = self.setup.make_estimator()
         self._humans: dict[int, Any] = {}  # one single-car batch per advisor, reused
@@ -149,8 +139,6 @@ class LaneKeepingAdvisorEnv(RendersOneCar, gym.Env):
         self._steering_limit = env.steering_limit
         self._acc_low, self._acc_high = env.acceleration_limits
         self._wheel_std = env.noise_std.steering
-        self._scene = self.setup.env
-        self._car: Car[float] | None = None
 
     # ------------------------------------------------------------------ API
     def reset(

@@ -22,12 +22,10 @@ single env's info keys.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
 from advisor_tasks.env import ADVISOR_RESET_OPTIONS
 from advisor_tasks.setup import (
@@ -39,14 +37,12 @@ from advisor_tasks.setup import (
     observation_rows,
     pop_advisor_option,
 )
-from hasa_env.envs.base import RendersCars, check_vector_args, started
-from hasa_env.envs.vector import vector_reset_request
+from hasa_env.envs.base import VectorCarShell, started
 from hasa_env.rl.humans import HumanPool
 from hasa_env.sim.car import (
     Car,
     advance_cars,
     car_info_values,
-    empty_cars,
     start_cars,
     truncated,
 )
@@ -57,7 +53,7 @@ from hasa_env.sim.transition import env_step, step_reward
 __all__ = ["LaneKeepingAdvisorVectorEnv"]
 
 
-class LaneKeepingAdvisorVectorEnv(RendersCars, VectorEnv):
+class LaneKeepingAdvisorVectorEnv(VectorCarShell, VectorEnv):
     """N cars of the advisor task stepped together (see the module docstring and
     :class:`advisor_tasks.env.LaneKeepingAdvisorEnv` for spaces, reward and info)."""
 
@@ -69,33 +65,14 @@ class LaneKeepingAdvisorVectorEnv(RendersCars, VectorEnv):
     partial_reset = True
     """``reset(options={"reset_mask": m})`` resets exactly the cars of ``m`` (for SB3VecEnv)."""
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        config: Mapping[str, Any] | None = None,
-        render_mode: str | None = None,
-        track: str | None = None,
-        max_episode_steps: int | None = None,
-    ) -> None:
-        num_envs = check_vector_args(
-            num_envs, render_mode, self.metadata["render_modes"], max_episode_steps
-        )
-        self.setup: AdvisorSetup = build_advisor_setup(config, track)
-        self.config = self.setup.config
-        n = self.num_envs = int(num_envs)
-        self.render_mode = render_mode
+    setup: AdvisorSetup
+    make_setup = staticmethod(build_advisor_setup)
+    scene_of = staticmethod(lambda setup: setup.env)
+
+    def _init_env(self) -> None:
+        n = self.num_envs
         env = self.setup.env
-        self.single_action_space = self.setup.action_space()
-        self.single_observation_space = self.setup.observation_space()
-        self.action_space = batch_space(self.single_action_space, n)
-        self.observation_space = batch_space(self.single_observation_space, n)
-        self._curvature = env.curvature_array()
         self._bounds = self.setup.observation_bounds()
-        self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n)]
-        self._cars = empty_cars(n, env)
-        self._car: Car[np.ndarray] | None = None  # the cars once reset
-        self._autoreset = np.zeros(n, dtype=bool)
-        self._arange = np.arange(n)
         self._humans = HumanPool(self.setup.drivers, n, self.setup.dt)
         self._wheel_noise = WheelNoise(n)
         self._estimator = self.setup.make_estimator()
@@ -105,32 +82,18 @@ class LaneKeepingAdvisorVectorEnv(RendersCars, VectorEnv):
         self._wheel = np.zeros(n)
         self._substeps = np.zeros((n, env.action_repeat))
         self._readout: dict[str, np.ndarray] = {}
-        self._scene = self.setup.env
 
     # ------------------------------------------------------------------ API
-    def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        n = self.num_envs
-        mask, seeds, options = vector_reset_request(seed, options, n, started=self._car is not None)
+    info_keys = ADVISOR_INFO_KEYS
+
+    def _checked_options(self, options: dict[str, Any]) -> dict[str, Any]:
         allowed = (*RESET_OPTIONS, *ADVISOR_RESET_OPTIONS)
         for key in options:
             if key not in allowed:
                 raise ValueError(
                     f"unknown reset option {key!r}; allowed: {', '.join(allowed)}, reset_mask"
                 )
-        idx = self._arange if mask is None else np.flatnonzero(mask)
-        for i in idx.tolist():
-            if seeds[i] is not None:
-                self._rngs[i] = np.random.default_rng(seeds[i])
-        cars = self._car = self._cars
-        self._reset_cars(cars, idx, options, whole=mask is None)
-        self._autoreset[idx] = False
-        info = self._info(cars)
-        if mask is not None:  # as gymnasium's vector envs: info entries of the reset cars only
-            for key in ADVISOR_INFO_KEYS:
-                info["_" + key] = mask.copy()
-        return self._observation(cars), info
+        return options
 
     def step(
         self, actions: Any
@@ -180,7 +143,7 @@ class LaneKeepingAdvisorVectorEnv(RendersCars, VectorEnv):
         time_up = truncated(cars, env)
         if resetting.any():
             idx = np.flatnonzero(resetting)
-            self._reset_cars(cars, idx, None, whole=False)
+            self._start(cars, idx, None, whole=False)
             rewards[idx] = 0.0
             terminated[idx] = False
             time_up[idx] = False
@@ -221,7 +184,7 @@ class LaneKeepingAdvisorVectorEnv(RendersCars, VectorEnv):
             return command, steering, acceleration
         return self._humans.steer(info, env.road), policy_steering, policy_acceleration
 
-    def _reset_cars(
+    def _start(
         self, cars: Car[np.ndarray], idx: np.ndarray, options: dict[str, Any] | None, whole: bool
     ) -> None:
         """Start new episodes of the cars ``idx``: car, sensors, human, estimator.

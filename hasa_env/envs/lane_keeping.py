@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from hasa_env.envs.base import LaneKeepingBase, RendersOneCar, check_render_mode, started
+from hasa_env.envs.base import LaneKeepingBase, SingleCarShell, started
 from hasa_env.sim.car import Car, advance_car, start_car, state_values, truncated
 from hasa_env.sim.dynamics import SCALAR_OPS, VehicleState
 from hasa_env.sim.setup import build_setup, check_reset_options, physical_action
@@ -17,7 +16,7 @@ from hasa_env.sim.transition import env_step, step_reward
 __all__ = ["LaneKeepingEnv"]
 
 
-class LaneKeepingEnv(LaneKeepingBase, RendersOneCar, gym.Env):
+class LaneKeepingEnv(LaneKeepingBase, SingleCarShell, gym.Env):
     """A kinematic bicycle keeping its lane while the camera sees a biased lane.
 
     ## Description
@@ -91,26 +90,13 @@ class LaneKeepingEnv(LaneKeepingBase, RendersOneCar, gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
 
-    def __init__(
-        self,
-        config: Mapping[str, Any] | None = None,
-        render_mode: str | None = None,
-        track: str | None = None,
-    ) -> None:
-        check_render_mode(render_mode, self.metadata["render_modes"])
-        self.setup = build_setup(config, track)
-        self.config = self.setup.config
-        self.render_mode = render_mode
-        self.metadata = {**self.metadata, "render_fps": self.config["render"]["fps"]}
-        self.action_space = self.setup.action_space()
-        self.observation_space = self.setup.observation_space()
-        self._curvature = self.setup.curvature_scalar()
+    make_setup = staticmethod(build_setup)
+
+    def _init_env(self) -> None:
         self._bounds = {
             "sensors": [b.astype(np.float64).tolist() for b in self.setup.sensor_bounds()],
             "state": [b.astype(np.float64).tolist() for b in self.setup.state_bounds()],
         }
-        self._scene = self.setup
-        self._car: Car[float] | None = None
         self._ended = False  # the episode ended (terminated or truncated) without a reset since
         self._warned_ended = False
 
