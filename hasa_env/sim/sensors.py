@@ -60,6 +60,8 @@ class Sensors(NamedTuple):
     steering: Any
 
 
+_new_sensors = tuple.__new__
+
 SENSOR_NAMES: tuple[str, ...] = Sensors._fields
 """Sensor channels, in observation order (their units: :data:`SENSOR_UNITS`)."""
 
@@ -101,11 +103,14 @@ def sensor_readings(
         params: the vehicle's parameters (for sensors that read through them, e.g. a
             yaw rate v tan(delta) / L; none of the six does).
     """
-    return Sensors(
-        state.speed + noise_std[0] * noise[0],
-        state.lateral_offset + bias + noise_std[1] * noise[1],
-        state.heading + noise_std[2] * noise[2],
-        imu[0] + noise_std[3] * noise[3],
-        imu[1] + noise_std[4] * noise[4],
-        state.steering + noise_std[5] * noise[5],
+    return _new_sensors(  # the NamedTuple's own __new__, without its Python frame
+        Sensors,
+        (
+            state.speed + noise_std[0] * noise[0],
+            state.lateral_offset + bias + noise_std[1] * noise[1],
+            state.heading + noise_std[2] * noise[2],
+            imu[0] + noise_std[3] * noise[3],
+            imu[1] + noise_std[4] * noise[4],
+            state.steering + noise_std[5] * noise[5],
+        ),
     )
