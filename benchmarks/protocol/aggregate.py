@@ -18,14 +18,8 @@ Three levels, all with pandas ``groupby``:
    (decided, confidently in a wrong lane, undecided, model mismatch).
    Recordings have one "seed" (``None``): their interval is over participants.
 
-Gain over the best steering-free baseline (``gain_over_steering_free``, m): on each seed s the
-steering-free baseline (:data:`~benchmarks.protocol.config.STEERING_FREE_BASELINES`) with the
-smallest lateral RMSE L_b(s), and per model::
-
-    gain = (1/S) sum_s (L_b(s) - L_m(s)),   L = the seed's mean over drivers
-
-with the interval of the same bootstrap over the per-driver differences (the best baseline of a
-seed held fixed in the replicates). Positive: the model beats every steering-free estimator.
+Gain over the best steering-free baseline (``gain_over_steering_free``, m, with the same
+bootstrap): :func:`benchmarks.protocol.gain.steering_free_gain`.
 
 Ranks: every steering model and estimator of kind builtin, user or baseline
 is ranked against all the others (smallest RMSE first), overall by the mean
@@ -43,7 +37,6 @@ a row whose score is not finite.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -52,12 +45,8 @@ import pandas as pd
 from scipy import stats
 
 from benchmarks import paper_values
-from benchmarks.protocol.config import (
-    BASELINES,
-    BUILTIN_MODELS,
-    ILLUSTRATIVE,
-    STEERING_FREE_BASELINES,
-)
+from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
+from benchmarks.protocol.gain import steering_free_gain
 from benchmarks.protocol.intervals import (
     clopper_pearson,
     hierarchical_bootstrap,
@@ -609,32 +598,6 @@ def verdict(
         _rank_stability(table, key, rank_key, replicates[key])
     source, column, _ = _VERDICT_KEYS["lateral_rmse"]
     rows, col = (by_driver[source], column) if driver_level else (seed_rows, "lateral_rmse")
-    _steering_free_gain(table, _seed_groups(rows, seeds, col, names), names)
+    table = table.assign(**steering_free_gain(_seed_groups(rows, seeds, col, names), names))
     _decision_times(table, runs_estimation)
     return _records(table)
-
-
-def _steering_free_gain(table: pd.DataFrame, groups: list[np.ndarray], names: list[str]) -> None:
-    """``gain_over_steering_free`` and its interval (module docstring) in ``table`` (rows in
-    ``names`` order), from the per-seed ``(drivers, models)`` lateral RMSEs ``groups``; NaN
-    without a steering-free baseline."""
-    free = [names.index(n) for n in STEERING_FREE_BASELINES if n in names]
-    gains = []
-    for values in groups:
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a model without rows: NaN
-            means = np.nanmean(values[:, free], axis=0) if free else np.array([])
-        if not np.isfinite(means).any():
-            gains.append(np.full(values.shape, np.nan))
-            continue
-        best = free[int(np.nanargmin(means))]
-        gains.append(values[:, [best]] - values)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        per_seed = np.array([np.nanmean(g, axis=0) for g in gains])
-        point = np.nanmean(per_seed, axis=0)
-    low, high = percentile_interval(hierarchical_bootstrap(gains))
-    enough = sum(np.isfinite(g).sum(axis=0) for g in gains) >= 2
-    table["gain_over_steering_free"] = point
-    table["gain_over_steering_free_ci_low"] = np.where(enough, low, np.nan)
-    table["gain_over_steering_free_ci_high"] = np.where(enough, high, np.nan)
