@@ -24,7 +24,9 @@
    with each ARX model, batched over runs, its steering-residual level set
    from the training run (:func:`estimators.tuning.steering_residual_std`)
    and its sensor noise from the run's env config; baselines
-   ``no_steering`` (speed + camera + IMU: the lanes cannot be told apart) and
+   ``no_steering`` (speed + camera + IMU: the lanes cannot be told apart),
+   ``lane_centring`` (the same weighing the lanes by a lane-centring prior fitted on
+   the training run, :class:`estimators.lane_centring.LaneCentringEKF`) and
    ``oracle`` (the same filter told the true bias). Per run: RMSE of the
    mixture's lateral-offset estimate (m) over the whole run, and the steps
    until the weight of the true lane exceeds 0.95 for good; the decision
