@@ -78,6 +78,9 @@ _VERDICT_COLUMNS = [
     Column(interval(percent, "rmse_decrease_vs_two_point"), "RMSE dec. [95% CI]"),
     Column(interval(fixed(2), "rmse_over_paper_median"), "ours/paper [95% CI]"),
     Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
+    Column(
+        interval(fixed(3), "gain_over_steering_free"), "gain over best steering-free (m) [95% CI]"
+    ),
     Column(count_share("decided_runs", "estimated_runs"), "decided [95% CI]"),
     Column(lambda r: _stability(r, "rank_lateral"), "rank lat. (kept)"),
     Column(lambda r: _stability(r, "rank_steering"), "rank steer. (kept)"),

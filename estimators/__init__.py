@@ -9,7 +9,8 @@
 - :class:`ARXStateSpace`: the augmented state [v_x, y, v_y, b, m_1..m_n] of a
   car and an ARX steering model, with exact Jacobians.
 - Baselines: :class:`NoSteeringEKF`, :class:`SingleHypothesisEKF`,
-  :class:`OracleEKF`, and :class:`FilterpyGMEKF` (filterpy reference).
+  :class:`OracleEKF`, the steering-free lane-centring prior
+  :class:`LaneCentringEKF` (fitted by :func:`fit_lane_centring`), and :class:`FilterpyGMEKF` (filterpy reference).
 - :func:`run_estimator`: filter recordings offline, batched.
 - Gymnasium wrappers: :class:`EstimatorInfoWrapper`,
   :class:`EstimatorObservationWrapper` (single and vector envs).
@@ -30,6 +31,7 @@ from estimators.base import (
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.filter_matrices import FilterMatrices
 from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
 from estimators.offline import EstimationResult, hypotheses_of, run_estimator
 from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
@@ -54,6 +56,8 @@ __all__ = [
     "FilterSettings",
     "FilterpyGMEKF",  # noqa: F822 - a lazy attribute (see below)
     "GaussianMixtureEKF",
+    "LaneCentringEKF",
+    "LaneCentringParams",
     "LaneEstimator",
     "MEASUREMENT_KEYS",
     "MEASUREMENT_NAMES",
@@ -65,6 +69,7 @@ __all__ = [
     "VectorEstimatorObservationWrapper",
     "estimate_info_keys",
     "estimate_observation_names",
+    "fit_lane_centring",
     "hypotheses_of",
     "inputs_from_info",
     "measurements_from_info",

@@ -175,7 +175,7 @@ def test_results_json_structure(outputs) -> None:
         assert row["n_runs"] == 2  # "Ill": 3 runs minus the training run
         assert row["rmse"] > 0 and row["r2"] <= 1.0 and row["r2_increments"] <= 1.0
     estimation = doc["estimation"]
-    expected = models + ["no_steering", "oracle"]
+    expected = models + ["no_steering", "lane_centring", "oracle"]
     assert [(r["driver"], r["model"]) for r in estimation] == [
         (d, m) for d in drivers for m in expected
     ]
@@ -186,7 +186,7 @@ def test_results_json_structure(outputs) -> None:
     assert len(doc["runs_steering"]) == (6 + 1) * 4
     main_rows = [r for r in doc["runs_estimation"] if r["track"] == "straight"]
     curved_rows = [r for r in doc["runs_estimation"] if r["track"] == "curved"]
-    assert len(main_rows) == 6 * 5 and len(curved_rows) == 1 * 5
+    assert len(main_rows) == 6 * 6 and len(curved_rows) == 1 * 6
     assert [(r["driver"], r["model"]) for r in doc["curved_estimation"]] == [
         ("Ill", m) for m in expected
     ]
@@ -213,6 +213,11 @@ def test_results_json_structure(outputs) -> None:
         assert {"condition_number", "ar_poles_max_abs", "stable", "identifiable",
                 "ridge_lambda"} <= set(info["checks"])  # fmt: skip
     assert doc["paper"]["table_2"]["Ill"]["generalized_mean"] == 0.22
+    # the steering-free lane-centring baseline: fitted on the seed's training run
+    [fitted] = doc["baselines"]
+    assert fitted["name"] == "lane_centring" and fitted["seed"] == 0 and fitted["error"] is None
+    assert {"autoregression", "innovation_variance", "decimation_time"} <= set(fitted["params"])
+    assert fitted["params"]["innovation_variance"] > 0
 
 
 def test_results_sanity(outputs) -> None:
@@ -227,6 +232,10 @@ def test_results_sanity(outputs) -> None:
         assert est[(driver, "no_steering")]["decided_runs"] == 0
         assert oracle < 0.05
         assert est[(driver, "oracle")]["steps_to_decide_median"] == 0
+        # drivers who keep their lane: the lane-centring prior tells the lanes apart
+        centring = est[(driver, "lane_centring")]
+        assert oracle <= centring["lateral_rmse_mean"] < blind
+        assert centring["wrong_lane_confident_runs"] == 0
         for model in ("two_point", "generalized", "near_far_pd"):
             assert oracle <= est[(driver, model)]["lateral_rmse_mean"]
     steer = {(r["driver"], r["model"]): r for r in result.steering}
@@ -274,7 +283,7 @@ def test_user_model_is_scored_and_ranked(outputs) -> None:
     summary = {r["model"]: r for r in result.summary}
     assert summary["oracle"]["rank_lateral"] == 1  # ranked against every estimator
     assert summary["near_far_pd"]["rank_lateral"] in (2, 3, 4)
-    assert summary["near_far_pd"]["rank_lateral_models"] == 5
+    assert summary["near_far_pd"]["rank_lateral_models"] == 6  # with the 3 baselines
     assert summary["near_far_pd"]["lateral_rmse"] < summary["no_steering"]["lateral_rmse"]
 
 
@@ -341,7 +350,8 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert "cannot fit this" in errors["fit_raises"]["message"]
     scored = {r["model"] for r in doc["steering"]}
     assert scored == {"two_point", "generalized", "road_blind", "near_far_pd", "no_arx"}
-    estimated = {"two_point", "generalized", "near_far_pd", "no_steering", "oracle"}
+    estimated = {"two_point", "generalized", "near_far_pd", "no_steering", "lane_centring",
+                 "oracle"}  # fmt: skip
     assert {r["model"] for r in doc["estimation"]} == estimated
     no_arx = next(m for m in doc["models"] if m["name"] == "no_arx")
     assert no_arx["arx"] is False and "not an ARX model" in no_arx["note"]

@@ -18,6 +18,7 @@ import pytest
 from scipy import stats
 
 from benchmarks.protocol.aggregate import verdict
+from benchmarks.protocol.gain import steering_free_gain
 from benchmarks.protocol.intervals import (
     clopper_pearson,
     hierarchical_bootstrap,
@@ -181,3 +182,19 @@ def test_decision_metrics_of_a_run() -> None:
     assert _censored_quantile([0.2, np.inf, 0.0, None], 0.5) == 0.2
     assert _censored_quantile([0.2, np.inf, np.inf], 0.5) is None
     assert _censored_quantile([None], 0.5) is None
+
+
+def test_gain_over_the_best_steering_free_baseline_per_seed() -> None:
+    """Per seed the better of no_steering and lane_centring is the reference; the gain is
+    its lateral RMSE minus the model's, averaged over seeds, with a paired interval."""
+    names = ["m", "no_steering", "lane_centring", "oracle"]
+    seed_a = np.array([[0.1, 0.9, 0.3, 0.0], [0.2, 0.9, 0.2, 0.0]])  # lane_centring best: 0.25
+    seed_b = np.array([[0.3, 0.9, 1.0, 0.0], [0.3, 0.9, 1.2, 0.0]])  # no_steering best: 0.9
+    gain = steering_free_gain([seed_a, seed_b], names)
+    expected = (np.array([0.25, 0.25, 0.25, 0.25]) - seed_a.mean(axis=0)
+                + np.array([0.9, 0.9, 0.9, 0.9]) - seed_b.mean(axis=0)) / 2  # fmt: skip
+    np.testing.assert_allclose(gain["gain_over_steering_free"], expected)
+    low, high = gain["gain_over_steering_free_ci_low"], gain["gain_over_steering_free_ci_high"]
+    assert np.all(low <= expected + 1e-12) and np.all(expected <= high + 1e-12)
+    without = steering_free_gain([seed_a[:, [0, 3]]], ["m", "oracle"])
+    assert np.isnan(without["gain_over_steering_free"]).all()

@@ -18,6 +18,9 @@ Three levels, all with pandas ``groupby``:
    (decided, confidently in a wrong lane, undecided, model mismatch).
    Recordings have one "seed" (``None``): their interval is over participants.
 
+Gain over the best steering-free baseline (``gain_over_steering_free``, m, with the same
+bootstrap): :func:`benchmarks.protocol.gain.steering_free_gain`.
+
 Ranks: every steering model and estimator of kind builtin, user or baseline
 is ranked against all the others (smallest RMSE first), overall by the mean
 over seeds and on each seed; stress models and the estimators without the
@@ -43,6 +46,7 @@ from scipy import stats
 
 from benchmarks import paper_values
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
+from benchmarks.protocol.gain import steering_free_gain
 from benchmarks.protocol.intervals import (
     clopper_pearson,
     hierarchical_bootstrap,
@@ -592,5 +596,8 @@ def verdict(
         table[f"{key}_ci_high"] = np.where(enough, high, np.nan)
     for key, rank_key in (("rmse", "rank_steering"), ("lateral_rmse", "rank_lateral")):
         _rank_stability(table, key, rank_key, replicates[key])
+    source, column, _ = _VERDICT_KEYS["lateral_rmse"]
+    rows, col = (by_driver[source], column) if driver_level else (seed_rows, "lateral_rmse")
+    table = table.assign(**steering_free_gain(_seed_groups(rows, seeds, col, names), names))
     _decision_times(table, runs_estimation)
     return _records(table)

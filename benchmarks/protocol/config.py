@@ -21,6 +21,7 @@ __all__ = [
     "BenchmarkError",
     "ProtocolConfig",
     "STEERING_BASELINE",
+    "STEERING_FREE_BASELINES",
     "UNCHECKED_SUFFIX",
 ]
 
@@ -28,8 +29,15 @@ __all__ = [
 BUILTIN_MODELS = ("two_point", "generalized")
 """Names of the built-in steering models in the results."""
 
-BASELINES = ("no_steering", "oracle")
-"""Names of the estimation baselines in the results."""
+BASELINES = ("no_steering", "lane_centring", "oracle")
+"""Names of the estimation baselines in the results: the steering-free ones
+(:data:`STEERING_FREE_BASELINES`) and the oracle, told the true lane."""
+
+STEERING_FREE_BASELINES = ("no_steering", "lane_centring")
+"""The baselines that use no steering model: the mixture filter on speed and camera alone,
+and the same weighing the lanes by a lane-centring prior fitted on the training run
+(:class:`estimators.lane_centring.LaneCentringEKF`). A steering model is worth its gain
+over the best of them."""
 
 STEERING_BASELINE = "road_blind"
 """The steering baseline: an AR(2) model of the steering's own past, fitted like the others,

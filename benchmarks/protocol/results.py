@@ -60,6 +60,9 @@ class BenchmarkResult:
         degenerate: the runs left out of every mean, ``{"seed", "driver",
             "track", "run", "file", "reason"}`` each
             (:func:`benchmarks.protocol.tasks.degenerate_reason`).
+        baselines: the fitted baselines, per seed: ``{"name", "seed", "params"}``
+            (the lane-centring prior fitted on that seed's training run,
+            :meth:`estimators.lane_centring.LaneCentringParams.to_dict`).
     """
 
     config: dict[str, Any]
@@ -81,6 +84,7 @@ class BenchmarkResult:
     notes: list[str] = field(default_factory=list)
     skipped: list[dict[str, str]] = field(default_factory=list)
     degenerate: list[dict[str, Any]] = field(default_factory=list)
+    baselines: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def model_names(self) -> list[str]:
@@ -98,6 +102,7 @@ class BenchmarkResult:
             "timing_seconds": self.timing,
             "drivers": self.drivers,
             "models": self.models,
+            "baselines": self.baselines,
             "steering": self.steering,
             "curved": self.curved,
             "estimation": self.estimation,

@@ -24,7 +24,9 @@
    with each ARX model, batched over runs, its steering-residual level set
    from the training run (:func:`estimators.tuning.steering_residual_std`)
    and its sensor noise from the run's env config; baselines
-   ``no_steering`` (speed + camera + IMU: the lanes cannot be told apart) and
+   ``no_steering`` (speed + camera + IMU: the lanes cannot be told apart),
+   ``lane_centring`` (the same weighing the lanes by a lane-centring prior fitted on
+   the training run, :class:`estimators.lane_centring.LaneCentringEKF`) and
    ``oracle`` (the same filter told the true bias). Per run: RMSE of the
    mixture's lateral-offset estimate (m) over the whole run, and the steps
    until the weight of the true lane exceeds 0.95 for good; the decision
@@ -71,7 +73,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -111,6 +113,7 @@ from benchmarks.protocol.plan import (
 from benchmarks.protocol.plots import plot_data
 from benchmarks.protocol.results import BenchmarkResult, versions
 from benchmarks.protocol.tasks import ChunkResult, ChunkTask, run_chunk
+from estimators.lane_centring import LaneCentringParams, fit_lane_centring
 from hasa_env.drivers import SpeedProfile
 
 __all__ = [
@@ -195,6 +198,9 @@ class FittedPlan:
         models: the fitted models (with their lane-keeping outcome when estimating);
             infos: their descriptions (``results.json`` ``models``), failed ones included.
         seconds: time spent fitting and checking (s).
+        lane_centring: the lane-centring baseline's prior fitted on the training run
+            (None: not estimating, or the run could not fit it; ``baseline_info`` says why).
+        baseline_info: the fitted baselines (``results.json`` ``baselines``).
     """
 
     plan: Plan
@@ -204,6 +210,8 @@ class FittedPlan:
     models: list[FittedModel]
     infos: list[dict[str, Any]]
     seconds: float
+    lane_centring: LaneCentringParams | None = None
+    baseline_info: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def plot_run(self) -> RunRef:
@@ -256,8 +264,27 @@ def fit_and_check(
             seed=seed,
             time_limit=config.model_time_limit,
         )
+    lane_centring, baseline_info = _fit_baselines(config, train_frame, seed)
     seconds = time.perf_counter() - t0
-    return FittedPlan(plan, training, validation, train_frame, fitted, fit_info, seconds)
+    return FittedPlan(
+        plan, training, validation, train_frame, fitted, fit_info, seconds, lane_centring,
+        baseline_info,
+    )  # fmt: skip
+
+
+def _fit_baselines(
+    config: ProtocolConfig, train_frame: pd.DataFrame, seed: int | None
+) -> tuple[LaneCentringParams | None, list[dict[str, Any]]]:
+    """The lane-centring prior fitted on the training run (when estimating) and its
+    description; a run it cannot be fitted on leaves that baseline out, with the reason."""
+    if not config.estimate:
+        return None, []
+    info: dict[str, Any] = {"name": "lane_centring", "seed": seed}
+    try:
+        params = fit_lane_centring(train_frame)
+    except ValueError as exc:
+        return None, [info | {"params": None, "error": str(exc)}]
+    return params, [info | {"params": params.to_dict(), "error": None}]
 
 
 def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list[ChunkTask]:
@@ -285,6 +312,7 @@ def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list
             compare_checks=config.compare_checks,
             filter_settings=dict(config.filter_settings),
             time_limit=config.model_time_limit,
+            lane_centring=fit.lane_centring,
         )
 
     return [task(chunk, "curved") for chunk in chunks(plan.curved, config.batch_size)] + [
@@ -459,6 +487,7 @@ def aggregate_result(
         notes=[n for fit in fits for n in fit.plan.notes],
         skipped=[s for fit in fits for s in fit.plan.skipped],
         degenerate=_degenerate_runs(runs_steering + runs_estimation, paths),
+        baselines=[info for fit in fits for info in fit.baseline_info],
     )
 
 

@@ -26,6 +26,7 @@ from benchmarks.protocol.models import (
 from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
 from estimators.offline import run_estimator
 from estimators.settings import FilterSettings, speed_settings
 from hasa_env.steering import residual_diagnostics, score_runs
@@ -94,6 +95,8 @@ class ChunkTask:
     filter_settings: Mapping[str, Any] = field(default_factory=dict)
     time_limit: float | None = None
     """Time limit (s) of scoring this batch with one user model, isolated (None: in-process)."""
+    lane_centring: LaneCentringParams | None = None
+    """The lane-centring prior fitted on the training run (None: that baseline is not run)."""
 
 
 @dataclass
@@ -147,10 +150,7 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
             trace["steering"] = frame["steering"].to_numpy()
             trace["predictions"] = {name: preds[i] for name, preds in predictions.items()}
     if task.estimate:
-        for name, make in (
-            ("no_steering", lambda s: NoSteeringEKF(s)),
-            ("oracle", lambda s: OracleEKF(None, s)),
-        ):
+        for name, make in _baseline_estimators(task):
             _estimate_model(task, frames, name, "baseline", make, out)
     reasons = {
         ref.key: degenerate_reason(frame) for ref, frame in zip(task.runs, frames, strict=True)
@@ -159,6 +159,18 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
         row["degenerate"] = reasons[(row["seed"], row["driver"], row["track"], row["run"])]
     out.seconds = time.process_time() - start
     return out
+
+
+def _baseline_estimators(task: ChunkTask) -> list[tuple[str, Callable[[Any], Any]]]:
+    """The baselines' names and filters (a function of the filter settings), in
+    :data:`~benchmarks.protocol.config.BASELINES` order; ``lane_centring`` only with its
+    fitted prior."""
+    makers: list[tuple[str, Callable[[Any], Any]]] = [("no_steering", NoSteeringEKF)]
+    params = task.lane_centring
+    if params is not None:
+        makers.append(("lane_centring", lambda s: LaneCentringEKF(params, s)))
+    makers.append(("oracle", lambda s: OracleEKF(None, s)))
+    return makers
 
 
 def _user_model_part(
