@@ -35,4 +35,5 @@ def test_every_env_is_measured_and_the_ratios_are_of_the_same_run(results):
         assert t["passed"] == (t["value"] >= t["minimum"])
     table = perf_advisor.format_table(results)
     assert table.count("PASS") + table.count("FAIL") == len(perf_advisor.TARGETS)
+    assert "(target >= 20x)" in table and "(target >= 1/20)" in table
     json.dumps(results, allow_nan=False)
