@@ -7,7 +7,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hasa_env.envs.base import LaneKeepingBase, SingleCarShell
+from hasa_env.envs.base import LaneKeepingBase, SingleCarShell, started
 from hasa_env.sim.car import Car, advance_car, start_car, state_values, truncated
 from hasa_env.sim.dynamics import SCALAR_OPS, VehicleState
 from hasa_env.sim.setup import build_setup, check_reset_options, physical_action
@@ -113,9 +113,7 @@ class LaneKeepingEnv(LaneKeepingBase, SingleCarShell, gym.Env):
         return self._observation(car), self._info(car)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        car = self._car
-        if car is None:
-            raise RuntimeError("call reset() before step()")
+        car = started(self._car)
         setup = self.setup
         steer, acc = physical_action(setup, action)
         if self._ended and not self._warned_ended:

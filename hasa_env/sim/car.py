@@ -140,15 +140,7 @@ def advance_car(
     car.velocity = outcome.velocity
     car.sim_step += samples
     car.acceleration = acceleration
-    # _read_sensors, written out: this is the single env's hot path
-    if car.noise_pos >= len(car.noise):
-        car.noise, car.noise_pos = draw_noise_block(rng, setup).tolist(), 0
-    noise = car.noise[car.noise_pos]
-    car.noise_pos += 1
-    car.curvature = curvature(state.station)
-    car.sensors = sensor_readings(
-        state, outcome.imu, car.bias, noise, setup.noise_std, setup.params
-    )
+    _read_sensors(car, rng, setup, outcome.imu, curvature(state.station))
 
 
 def _read_sensors(
