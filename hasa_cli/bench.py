@@ -50,6 +50,7 @@ from benchmarks.perf import (
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
 from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
 from benchmarks.report import format_tables
+from benchmarks.scenario_suite import format_suite, suite_rows, write_suite
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -60,6 +61,7 @@ from hasa_cli import (
     error,
     warn,
 )
+from hasa_env.scenarios import SCENARIOS
 
 __all__ = ["main", "build_parser"]
 
@@ -104,6 +106,14 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     )
     data.add_argument(
         "--track", choices=("straight", "curved"), default="straight", help="main track"
+    )
+    data.add_argument(
+        "--scenario",
+        choices=(*SCENARIOS, "all"),
+        default="paper",
+        metavar="NAME",
+        help=f"scenario of the synthetic runs: {', '.join(SCENARIOS)}, or all (each into "
+        "its own folder of --out, and a table of every scenario); default paper",
     )
     data.add_argument(
         "--curved-runs",
@@ -312,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # -------------------------------------------------------------------- paper/score
-def _config(args: argparse.Namespace) -> Any:
+def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
     noise = {
         key: value
         for key, value in (
@@ -332,6 +342,7 @@ def _config(args: argparse.Namespace) -> Any:
         runs=args.runs,
         ill_runs=args.ill_runs,
         duration=args.duration,
+        scenario=scenario,
         track=args.track,
         curved_runs=args.curved_runs,
         noise=noise,
@@ -392,6 +403,13 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     if args.workers is not None and args.workers < 1:
         error(PROG, f"--workers must be >= 1, got {args.workers}")
         return EXIT_USAGE
+    if args.recordings is not None and args.scenario != "paper":
+        error(
+            PROG,
+            "--scenario applies to synthetic runs; recordings carry their own scenario "
+            "(their env config's 'scenario')",
+        )
+        return EXIT_USAGE
     out = Path(args.out)
     problem = output_problem(out, args.overwrite)
     if problem is not None:
@@ -404,10 +422,45 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         except SchedulerError as exc:
             error(PROG, str(exc))
             return EXIT_USAGE if exc.kind == "address" else EXIT_ENVIRONMENT
+    if args.scenario != "all":
+        return _run_scenario(args, user_models, args.scenario, out, scheduler)[0]
+    started = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    results, status = {}, EXIT_OK
+    for name in SCENARIOS:
+        if not args.quiet:
+            print(f"== scenario {name}")
+        code, result = _run_scenario(args, user_models, name, out / name, scheduler)
+        if result is None:
+            return code
+        results[name], status = result, max(status, code)
+    rows = suite_rows(results)
+    try:
+        write_suite(rows, out)
+    except OSError as exc:
+        error(PROG, f"cannot write the scenario table to {out}: {exc}")
+        return EXIT_ENVIRONMENT
+    if not args.quiet:
+        print(format_suite(rows))
+        print(
+            f"wrote {len(results)} scenario folders and scenarios.md, scenarios.csv to {out}/; "
+            f"{time.perf_counter() - started:.1f} s in all"
+        )
+    return status
+
+
+def _run_scenario(
+    args: argparse.Namespace,
+    user_models: Sequence[str],
+    scenario: str,
+    out: Path,
+    scheduler: Any,
+) -> tuple[int, Any]:
+    """Run the protocol in one scenario and write its folder: (exit status, result or None)."""
     started = time.perf_counter()
     progress = _Progress(args.quiet)
     try:
-        config = _config(args)
+        config = _config(args, scenario)
         result = run_protocol(
             config,
             user_models,
@@ -418,14 +471,14 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     except BenchmarkError as exc:
         progress.close()
         error(PROG, str(exc))
-        return EXIT_USAGE
+        return EXIT_USAGE, None
     progress("writing results, tables and figures", 0, 0)
     try:
         written = write_result_folder(result, out, figures=not args.no_plots)
     except OSError as exc:
         progress.close()
         error(PROG, f"cannot write the results to {out}: {exc}")
-        return EXIT_ENVIRONMENT
+        return EXIT_ENVIRONMENT, None
     progress.close()
     if not args.quiet:
         print(format_tables(result))
@@ -443,7 +496,7 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     for failure in result.errors:
         error(PROG, failure["message"])
     partial = result.errors or result.skipped or result.degenerate
-    return EXIT_PARTIAL if partial else EXIT_OK
+    return (EXIT_PARTIAL if partial else EXIT_OK), result
 
 
 # -------------------------------------------------------------------------- perf

@@ -266,7 +266,8 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
     frame = _without_degenerate(
         frame, "lateral_rmse",
         ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight",
-         "final_decision", "wrong_lane_confident", *_DECISION_COLUMNS),
+         "final_decision", "wrong_lane_confident", "wrong_lane_confident_share",
+         *_DECISION_COLUMNS),
     )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (
@@ -293,6 +294,10 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
                 lambda v: int(v.astype(bool).sum()),
             ),
             wrong_lane_confident_share=("wrong_lane_confident_share", _finite_mean),
+            wrong_lane_ever_runs=(
+                "wrong_lane_confident_share",
+                lambda v: int((pd.to_numeric(v, errors="coerce") > 0).sum()),
+            ),
             undecided_runs=("final_decision", lambda v: int((v == "undecided").sum())),
             model_mismatch_runs=("final_decision", lambda v: int((v == "model_mismatch").sum())),
             lateral_nees=("lateral_nees", _finite_mean),
@@ -346,8 +351,8 @@ def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
     return seeds.astype(object) == seed
 
 
-_SAFETY_COUNTS = ("wrong_lane_confident_runs", "undecided_runs", "model_mismatch_runs",
-                  "never_decided_runs")  # fmt: skip
+_SAFETY_COUNTS = ("wrong_lane_confident_runs", "wrong_lane_ever_runs", "undecided_runs",
+                  "model_mismatch_runs", "never_decided_runs")  # fmt: skip
 _DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision")
 
 

@@ -9,6 +9,7 @@ from typing import Any
 
 from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
+from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import deep_merge
 from hasa_env.validation import ABSENT, Field, schema, validate_fields
 
@@ -102,6 +103,10 @@ _SCHEMA = schema(
             low_open=True,
         ),
         "stress": Field("bool", doc="Also score the stress set of bad advisors."),
+        "scenario": Field(
+            "choice", doc="The scenario of the synthetic runs (hasa_env.scenarios).",
+            choices=tuple(SCENARIOS),
+        ),
         "estimate": Field("bool", doc="Run the lane estimation (table 2)."),
         "filter_settings": Field(
             "mapping", doc="FilterSettings fields for every estimator.", each=Field("json")
@@ -140,6 +145,10 @@ class ProtocolConfig:
         ill_runs: runs of the illustrative driver on the main track, the
             training run included (None: ``runs + 4``, the paper's 14).
         duration: length of each run (s).
+        scenario: the scenario of the synthetic runs (:data:`hasa_env.scenarios.SCENARIOS`):
+            the env config it sets (under ``noise``) and its drivers' preferred offsets
+            (:func:`hasa_env.scenarios.scenario_drivers`); the training run and the
+            scored runs are all driven in it.
         track: the main track, "straight" or "curved".
         curved_runs: extra runs of the illustrative driver on the curved
             track (steering scores and estimation with the road ahead as a
@@ -193,6 +202,7 @@ class ProtocolConfig:
     runs: int = 10
     ill_runs: int | None = None
     duration: float = 30.0
+    scenario: str = "paper"
     track: str = "straight"
     curved_runs: int = 4
     noise: Mapping[str, float] = field(default_factory=dict)
@@ -251,14 +261,15 @@ class ProtocolConfig:
         """The seeds the protocol runs (recordings: one pass, seed None)."""
         return (None,) if self.recordings is not None else self.seeds
 
-    def env_config(self) -> dict[str, Any]:
+    def env_config(self, training: bool = False) -> dict[str, Any]:
         """The env configuration of the synthetic runs (deep-merged onto the defaults): the
         population's study conditions (:attr:`hasa_env.drivers.PopulationSpec.env_config`:
-        disturbances, the steering sensor of a wheel study), the run length, and the
-        ``noise`` overrides."""
+        disturbances, the steering sensor of a wheel study), the run length, the scenario
+        (``training``: the training run's, always ``paper``) and the ``noise`` overrides."""
         population = POPULATIONS.get(self.population)
         config = deep_merge(dict(population.env_config) if population else {}, {})
         config["time_limit"] = float(self.duration)
+        config["scenario"] = "paper" if training else self.scenario
         if self.noise:
             config = deep_merge(
                 config, {"noise": {k: float(v) for k, v in dict(self.noise).items()}}

@@ -14,6 +14,7 @@ from benchmarks.protocol.config import ILLUSTRATIVE, TRACK_ENV_IDS, BenchmarkErr
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
 from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
+from hasa_env.scenarios import scenario_drivers
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
 __all__ = [
@@ -74,6 +75,10 @@ class Plan:
         curved: the extra curved-track runs (empty when the main track is curved).
         params: driver name -> :class:`hasa_env.drivers.DriverParams` (synthetic only).
         env_config: the env config of the synthetic runs (``{}`` for recordings).
+        training_env_config: the env config of the synthetic training run: ``env_config``
+            in the ``paper`` scenario (models and baselines are fitted on ordinary lane
+            keeping and scored in the scenario; the drivers keep their own preferred
+            offsets). ``{}`` for recordings.
         drivers: per driver its description in the results (``seed``, ``driver``, ``runs``,
             ``curved_runs``, and ``parameters`` or ``recordings``, ``study_session``).
         driver_order: the drivers in the order of the tables (the illustrative one first
@@ -94,6 +99,7 @@ class Plan:
     driver_order: list[str]
     notes: list[str] = field(default_factory=list)
     skipped: list[dict[str, str]] = field(default_factory=list)
+    training_env_config: dict[str, Any] = field(default_factory=dict)
 
     @property
     def recorded(self) -> bool:
@@ -152,6 +158,7 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
         params = population(config.population, seed, config.drivers)
     except ValueError as exc:
         raise BenchmarkError(str(exc)) from None
+    params = scenario_drivers(params, config.scenario, seed)
     by_name = {p.name: p for p in params}
     main: list[RunRef] = []
     for p in params:
@@ -185,6 +192,7 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
         curved=curved,
         params=by_name,
         env_config=config.env_config(),
+        training_env_config=config.env_config(training=True),
         drivers=drivers,
         driver_order=[p.name for p in params],
     )

@@ -236,11 +236,12 @@ def fit_and_check(
     validation = plan.validation()
     say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
         else "loading the training run and fitting the models", 0, 0)  # fmt: skip
-    train_frame = load_frames([training], config.track, plan.env_config, plan.params)[0]
+    train_env = plan.training_env_config or plan.env_config
+    train_frame = load_frames([training], config.track, train_env, plan.params)[0]
     t0 = time.perf_counter()
     sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
     constant_speed = (
-        constant_speed_run(training, config.track, plan.env_config, plan.params)
+        constant_speed_run(training, config.track, train_env, plan.params)
         if config.stress and seed is not None
         else None
     )

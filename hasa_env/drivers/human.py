@@ -74,20 +74,35 @@ def check_range(
 
 
 def lane_bearings(
-    info: Mapping[str, np.ndarray], road: Road, near: np.ndarray, far: np.ndarray
+    info: Mapping[str, np.ndarray],
+    road: Road,
+    near: np.ndarray,
+    far: np.ndarray,
+    preferred_offset: np.ndarray | float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Bearings (rad) of the true lane centre at ``near`` and ``far`` m ahead of N cars.
+    """Bearings (rad) of the driven lane's centre at ``near`` and ``far`` m ahead of N cars.
 
-    Straight road: phi = -(theta + atan(y / near)), omega = -(theta + atan(y / far));
-    curved road: :func:`hasa_env.sim.road.lane_centre_bearing` (exact).
+    The point d m ahead lies ``l(d) = offset(s + d) + preferred_offset`` left of the road's
+    centre line (``road.lane_shifts``, :meth:`~hasa_env.sim.road.Road.driven_offset`; 0
+    without them). Straight road: phi = -(theta + atan((y - l(near)) / near)), omega =
+    -(theta + atan((y - l(far)) / far)); curved road:
+    :func:`hasa_env.sim.road.lane_centre_bearing` (exact).
     """
     y, theta = info["lateral_offset"], info["heading"]
-    if road.is_straight:
-        return -(theta + np.arctan(y / near)), -(theta + np.arctan(y / far))
     s = info["station"]
+    near_offset: Any = preferred_offset
+    far_offset: Any = preferred_offset
+    if road.lane_shifts:
+        near_offset = near_offset + road.driven_offset(s + near)
+        far_offset = far_offset + road.driven_offset(s + far)
+    if road.is_straight:
+        return (
+            -(theta + np.arctan((y - near_offset) / near)),
+            -(theta + np.arctan((y - far_offset) / far)),
+        )
     return (
-        np.asarray(lane_centre_bearing(road, s, y, theta, near), dtype=np.float64),
-        np.asarray(lane_centre_bearing(road, s, y, theta, far), dtype=np.float64),
+        np.asarray(lane_centre_bearing(road, s, y, theta, near, near_offset), dtype=np.float64),
+        np.asarray(lane_centre_bearing(road, s, y, theta, far, far_offset), dtype=np.float64),
     )
 
 
@@ -145,6 +160,9 @@ class HumanBatch(ABC):
     """
 
     params_type: ClassVar[type]
+    sees_ahead: ClassVar[bool] = False
+    """True: the control law looks at the driven lane ahead itself (:func:`lane_bearings`);
+    False: it steers on :meth:`perceived` offsets."""
     _fresh: np.ndarray  # cars whose next step is their first, set by reset()
     # the pedal remnant (m/s^2) of each car, its AR(1) coefficient, innovation std and draws
     _pedal: np.ndarray
@@ -168,6 +186,8 @@ class HumanBatch(ABC):
             raise TypeError(f"{name} needs {self.params_type.__name__}, got {wrong[0]}")
         self.num_cars = len(self.params)
         self.max_steering = self.arr("max_steering")
+        self.preferred_offset = self.arr("preferred_offset")
+        self._keeps_offset = bool(self.preferred_offset.any())
         self.profile = speed_profile_arrays([p.speed for p in self.params])
         self.motor = MotorStage(
             self.arr("neuromuscular_frequency"),
@@ -241,6 +261,8 @@ class HumanBatch(ABC):
         """
         if self._dt is None:
             raise RuntimeError("call reset() before act()")
+        if not self.sees_ahead and (self._keeps_offset or road.lane_shifts):
+            info = self.perceived(info, road)
         if self._all_fresh:
             start = np.asarray(info["steering"], dtype=np.float64)
             self.motor.start(start)
@@ -257,6 +279,32 @@ class HumanBatch(ABC):
             self._fresh = np.zeros(self.num_cars, dtype=bool)
         command = self._command(info, road)
         return self.motor.step(command, info["speed"])
+
+    def perceived(self, info: Mapping[str, np.ndarray], road: Road) -> Mapping[str, np.ndarray]:
+        """The true ``info`` as the drivers steer on it: offset and heading from the lane
+        they want to drive along (docs/design.md §14).
+
+        The target is the driven lane's centre (:meth:`~hasa_env.sim.road.Road.driven_offset`,
+        ``road.lane_shifts``) plus each driver's ``preferred_offset``::
+
+            y_seen     = y - offset(s) - preferred_offset
+            theta_seen = theta - slope(s)
+
+        (small angles: the driven lane's heading relative to the road is its slope). Every
+        archetype's control law then steers to y_seen = 0; its look-ahead extrapolates the
+        driven lane straight from the car's station (the far point sees a shift's slope,
+        not its end). Archetypes that look ahead themselves (``sees_ahead``) skip it.
+        """
+        station = np.asarray(info["station"], dtype=np.float64)
+        target = self.preferred_offset
+        out = dict(info)
+        if road.lane_shifts:
+            target = target + road.driven_offset(station)
+            out["heading"] = np.asarray(info["heading"], dtype=np.float64) - road.driven_slope(
+                station
+            )
+        out["lateral_offset"] = np.asarray(info["lateral_offset"], dtype=np.float64) - target
+        return out
 
     # ------------------------------------------------------------ archetype hooks
     @abstractmethod
@@ -357,6 +405,7 @@ def check_common(owner: str, params: Any) -> None:
     check_range(owner, "neuromuscular_frequency", params.neuromuscular_frequency, 0.0, 200.0, open_low=True)  # fmt: skip
     check_range(owner, "neuromuscular_damping", params.neuromuscular_damping, 0.0, 5.0, open_low=True)  # fmt: skip
     check_range(owner, "max_steering", params.max_steering, 0.0, 1.5, open_low=True)
+    check_range(owner, "preferred_offset", params.preferred_offset, -2.0, 2.0)
     for name, kind in (("speed", SpeedProfile), ("motor", MotorParams)):
         value = getattr(params, name)
         if not isinstance(value, kind):

@@ -182,13 +182,20 @@ class PreviewFeedback:
     def __call__(
         self, y: np.ndarray, theta: np.ndarray, station: np.ndarray, v: np.ndarray, road: Road
     ) -> np.ndarray:
-        """f = k_y y + k_v v theta + sum_j k_j v^2 kappa(s + v t_j) (m/s^3), arrays of N cars."""
+        """f = k_y y + k_v v theta + sum_j k_j v^2 kappa(s + v t_j) (m/s^3), arrays of N cars.
+
+        kappa is the driven lane's curvature: the road's plus that of its lane shifts
+        (:meth:`~hasa_env.sim.road.Road.driven_curvature`; y and theta are then relative
+        to the driven lane, :meth:`~hasa_env.drivers.human.HumanBatch.perceived`).
+        """
         k = self.gains
         out = k[:, 0] * y + k[:, 1] * (v * theta)
-        if not road.is_straight:
+        if not road.is_straight or road.lane_shifts:
             v2 = v * v
             stations = station[:, None] + v[:, None] * self.preview_times
             kappa = curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations)
+            if road.lane_shifts:
+                kappa = kappa + road.driven_curvature(stations)
             for j in range(kappa.shape[1]):
                 out = out + k[:, 3 + j] * (v2 * kappa[:, j])
         return out

@@ -65,6 +65,8 @@ class LqrDriverParams:
         speed: the speed behaviour.
         max_steering: command saturation and wheel limit (rad), in (0, 1.5].
         motor: remnant and wheel of the output stage.
+        preferred_offset: the lateral offset (m, left positive) from the driven lane's
+            centre the driver keeps, in [-2, 2].
     """
 
     archetype: ClassVar[str]
@@ -78,6 +80,7 @@ class LqrDriverParams:
     speed: SpeedProfile = field(default_factory=SpeedProfile)
     max_steering: float = 0.5
     motor: MotorParams = field(default_factory=MotorParams)
+    preferred_offset: float = 0.0
 
     def __post_init__(self) -> None:
         owner = type(self).__name__

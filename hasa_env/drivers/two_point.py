@@ -57,6 +57,7 @@ from hasa_env.drivers.human import (
     DelayLine,
     HumanBatch,
     HumanDriver,
+    check_range,
     lane_bearings,
     params_from_dict,
     params_to_dict,
@@ -92,6 +93,8 @@ class TwoPointParams:
         speed: the speed behaviour.
         max_steering: command saturation and wheel limit (rad), the env's default limit.
         motor: remnant and wheel of the output stage (default: none, no quantization).
+        preferred_offset: the lateral offset (m, left positive) from the driven lane's
+            centre the driver keeps, in [-2, 2] (:class:`~hasa_env.drivers.human.HumanBatch`).
     """
 
     name: str = "driver"
@@ -110,8 +113,10 @@ class TwoPointParams:
     speed: SpeedProfile = field(default_factory=SpeedProfile)
     max_steering: float = 0.5
     motor: MotorParams = field(default_factory=MotorParams)
+    preferred_offset: float = 0.0
 
     def __post_init__(self) -> None:
+        check_range("TwoPointParams", "preferred_offset", self.preferred_offset, -2.0, 2.0)
         positive = ("near_time", "far_time", "reference_speed", "neuromuscular_frequency",
                     "neuromuscular_damping", "max_steering")  # fmt: skip
         for key in positive:
@@ -216,6 +221,7 @@ class TwoPointBatch(HumanBatch):
     """N two-point PI drivers acting on N cars' info arrays (see :class:`TwoPointParams`)."""
 
     params_type = TwoPointParams
+    sees_ahead = True
 
     # Per-run state, set by _reset() / _start().
     _noise: NoiseBlocks
@@ -249,7 +255,9 @@ class TwoPointBatch(HumanBatch):
         self, info: Mapping[str, np.ndarray], road: Road
     ) -> tuple[np.ndarray, np.ndarray]:
         v = np.maximum(info["speed"], MIN_SPEED)
-        return lane_bearings(info, road, v * self.near_time, v * self.far_time)
+        return lane_bearings(
+            info, road, v * self.near_time, v * self.far_time, self.preferred_offset
+        )
 
     def _start(
         self,

@@ -191,7 +191,12 @@ class Recording:
     @property
     def road(self) -> Road:
         """The road the recording was made on (its config's track and lane width)."""
-        return make_road(self.config["track"], lane_width=self.config["road"]["lane_width"])
+        road = self.config["road"]
+        return make_road(
+            self.config["track"],
+            lane_width=road["lane_width"],
+            lane_shifts=road.get("lane_shifts", ()),
+        )
 
 
 class RecordingList(list):

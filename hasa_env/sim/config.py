@@ -15,6 +15,7 @@ import copy
 from collections.abc import Mapping
 from typing import Any
 
+from hasa_env.scenarios import SCENARIOS
 from hasa_env.validation import Field, schema, validate
 
 __all__ = ["ConfigError", "default_config", "make_config", "deep_merge", "describe_config"]
@@ -39,6 +40,13 @@ def _choice(default: str, doc: str, *choices: str) -> Field:
 # The schema: every leaf of the configuration with its default, unit and range.
 _SCHEMA: Field = schema(
     {
+        "scenario": Field(
+            "choice",
+            "paper",
+            "Named scenario (hasa_env.scenarios.SCENARIOS): the keys it sets lie under "
+            "the user's own.",
+            choices=tuple(SCENARIOS),
+        ),
         "track": _choice(
             "straight",
             "Road: 'straight' or 'curved' (the shipped curved track, see hasa_env.sim.road).",
@@ -65,6 +73,15 @@ _SCHEMA: Field = schema(
             "lane_width": _number(3.6, "Lane width (m).", 2.0, 6.0, "m"),
             "lanes_left": _integer(1, "Lanes left of the ego lane.", 0, 5),
             "lanes_right": _integer(0, "Lanes right of the ego lane.", 0, 5),
+            "lane_shifts": Field(
+                "json",
+                [],
+                "Sideways moves of the lane the human drives in, relative to the markings "
+                "the camera reads: a list of {station (m, >= 0), length (m, > 0), offset (m)}, "
+                "each a half-cosine ramp (hasa_env.sim.road.Road.driven_offset).",
+                max_depth=2,
+                max_length=200,
+            ),
             "offroad_margin": _number(
                 0.5,
                 "How far (m) the rear-axle centre may pass the road edge before termination.",
@@ -84,6 +101,12 @@ _SCHEMA: Field = schema(
                 15.0, "Initial speed (m/s), at most vehicle.max_speed.", 0.0, 150.0, "m/s"
             ),
             "steering": _number(0.0, "Initial road-wheel angle (rad).", -1.0, 1.0, "rad"),
+            "between_hypotheses": Field(
+                "bool",
+                False,
+                "Start halfway between the true lane's centre and the centre the nearest "
+                "other hypothesis puts it at ((b_j - b) / 2, m) instead of at lateral_offset.",
+            ),
             "lateral_offset_std": _number(
                 0.0, "Std of a Gaussian added to the initial offset (m).", 0.0, 5.0, "m"
             ),
@@ -231,6 +254,8 @@ def default_config() -> dict[str, Any]:
     ==========================  =================================================
     key                         meaning (unit, default)
     ==========================  =================================================
+    scenario                    named scenario (hasa_env.scenarios, 'paper'); its
+                                keys lie under the user's
     track                       'straight' | 'curved'
     sim_frequency               simulation rate (Hz, 100)
     action_repeat               sim steps per env step (1)
@@ -240,8 +265,11 @@ def default_config() -> dict[str, Any]:
     road.lane_width             m, 3.6
     road.lanes_left/right       extra lanes beside the ego lane (1 / 0)
     road.offroad_margin         m past the edge before termination (0.5)
+    road.lane_shifts            sideways moves of the driven lane ([]): list of
+                                {station, length, offset} (m)
     initial_state.*             y (m, -0.5), heading (rad), speed (m/s, 15),
-                                steering (rad), and *_std randomisation
+                                steering (rad), and *_std randomisation;
+                                between_hypotheses (false)
     markings.hypotheses         camera biases b (m, [0, -1.8]), distinct
     markings.probabilities      prior of each (uniform)
     noise.*                     sensor noise std: speed, camera, camera_heading,
@@ -283,6 +311,33 @@ def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict[str, 
     return out
 
 
+_SHIFT_RANGES = {"station": (0.0, 1e6), "length": (0.1, 1e4), "offset": (-20.0, 20.0)}
+
+
+def _check_lane_shifts(shifts: list[Any]) -> None:
+    """Each entry of ``road.lane_shifts`` is {station, length, offset} with numbers in range."""
+    if not isinstance(shifts, list):
+        raise ConfigError(
+            f"config key 'road.lane_shifts' must be a list of {{station, length, offset}}, "
+            f"got {type(shifts).__name__}"
+        )
+    for i, shift in enumerate(shifts):
+        where = f"config key 'road.lane_shifts[{i}]"
+        if not isinstance(shift, Mapping) or set(shift) != set(_SHIFT_RANGES):
+            raise ConfigError(
+                f"{where}' must be an object with exactly the keys station, length, offset "
+                f"(m), got {shift!r}"
+            )
+        for key, (low, high) in _SHIFT_RANGES.items():
+            value = shift[key]
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (ok and low <= value <= high):
+                raise ConfigError(
+                    f"{where}.{key}' must be a number in [{low:g}, {high:g}] m, got {value!r}"
+                )
+            shift[key] = float(value)
+
+
 def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Fill ``config`` in with :func:`default_config` (a deep merge) and validate the result.
 
@@ -296,9 +351,12 @@ def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
             above ``vehicle.max_speed``). The message names the key path and
             the allowed range.
     """
-    cfg: dict[str, Any] = validate(
-        {} if config is None else config, _SCHEMA, describe=_describe, error=_error
-    )
+    config = {} if config is None else config
+    name = config.get("scenario", "paper") if isinstance(config, Mapping) else None
+    if isinstance(name, str) and name in SCENARIOS:
+        config = deep_merge(SCENARIOS[name].config, config)
+    cfg: dict[str, Any] = validate(config, _SCHEMA, describe=_describe, error=_error)
+    _check_lane_shifts(cfg["road"]["lane_shifts"])
     probs = cfg["markings"]["probabilities"]
     hyps = cfg["markings"]["hypotheses"]
     if probs is not None:

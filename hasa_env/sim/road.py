@@ -15,8 +15,8 @@ the visual angle of the two-point steering model on any road.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -32,12 +32,19 @@ class Road:
         spacing: grid spacing ds (m).
         curvature: kappa at the grid nodes (1/m), float64 array, linear in between.
         lane_width: m.
+        lane_shifts: sideways moves of the lane the human drives in, relative to this
+            centre line (the markings the camera reads): ``(station, length, offset)``
+            in m each, a smooth half-cosine ramp of ``offset`` over
+            ``[station, station + length]`` (a construction-zone shift, a planned lane
+            change); they add up. :meth:`driven_offset` and :meth:`driven_slope` give
+            the driven lane's centre; the car's dynamics and the camera ignore it.
     """
 
     name: str
     spacing: float
     curvature: np.ndarray
     lane_width: float = 3.6
+    lane_shifts: tuple[tuple[float, float, float], ...] = ()
     x: np.ndarray = field(init=False, repr=False)
     y: np.ndarray = field(init=False, repr=False)
     psi: np.ndarray = field(init=False, repr=False)
@@ -74,6 +81,47 @@ class Road:
     @property
     def is_straight(self) -> bool:
         return not np.any(self.curvature)
+
+    def driven_offset(self, s: np.ndarray | float) -> np.ndarray:
+        """Lateral offset (m, left positive) of the driven lane's centre at station s::
+
+        offset(s) = sum_j offset_j (1 - cos(pi u_j)) / 2,  u_j = clip((s - s_j) / l_j, 0, 1)
+        """
+        s = np.asarray(s, dtype=np.float64)
+        out = np.zeros(s.shape)
+        for start, length, offset in self.lane_shifts:
+            u = np.clip((s - start) / length, 0.0, 1.0)
+            out = out + offset * 0.5 * (1.0 - np.cos(np.pi * u))
+        return out
+
+    def driven_slope(self, s: np.ndarray | float) -> np.ndarray:
+        """d offset / ds of :meth:`driven_offset` (rad, small-angle: the driven lane's
+        heading relative to the centre line)::
+
+            slope(s) = sum_j offset_j pi / (2 l_j) sin(pi u_j)
+        """
+        s = np.asarray(s, dtype=np.float64)
+        out = np.zeros(s.shape)
+        for start, length, offset in self.lane_shifts:
+            u = np.clip((s - start) / length, 0.0, 1.0)
+            out = out + offset * np.pi / (2.0 * length) * np.sin(np.pi * u)
+        return out
+
+    def driven_curvature(self, s: np.ndarray | float) -> np.ndarray:
+        """d^2 offset / ds^2 of :meth:`driven_offset` (1/m): the curvature the driven lane
+        adds to the road's (small angles)::
+
+            curvature(s) = sum_j offset_j (pi / l_j)^2 / 2 cos(pi u_j),  0 < u_j < 1 (else 0)
+        """
+        s = np.asarray(s, dtype=np.float64)
+        out = np.zeros(s.shape)
+        for start, length, offset in self.lane_shifts:
+            u = (s - start) / length
+            inside = (u > 0.0) & (u < 1.0)
+            out = out + np.where(
+                inside, offset * 0.5 * (np.pi / length) ** 2 * np.cos(np.pi * u), 0.0
+            )
+        return out
 
     def curvature_at(self, s: np.ndarray | float) -> np.ndarray:
         """kappa(s) (1/m), vectorized; constant beyond the table."""
@@ -209,13 +257,22 @@ def curved_road(lane_width: float = 3.6, spacing: float = 0.5) -> Road:
 TRACKS: dict[str, Callable[..., Road]] = {"straight": straight_road, "curved": curved_road}
 
 
-def make_road(track: str, lane_width: float = 3.6) -> Road:
-    """Build a named track ('straight' or 'curved')."""
+def make_road(
+    track: str, lane_width: float = 3.6, lane_shifts: Sequence[Mapping[str, float]] = ()
+) -> Road:
+    """Build a named track ('straight' or 'curved'), with the driven lane's shifts
+    (``{"station", "length", "offset"}`` each, m: config ``road.lane_shifts``)."""
     try:
         factory = TRACKS[track]
     except KeyError:
         raise ValueError(f"unknown track {track!r}; allowed: {', '.join(TRACKS)}") from None
-    return factory(lane_width=lane_width)
+    road = factory(lane_width=lane_width)
+    if lane_shifts:
+        shifts = tuple(
+            (float(m["station"]), float(m["length"]), float(m["offset"])) for m in lane_shifts
+        )
+        road = replace(road, lane_shifts=shifts)
+    return road
 
 
 def curvature_lookup_scalar(curvature: list[float], inv_spacing: float, station: float) -> float:

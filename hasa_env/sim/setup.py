@@ -10,7 +10,7 @@ is :func:`hasa_env.sim.transition.env_step`.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, SupportsFloat
@@ -182,7 +182,7 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
     cfg = make_config(config)  # a config that is not a mapping is a ConfigError there
     road_cfg = cfg["road"]
     width = road_cfg["lane_width"]
-    road = make_road(cfg["track"], lane_width=width)
+    road = make_road(cfg["track"], lane_width=width, lane_shifts=road_cfg["lane_shifts"])
     dt = 1.0 / cfg["sim_frequency"]
     params = VehicleParams(cfg["vehicle"]["wheelbase"], cfg["vehicle"]["max_speed"], dt)
     hyps = tuple(cfg["markings"]["hypotheses"])
@@ -292,7 +292,10 @@ def draw_episode(
         matches = [i for i, h in enumerate(setup.hypotheses) if h == bias]
         index = matches[0] if matches else -1
     init = setup.config["initial_state"]
-    y = init["lateral_offset"] + init["lateral_offset_std"] * float(jitter[0])
+    y = init["lateral_offset"]
+    if init["between_hypotheses"]:
+        y = _halfway_to_nearest(bias, setup.hypotheses, y)
+    y = y + init["lateral_offset_std"] * float(jitter[0])
     th = init["heading"] + init["heading_std"] * float(jitter[1])
     v = init["speed"] + init["speed_std"] * float(jitter[2])
     v = min(max(v, 0.0), setup.params.max_speed)
@@ -305,6 +308,17 @@ def draw_episode(
     if setup.disturbance is not None:
         phases = rng.uniform(0.0, 2.0 * math.pi, setup.disturbance.n_phases).tolist()
     return VehicleState(0.0, y, th, v, delta), index, bias, block, phases
+
+
+def _halfway_to_nearest(bias: float, hypotheses: Sequence[float], otherwise: float) -> float:
+    """The offset halfway between the true lane's centre (y = 0) and the centre the nearest
+    other hypothesis b_j puts it at (y = b_j - b): (b_j - b) / 2 (m); ``otherwise`` when
+    there is no other hypothesis."""
+    others = [h for h in hypotheses if h != bias]
+    if not others:
+        return otherwise
+    nearest = min(others, key=lambda h: (abs(h - bias), h))
+    return 0.5 * (nearest - bias)
 
 
 def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:

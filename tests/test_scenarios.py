@@ -1,0 +1,162 @@
+"""The scenario suite: config, env (single = vector), drivers, benchmark (docs/design.md §14)."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+
+from hasa_cli.bench import main as bench_main
+from hasa_env import ConfigError, make_config
+from hasa_env.drivers import SyntheticDriver, population, run_drivers
+from hasa_env.drivers.two_point import TwoPointParams
+from hasa_env.scenarios import SCENARIOS, scenario_drivers, scenario_names
+from hasa_env.sim.road import make_road
+from hasa_env.sim.setup import INFO_KEYS
+
+
+def test_every_scenario_is_a_valid_config_and_the_users_keys_win():
+    assert scenario_names()[0] == "paper"
+    assert set(scenario_names()) >= {
+        "paper", "lane_shift", "late_ambiguity", "close_hypotheses", "off_centre_drivers",
+        "lane_change",
+    }  # fmt: skip
+    for name, spec in SCENARIOS.items():
+        cfg = make_config({"scenario": name})
+        assert cfg["scenario"] == name
+        assert spec.why and spec.summary
+    cfg = make_config({"scenario": "close_hypotheses", "markings": {"hypotheses": [0.0, 0.9]}})
+    assert cfg["markings"]["hypotheses"] == [0.0, 0.9]
+    assert make_config({"scenario": "close_hypotheses"})["markings"]["hypotheses"] == [0.0, -0.6]
+    with pytest.raises(ConfigError, match="scenario"):
+        make_config({"scenario": "rain"})
+
+
+@pytest.mark.parametrize(
+    "shifts, match",
+    [
+        ([{"station": 1.0, "length": 0.0, "offset": 1.0}], r"lane_shifts\[0\]\.length"),
+        ([{"station": 1.0, "length": 5.0}], r"lane_shifts\[0\]' must be an object"),
+        ([{"station": 1.0, "length": 5.0, "offset": 1.0}, 3], r"lane_shifts\[1\]"),
+        ([{"station": -1.0, "length": 5.0, "offset": 1.0}], r"station' must be a number in"),
+        ({"station": 1.0}, "must be a list"),
+    ],
+)
+def test_bad_lane_shifts_are_named(shifts, match):
+    with pytest.raises(ConfigError, match=match):
+        make_config({"road": {"lane_shifts": shifts}})
+
+
+def test_driven_lane_offset_slope_and_curvature_agree():
+    road = make_road("straight", lane_shifts=[{"station": 100.0, "length": 60.0, "offset": 1.8}])
+    s = np.linspace(80.0, 180.0, 2001)
+    offset, slope, curvature = road.driven_offset(s), road.driven_slope(s), road.driven_curvature(s)
+    assert offset[0] == 0.0 and offset[-1] == pytest.approx(1.8)
+    np.testing.assert_allclose(np.gradient(offset, s), slope, atol=2e-4)
+    inside = (s > 101.0) & (s < 159.0)
+    np.testing.assert_allclose(np.gradient(slope, s)[inside], curvature[inside], atol=2e-4)
+    assert make_road("straight").driven_offset(120.0) == 0.0
+
+
+@pytest.mark.parametrize("name", list(SCENARIOS))
+def test_vector_env_matches_single_envs_in_every_scenario(name):
+    n = 3
+    config = {"scenario": name, "time_limit": 0.3, "noise": {"block_size": 7}}
+    native = gym.make_vec(
+        "hasa_env/LaneKeeping-v0", num_envs=n, vectorization_mode="vector_entry_point",
+        config=config,
+    )  # fmt: skip
+    sync = gym.make_vec(
+        "hasa_env/LaneKeeping-v0", num_envs=n, vectorization_mode="sync", config=config
+    )
+    obs_a, info_a = native.reset(seed=5)
+    obs_b, info_b = sync.reset(seed=5)
+    rng = np.random.default_rng(1)
+    for _ in range(45):
+        np.testing.assert_array_equal(obs_a, obs_b)
+        for key in INFO_KEYS:
+            np.testing.assert_array_equal(info_a[key], info_b[key], err_msg=key)
+        actions = rng.uniform(-1.0, 1.0, (n, 2))
+        obs_a, rew_a, term_a, trunc_a, info_a = native.step(actions)
+        obs_b, rew_b, term_b, trunc_b, info_b = sync.step(actions)
+        np.testing.assert_array_equal(rew_a, rew_b)
+
+
+def test_late_ambiguity_starts_halfway_to_the_other_hypothesis():
+    env = gym.make("hasa_env/LaneKeeping-v0", config={"scenario": "late_ambiguity"})
+    hypotheses = env.unwrapped.setup.hypotheses
+    for index, expected in ((0, -0.9), (1, 0.9)):
+        _, info = env.reset(seed=0, options={"bias_index": index})
+        assert info["bias"] == hypotheses[index]
+        assert info["lateral_offset"] == pytest.approx(expected)
+        assert info["speed"] == 25.0
+
+
+def _final_offsets(name, params, seconds=30.0):
+    frames = run_drivers(
+        [SyntheticDriver(p) for p in params],
+        [(i, 50 + i) for i in range(len(params))],
+        "hasa_env/LaneKeeping-v0",
+        {"scenario": name, "time_limit": seconds},
+    )
+    return frames
+
+
+def test_drivers_of_every_archetype_follow_a_lane_shift_and_a_lane_change():
+    params = population("paper", 3, 6)  # two-point, preview and intermittent drivers
+    assert len({type(p).__name__ for p in params}) == 3
+    for frame in _final_offsets("lane_shift", params):
+        assert len(frame) == 3001  # nobody left the road
+        station = frame["station"].to_numpy()
+        after = station > 150.0 + 65.0 + 100.0  # well after the shift
+        assert after.any()
+        assert abs(frame["lateral_offset"].to_numpy()[after].mean() - 1.8) < 0.4
+    for frame in _final_offsets("lane_change", params):
+        y, station = frame["lateral_offset"].to_numpy(), frame["station"].to_numpy()
+        assert len(frame) == 3001
+        in_left_lane = (station > 230.0) & (station < 290.0)
+        if in_left_lane.any():
+            assert abs(y[in_left_lane].mean() - 3.6) < 0.6
+
+
+def test_off_centre_drivers_keep_their_preferred_offset():
+    params = population("paper", 3, 6)
+    drivers = scenario_drivers(params, "off_centre_drivers", seed=3)
+    offsets = np.array([p.preferred_offset for p in drivers])
+    assert np.all((np.abs(offsets) >= 0.2) & (np.abs(offsets) <= 0.5))
+    assert offsets == pytest.approx([p.preferred_offset for p in
+                                     scenario_drivers(params, "off_centre_drivers", seed=3)])  # fmt: skip
+    assert scenario_drivers(params, "paper", seed=3) == params
+    for frame, offset in zip(_final_offsets("off_centre_drivers", drivers), offsets, strict=True):
+        y = frame["lateral_offset"].to_numpy()[1000:]
+        assert abs(y.mean() - offset) < 0.2
+    with pytest.raises(ValueError, match="unknown scenario 'rain'; allowed: paper"):
+        scenario_drivers(params, "rain", seed=3)
+    with pytest.raises(ValueError, match="preferred_offset"):
+        TwoPointParams(preferred_offset=3.0)
+
+
+def test_hasa_bench_runs_every_scenario_and_writes_the_suite_table(tmp_path, capsys):
+    out = tmp_path / "suite"
+    code = bench_main(
+        ["paper", "--scenario", "all", "--seed", "9", "--drivers", "2", "--runs", "2",
+         "--ill-runs", "2", "--duration", "6", "--curved-runs", "0", "--no-plots",
+         "--quiet", "--workers", "1", "--out", str(out)]
+    )  # fmt: skip
+    assert code in (0, 1)
+    table = pd.read_csv(out / "scenarios.csv")
+    assert list(table["scenario"].unique()) == list(SCENARIOS)
+    for name in SCENARIOS:
+        result = json.loads((out / name / "results.json").read_text())
+        assert result["config"]["scenario"] == name
+        part = table[table["scenario"] == name]
+        assert {"generalized", "two_point", "lane_centring", "no_steering"} <= set(part["model"])
+        assert (part["estimated_runs"] > 0).all()
+    assert "### lane_shift" in (out / "scenarios.md").read_text()
+    code = bench_main(
+        ["paper", "--scenario", "lane_shift", "--recordings", str(tmp_path), "--out",
+         str(tmp_path / "x")]
+    )  # fmt: skip
+    assert code == 2
+    assert "--scenario applies to synthetic runs" in capsys.readouterr().err
