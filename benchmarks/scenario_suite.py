@@ -79,7 +79,8 @@ def format_suite(rows: list[dict[str, Any]]) -> str:
     lines = []
     for scenario, part in pd.DataFrame(rows).groupby("scenario", sort=False):
         lines += [f"### {scenario}", "", head, "|" + "---|" * 8]
-        for row in part.to_dict("records"):
+        for record in part.to_dict("records"):
+            row = {str(k): v for k, v in record.items()}
             timing = (
                 f"{_number(row['time_to_decide_median'], 2)} / "
                 f"{_number(row['time_to_decide_p90'], 2)}"

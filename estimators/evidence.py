@@ -72,9 +72,23 @@ confidently in the wrong lane (5 of 8 on the curved track), against 1 (and
 0) for the raw eq. 19; without them, 2 (and 0) (``hasa-bench paper --seeds
 1,4 --stress --filter ...``; the issue notes have the table).
 
+Reversal rule (issue 24, the scenario suite): the hypotheses are constant within a run, so
+weights that pass the decision threshold on hypothesis i and later on another hypothesis j mean
+that the evidence of one of the two periods was wrong, and nothing tells which. The run's
+weights then go back to the prior and stay there for the rest of the run, reported as
+``model_mismatch``: an estimator that cannot tell says so. A decision commits only once it has
+held for ``commit_time`` (1 s) at steps whose evidence was checked (at least
+``MIN_CHECKED_SAMPLES`` effective samples, no mismatch), so a start-up flip-flop can still
+reverse itself (measured: a fitted model on a stop-and-go drive decided right after 0.2 s,
+wrong 0.2 s later, then right for good); a prior that is itself past the
+threshold is the user's belief, not evidence: for such a run the rule is off. Found by tracing the ``lane_shift``
+and ``lane_change`` scenarios (docs/design.md §14.6), where the driver leaves the marked lane's
+centre on purpose and every steering model reads that as evidence for the other lane; its cost
+is the runs that were confidently wrong first and right later, which now end undecided.
+
 Decision state of a run (:data:`DECISIONS`)::
 
-    "model_mismatch"  mismatch (above)
+    "model_mismatch"  mismatch (above), or a decision reversed (the reversal rule)
     "decided"         otherwise, when max_i w_i >= decision_threshold
     "undecided"       otherwise
 
@@ -115,6 +129,9 @@ MISMATCH_QUANTILE_Z = 3.09
 """Standard-normal quantile of the mismatch test (0.999: one false alarm in a thousand tests
 of a model whose lambda is at the threshold)."""
 
+NOT_COMMITTED, CONTRADICTED = -1.0, -2.0
+"""Codes of ``_committed`` besides a hypothesis index: no decision yet; a decision reversed."""
+
 MIN_CHECKED_SAMPLES = 2.0
 """Effective samples lambda needs before weights count as verified."""
 
@@ -136,6 +153,8 @@ EVIDENCE_STATE = (
     "_last_score",
     "_log_prior",
     "_verified_log_w",
+    "_committed",
+    "_candidate",
 )
 """The per-run arrays of the rule (kept by the filter with its other per-run state)."""
 
@@ -150,6 +169,7 @@ class EvidenceRule:
     mismatch_model_error: float
     decision_threshold: float
     log_floor: float
+    commit_steps: float = math.inf
 
     @property
     def log_decision_threshold(self) -> float:
@@ -165,6 +185,9 @@ class EvidenceRule:
             mismatch_model_error=settings.mismatch_model_error,
             decision_threshold=settings.decision_threshold,
             log_floor=math.log(settings.weight_floor) if settings.weight_floor > 0 else -math.inf,
+            commit_steps=max(1.0, round(settings.commit_time / dt))
+            if math.isfinite(settings.commit_time)
+            else math.inf,
         )
 
 
@@ -179,6 +202,8 @@ def initial_evidence_state(log_prior: np.ndarray) -> dict[str, np.ndarray]:
         "_last_score": np.zeros((n_runs, n_comp)),  # 0: no previous innovation
         "_log_prior": log_prior.copy(),
         "_verified_log_w": log_prior.copy(),
+        "_committed": np.full(n_runs, NOT_COMMITTED),
+        "_candidate": np.zeros((n_runs, 2)),
     }
 
 
@@ -220,9 +245,60 @@ def weigh_evidence(
         ``autocorrelation`` (rho) and ``evidence_scale`` (tau).
     """
     if log_w.shape[0] == 1 and rule.enabled and rule.forgetting == 0:
-        return _weigh_one(rule, log_w, log_lik, score, state)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        return _weigh(rule, log_w, log_lik, score, state)
+        new_log_w, new_state, stats = _weigh_one(rule, log_w, log_lik, score, state)
+    else:
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            new_log_w, new_state, stats = _weigh(rule, log_w, log_lik, score, state)
+    if rule.enabled and math.isfinite(rule.commit_steps):
+        new_log_w = _hold_first_decision(rule, new_log_w, new_state, stats)
+    stats.pop("checked", None)
+    return new_log_w, new_state, stats
+
+
+def _hold_first_decision(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    state: dict[str, np.ndarray],
+    stats: dict[str, np.ndarray],
+) -> np.ndarray:
+    """The reversal rule (module docstring)::
+
+        candidate: the hypothesis of a checked decision and the steps it has held (reset
+                   when the run is not decided, or decided on another hypothesis)
+        commit:    candidate held for commit_time (s)          -> committed = i
+        contradict: committed = i and the run decided on j != i -> weights = prior, for ever
+
+    Updates ``state``'s ``_committed``, ``_candidate`` (and ``_verified_log_w``) and
+    ``stats["decision"]`` in place; returns the weights."""
+    checked = stats.pop("checked")
+    committed = state["_committed"]
+    if committed.size == 1 and committed[0] >= 0:  # one committed run (the single env's case)
+        lw = log_w[0].tolist()
+        if int(stats["decision"][0]) != DECIDED or lw.index(max(lw)) == committed[0]:
+            return log_w
+    decided = stats["decision"] == DECIDED
+    if not decided.any() and not (committed != NOT_COMMITTED).any():
+        if state["_candidate"].any():
+            state["_candidate"] = np.zeros_like(state["_candidate"])
+        return log_w  # (nothing decided, nothing committed: the common case at the start)
+    top = np.argmax(log_w, axis=1).astype(np.float64)
+    # a prior that is itself decided is the user's belief, not evidence: no commitment
+    eligible = decided & checked
+    eligible &= state["_log_prior"].max(axis=1) < rule.log_decision_threshold
+    candidate, held = state["_candidate"][:, 0], state["_candidate"][:, 1]
+    held = np.where(eligible, np.where((held > 0) & (candidate == top), held + 1.0, 1.0), 0.0)
+    candidate = np.where(eligible, top, 0.0)
+    state["_candidate"] = np.stack([candidate, held], axis=1)
+    is_committed = committed >= 0
+    contradicted = (committed == CONTRADICTED) | (decided & is_committed & (top != committed))
+    commits = ~is_committed & (committed != CONTRADICTED) & (held >= rule.commit_steps)
+    state["_committed"] = np.where(contradicted, CONTRADICTED, np.where(commits, top, committed))
+    if not contradicted.any():
+        return log_w
+    prior = state["_log_prior"]
+    state["_verified_log_w"] = np.where(contradicted[:, None], prior, state["_verified_log_w"])
+    stats["decision"] = np.where(contradicted, MODEL_MISMATCH, stats["decision"])
+    return np.where(contradicted[:, None], prior, log_w)
 
 
 def _weigh_one(
@@ -300,6 +376,7 @@ def _weigh_one(
         "model_error": np.array([model_error]),
         "autocorrelation": np.array([rho]),
         "evidence_scale": np.array([scale]),
+        "checked": np.array([(not mismatch) and samples >= MIN_CHECKED_SAMPLES]),
     }
     return new_log_w, new_state, stats
 
@@ -354,6 +431,7 @@ def _weigh(
         "model_error": model_error,
         "autocorrelation": rho,
         "evidence_scale": scale,
+        "checked": (samples >= MIN_CHECKED_SAMPLES) & ~mismatch,
     }
     return new_log_w, new_state, stats
 

@@ -58,6 +58,7 @@ _SCHEMA = schema(
         "mismatch_model_error": Field("number", low=1.0, low_open=True, infinite=True),
         "forgetting_time": _positive("s", infinite=True),
         "decision_threshold": Field("number", low=0.5, high=1.0, high_open=True),
+        "commit_time": _positive("s", infinite=True),
         "weight_floor": Field("number", low=0.0, high=1e-3),
     }
 )
@@ -180,6 +181,9 @@ class FilterSettings:
             to the prior without fresh evidence (``math.inf``: never).
         decision_threshold: the weight a hypothesis needs for the run to be
             ``"decided"``.
+        commit_time: how long (s) a checked decision must hold before a reversal of it
+            counts as a contradiction (:mod:`estimators.evidence`, the reversal rule;
+            ``math.inf``: never, the rule is off).
         weight_floor: no weight falls below this (0: no floor).
     """
 
@@ -209,6 +213,7 @@ class FilterSettings:
     mismatch_model_error: float = 9.0
     forgetting_time: float = math.inf
     decision_threshold: float = 0.95
+    commit_time: float = 1.0
     weight_floor: float = 0.0
 
     def __post_init__(self) -> None:

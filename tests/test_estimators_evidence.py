@@ -43,6 +43,19 @@ def _run(rule, log_lik, score, prior=(0.5, 0.5)):
     return np.array(weights), np.array(decisions), np.array(scales)
 
 
+def _run_batch(rule, log_liks, scores):
+    """The runs of :func:`_run`, weighed together (R, T, 2 weights)."""
+    log_w = np.log(np.full((len(scores), 2), 0.5))
+    state = initial_evidence_state(log_w)
+    weights = []
+    for k in range(len(scores[0])):
+        log_lik = np.stack([ll[k] for ll in log_liks])
+        score = np.stack([sc[k] for sc in scores])
+        log_w, state, _ = weigh_evidence(rule, log_w, log_lik, score, state)
+        weights.append(np.exp(log_w))
+    return np.stack(weights, axis=1)
+
+
 def _ar1(rng, n, rho):
     e = rng.standard_normal(n)
     out = np.empty(n)
@@ -106,20 +119,36 @@ def test_a_model_that_never_fits_leaves_the_weights_at_the_prior():
     assert abs(weights[-1, 0] - 0.5) < 0.2  # (only the first window's evidence entered)
 
 
-def test_a_wrong_early_decision_is_reversible():
-    # first 3 s favour hypothesis 1, then 20 s of evidence for hypothesis 0
+def test_a_reversed_decision_goes_back_to_the_prior_and_says_so():
+    # first 3 s favour hypothesis 1, then 20 s of evidence for hypothesis 0: one of the two
+    # periods was wrong (the hypotheses do not change within a run), nothing tells which
     rng = np.random.default_rng(4)
     u = rng.standard_normal(2300)
     score = np.where(np.arange(2300)[:, None] < 300, [[1.0, 0.0]], [[0.0, 1.0]])
     score = score + u[:, None]
     log_lik = -0.5 * score * score
-    weights, _, _ = _run(_rule(), log_lik, score)  # nothing is pruned: it comes back
-    assert weights[299, 1] > 0.999 and weights[-1, 0] > 0.999
-    floored, _, _ = _run(_rule(weight_floor=1e-12, forgetting_time=20.0), log_lik, score)
-    assert floored[299, 1] > 0.999 and floored[-1, 0] > 0.999
+    weights, decisions, _ = _run(_rule(), log_lik, score)
+    assert weights[299, 1] > 0.999 and decisions[299] == DECIDED
+    assert np.all(weights[-1] == 0.5) and decisions[-1] == MODEL_MISMATCH
+    assert weights[300:, 0].max() < 0.95  # never confident in the other lane
+    raw, _, _ = _run(_rule(evidence_checks=False), log_lik, score)
+    assert raw[-1, 0] > 0.999  # teeth: eq. 19 follows the later evidence to the other lane
+    # the floor and forgetting do not lift the rule
+    floored, fdecisions, _ = _run(_rule(weight_floor=1e-12, forgetting_time=20.0), log_lik, score)
+    assert floored[299, 1] > 0.999 and fdecisions[-1] == MODEL_MISMATCH
     assert floored.min() >= 1e-12 * 0.999  # the floor
-    back = np.argmax(weights[300:, 0] > 0.5)
-    assert np.argmax(floored[300:, 0] > 0.5) < back  # the floor shortens the way back
+
+
+def test_one_run_and_many_runs_agree_on_the_reversal_rule():
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal((2300, 3))
+    flip = np.where(np.arange(2300)[:, None] < 300, [[1.0, 0.0]], [[0.0, 1.0]])
+    steady = np.tile([[0.0, 0.5]], (2300, 1))
+    scores = [flip + u[:, :1], steady + u[:, 1:2], flip[::-1] + u[:, 2:]]
+    alone = [_run(_rule(), -0.5 * sc * sc, sc)[0] for sc in scores]
+    batch = _run_batch(_rule(), [-0.5 * sc * sc for sc in scores], scores)
+    for r in range(3):
+        np.testing.assert_allclose(batch[r], alone[r], rtol=0, atol=1e-12)
 
 
 def test_missing_steering_does_not_move_the_statistics():

@@ -296,7 +296,7 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             wrong_lane_confident_share=("wrong_lane_confident_share", _finite_mean),
             wrong_lane_ever_runs=(
                 "wrong_lane_confident_share",
-                lambda v: int((pd.to_numeric(v, errors="coerce") > 0).sum()),
+                lambda v: int(np.sum(pd.to_numeric(v, errors="coerce") > 0)),
             ),
             undecided_runs=("final_decision", lambda v: int((v == "undecided").sum())),
             model_mismatch_runs=("final_decision", lambda v: int((v == "model_mismatch").sum())),

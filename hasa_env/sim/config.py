@@ -311,10 +311,23 @@ def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict[str, 
     return out
 
 
+def _under(keys: Mapping[str, Any], config: Mapping[str, Any]) -> dict[str, Any]:
+    """``config`` with ``keys`` (a scenario's, trusted and shallow) filled in where the user
+    gave none; the user's values are neither copied nor walked beyond the scenario's own
+    depth (a hostile, deeply nested config reaches the validator as it was given)."""
+    out = dict(config)
+    for key, value in keys.items():
+        if key not in out:
+            out[key] = copy.deepcopy(value)
+        elif isinstance(value, Mapping) and isinstance(out[key], Mapping):
+            out[key] = _under(value, out[key])
+    return out
+
+
 _SHIFT_RANGES = {"station": (0.0, 1e6), "length": (0.1, 1e4), "offset": (-20.0, 20.0)}
 
 
-def _check_lane_shifts(shifts: list[Any]) -> None:
+def _check_lane_shifts(shifts: Any) -> None:
     """Each entry of ``road.lane_shifts`` is {station, length, offset} with numbers in range."""
     if not isinstance(shifts, list):
         raise ConfigError(
@@ -323,7 +336,7 @@ def _check_lane_shifts(shifts: list[Any]) -> None:
         )
     for i, shift in enumerate(shifts):
         where = f"config key 'road.lane_shifts[{i}]"
-        if not isinstance(shift, Mapping) or set(shift) != set(_SHIFT_RANGES):
+        if not isinstance(shift, dict) or set(shift) != set(_SHIFT_RANGES):
             raise ConfigError(
                 f"{where}' must be an object with exactly the keys station, length, offset "
                 f"(m), got {shift!r}"
@@ -354,7 +367,7 @@ def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     config = {} if config is None else config
     name = config.get("scenario", "paper") if isinstance(config, Mapping) else None
     if isinstance(name, str) and name in SCENARIOS:
-        config = deep_merge(SCENARIOS[name].config, config)
+        config = _under(SCENARIOS[name].config, config)
     cfg: dict[str, Any] = validate(config, _SCHEMA, describe=_describe, error=_error)
     _check_lane_shifts(cfg["road"]["lane_shifts"])
     probs = cfg["markings"]["probabilities"]
