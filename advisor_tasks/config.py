@@ -11,6 +11,10 @@ key                             meaning (default)
 ==============================  ==========================================================
 action.steering_only            the action is the steering alone, Box(1,); the
                                 acceleration is 0 m/s^2 (true)
+scenario                        the env's named scenario (:mod:`hasa_env.scenarios`):
+                                its env keys, and the advisors keep its preferred
+                                lateral offsets (``scenario_drivers`` seeded with
+                                advisor.population_seed) ('paper')
 advisor.population              population of :data:`hasa_env.drivers.POPULATIONS` ('paper')
 advisor.population_seed         its seed (0)
 advisor.population_size         its number of drivers (9)
@@ -86,6 +90,7 @@ from hasa_env.drivers import (
     run_driver,
 )
 from hasa_env.drivers.archetypes import HumanParams
+from hasa_env.scenarios import scenario_drivers
 from hasa_env.sim.config import ConfigError, deep_merge
 from hasa_env.sim.config import default_config as env_default_config
 from hasa_env.sim.config import describe_config as env_describe_config
@@ -312,10 +317,11 @@ _LANE_CHECKS: dict[tuple[Any, ...], str | None] = {}
 @functools.lru_cache(maxsize=16)
 def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, float]:
     """(fitted model, residual std (rad)) of ``kind`` on one run of the population's first
-    driver in the task's env (cached: every env of a vector or an evaluation shares it)."""
+    driver, as it drives in the scenario, in the task's env (cached: every env of a vector
+    or an evaluation shares it)."""
     name, seed, size = json.loads(population_key)
     config = json.loads(env_key)
-    trainer = population(name, seed, size)[0]
+    trainer = scenario_drivers(population(name, seed, size), config["scenario"], seed)[0]
     frame = run_driver(
         make_driver(trainer), "hasa_env/LaneKeeping-v0", runs=1, seed=TRAINING_SEED, config=config
     )[0]

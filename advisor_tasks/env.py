@@ -43,7 +43,9 @@ class LaneKeepingAdvisorEnv(SingleCarShell, gym.Env):
     with the true bias ``b`` unknown among ``markings.hypotheses``. A synthetic human
     of a named population (``advisor.population``; one drawn per episode, or the
     configured ``advisor.driver``) sits at the wheel, sees the true lane and turns
-    the wheel as it would to keep it. Its measured steering feeds the human-as-advisor
+    the wheel as it would to keep it (the lane it drives in and the offset from its
+    centre it keeps are the ``scenario``'s: ``road.lane_shifts``, and the drivers'
+    preferred offsets of :func:`hasa_env.scenarios.scenario_drivers`). Its measured steering feeds the human-as-advisor
     estimator (``estimator.*``: the Gaussian-mixture EKF by default, docs/design.md
     §8), which tells the lanes apart. With ``advisor.drives = "car"`` (default) the
     policy's action drives the car and the human only advises (the paper's "future

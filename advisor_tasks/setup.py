@@ -39,6 +39,7 @@ from estimators.road_geometry import lane_points_ahead, look_ahead_distances
 from estimators.wrappers import estimate_info_keys
 from hasa_env.drivers import POPULATIONS, population
 from hasa_env.drivers.archetypes import HumanParams
+from hasa_env.scenarios import scenario_drivers
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.sensors import SENSOR_NAMES
 from hasa_env.sim.setup import INFO_KEYS, EnvSetup, build_setup, physical_action
@@ -100,7 +101,9 @@ class AdvisorSetup:
         env: the car's lane-keeping set-up (``action_repeat`` of the task).
         sample: the same set-up with ``action_repeat`` 1: one simulation sample, the
             step of :func:`hasa_env.sim.transition.env_step` inside an env step.
-        drivers: the population's drivers.
+        drivers: the population's drivers as they drive in the env's ``scenario``
+            (:func:`hasa_env.scenarios.scenario_drivers` with the population seed: the
+            scenario's preferred lateral offsets, e.g. ``off_centre_drivers``).
         fixed_driver: index of the configured advisor, None for one drawn per episode.
         human_drives: the human's commands drive the car (``advisor.drives = 'human'``).
         steering_only: the action is the steering alone.
@@ -197,8 +200,13 @@ def build_advisor_setup(config: Mapping[str, Any] | None, track: str | None = No
         env_part = deep_merge(dict(POPULATIONS[advisor["population"]].env_config), env_part)
     env = build_setup(env_part, track)
     sample = dataclasses.replace(env, action_repeat=1)
+    seed = advisor["population_seed"]
     drivers = tuple(
-        population(advisor["population"], advisor["population_seed"], advisor["population_size"])
+        scenario_drivers(
+            population(advisor["population"], seed, advisor["population_size"]),
+            env.config["scenario"],
+            seed,
+        )
     )
     fixed = driver_index(advisor["driver"], list(drivers))
     make_estimator = estimator_factory(own, env.config)

@@ -163,8 +163,9 @@ def test_config_is_deep_merged_and_errors_name_the_key_and_the_range():
         (ID, {**SHORT, "action_repeat": 3}),
         (ID, {**SHORT, "action_repeat": 2, "advisor": {"drives": "human"}}),
         (CURVED, {**SHORT, "action_repeat": 2, "action": {"steering_only": False}}),
+        (ID, {**SHORT, "scenario": "off_centre_drivers", "advisor": {"drives": "human"}}),
     ],
-    ids=["car drives", "action_repeat 3", "human drives", "curved, acceleration"],
+    ids=["car drives", "action_repeat 3", "human drives", "curved, acceleration", "scenario"],
 )
 def test_car_i_of_the_vector_env_is_the_single_env_seeded_seed_plus_i(env_id, config):
     n, seed = 3, 11
@@ -265,6 +266,67 @@ def test_the_human_drives_and_the_action_is_ignored():
     assert info["steering"] == info["advisor_steering"] and info["policy_steering"] == 0.5
     assert info["sensor_advisor_steering"] == info["sensor_steering"]
     assert abs(info["lateral_offset"]) < 1.0
+
+
+def test_the_advisors_keep_the_scenarios_preferred_offsets():
+    from hasa_env.drivers import population
+    from hasa_env.scenarios import scenario_drivers
+
+    config = {"scenario": "off_centre_drivers", "advisor": {"population_seed": 2}}
+    drivers = gym.make(ID, config=config).unwrapped.setup.drivers
+    assert list(drivers) == scenario_drivers(population("paper", 2, 9), "off_centre_drivers", 2)
+    assert all(0.2 <= abs(d.preferred_offset) <= 0.5 for d in drivers)
+    assert all(d.preferred_offset == 0.0 for d in gym.make(ID).unwrapped.setup.drivers)
+
+    def mean_offset(scenario_config: dict) -> float:
+        """The car's mean lateral offset (m) over seconds 20-25 with the human driving."""
+        advisor = {**scenario_config["advisor"], "drives": "human", "driver": "Ill"}
+        env = gym.make(ID, config={**scenario_config, "action_repeat": 10, "advisor": advisor})
+        env.reset(seed=0)
+        offsets = []
+        for k in range(250):
+            *_, terminated, _, info = env.step(np.zeros(1, np.float32))
+            assert not terminated
+            offsets.extend(info["substep_lateral_offset"] if k >= 200 else [])
+        return float(np.mean(offsets))
+
+    # the same markings and seeds without the scenario's drivers: only the offset differs
+    # (the human drifts to it with a time constant of about 5 s)
+    preferred = next(d.preferred_offset for d in drivers if d.name == "Ill")
+    keeping = mean_offset(config)
+    centred = mean_offset(
+        {"markings": {"hypotheses": [0.0, -0.8]}, "advisor": {"population_seed": 2}}
+    )
+    assert keeping - centred == pytest.approx(preferred, abs=0.03)
+
+
+def test_fitted_models_train_on_the_scenarios_first_driver(monkeypatch):
+    """'fit:' models are fitted on a run of the population's first driver as it drives in
+    the scenario (keeping its preferred offset, like the advisors and hasa-bench's)."""
+    from advisor_tasks import config as advisor_config
+    from hasa_env.drivers import population
+    from hasa_env.scenarios import scenario_drivers
+
+    trainers = []
+
+    def capture(params):
+        trainers.append(params)
+        raise RuntimeError("stop before the training run")
+
+    monkeypatch.setattr(advisor_config, "make_driver", capture)
+    advisor_config._fitted_model.cache_clear()
+    config = {
+        "scenario": "off_centre_drivers",
+        "advisor": {"population_seed": 5},
+        "estimator": {"steering_model": "fit:generalized"},
+    }
+    try:
+        with pytest.raises(RuntimeError, match="stop before"):
+            gym.make(ID, config=config)
+    finally:
+        advisor_config._fitted_model.cache_clear()
+    expected = scenario_drivers(population("paper", 5, 9), "off_centre_drivers", 5)[0]
+    assert trainers == [expected] and expected.preferred_offset != 0.0
 
 
 def test_invalid_actions_and_reset_options_are_refused():

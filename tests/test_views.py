@@ -285,3 +285,86 @@ def test_view_options_choose_hud_items_and_refuse_unknown_ones():
     shown = TopDownRenderer(setup, "rgb_array").render(info)
     hidden = TopDownRenderer(setup, "rgb_array", options=ViewOptions(ghosts=False)).render(info)
     assert _mask(shown, GHOST_COLOUR, 0).sum() > 0 and _mask(hidden, GHOST_COLOUR, 0).sum() == 0
+
+
+def _frame_at_station(scenario: str, view: str, station: float) -> tuple[np.ndarray, dict, object]:
+    """A ``render_mode="rgb_array"`` frame of ``scenario`` with the car driven straight,
+    on the marked lane's centre, to ``station`` (m)."""
+    import gymnasium as gym
+
+    env = gym.make(
+        "hasa_env/LaneKeeping-v0",
+        render_mode="rgb_array",
+        config={"scenario": scenario, "render": {"view": view, "width": 640, "height": 360}},
+    )
+    options = {"lateral_offset": 0.0, "heading": 0.0, "steering": 0.0, "speed": 30.0}
+    _, info = env.reset(seed=0, options=options)
+    while info["station"] < station:
+        _, _, terminated, _, info = env.step(np.zeros(2, np.float32))
+        assert not terminated
+    return env.render(), info, env.unwrapped.setup
+
+
+def _columns_near(row: np.ndarray, expected: list[float], tol: float) -> None:
+    """Yellow pixels of ``row`` lie near each ``expected`` column (px), and only there."""
+    cols = np.flatnonzero(row)
+    assert cols.size, "no yellow pixels in the row"
+    for x in expected:
+        assert np.min(np.abs(cols - x)) <= tol, (x, cols)
+    nearest = np.min(np.abs(cols[:, None] - np.array(expected)[None, :]), axis=1)
+    assert nearest.max() <= tol + 3, (expected, cols)
+
+
+def test_the_driven_lane_of_a_lane_shift_is_drawn_in_yellow_in_both_views():
+    from hasa_env.render import ViewOptions
+    from hasa_env.render.common import DRIVEN_LANE_COLOUR
+
+    station, width, height = 180.0, 640, 360
+    # driver's view: the row showing the road 10 m ahead of the eye
+    frame, info, setup = _frame_at_station("lane_shift", "driver", station)
+    plain, *_ = _frame_at_station("paper", "driver", station)
+    assert info["lateral_offset"] == 0.0 and info["heading"] == 0.0
+    yellow = _mask(frame, DRIVEN_LANE_COLOUR, tol=0)
+    assert yellow.sum() > 1000 and _mask(plain, DRIVEN_LANE_COLOUR, tol=0).sum() == 0
+    assert _mask(frame, MARKING_COLOUR, tol=3).sum() > 1000  # the white markings stay
+    rc = setup.config["render"]
+    focal = 0.5 * width / math.tan(0.5 * rc["horizontal_field_of_view"])
+    horizon = 0.4 * height
+    row = int(round(horizon + focal * rc["eye_height"] / 10.0))
+    ahead = focal * rc["eye_height"] / (row + 0.5 - horizon)  # m ahead of the eye at the row
+    centre = float(setup.road.driven_offset(info["station"] + 1.2 + ahead))
+    assert 0.8 < centre < 1.4  # mid-shift: the driven lane is well off the marked one
+    expected = [0.5 * width - focal * (centre + side) / ahead for side in (-1.8, 1.8)]
+    _columns_near(yellow[row], expected, tol=3.0)
+    # the participant follows it too: drawn without ghosts and HUD
+    view = DriverViewRenderer(setup, "rgb_array", options=ViewOptions.participant())
+    assert _mask(view.render(info), DRIVEN_LANE_COLOUR, tol=0).sum() > 1000
+    # top-down: the road 10 m ahead of the car's station, the car's station at 70 % height
+    frame, info, setup = _frame_at_station("lane_shift", "top_down", station)
+    plain, *_ = _frame_at_station("paper", "top_down", station)
+    yellow = _mask(frame, DRIVEN_LANE_COLOUR, tol=0)
+    assert _mask(plain, DRIVEN_LANE_COLOUR, tol=0).sum() == 0
+    ppm = setup.config["render"]["pixels_per_metre"]
+    row = int(round(0.7 * height - 10.0 * ppm))
+    centre = float(setup.road.driven_offset(info["station"] + 10.0))
+    _columns_near(yellow[row], [0.5 * width - (centre + s) * ppm for s in (-1.8, 1.8)], 2.0)
+    # before the shift's start (150 m) the driven lane is the marked one: no yellow there
+    early = TopDownRenderer(setup, "rgb_array").render({**info, "station": 156.0})
+    yellow = _mask(early, DRIVEN_LANE_COLOUR, tol=0)
+    before, after = (int(round(0.7 * height - (s - 156.0) * ppm)) for s in (148.0, 165.0))
+    assert yellow[before].sum() == 0 and yellow[after].sum() > 0
+
+
+def test_the_filled_near_and_far_points_sit_on_the_driven_lane():
+    setup = build_setup({"scenario": "lane_shift", "render": {"width": 640, "height": 360}})
+    info = {"time": 6.0, "station": 180.0, "lateral_offset": 0.0, "heading": 0.0,
+            "speed": 30.0, "steering": 0.0}  # fmt: skip
+    from hasa_env.render import ViewOptions
+
+    options = ViewOptions(ghosts=False)  # no ghost rings: the filled point alone
+    view = DriverViewRenderer(setup, "rgb_array", show_points=True, options=options)
+    near = _mask(view.render(info), NEAR_POINT_COLOUR)
+    ahead = 6.2 - 1.2  # the near point is 6.2 m ahead of the station, the eye 1.2 m
+    expected = 320.0 - view.focal * float(setup.road.driven_offset(186.2)) / ahead
+    assert expected < 260.0  # well left of the marked lane's centre (320 px)
+    assert abs(np.nonzero(near)[1].mean() - expected) < 3.0

@@ -43,6 +43,9 @@ __all__ = [
     "CAR_COLOUR",
     "HYPOTHESIS_COLOURS",
     "INFO_WEIGHT_KEYS",
+    "DRIVEN_LANE_COLOUR",
+    "DRIVEN_LANE_TOLERANCE",
+    "driven_lane_runs",
 ]
 
 GRASS_COLOUR = (46, 120, 52)
@@ -50,6 +53,12 @@ ROAD_COLOUR = (90, 90, 96)
 MARKING_COLOUR = (245, 245, 245)
 GHOST_COLOUR = (200, 185, 90)
 CAR_COLOUR = (200, 40, 40)
+DRIVEN_LANE_COLOUR = (255, 200, 0)
+"""The driven lane's lines where it leaves the marked lane (``road.lane_shifts``): the
+yellow of temporary construction-zone markings."""
+DRIVEN_LANE_TOLERANCE = 0.01
+"""The driven lane's lines are drawn where its centre is more than this (m) off the marked
+lane's (:func:`driven_lane_runs`)."""
 HUD_TEXT_COLOUR = (255, 255, 255)
 HYPOTHESIS_COLOURS = (
     (235, 235, 235),
@@ -253,6 +262,28 @@ class Hud:
         for img in images:
             surface.blit(img, ((sw - img.get_width()) // 2, y))
             y += img.get_height() + 6
+
+
+def driven_lane_runs(offsets: np.ndarray) -> list[slice]:
+    """The stretches of samples at which the driven lane's lines are drawn.
+
+    ``offsets`` (m) are the driven lane's centre (:meth:`hasa_env.sim.road.Road.driven_offset`)
+    at increasing stations; a run is a contiguous stretch where ``|offset|`` exceeds
+    :data:`DRIVEN_LANE_TOLERANCE`, widened by one sample at each end so the lines leave
+    the white markings where the shift starts and rejoin them where it ends. Runs of
+    fewer than two samples are dropped.
+    """
+    away = np.abs(np.asarray(offsets, dtype=np.float64)) > DRIVEN_LANE_TOLERANCE
+    if not away.any():
+        return []
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], away, [False]]).astype(np.int8)))
+    n = away.size
+    runs = []
+    for start, stop in zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True):
+        run = slice(max(start - 1, 0), min(stop + 1, n))
+        if run.stop - run.start >= 2:
+            runs.append(run)
+    return runs
 
 
 def _hypothesis_index(bias: float, hypotheses: Sequence[float]) -> int:

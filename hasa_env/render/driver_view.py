@@ -7,9 +7,19 @@ speed, the *ghost* markings of every wrong lane hypothesis (b != 0: the
 camera reads y + b, so that hypothesis puts the lane centre at y = -b and its
 markings at y = -b +- lane_width / 2), drawn dashed and faded, and
 optionally the near (6.2 m) and far (20 m) lane-centre points of the
-two-point steering model (filled for the true lane, rings for the ghost
-lanes). The HUD (:class:`hasa_env.render.common.Hud`) shows time, speed,
+two-point steering model (filled for the lane the driver follows, rings for the
+ghost lanes). The HUD (:class:`hasa_env.render.common.Hud`) shows time, speed,
 steering angle and, when an estimator runs alongside, the hypothesis weights.
+
+With ``road.lane_shifts`` (a construction-zone shift, a planned lane change) the lane
+the driver follows leaves the marked one: its two lines, at ``driven_offset(s) +-
+lane_width / 2`` (:meth:`hasa_env.sim.road.Road.driven_offset`), are drawn solid in
+construction-zone yellow (:data:`~hasa_env.render.common.DRIVEN_LANE_COLOUR`) along the
+visible stretch wherever its centre is off the marked lane's
+(:func:`~hasa_env.render.common.driven_lane_runs`), over the white markings, which stay:
+the camera keeps reading them. For a lane change the yellow lines show the planned path
+into the other lane and back. They are drawn in every view, the participant's too (the
+driver follows them), and the filled near/far points sit on the driven lane's centre.
 
 :class:`hasa_env.render.options.ViewOptions` chooses what is drawn; a study
 participant's view (:meth:`ViewOptions.participant`) hides the ghost
@@ -37,12 +47,14 @@ from typing import Any
 import numpy as np
 
 from hasa_env.render.common import (
+    DRIVEN_LANE_COLOUR,
     GHOST_COLOUR,
     GRASS_COLOUR,
     MARKING_COLOUR,
     ROAD_COLOUR,
     SceneRenderer,
     WeightSource,
+    driven_lane_runs,
 )
 from hasa_env.render.options import ViewOptions
 from hasa_env.sim.setup import EnvSetup
@@ -84,6 +96,10 @@ DASH_PERIOD = 12.0
 """True lane dividers: 6 m dash, 6 m gap (as in the top-down view)."""
 GHOST_DASH_PERIOD = 6.0
 """Ghost markings: 3 m dash, 3 m gap."""
+DRIVEN_LANE_SPACING = 5.0
+"""The driven lane's lines are sampled at least this often (m of station): far ahead the
+road's own samples are up to 20 m apart, too sparse for a 65 m shift; at 5 m a chord
+departs from the half-cosine ramp by under 1 cm."""
 POST_SPACING = 50.0
 """Roadside posts every this many metres (m)."""
 POINT_RADIUS = 0.12
@@ -165,6 +181,16 @@ class DriverViewRenderer(SceneRenderer):
         # distances ahead of the car's station at which the continuous lines are sampled:
         # dense near the car, where perspective magnifies
         self._distances = np.geomspace(1.0, VIEW_DISTANCE, 64)
+        # the driven lane's lines: the same samples while they are dense enough, then uniform
+        gaps = np.diff(self._distances)
+        cut = float(self._distances[np.flatnonzero(gaps > DRIVEN_LANE_SPACING)[0]])
+        self._driven_distances = np.concatenate(
+            [
+                self._distances[self._distances <= cut],
+                np.arange(cut + DRIVEN_LANE_SPACING, VIEW_DISTANCE, DRIVEN_LANE_SPACING),
+                [VIEW_DISTANCE],
+            ]
+        )
 
     # ---------------------------------------------------------- geometry
     def _camera(self, info: Mapping[str, Any]) -> tuple[float, float, float, float]:
@@ -197,18 +223,24 @@ class DriverViewRenderer(SceneRenderer):
         return sx, sy, forward
 
     def _offset_points(
-        self, X: np.ndarray, Y: np.ndarray, psi_sin: np.ndarray, psi_cos: np.ndarray, offset: float
+        self,
+        X: np.ndarray,
+        Y: np.ndarray,
+        psi_sin: np.ndarray,
+        psi_cos: np.ndarray,
+        offset: float | np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
         return X - psi_sin * offset, Y + psi_cos * offset
 
     def _strip(
         self,
         poses: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-        right: float,
-        left: float,
+        right: float | np.ndarray,
+        left: float | np.ndarray,
         camera: tuple[float, float, float, float],
     ) -> list[tuple[float, float]] | None:
-        """Polygon of the band between lateral offsets ``right`` < ``left`` (m); None if behind."""
+        """Polygon of the band between lateral offsets ``right`` < ``left`` (m; constants or one
+        per pose); None if behind."""
         X, Y, sn, cs = poses
         rx, ry = self._offset_points(X, Y, sn, cs, right)
         lx, ly = self._offset_points(X, Y, sn, cs, left)
@@ -314,11 +346,28 @@ class DriverViewRenderer(SceneRenderer):
             if band is not None:
                 pg.draw.polygon(surf, MARKING_COLOUR, band)
         self._dashes(station, DASH_PERIOD, self.dividers, MARKING_COLOUR, MARKING_WIDTH, camera)
+        self._draw_driven_lane(station, camera)
         self._draw_posts(station, camera)
         if self.show_points:
             self._draw_points(station, camera)
         if self._bonnet is not None:
             surf.blit(self._bonnet, (0, self.height - self._bonnet.get_height()))
+
+    def _draw_driven_lane(self, station: float, camera: tuple[float, float, float, float]) -> None:
+        """The driven lane's lines (yellow, solid) where it is off the marked lane."""
+        road = self.setup.road
+        if not road.lane_shifts:
+            return
+        stations = station + self._driven_distances
+        offsets = road.driven_offset(stations)
+        poses = self._poses(stations)
+        half, w = 0.5 * road.lane_width, 0.5 * MARKING_WIDTH
+        for run in driven_lane_runs(offsets):
+            stretch = (poses[0][run], poses[1][run], poses[2][run], poses[3][run])
+            for line in (offsets[run] - half, offsets[run] + half):
+                band = self._strip(stretch, line - w, line + w, camera)
+                if band is not None:
+                    self._pg.draw.polygon(self._target, DRIVEN_LANE_COLOUR, band)
 
     def _bonnet_surface(self) -> Any:
         """The bonnet and dashboard silhouette (drawn once, blitted every frame).
@@ -372,7 +421,8 @@ class DriverViewRenderer(SceneRenderer):
         X, Y, sn, cs = self._poses(station + distances)
         pg = self._pg
         colours = (NEAR_POINT_COLOUR, FAR_POINT_COLOUR)
-        for centre, ring in [(0.0, False)] + [(c, True) for c in self.ghost_centres]:
+        driven = self.setup.road.driven_offset(station + distances)  # 0 without lane shifts
+        for centre, ring in [(driven, False)] + [(c, True) for c in self.ghost_centres]:
             px, py = self._offset_points(X, Y, sn, cs, centre)
             sx, sy, forward = self.project(px, py, camera)
             for x, y, f, colour in zip(sx, sy, forward, colours, strict=True):

@@ -4,6 +4,15 @@ The view follows the car with the road tangent pointing up: grey road,
 white lane markings (true), faded yellow "ghost" markings where a wrong
 lane-centre hypothesis would put the lane, the car, and the shared HUD
 (:class:`hasa_env.render.common.Hud`).
+
+With ``road.lane_shifts`` (a construction-zone shift, a planned lane change) the lane
+the driver follows leaves the marked one: its two lines, at ``driven_offset(s) +-
+lane_width / 2``, are drawn solid in construction-zone yellow
+(:data:`~hasa_env.render.common.DRIVEN_LANE_COLOUR`) wherever its centre is off the
+marked lane's (:func:`~hasa_env.render.common.driven_lane_runs`), over the white
+markings, which stay: the camera keeps reading them. For a lane change the yellow
+lines show the planned path into the other lane and back. Drawn whatever the
+:class:`~hasa_env.render.options.ViewOptions` (the driver follows them).
 """
 
 from __future__ import annotations
@@ -15,12 +24,14 @@ import numpy as np
 
 from hasa_env.render.common import (
     CAR_COLOUR,
+    DRIVEN_LANE_COLOUR,
     GHOST_COLOUR,
     GRASS_COLOUR,
     MARKING_COLOUR,
     ROAD_COLOUR,
     SceneRenderer,
     WeightSource,
+    driven_lane_runs,
 )
 from hasa_env.render.options import ViewOptions
 from hasa_env.sim.setup import EnvSetup
@@ -75,16 +86,20 @@ class TopDownRenderer(SceneRenderer):
         return np.stack([sx, sy], axis=-1)
 
     def _line_points(
-        self, stations: np.ndarray, offset: float, origin: tuple
+        self,
+        poses: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        offset: float | np.ndarray,
+        origin: tuple,
     ) -> list[tuple[float, float]]:
-        road = self.setup.road
-        X, Y, psi = road.pose_at(stations)
-        gx = X - np.sin(psi) * offset
-        gy = Y + np.cos(psi) * offset
+        """Screen points of the line ``offset`` m (a constant or one per pose) left of the
+        centre-line ``poses`` (X, Y, sin psi, cos psi)."""
+        X, Y, sn, cs = poses
+        gx = X - sn * offset
+        gy = Y + cs * offset
         return [tuple(p) for p in self._to_screen(gx, gy, origin).tolist()]
 
     def _draw_scene(self, surf: Any, info: Mapping[str, Any]) -> None:
-        """The road from above: grass, road, true and ghost markings, the car."""
+        """The road from above: grass, road, true and ghost markings, the driven lane, the car."""
         pg = self._pg
         setup = self.setup
         road = setup.road
@@ -96,18 +111,20 @@ class TopDownRenderer(SceneRenderer):
         stations = np.arange(s0 - behind, s0 + ahead, 1.0)
         X0, Y0, psi0 = road.pose_at(s0)
         origin = (float(X0), float(Y0), float(psi0))
+        X, Y, psi = road.pose_at(stations)
+        poses = (X, Y, np.sin(psi), np.cos(psi))  # once per frame, shared by every line
         cfg = setup.config["road"]
         right_edge = -width / 2 - cfg["lanes_right"] * width
         left_edge = width / 2 + cfg["lanes_left"] * width
-        left_pts = self._line_points(stations, left_edge, origin)
-        right_pts = self._line_points(stations, right_edge, origin)
+        left_pts = self._line_points(poses, left_edge, origin)
+        right_pts = self._line_points(poses, right_edge, origin)
         pg.draw.polygon(surf, ROAD_COLOUR, left_pts + right_pts[::-1])
         line_w = max(1, int(round(0.15 * self.ppm)))
         # true markings: solid edges, dashed lane dividers
         n_lines = cfg["lanes_left"] + cfg["lanes_right"] + 1
         for i in range(n_lines + 1):
             offset = right_edge + i * width
-            pts = self._line_points(stations, offset, origin)
+            pts = self._line_points(poses, offset, origin)
             if i in (0, n_lines):
                 pg.draw.lines(surf, MARKING_COLOUR, False, pts, line_w)
             else:
@@ -117,9 +134,25 @@ class TopDownRenderer(SceneRenderer):
             if b == 0.0:
                 continue
             for side in (-0.5, 0.5):
-                pts = self._line_points(stations, -b + side * width, origin)
+                pts = self._line_points(poses, -b + side * width, origin)
                 self._dashed(pts, stations, GHOST_COLOUR, max(1, line_w // 2), period=6.0)
+        self._draw_driven_lane(stations, poses, origin, line_w)
         self._draw_car(info, origin)
+
+    def _draw_driven_lane(
+        self, stations: np.ndarray, poses: tuple, origin: tuple, line_w: int
+    ) -> None:
+        """The driven lane's lines (yellow, solid) where it is off the marked lane."""
+        road = self.setup.road
+        if not road.lane_shifts:
+            return
+        offsets = road.driven_offset(stations)
+        half = 0.5 * road.lane_width
+        for run in driven_lane_runs(offsets):
+            stretch = tuple(p[run] for p in poses)
+            for side in (-half, half):
+                pts = self._line_points(stretch, offsets[run] + side, origin)
+                self._pg.draw.lines(self._target, DRIVEN_LANE_COLOUR, False, pts, line_w)
 
     def _dashed(
         self, pts: list, stations: np.ndarray, colour: tuple, line_w: int, period: float = 12.0
