@@ -22,7 +22,7 @@ lane_shift             a construction-zone shift: the driven lane moves 1.8 m le
                        65 m from station 150 m; the old markings carry straight on
 late_ambiguity         the ambiguity starts at speed (25 m/s) with the car halfway
                        between the true centre and the ghost's
-close_hypotheses       hypotheses 0.6 m apart (worn paint, tar seams); start centred
+close_hypotheses       hypotheses 0.3 m apart (worn paint, tar seams); start centred
                        +- 0.25 m (std)
 off_centre_drivers     each driver keeps a preferred offset of 0.2-0.5 m, left or right;
                        hypotheses [0, -0.8] m (a tar seam)
@@ -93,11 +93,13 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "close_hypotheses",
-            "hypotheses 0.6 m apart (worn paint, tar seams); start centred, std 0.25 m",
+            "hypotheses 0.3 m apart (worn paint, tar seams); start centred, std 0.25 m",
             "the hypotheses lie inside the drivers' own lateral wander, so where the car "
-            "sits says little about which is true.",
+            "sits says little about which is true. (0.6 m apart, as first designed, a "
+            "lane-centring prior decided in a median 0.5-2 s: the spacing was still 2-4 "
+            "drivers' lateral standard deviations.)",
             {
-                "markings": {"hypotheses": [0.0, -0.6]},
+                "markings": {"hypotheses": [0.0, -0.3]},
                 "initial_state": {"lateral_offset": 0.0, "lateral_offset_std": 0.25},
             },
         ),

@@ -28,7 +28,7 @@ def test_every_scenario_is_a_valid_config_and_the_users_keys_win():
         assert spec.why and spec.summary
     cfg = make_config({"scenario": "close_hypotheses", "markings": {"hypotheses": [0.0, 0.9]}})
     assert cfg["markings"]["hypotheses"] == [0.0, 0.9]
-    assert make_config({"scenario": "close_hypotheses"})["markings"]["hypotheses"] == [0.0, -0.6]
+    assert make_config({"scenario": "close_hypotheses"})["markings"]["hypotheses"] == [0.0, -0.3]
     with pytest.raises(ConfigError, match="scenario"):
         make_config({"scenario": "rain"})
 
