@@ -60,7 +60,7 @@ CSV_TABLES = {
 
 def _source(cfg: dict[str, Any]) -> str:
     if cfg.get("recordings"):
-        return f"recordings in {cfg['recordings']}"
+        return f"recordings in {cfg['recordings']} (scenario {cfg.get('scenario', 'paper')!r})"
     return (
         f"synthetic population {cfg['population']!r}, seeds {cfg['seeds']}: "
         f"{cfg['drivers']} drivers x {cfg['runs']} runs of {cfg['duration']:g} s on the "

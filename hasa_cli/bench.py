@@ -407,7 +407,8 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         error(
             PROG,
             "--scenario applies to synthetic runs; recordings carry their own scenario "
-            "(their env config's 'scenario')",
+            "(their env config's 'scenario'): the training run's is scored, the others are "
+            "listed as skipped (--training-file chooses)",
         )
         return EXIT_USAGE
     out = Path(args.out)

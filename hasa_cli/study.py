@@ -45,6 +45,7 @@ from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.scenarios import scenario_drivers, scenario_spec
 from hasa_env.session import (
     DriveSession,
     DriveSettings,
@@ -163,7 +164,44 @@ def _answers(study: Study, given: dict[str, str], interactive: bool) -> dict[str
     return study.check_metadata(answers)
 
 
+def _scenario_lines(study: Study) -> list[str]:
+    """What ``--check`` says of the study's scenario: its name and summary, the start state
+    and hypotheses the runs get, the scenario's keys the study file overrides."""
+    spec = scenario_spec(study.scenario)
+    config = study.env_config(study.document["measured"]["track"])
+    init = config["initial_state"]
+    where = (
+        "halfway between the true lane's centre and the nearest other hypothesis's "
+        "(initial_state.between_hypotheses)"
+        if init["between_hypotheses"]
+        else f"y = {init['lateral_offset']:+.2f} m"
+    )
+    if init["lateral_offset_std"] > 0.0:
+        where += f" (+ a Gaussian of std {init['lateral_offset_std']:g} m)"
+    lines = [
+        f"scenario {spec.name!r}: {spec.summary}",
+        f"  start: {init['speed']:g} m/s, {where}, heading {init['heading']:g} rad; lane "
+        f"hypotheses {config['markings']['hypotheses']} m",
+    ]
+    if config["road"]["lane_shifts"]:
+        lines.append(
+            f"  the driven lane moves: {config['road']['lane_shifts']} (drawn in yellow over "
+            "the white markings, which the camera keeps reading)"
+        )
+    for key, mine, theirs in study.scenario_overrides():
+        lines.append(f"  the study file's {key} = {mine!r} overrides the scenario's {theirs!r}")
+    if spec.preferred_offset[1] > 0.0:
+        low, high = spec.preferred_offset
+        lines.append(
+            f"  the scenario's preferred offset ({low:g}-{high:g} m) is a synthetic driver's "
+            "(--synthetic); a human keeps their own"
+        )
+    return lines
+
+
 def _print_schedule(study: Study, participant: str, slot: int | None) -> None:
+    for line in _scenario_lines(study):
+        print(f"{study.source}: {line}" if not line.startswith(" ") else line)
     seed = study.seed
     if seed is None:
         print(f"{study.source}: no study seed: each session draws one (recorded)")
@@ -259,10 +297,17 @@ class _Participant:
     metadata: dict[str, Any] = field(default_factory=dict)
 
 
-def _synthetic_participant(args: argparse.Namespace) -> _Participant:
+def _synthetic_participant(args: argparse.Namespace, scenario: str) -> _Participant:
     """A synthetic driver of ``--population`` turning a virtual G29 and pressing its button
-    through the screens; :class:`_Exit` for an unknown driver (2) or no virtual wheel (3)."""
-    drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
+    through the screens, as it drives in the study's ``scenario`` (its preferred offset:
+    :func:`hasa_env.scenarios.scenario_drivers`, from ``--population-seed``);
+    :class:`_Exit` for an unknown driver (2) or no virtual wheel (3)."""
+    drivers = {
+        p.name: p
+        for p in scenario_drivers(
+            population(args.population, seed=args.population_seed), scenario, args.population_seed
+        )
+    }
     if args.synthetic not in drivers:
         print(f"{PROG}: unknown driver {args.synthetic!r}; this population has "
               f"{', '.join(drivers)}", file=sys.stderr)  # fmt: skip
@@ -338,7 +383,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         display = None if setup.headless else _open_window(pg, args, setup.study)
         who = (
-            _synthetic_participant(args)
+            _synthetic_participant(args, setup.study.scenario)
             if setup.synthetic
             else _Participant(joystick_profiles(args.calibration, log))
         )

@@ -2,7 +2,7 @@
 
 A scenario is the env config it sets (under the user's own keys: ``gym.make(id,
 config={"scenario": "lane_shift"})``, ``hasa-bench paper --scenario lane_shift``, a
-study file's ``"env_config": {"scenario": ...}``) and, for the drivers, the lateral
+study file's ``[runs] scenario = ...``) and, for the drivers, the lateral
 offset they prefer to keep (:func:`scenario_drivers`). docs/design.md §14 says why each
 exists; what they need from the env:
 

@@ -16,7 +16,9 @@ from hasa_env.devices import InputManager, JoystickCalibration
 from hasa_env.devices.calibration import shipped_calibration
 from hasa_env.devices.virtual import VirtualJoystick
 from hasa_env.drivers import SyntheticDriver, population
+from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording import load_recording
+from hasa_env.scenarios import SCENARIOS
 from hasa_env.session import (
     DriveSettings,
     SessionError,
@@ -29,6 +31,7 @@ from hasa_env.session import (
 from hasa_env.session.study import participant_slot, williams_square
 
 PAPER = Path(__file__).resolve().parents[1] / "studies" / "paper.toml"
+LANE_SHIFT = PAPER.with_name("lane_shift.toml")
 
 
 def small(**sections) -> Study:
@@ -64,9 +67,82 @@ def test_the_paper_study_is_the_papers_protocol():
     measured = [r for r in runs if r.block == "measured"]
     assert len(measured) == 10 and Counter(r.bias for r in measured) == {0.0: 5, -1.8: 5}
     assert all(r.track == "straight" for r in runs)
-    options = study.reset_options(measured[0])
-    assert options == {"lateral_offset": -0.5, "heading": 0.0, "speed": 15.0, "steering": 0.0,
-                       "bias": measured[0].bias}  # fmt: skip
+    # the start state is the env config's (where a scenario's keys can still apply)
+    assert study.reset_options(measured[0]) == {"steering": 0.0, "bias": measured[0].bias}
+    assert config["scenario"] == "paper" and study.scenario_overrides() == []
+    init = config["initial_state"]
+    assert (init["lateral_offset"], init["speed"], init["heading"]) == (-0.5, 15.0, 0.0)
+    assert not init["between_hypotheses"] and init["lateral_offset_std"] == 0.0
+
+
+def test_the_lane_shift_study_is_the_paper_protocol_in_the_lane_shift_scenario():
+    paper, shift = Study.load(PAPER), Study.load(LANE_SHIFT)
+    assert shift.scenario == "lane_shift" and shift.scenario_overrides() == []
+    config = shift.env_config("straight")
+    assert config["scenario"] == "lane_shift"
+    assert config["road"]["lane_shifts"] == SCENARIOS["lane_shift"].config["road"]["lane_shifts"]
+    assert config == paper.env_config("straight") | {
+        "scenario": "lane_shift", "road": config["road"]}  # fmt: skip
+    # the same protocol: every key but the name, the texts and the scenario
+    same = ("format_version", "participant", "practice", "measured", "schedule", "env", "view")
+    assert {k: shift.document[k] for k in same} == {k: paper.document[k] for k in same}
+    assert {**shift.document["runs"], "scenario": "paper"} == paper.document["runs"]
+    assert [(r.bias, r.seed) for r in shift.schedule_for("P03", None, 1)] == [
+        (r.bias, r.seed) for r in paper.schedule_for("P03", None, 1)]  # fmt: skip
+    env = LaneKeepingEnv(config=config)
+    try:
+        _, info = env.reset(
+            seed=1, options=shift.reset_options(shift.schedule_for("P01", None, 1)[1])
+        )
+    finally:
+        env.close()
+    assert info["lateral_offset"] == -0.5 and info["speed"] == 15.0
+
+
+def _paper_in(tmp_path: Path, scenario: str, drop: tuple[str, ...] = ()) -> Study:
+    """studies/paper.toml with ``runs.scenario`` = ``scenario`` and the ``[runs]`` or
+    ``[env]`` lines starting with ``drop`` left out."""
+    lines = [line for line in PAPER.read_text().splitlines()
+             if not line.startswith(drop or ("\0",))]  # fmt: skip
+    text = "\n".join(lines).replace("[runs]\n", f'[runs]\nscenario = "{scenario}"\n', 1)
+    return Study.load(write(tmp_path, text + "\n"))
+
+
+def _start(study: Study, bias: float) -> dict:
+    env = LaneKeepingEnv(config=study.env_config("straight"))
+    try:
+        run = next(r for r in study.schedule_for("P01", None, 1) if r.bias == bias)
+        return env.reset(seed=run.seed, options=study.reset_options(run))[1]
+    finally:
+        env.close()
+
+
+def test_a_scenario_applies_under_the_study_files_own_keys(tmp_path):
+    # late_ambiguity in a copy of paper.toml: the file's speed and lateral_offset are
+    # given, yet the car starts halfway between the hypotheses' centres
+    late = _paper_in(tmp_path, "late_ambiguity")
+    assert late.env_config("straight")["initial_state"]["between_hypotheses"] is True
+    for bias, halfway in ((0.0, -0.9), (-1.8, 0.9)):
+        info = _start(late, bias)
+        assert info["lateral_offset"] == pytest.approx(halfway) and info["speed"] == 15.0
+    assert late.scenario_overrides() == [("runs.speed", 15.0, 25.0)]
+    # without [runs] speed, the scenario's 25 m/s
+    assert _start(_paper_in(tmp_path, "late_ambiguity", ("speed =",)), 0.0)["speed"] == 25.0
+    # close_hypotheses: paper.toml's hypotheses and start win (and are listed) ...
+    close = _paper_in(tmp_path, "close_hypotheses")
+    assert close.hypotheses == [0.0, -1.8]
+    assert {k for k, _, _ in close.scenario_overrides()} == {
+        "env.markings.hypotheses", "runs.lateral_offset"}  # fmt: skip
+    # ... and without them the scenario's: its hypotheses schedule the runs, its start
+    bare = _paper_in(tmp_path, "close_hypotheses", ("lateral_offset", "markings.hypotheses"))
+    assert bare.hypotheses == [0.0, -0.6] and bare.scenario_overrides() == []
+    biases = {r.bias for r in bare.schedule_for("P01", None, 1) if r.block == "measured"}
+    assert biases == {0.0, -0.6}
+    init = bare.env_config("straight")["initial_state"]
+    assert (init["lateral_offset"], init["lateral_offset_std"]) == (0.0, 0.25)
+    # off_centre_drivers: only the hypotheses are env keys (the offsets are drivers')
+    off = _paper_in(tmp_path, "off_centre_drivers", ("markings.hypotheses",))
+    assert off.hypotheses == [0.0, -0.8]
 
 
 @pytest.mark.parametrize(
@@ -87,6 +163,14 @@ def test_the_paper_study_is_the_papers_protocol():
         ("break_every = 5", "break_every = 5 5", r"not valid TOML: .*\(at line \d+, column \d+\)"),
         ("[env]", "[env]\ntrack = 'curved'", r"'env.track' is set by practice.track"),
         ('hud = []', 'hud = ["clock"]', r"key 'view.hud' has the unknown item 'clock'"),
+        ("seconds = 30.0", 'seconds = 30.0\nscenario = "lane_shif"',
+         r"study.toml, line \d+: key 'runs.scenario' = 'lane_shif' is not allowed: one of "
+         r"'paper', 'lane_shift', 'late_ambiguity', 'close_hypotheses', 'off_centre_drivers', "
+         r"'lane_change'"),
+        ("[env]", '[env]\nscenario = "lane_shift"', r"line \d+: key 'env.scenario' is set by "
+         r"runs.scenario; remove it from \[env\]"),
+        ("lateral_offset = -0.5", "lateral_offset = 5.5",
+         r"line \d+: key 'runs.lateral_offset' = 5.5 is out of range: allowed \[-5, 5\] m"),
     ],
 )  # fmt: skip
 def test_bad_study_files_name_file_line_key_and_range(tmp_path, old, new, message):

@@ -20,7 +20,9 @@ from hasa_cli.bench import main as bench_main
 from hasa_cli.drive import EXIT_NO_SCREEN
 from hasa_cli.drive import main as drive_main
 from hasa_cli.study import StatusLine
+from hasa_env.drivers import population
 from hasa_env.recording import load_recording
+from hasa_env.scenarios import scenario_drivers
 
 STUDY = """
 format_version = 1
@@ -200,3 +202,41 @@ def test_the_status_line_shows_run_bias_time_speed_and_weights(tmp_path, capsys)
                for line in driving)  # fmt: skip
     assert any(line.endswith("| break") for line in lines)
     assert StatusLine().tty is False  # captured: plain lines, no carriage returns
+
+
+def test_study_check_shows_the_scenario_and_what_the_file_overrides(tmp_path, capsys):
+    shipped = Path(__file__).resolve().parents[1] / "studies" / "lane_shift.toml"
+    assert drive_main(["study", str(shipped), "--participant", "P01", "--check"]) == 0
+    shown = capsys.readouterr().out
+    assert "scenario 'lane_shift': construction zone" in shown
+    assert "the driven lane moves: [{'station': 150.0, 'length': 65.0, 'offset': 1.8}]" in shown
+    assert "the views draw the painted lines only, not the moved lane" in shown
+    assert "overrides" not in shown  # lane_shift.toml keeps every key of the scenario
+    late = tmp_path / "late.toml"
+    late.write_text(_study(tmp_path, 1.0).read_text().replace(
+        "[runs]\n", '[runs]\nscenario = "late_ambiguity"\nspeed = 15.0\n'))  # fmt: skip
+    assert drive_main(["study", str(late), "--participant", "P01", "--check"]) == 0
+    shown = capsys.readouterr().out
+    assert "start: 15 m/s, halfway between the true lane's centre and the nearest other" in shown
+    assert "the study file's runs.speed = 15.0 overrides the scenario's 25.0" in shown
+
+
+def test_a_synthetic_participant_drives_the_studys_scenario(tmp_path, capsys):
+    study = tmp_path / "off.toml"
+    study.write_text(_study(tmp_path, 0.3).read_text().replace(
+        "[runs]\n", '[runs]\nscenario = "off_centre_drivers"\n').replace(
+        "markings.hypotheses = [0.0, -1.8]\n", ""))  # fmt: skip
+    out = tmp_path / "rec"
+    code = drive_main(["study", str(study), "--participant", "P01", "--output", str(out),
+                       "--synthetic", "2", "--meta", "age_band=18-24"])  # fmt: skip
+    assert code == 0
+    capsys.readouterr()
+    rec = load_recording(out / "P01" / "measured_01_000.csv")
+    assert rec.config["scenario"] == "off_centre_drivers"
+    assert rec.config["markings"]["hypotheses"] == [0.0, -0.8]
+    assert rec.meta["metadata"]["study"]["scenario"] == "off_centre_drivers"
+    # the synthetic participant keeps the scenario's preferred offset (a human their own)
+    expected = {p.name: p for p in scenario_drivers(population("paper", seed=0),
+                                                   "off_centre_drivers", 0)}["2"]  # fmt: skip
+    offset = rec.meta["metadata"]["synthetic_driver"]["params"]["preferred_offset"]
+    assert offset == expected.preferred_offset and 0.2 <= abs(offset) <= 0.5

@@ -147,8 +147,10 @@ class ProtocolConfig:
         duration: length of each run (s).
         scenario: the scenario of the synthetic runs (:data:`hasa_env.scenarios.SCENARIOS`):
             the env config it sets (under ``noise``) and its drivers' preferred offsets
-            (:func:`hasa_env.scenarios.scenario_drivers`); the training run and the
-            scored runs are all driven in it.
+            (:func:`hasa_env.scenarios.scenario_drivers`); the scored runs are driven in
+            it, the training run in ``paper`` (:meth:`env_config`). Recordings carry their
+            own: the training recording's is scored (:func:`benchmarks.protocol.plan.
+            recording_plan`), and the results' config names it.
         track: the main track, "straight" or "curved".
         curved_runs: extra runs of the illustrative driver on the curved
             track (steering scores and estimation with the road ahead as a

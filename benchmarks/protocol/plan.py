@@ -85,6 +85,8 @@ class Plan:
             for recordings, the population's order otherwise).
         notes: what the plan wants said in the results (recordings only).
         skipped: recordings left out, ``{"file", "reason"}`` each.
+        scenario: the scenario of the scored runs (:data:`hasa_env.scenarios.SCENARIOS`):
+            ``config.scenario`` for synthetic runs, the training recording's for recordings.
     """
 
     seed: int | None
@@ -100,6 +102,7 @@ class Plan:
     notes: list[str] = field(default_factory=list)
     skipped: list[dict[str, str]] = field(default_factory=list)
     training_env_config: dict[str, Any] = field(default_factory=dict)
+    scenario: str = "paper"
 
     @property
     def recorded(self) -> bool:
@@ -195,6 +198,7 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
         training_env_config=config.env_config(training=True),
         drivers=drivers,
         driver_order=[p.name for p in params],
+        scenario=config.scenario,
     )
 
 
@@ -312,6 +316,8 @@ class _Scan:
     training: tuple[str, str] | None
     session_details: dict[str, Any]
     session_notes: list[str]
+    scenarios: dict[Path, str] = field(default_factory=dict)
+    """Each found recording's scenario (its env config's; ``paper`` when it has none)."""
 
 
 def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | None) -> _Scan:
@@ -323,6 +329,7 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
         if not (e.path == root and not loaded)  # "no recordings here" is said below
     ]
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
+    scenarios: dict[Path, str] = {}
     training: tuple[str, str] | None = None
     session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
     for rec in loaded:
@@ -338,6 +345,7 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
         driver = session_runs.get(rec.path.resolve()) or _driver_of(rec, root)
         track = str(rec.config["track"])
         found[(driver, track)].append(rec.path)
+        scenarios[rec.path] = str(rec.config.get("scenario") or "paper")
         if training_file is not None and rec.path.resolve() == training_file:
             training = (driver, track)
     if not found:
@@ -347,7 +355,39 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
                 + "\n".join(f"  {s['file']}: {s['reason']}" for s in skipped)
             )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
-    return _Scan(found, skipped, training, session_details, session_notes)
+    return _Scan(found, skipped, training, session_details, session_notes, scenarios)
+
+
+def _keep_one_scenario(
+    scan: _Scan, illustrative: str, track: str, training_index: int
+) -> tuple[str, int]:
+    """Leave in ``scan`` the recordings of the training run's scenario only (the others go
+    to ``scan.skipped`` with the reason); the scenario scored and the training run's index
+    among the illustrative driver's remaining runs. Without that run (an index past the
+    driver's runs: :meth:`Plan.training` says so) the scenario is that of the driver's first
+    run (of the first recording found, if it has none on ``track``)."""
+    own = scan.found.get((illustrative, track)) or [p for ps in scan.found.values() for p in ps]
+    training = own[training_index] if training_index < len(own) else None
+    scenario = scan.scenarios[training if training is not None else own[0]]
+    for key in list(scan.found):
+        kept = []
+        for path in scan.found[key]:
+            other = scan.scenarios[path]
+            if other == scenario:
+                kept.append(path)
+                continue
+            scan.skipped.append({
+                "file": str(path),
+                "reason": f"scenario {other}, not the training run's {scenario} (score it "
+                "with a folder of its own)",
+            })  # fmt: skip
+        if kept:
+            scan.found[key] = kept
+        else:
+            del scan.found[key]
+    if training is not None:
+        training_index = scan.found[(illustrative, track)].index(training)
+    return scenario, training_index
 
 
 def _training_choice(
@@ -397,14 +437,27 @@ def recording_plan(config: ProtocolConfig) -> Plan:
     study``) contribute their completed measured runs only: practice runs and
     aborted attempts are left out and reported in the notes, and the drivers
     are the sessions' participants, with their metadata.
+
+    One scenario is scored: the training run's (its recording's env config
+    ``scenario``; a recording without one is ``paper``). Recordings of another
+    scenario are listed in ``skipped``, not pooled: a lane shift or a lane change
+    makes other errors than lane keeping, and one table and verdict over both
+    would describe neither; and the training run stays one of the scored
+    scenario's, as a folder of one study's recordings has it. To score another
+    scenario, give it a folder of its own (or ``training_file`` one of its
+    recordings). (Unlike the synthetic protocol, whose training run is driven in
+    the ``paper`` scenario whatever it scores, :attr:`Plan.training_env_config`,
+    the models here are fitted on a run of the scored scenario: the notes say so
+    when it is not ``paper``.)
     """
     root = Path(config.recordings or "")
     if not root.is_dir():
         raise BenchmarkError(f"recordings directory {str(root)!r} does not exist")
     training_file = Path(config.training_file).resolve() if config.training_file else None
     scan = _scan_recordings(root, config, training_file)
-    found = scan.found
     illustrative, training_index = _training_choice(config, root, scan, training_file)
+    scenario, training_index = _keep_one_scenario(scan, illustrative, config.track, training_index)
+    found = scan.found
     names = sorted({d for d, _ in found})
     order = [illustrative] + [n for n in names if n != illustrative]
     other_track = "curved" if config.track != "curved" else None
@@ -428,7 +481,10 @@ def recording_plan(config: ProtocolConfig) -> Plan:
                 ),
             }
         )
-    notes = [f"recordings: {len(main) + len(curved)} runs of {len(names)} drivers from {root}"]
+    notes = [
+        f"recordings: {len(main) + len(curved)} runs of {len(names)} drivers from {root}, "
+        f"scenario {scenario!r} (the training run's)"
+    ]
     unused = sum(
         len(paths)
         for (_, track), paths in found.items()
@@ -446,6 +502,18 @@ def recording_plan(config: ProtocolConfig) -> Plan:
     )
     if train_ref is not None:
         notes.append(f"the models are trained on {train_ref.path} (driver {illustrative!r})")
+    if scenario != "paper":
+        notes.append(
+            f"the models and the lane-centring prior are fitted on a run of {scenario!r} "
+            "itself, not on one of ordinary lane keeping ('paper') as in the synthetic "
+            "protocol (docs/design.md section 14.4)"
+        )
+    others = sum(1 for s in scan.skipped if s["reason"].startswith("scenario "))
+    if others:
+        notes.append(
+            f"{others} recording(s) of other scenarios than {scenario!r} not scored "
+            "(listed as skipped)"
+        )
     return Plan(
         seed=None,
         track=config.track,
@@ -459,6 +527,7 @@ def recording_plan(config: ProtocolConfig) -> Plan:
         driver_order=order,
         notes=notes,
         skipped=scan.skipped,
+        scenario=scenario,
     )
 
 

@@ -408,6 +408,18 @@ def _estimators(
     return estimators, kinds
 
 
+def _result_config(
+    config: ProtocolConfig, plan: Plan, user_models: Sequence[str]
+) -> dict[str, Any]:
+    """The results' ``config``: the protocol's settings, the illustrative driver, the user
+    models and the scenario scored (a recording plan's is its training run's)."""
+    return config.to_dict() | {
+        "illustrative": plan.illustrative,
+        "user_models": list(user_models),
+        "scenario": plan.scenario,
+    }
+
+
 def aggregate_result(
     config: ProtocolConfig,
     user_models: Sequence[str],
@@ -460,8 +472,7 @@ def aggregate_result(
         config,
     )
     return BenchmarkResult(
-        config=config.to_dict()
-        | {"illustrative": first.plan.illustrative, "user_models": list(user_models)},
+        config=_result_config(config, first.plan, user_models),
         models=model_info,
         steering=steering_rows,
         curved=curved_rows,

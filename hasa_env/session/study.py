@@ -25,9 +25,11 @@ paper's protocol. Every key, with its default and range::
 
     [runs]                              # every run
     seconds = 30.0                      # (0, 3600] s
-    speed = 15.0                        # start speed, [0, 60] m/s
-    lateral_offset = -0.5               # start y, [-5, 5] m
-    heading = 0.0                       # start heading, [-0.5, 0.5] rad
+    scenario = "paper"                  # hasa_env.scenarios.SCENARIOS (default "paper")
+    speed = 15.0                        # start speed, [0, 60] m/s     } omitted: the env
+    lateral_offset = -0.5               # start y, [-5, 5] m           } config's initial_state
+    heading = 0.0                       # start heading, [-0.5, 0.5] rad } (the scenario's;
+                                        #   paper: 15 m/s, -0.5 m, 0 rad)
     speed_control = "free"              # "free" (pedals) | "constant" (cruise)
     min_speed = 0.0                     # no stopping: the brake stops here, [0, 60] m/s
     countdown = 3.0                     # [0, 60] s
@@ -80,6 +82,22 @@ Schedules (the hypotheses are ``env.markings.hypotheses``, n of them):
   uniform), from the study seed and the id;
 - ``fixed``: ``schedule.order``, the same for everyone.
 
+The scenario (``runs.scenario``, :mod:`hasa_env.scenarios`) is the env
+config's ``scenario`` key: its env keys lie under the study's own, so what the
+study file gives wins (``[env]``, and ``[runs]`` ``speed``, ``lateral_offset``,
+``heading``, which are the env config's ``initial_state`` keys and win over
+``[env]``'s) and the scenario's other keys apply: a copy of
+``studies/paper.toml`` with ``scenario = "late_ambiguity"`` starts at the file's
+15 m/s but halfway between the hypotheses' centres (the scenario's
+``initial_state.between_hypotheses``, which places the car whatever
+``lateral_offset`` says), and with ``scenario = "close_hypotheses"`` it keeps
+its own ``markings.hypotheses`` ([0, -1.8] m), so the scenario changes only the
+start: ``hasa-drive study FILE --check`` lists such overridden keys
+(:meth:`Study.scenario_overrides`). A scenario's drivers' preferred offset
+(``off_centre_drivers``) is for synthetic drivers only: a human keeps their
+own. The scenario is one for the whole study (the run list has no per-run
+settings); the env key ``scenario`` is refused in ``[env]``.
+
 Run seeds derive from the study seed, the participant id and the run's
 position, so a resumed session drives exactly the runs it would have. Bad
 input raises :class:`StudyError` naming the file, the line where it can
@@ -103,6 +121,7 @@ from typing import Any
 import numpy as np
 
 from hasa_env.render import ViewOptions
+from hasa_env.scenarios import scenario_spec
 from hasa_env.session.study_schema import (
     IDENTIFYING_KEYS,
     SCHEDULE_KINDS,
@@ -110,6 +129,7 @@ from hasa_env.session.study_schema import (
     STUDY_FORMAT_VERSION,
     check_relations,
     line_of,
+    study_env,
 )
 from hasa_env.sim.config import deep_merge, make_config
 from hasa_env.validation import validate
@@ -413,25 +433,51 @@ class Study:
         except (KeyError, IndexError, ValueError):
             return template
 
+    @property
+    def scenario(self) -> str:
+        """The scenario of every run (``runs.scenario``, :data:`hasa_env.scenarios.SCENARIOS`)."""
+        return str(self.document["runs"]["scenario"])
+
+    def env_keys(self) -> dict[str, Any]:
+        """The env configuration the study sets (:func:`~hasa_env.session.study_schema.study_env`:
+        ``[env]``, the scenario, the start state of ``[runs]``), before the run's track and
+        time limit are added."""
+        return study_env(self.document)
+
     def env_config(self, track: str) -> dict[str, Any]:
-        """The env configuration of a run on ``track`` (validated)."""
+        """The env configuration of a run on ``track`` (validated): the scenario's keys under
+        the study's own (:meth:`env_keys`)."""
         base = {
             "track": track,
             "time_limit": self.document["runs"]["seconds"],
             "action": {"type": "physical"},
         }
-        return make_config(deep_merge(base, self.document["env"]))
+        return make_config(deep_merge(base, self.env_keys()))
+
+    def scenario_overrides(self) -> list[tuple[str, Any, Any]]:
+        """The scenario's env keys the study file gives other values of its own:
+        ``(the study file's key, its value, the scenario's value)`` each (``runs.speed``,
+        ``env.markings.hypotheses``, ...). The study's win (:meth:`env_keys`);
+        ``hasa-drive study --check`` lists them."""
+        own = self.env_keys()
+        runs = self.document["runs"]
+        out = []
+        for path, value in _leaves(scenario_spec(self.scenario).config):
+            mine: Any = own
+            for part in path.split("."):
+                mine = mine.get(part, _ABSENT) if isinstance(mine, Mapping) else _ABSENT
+            if mine is _ABSENT or mine == value:
+                continue
+            table, _, key = path.partition(".")
+            given_in_runs = table == "initial_state" and runs.get(key) is not None
+            out.append((f"runs.{key}" if given_in_runs else f"env.{path}", mine, value))
+        return out
 
     def reset_options(self, run: ScheduledRun) -> dict[str, Any]:
-        """``reset`` options of a run: the study's start state and the run's bias."""
-        r = self.document["runs"]
-        return {
-            "lateral_offset": r["lateral_offset"],
-            "heading": r["heading"],
-            "speed": r["speed"],
-            "steering": 0.0,
-            "bias": run.bias,
-        }
+        """``reset`` options of a run: the wheel centred and the run's bias. The start state
+        is in the env configuration (:meth:`env_keys`), where a scenario's
+        ``initial_state.between_hypotheses`` can still place the car."""
+        return {"steering": 0.0, "bias": run.bias}
 
     def check_metadata(self, answers: Mapping[str, Any]) -> dict[str, Any]:
         """The participant's metadata, each answer checked (typed text or values).
@@ -516,6 +562,21 @@ class Study:
     def to_dict(self) -> dict[str, Any]:
         """The validated study (a deep copy)."""
         return copy.deepcopy(dict(self.document))
+
+
+_ABSENT = object()
+
+
+def _leaves(tree: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    """``(dotted key path, value)`` of every leaf of a nested mapping (a list is a leaf)."""
+    out: list[tuple[str, Any]] = []
+    for key, value in tree.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out += _leaves(value, f"{path}.")
+        else:
+            out.append((path, value))
+    return out
 
 
 def seed_from_entropy() -> int:

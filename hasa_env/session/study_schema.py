@@ -11,14 +11,16 @@ messages. :mod:`hasa_env.session.study` documents the keys.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from typing import Any
 
 from hasa_env.render import HUD_ITEMS
+from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import ConfigError, deep_merge, make_config
 from hasa_env.validation import ANY_JSON, Field, schema, version
 
-__all__ = ["IDENTIFYING_KEYS", "SCHEDULE_KINDS", "SCHEMA", "STUDY_FORMAT_VERSION",
-           "check_relations", "line_of"]  # fmt: skip
+__all__ = ["IDENTIFYING_KEYS", "SCHEDULE_KINDS", "SCHEMA", "START_KEYS", "STUDY_FORMAT_VERSION",
+           "check_relations", "line_of", "study_env"]  # fmt: skip
 
 STUDY_FORMAT_VERSION = 1
 SCHEDULE_KINDS = ("latin_square", "counterbalanced", "random", "fixed")
@@ -81,10 +83,16 @@ SCHEMA = schema(
         "runs": {
             "seconds": Field("number", 30.0, "Length of a run.", unit="s", low=0.0, high=3600.0,
                              low_open=True),
-            "speed": Field("number", 15.0, "Start speed.", unit="m/s", low=0.0, high=60.0),
-            "lateral_offset": Field("number", -0.5, "Start lateral offset y.", unit="m",
-                                    low=-5.0, high=5.0),
-            "heading": Field("number", 0.0, "Start heading.", unit="rad", low=-0.5, high=0.5),
+            "scenario": Field("choice", "paper", "The scenario of every run "
+                              "(hasa_env.scenarios): env keys under the study's own.",
+                              choices=tuple(SCENARIOS)),
+            "speed": Field("number", None, "Start speed (null: the scenario's, paper 15 m/s).",
+                           unit="m/s", low=0.0, high=60.0, optional=True),
+            "lateral_offset": Field("number", None, "Start lateral offset y (null: the "
+                                    "scenario's, paper -0.5 m).", unit="m", low=-5.0, high=5.0,
+                                    optional=True),
+            "heading": Field("number", None, "Start heading (null: the scenario's, paper 0).",
+                             unit="rad", low=-0.5, high=0.5, optional=True),
             "speed_control": Field("choice", "free", "'free': the pedals set the speed; "
                                    "'constant': cruise control.", choices=("free", "constant")),
             "min_speed": Field("number", 0.0, "No stopping: the brake stops here.", unit="m/s",
@@ -128,6 +136,26 @@ SCHEMA = schema(
         },
     }
 )  # fmt: skip
+
+
+START_KEYS = ("speed", "lateral_offset", "heading")
+"""The ``[runs]`` keys of the start state: the env config's ``initial_state`` keys."""
+
+
+def study_env(doc: Mapping[str, Any]) -> dict[str, Any]:
+    """The env configuration a validated study ``doc`` sets (without track, time limit and
+    action, which are the study's own): ``[env]``, ``scenario`` = ``runs.scenario``, and the
+    start state ``[runs]`` gives (``speed``, ``lateral_offset``, ``heading``) as the
+    ``initial_state`` keys of the same names, over ``[env]``'s. The scenario's keys lie
+    under all of these (:func:`hasa_env.sim.config.make_config`): a key the study file
+    gives wins, the scenario's others apply. A start key ``[runs]`` leaves out (null)
+    is the scenario's (paper: 15 m/s, -0.5 m, 0 rad); ``initial_state.between_hypotheses``
+    of a scenario places the car whatever ``lateral_offset`` says.
+    """
+    runs = doc["runs"]
+    start = {key: runs[key] for key in START_KEYS if runs.get(key) is not None}
+    env = deep_merge(doc["env"], {"initial_state": start} if start else {})
+    return deep_merge({"scenario": runs.get("scenario", "paper")}, env)
 
 
 def line_of(text: str, path: str) -> int | None:
@@ -182,20 +210,27 @@ def check_relations(doc: dict[str, Any], fail: Any) -> None:
                        f"{f['high']:g}")  # fmt: skip
     env = doc["env"]
     for reserved, owner in (("track", "practice.track / measured.track"),
-                            ("time_limit", "runs.seconds"), ("action", "the study")):  # fmt: skip
+                            ("time_limit", "runs.seconds"), ("action", "the study"),
+                            ("scenario", "runs.scenario")):  # fmt: skip
         if reserved in env:
             raise fail(f"env.{reserved}", f"key 'env.{reserved}' is set by {owner}; remove it "
                        "from [env]")  # fmt: skip
     try:
-        config = make_config(deep_merge({"action": {"type": "physical"}}, env))
+        config = make_config(deep_merge({"action": {"type": "physical"}}, study_env(doc)))
     except ConfigError as exc:
         path = re.search(r"config key '([^']+)'", str(exc))
-        raise fail(f"env.{path.group(1)}" if path else "env", f"in [env]: {exc}") from None
+        key = path.group(1) if path else ""
+        table, _, leaf = key.partition(".")
+        if table == "initial_state" and leaf in START_KEYS and doc["runs"][leaf] is not None:
+            raise fail(f"runs.{leaf}", f"in [runs]: {exc}") from None
+        raise fail(f"env.{key}" if key else "env", f"in [env]: {exc}") from None
     hypotheses = [float(b) for b in config["markings"]["hypotheses"]]
     runs = doc["runs"]
-    if runs["min_speed"] > runs["speed"]:
+    speed = config["initial_state"]["speed"]
+    if runs["min_speed"] > speed:
+        given = "runs.speed" if runs["speed"] is not None else "of the env config (initial_state)"
         raise fail("runs.min_speed", f"key 'runs.min_speed' = {runs['min_speed']:g} m/s is "
-                   f"above the start speed runs.speed = {runs['speed']:g} m/s")  # fmt: skip
+                   f"above the start speed {given} = {speed:g} m/s")  # fmt: skip
     bias = doc["practice"]["bias"]
     if bias is not None and bias not in hypotheses:
         raise fail("practice.bias", f"key 'practice.bias' = {bias:g} is not allowed: one of the "

@@ -189,17 +189,18 @@ class StudySession:
             return self._drives[track]
         doc = self.study.document
         r = doc["runs"]
+        start = self.study.env_config(track)["initial_state"]
         settings = DriveSettings(
             participant=self.participant,
             track=track,
             runs=len(record.schedule),
             seconds=r["seconds"],
-            speed=r["speed"],
-            lateral_offset=r["lateral_offset"],
+            speed=start["speed"],
+            lateral_offset=start["lateral_offset"],
             output=self.output,
             seed=record.doc["seed"],
             countdown=r["countdown"],
-            config=doc["env"],
+            config=self.study.env_keys(),
             fsync=self.fsync,
             speed_control=r["speed_control"],
             min_speed=r["min_speed"],
@@ -248,6 +249,7 @@ class StudySession:
                     "position": run.position,
                     "attempt": attempt,
                     "schedule": self.study.document["schedule"]["kind"],
+                    "scenario": self.study.scenario,
                     "bias": run.bias,
                     "bias_index": run.bias_index,
                     "session_file": SESSION_FILE,
