@@ -135,9 +135,9 @@ def test_a_scenario_applies_under_the_study_files_own_keys(tmp_path):
         "env.markings.hypotheses", "runs.lateral_offset"}  # fmt: skip
     # ... and without them the scenario's: its hypotheses schedule the runs, its start
     bare = _paper_in(tmp_path, "close_hypotheses", ("lateral_offset", "markings.hypotheses"))
-    assert bare.hypotheses == [0.0, -0.6] and bare.scenario_overrides() == []
+    assert bare.hypotheses == [0.0, -0.3] and bare.scenario_overrides() == []
     biases = {r.bias for r in bare.schedule_for("P01", None, 1) if r.block == "measured"}
-    assert biases == {0.0, -0.6}
+    assert biases == {0.0, -0.3}
     init = bare.env_config("straight")["initial_state"]
     assert (init["lateral_offset"], init["lateral_offset_std"]) == (0.0, 0.25)
     # off_centre_drivers: only the hypotheses are env keys (the offsets are drivers')
