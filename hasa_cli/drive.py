@@ -2,14 +2,19 @@
 
 Commands::
 
-    hasa-drive --participant P07 [--track straight|curved] [--bias random|B] [--runs 10]
+    hasa-drive --participant P07 [--track straight|curved] [--scenario NAME] [--bias random|B]
+               [--runs 10]
     hasa-drive study STUDY.toml --participant P07 [--meta KEY=VALUE ...] [--check]
     hasa-drive calibrate [--output FILE]
     hasa-drive synthetic --driver Ill [--population paper] [--participant NAME]
 
 The drive follows the paper's protocol (:class:`hasa_env.session.DriveSession`):
 every run lasts 30 s, starts at 15 m/s and y = -0.5 m in the right lane; a
-countdown precedes it. Each run is recorded under
+countdown precedes it. ``--scenario NAME`` (:mod:`hasa_env.scenarios`) drives
+a named scenario instead: its env keys (road, markings, start) lie under the
+options given (``--speed``, ``--lateral-offset``, ``--bias``, ...), so an option
+left out takes the scenario's value; ``hasa-drive synthetic`` also gives its
+driver the scenario's preferred offset (:func:`hasa_env.scenarios.scenario_drivers`). Each run is recorded under
 ``recordings/<participant>/run_NNN.csv`` (+ ``.json`` sidecar, + the raw
 wheel and pedal values in ``run_NNN.inputs.tsv``), every step flushed at
 once (a killed process keeps every completed step). ``--estimator`` runs the
@@ -54,6 +59,7 @@ from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.scenarios import scenario_drivers, scenario_names
 from hasa_env.session import (
     DriveSession,
     DriveSettings,
@@ -91,9 +97,25 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
     )
     p.add_argument("--runs", type=int, default=10, help="number of runs (default %(default)s)")
     p.add_argument("--seconds", type=float, default=30.0, help="length of a run in s (default 30)")
-    p.add_argument("--speed", type=float, default=15.0, help="initial speed in m/s (default 15)")
     p.add_argument(
-        "--lateral-offset", type=float, default=-0.5, help="initial y in m (default -0.5)"
+        "--scenario",
+        choices=scenario_names(),
+        default="paper",
+        help="named scenario of every run (hasa_env.scenarios; default %(default)s); the "
+        "options given here win over its values",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=None,
+        help="initial speed in m/s (default: the scenario's; paper 15)",
+    )
+    p.add_argument(
+        "--lateral-offset",
+        type=float,
+        default=None,
+        help="initial y in m (default: the scenario's; paper -0.5, late_ambiguity halfway "
+        "between the hypotheses)",
     )
     p.add_argument(
         "--output",
@@ -184,6 +206,7 @@ def _drive_setup(
         seed=args.seed,
         countdown=args.countdown,
         fsync=args.fsync,
+        scenario=args.scenario,
     )
     settings.env_config()
     keyboard = load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
@@ -217,19 +240,28 @@ def _raise_exit(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
 
 
-def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
-    drivers = {p.name: p for p in population(args.population, seed=args.population_seed)}
+def _synthetic_driver(args: argparse.Namespace) -> tuple[Any, str]:
+    """The driver ``--driver`` of the population as it drives in ``--scenario`` (its
+    preferred offset: :func:`hasa_env.scenarios.scenario_drivers`) and the participant id
+    (``--participant``, default ``synthetic-<population>-<seed>-<driver>[-<scenario>]``,
+    the scenario named unless ``paper``); raises ValueError for an unknown driver."""
+    seed = args.population_seed
+    drivers = {
+        p.name: p
+        for p in scenario_drivers(population(args.population, seed=seed), args.scenario, seed)
+    }
     if args.driver not in drivers:
-        error(
-            "hasa-drive",
-            f"unknown driver {args.driver!r}; this population has {', '.join(drivers)}",
+        raise ValueError(
+            f"unknown driver {args.driver!r}; this population has {', '.join(drivers)}"
         )
-        return EXIT_USAGE
-    params = drivers[args.driver]
-    participant = (
-        args.participant or f"synthetic-{args.population}-{args.population_seed}-{args.driver}"
-    )
+    scenario = "" if args.scenario == "paper" else f"-{args.scenario}"
+    default = f"synthetic-{args.population}-{seed}-{args.driver}{scenario}"
+    return drivers[args.driver], args.participant or default
+
+
+def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     try:
+        params, participant = _synthetic_driver(args)
         settings = DriveSettings(
             participant=participant,
             track=args.track,
@@ -242,6 +274,7 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
             seed=args.seed,
             countdown=0.0,
             fsync=args.fsync,
+            scenario=args.scenario,
         )
         settings.env_config()
     except (ValueError, ConfigError) as exc:

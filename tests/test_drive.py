@@ -80,7 +80,9 @@ def test_scripted_drive_with_a_virtual_wheel_is_reproduced_by_hasa_replay(tmp_pa
     assert rec.path.parent == tmp_path / "p01" and rec.complete and rec.steps == 500
     meta = rec.meta["metadata"]
     assert meta["participant"] == "p01" and meta["input"]["source_at_start"].startswith("joystick:")
-    assert rec.meta["reset_options"]["lateral_offset"] == -0.5 and rec.data["speed"].iloc[0] == 15.0
+    assert rec.meta["config"]["initial_state"]["lateral_offset"] == -0.5
+    assert rec.data["lateral_offset"].iloc[0] == -0.5 and rec.data["speed"].iloc[0] == 15.0
+    assert rec.meta["config"]["scenario"] == meta["protocol"]["scenario"] == "paper"
     # what the driver asked for reached the env through SDL, up to the axis' int16 resolution
     assert sorted(driver.commands) == list(range(500))
     commanded = np.array([driver.commands[k][0] for k in range(500)])
@@ -355,14 +357,88 @@ def test_settings_are_validated(tmp_path):
     with pytest.raises(SystemExit):
         main(["--participant", "p", "--bias", "left"])
     s = DriveSettings(participant="p", bias=-1.8, output=Path("x"))
-    assert s.reset_options() == {
-        "lateral_offset": -0.5,
-        "heading": 0.0,
-        "speed": 15.0,
-        "steering": 0.0,
-        "bias": -1.8,
-    }
+    assert s.reset_options() == {"steering": 0.0, "bias": -1.8}  # the start: in the config
+    start = s.env_config()["initial_state"]
+    assert (start["lateral_offset"], start["speed"], start["heading"]) == (-0.5, 15.0, 0.0)
     assert s.env_config()["time_limit"] == 30.0 and s.env_config()["action"]["type"] == "physical"
+    assert s.env_config()["scenario"] == "paper"
+
+
+def test_settings_scenario_lies_under_the_options_given():
+    with pytest.raises(ValueError, match=r"drive setting 'scenario' = 'nope' is not allowed: one "):
+        DriveSettings(participant="p", scenario="nope")
+    with pytest.raises(ValueError, match=r"'config.scenario' = 'lane_shift' differs from the "):
+        DriveSettings(participant="p", config={"scenario": "lane_shift"})
+    with pytest.raises(
+        ValueError, match=r"'lateral_offset' = 12.0 is out of range: allowed \[-10, 10\] m"
+    ):
+        DriveSettings(participant="p", lateral_offset=12.0)
+    late = DriveSettings(participant="p", scenario="late_ambiguity").env_config()
+    assert late["initial_state"]["speed"] == 25.0 and late["initial_state"]["between_hypotheses"]
+    given = DriveSettings(
+        participant="p", scenario="late_ambiguity", speed=12.0, lateral_offset=0.2
+    )
+    start = given.env_config()["initial_state"]
+    assert (start["speed"], start["lateral_offset"], start["between_hypotheses"]) == (
+        12.0,
+        0.2,
+        False,
+    )
+    close = DriveSettings(participant="p", scenario="close_hypotheses", config={"markings": {
+        "hypotheses": [0.0, -1.8]}}).env_config()  # fmt: skip
+    assert close["markings"]["hypotheses"] == [0.0, -1.8]  # the user's key wins
+    assert close["initial_state"]["lateral_offset_std"] == 0.25  # the scenario's others apply
+    assert given.reset_options() == {"steering": 0.0}
+
+
+def _synthetic_recording(tmp_path, *args):
+    out = tmp_path / "-".join(a.strip("-") for a in args)
+    assert main(["synthetic", "--output", str(out), "--seed", "4", *args]) == 0
+    (csv,) = sorted(out.rglob("run_*.csv"))
+    return load_recording(csv)
+
+
+def test_synthetic_drive_in_a_lane_shift_follows_the_driven_lane(tmp_path):
+    rec = _synthetic_recording(tmp_path, "--scenario", "lane_shift", "--seconds", "25")
+    assert rec.config["scenario"] == "lane_shift"
+    assert rec.config["road"]["lane_shifts"] == [{"station": 150.0, "length": 65.0, "offset": 1.8}]
+    assert rec.path.parent.name == "synthetic-paper-0-Ill-lane_shift"
+    d = rec.data
+    after = d["station"] > 260.0  # well after the shift's end at 215 m
+    assert after.sum() > 500
+    assert abs(d["lateral_offset"][after].mean() - 1.8) < 0.3
+    assert abs(d["lateral_offset"][d["station"] < 140.0].mean()) < 0.6  # before: the old lane
+
+
+def test_synthetic_late_ambiguity_starts_between_the_hypotheses_unless_told(tmp_path):
+    common = ("--scenario", "late_ambiguity", "--seconds", "0.1", "--bias")
+    for bias, halfway in (("0", -0.9), ("-1.8", 0.9)):
+        rec = _synthetic_recording(tmp_path, *common, bias)
+        first = rec.data.iloc[0]
+        assert first["lateral_offset"] == pytest.approx(halfway) and first["speed"] == 25.0
+        assert rec.config["scenario"] == "late_ambiguity"
+    rec = _synthetic_recording(tmp_path, *common, "0", "--lateral-offset", "0.2", "--speed", "12")
+    first = rec.data.iloc[0]
+    assert first["lateral_offset"] == 0.2 and first["speed"] == 12.0
+    assert rec.meta["metadata"]["protocol"]["between_hypotheses"] is False
+
+
+def test_synthetic_driver_keeps_the_scenarios_preferred_offset(tmp_path):
+    from hasa_env.scenarios import scenario_drivers
+
+    rec = _synthetic_recording(
+        tmp_path, "--scenario", "off_centre_drivers", "--seconds", "0.1", "--population-seed", "3"
+    )
+    (expected,) = [
+        p for p in scenario_drivers(population("paper", seed=3), "off_centre_drivers", 3)
+        if p.name == "Ill"
+    ]  # fmt: skip
+    params = rec.meta["metadata"]["synthetic_driver"]["params"]
+    assert 0.2 <= abs(params["preferred_offset"]) <= 0.5
+    assert params["preferred_offset"] == expected.preferred_offset
+    assert rec.config["markings"]["hypotheses"] == [0.0, -0.8]
+    with pytest.raises(SystemExit):
+        main(["synthetic", "--scenario", "nope"])
 
 
 def test_an_estimator_runs_alongside_and_feeds_the_hud(tmp_path, pg):

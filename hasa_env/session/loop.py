@@ -398,6 +398,7 @@ class DriveSession:
 
     def _run_metadata(self, run_index: int, seed: int) -> dict[str, Any]:
         s = self.settings
+        start = self.config["initial_state"]
         meta: dict[str, Any] = {
             "tool": "hasa-drive",
             "participant": s.participant,
@@ -407,8 +408,10 @@ class DriveSession:
             "protocol": {
                 "track": s.track,
                 "seconds": s.seconds,
-                "speed": s.speed,
-                "lateral_offset": s.lateral_offset,
+                "scenario": s.scenario,
+                "speed": start["speed"],
+                "lateral_offset": start["lateral_offset"],
+                "between_hypotheses": start["between_hypotheses"],
                 "bias": "random" if s.bias is None else s.bias,
                 "speed_control": s.speed_control,
                 "min_speed": s.min_speed,

@@ -9,10 +9,38 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import deep_merge, make_config
 from hasa_env.validation import ANY_JSON, Field, schema, validate_fields
 
-__all__ = ["DriveSettings"]
+__all__ = ["START_KEYS", "DriveSettings", "scenario_env"]
+
+START_KEYS = ("speed", "lateral_offset", "heading")
+"""The start-state keys a drive or a study sets: the env config's ``initial_state`` keys."""
+
+
+def scenario_env(
+    scenario: str, env: Mapping[str, Any], start: Mapping[str, float | None]
+) -> dict[str, Any]:
+    """The env configuration keys of runs in ``scenario`` started as ``start`` says.
+
+    ``env`` (the user's own env keys) with the start keys ``start`` gives
+    (:data:`START_KEYS`: speed m/s, lateral_offset m, heading rad; None: not given)
+    as ``initial_state`` keys over ``env``'s, and ``scenario``. The scenario's keys lie
+    under all of these (:func:`hasa_env.sim.config.make_config`): a key the user gives
+    wins, the scenario's others apply; a start key left out is the scenario's (paper:
+    15 m/s, -0.5 m, 0 rad). Used by drive settings and study files alike.
+
+    Raises:
+        ValueError: a start key not in :data:`START_KEYS`.
+    """
+    unknown = sorted(set(start) - set(START_KEYS))
+    if unknown:
+        raise ValueError(f"unknown start key {unknown[0]!r}; allowed: {', '.join(START_KEYS)}")
+    given = {key: value for key, value in start.items() if value is not None}
+    keys = deep_merge(env, {"initial_state": given} if given else {})
+    return deep_merge({"scenario": scenario}, keys)
+
 
 _PARTICIPANT_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]*")
 
@@ -32,9 +60,17 @@ _SCHEMA = schema(
         "seconds": Field(
             "number", doc="Length of a run.", unit="s", low=0.0, high=1e6, low_open=True
         ),
-        "speed": Field("number", doc="Initial speed.", unit="m/s", low=0.0, high=150.0),
+        "scenario": Field(
+            "choice", doc="Named scenario (hasa_env.scenarios): env keys under the drive's own.",
+            choices=tuple(SCENARIOS),
+        ),
+        "speed": Field(
+            "number", doc="Initial speed (null: the scenario's).", unit="m/s", low=0.0,
+            high=150.0, optional=True,
+        ),
         "lateral_offset": Field(
-            "number", doc="Initial lateral offset.", unit="m", low=-30.0, high=30.0
+            "number", doc="Initial lateral offset (null: the scenario's).", unit="m", low=-10.0,
+            high=10.0, optional=True,
         ),
         "output": Field("string", doc="Root directory of the recordings.", non_empty=True),
         "seed": Field("integer", doc="Root seed (null: fresh entropy).", low=0, optional=True),
@@ -65,17 +101,23 @@ class DriveSettings:
             (equally likely hypotheses, from the run's seed).
         runs: number of runs.
         seconds: length of a run (the paper: 30 s).
-        speed: initial speed (15 m/s).
-        lateral_offset: initial lateral offset y (-0.5 m).
+        speed: initial speed (m/s, 0-150), or None for the scenario's (paper: 15 m/s).
+        lateral_offset: initial lateral offset y (m, -10 to 10), or None for the
+            scenario's (paper: -0.5 m). Given, it also wins over a scenario's
+            ``initial_state.between_hypotheses`` (``late_ambiguity``); a scenario's
+            ``lateral_offset_std`` is still added.
         output: root directory of the recordings (a str or path; a Path once validated).
         seed: root seed of the runs' seeds (None: fresh entropy, recorded).
         countdown: seconds of countdown before each run (real time only).
-        config: extra env configuration deep-merged onto the defaults.
+        config: extra env configuration deep-merged onto the defaults (over the
+            scenario's keys; a ``scenario`` key in it must equal ``scenario``).
         fsync: also fsync every recorded row (survives power loss).
         speed_control: ``"free"`` (default): throttle and brake set the speed;
             ``"constant"``: the car keeps its initial speed whatever the pedals do.
         min_speed: "no stopping" (m/s): the brake cannot take the car below this
             speed; the recorded action is the acceleration applied (0: no limit).
+        scenario: the named scenario of every run (:data:`hasa_env.scenarios.SCENARIOS`,
+            default ``"paper"``); its env keys lie under the settings' own.
     """
 
     participant: str
@@ -83,8 +125,8 @@ class DriveSettings:
     bias: float | None = None
     runs: int = 10
     seconds: float = 30.0
-    speed: float = 15.0
-    lateral_offset: float = -0.5
+    speed: float | None = None
+    lateral_offset: float | None = None
     output: Path | str = Path("recordings")
     seed: int | None = None
     countdown: float = 3.0
@@ -92,6 +134,7 @@ class DriveSettings:
     fsync: bool = False
     speed_control: str = "free"
     min_speed: float = 0.0
+    scenario: str = "paper"
 
     def __post_init__(self) -> None:
         """Validate every setting (shared validator) and keep the converted values.
@@ -109,21 +152,31 @@ class DriveSettings:
             error=lambda path, message: ValueError(message),
         )
         self.output = Path(self.output)
+        named = self.config.get("scenario", self.scenario)
+        if named != self.scenario:
+            raise ValueError(
+                f"drive setting 'config.scenario' = {named!r} differs from the setting "
+                f"'scenario' = {self.scenario!r}; give the scenario once, as 'scenario'"
+            )
         self.env_config()  # a bad config is refused now, not at the first run
 
     def env_config(self) -> dict[str, Any]:
-        """The env configuration of every run (validated)."""
+        """The env configuration of every run (validated): :func:`scenario_env` of the
+        scenario, ``config`` and the start (``speed``, ``lateral_offset``), over the
+        track, time limit and physical action; a given ``lateral_offset`` also sets
+        ``initial_state.between_hypotheses`` false."""
         base = {"track": self.track, "time_limit": self.seconds, "action": {"type": "physical"}}
-        return make_config(deep_merge(base, self.config))
+        start = {"speed": self.speed, "lateral_offset": self.lateral_offset}
+        keys = scenario_env(self.scenario, self.config, start)
+        if self.lateral_offset is not None:
+            keys = deep_merge(keys, {"initial_state": {"between_hypotheses": False}})
+        return make_config(deep_merge(base, keys))
 
     def reset_options(self) -> dict[str, Any]:
-        """``reset`` options of every run: the protocol's initial state and, if fixed, the bias."""
-        options: dict[str, Any] = {
-            "lateral_offset": float(self.lateral_offset),
-            "heading": 0.0,
-            "speed": float(self.speed),
-            "steering": 0.0,
-        }
+        """``reset`` options of every run: the wheel centred and, if fixed, the bias (m).
+        The start state is in the env configuration (:meth:`env_config`), where the
+        scenario's start keys apply."""
+        options: dict[str, Any] = {"steering": 0.0}
         if self.bias is not None:
             options["bias"] = float(self.bias)
         return options

@@ -16,6 +16,7 @@ from typing import Any
 
 from hasa_env.render import HUD_ITEMS
 from hasa_env.scenarios import SCENARIOS
+from hasa_env.session.settings import START_KEYS, scenario_env
 from hasa_env.sim.config import ConfigError, deep_merge, make_config
 from hasa_env.validation import ANY_JSON, Field, schema, version
 
@@ -138,10 +139,6 @@ SCHEMA = schema(
 )  # fmt: skip
 
 
-START_KEYS = ("speed", "lateral_offset", "heading")
-"""The ``[runs]`` keys of the start state: the env config's ``initial_state`` keys."""
-
-
 def study_env(doc: Mapping[str, Any]) -> dict[str, Any]:
     """The env configuration a validated study ``doc`` sets (without track, time limit and
     action, which are the study's own): ``[env]``, ``scenario`` = ``runs.scenario``, and the
@@ -150,12 +147,12 @@ def study_env(doc: Mapping[str, Any]) -> dict[str, Any]:
     under all of these (:func:`hasa_env.sim.config.make_config`): a key the study file
     gives wins, the scenario's others apply. A start key ``[runs]`` leaves out (null)
     is the scenario's (paper: 15 m/s, -0.5 m, 0 rad); ``initial_state.between_hypotheses``
-    of a scenario places the car whatever ``lateral_offset`` says.
+    of a scenario places the car whatever ``lateral_offset`` says. (The same
+    :func:`hasa_env.session.settings.scenario_env` makes a drive's env keys.)
     """
     runs = doc["runs"]
-    start = {key: runs[key] for key in START_KEYS if runs.get(key) is not None}
-    env = deep_merge(doc["env"], {"initial_state": start} if start else {})
-    return deep_merge({"scenario": runs.get("scenario", "paper")}, env)
+    start = {key: runs.get(key) for key in START_KEYS}
+    return scenario_env(runs.get("scenario", "paper"), doc["env"], start)
 
 
 def line_of(text: str, path: str) -> int | None:

@@ -189,14 +189,11 @@ class StudySession:
             return self._drives[track]
         doc = self.study.document
         r = doc["runs"]
-        start = self.study.env_config(track)["initial_state"]
-        settings = DriveSettings(
+        settings = DriveSettings(  # the start state: in the study's env keys
             participant=self.participant,
             track=track,
             runs=len(record.schedule),
             seconds=r["seconds"],
-            speed=start["speed"],
-            lateral_offset=start["lateral_offset"],
             output=self.output,
             seed=record.doc["seed"],
             countdown=r["countdown"],
@@ -204,6 +201,7 @@ class StudySession:
             fsync=self.fsync,
             speed_control=r["speed_control"],
             min_speed=r["min_speed"],
+            scenario=self.study.scenario,
         )
 
         def status(drive: DriveSession) -> None:
