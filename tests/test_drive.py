@@ -479,3 +479,19 @@ def test_raw_input_file_never_overwrites_an_orphaned_one(tmp_path):
     frame = load_raw_inputs(path)
     assert list(frame["step"]) == [1] and frame["road_wheel_angle"].iloc[0] == 0.01
     assert np.isnan(frame["raw_steering"].iloc[0]) and frame["source"].iloc[0] == "keyboard"
+
+
+def test_free_drive_takes_a_scenario(tmp_path):
+    from hasa_cli.drive import _drive_parser, _drive_setup
+
+    def settings(*extra):
+        argv = ["--participant", "p", "--output", str(tmp_path), "--scenario", "late_ambiguity"]
+        return _drive_setup(_drive_parser().parse_args([*argv, *extra]), print)[0]
+
+    start = settings().env_config()["initial_state"]
+    assert settings().scenario == "late_ambiguity"
+    assert start["speed"] == 25.0 and start["between_hypotheses"] is True
+    start = settings("--lateral-offset", "-0.5").env_config()["initial_state"]
+    assert start["lateral_offset"] == -0.5 and start["between_hypotheses"] is False
+    with pytest.raises(SystemExit):
+        main(["--participant", "p", "--scenario", "nope"])
