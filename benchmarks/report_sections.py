@@ -98,6 +98,7 @@ _SAFETY_COLUMNS = [
     Column(_decision_time, "decides in (s) median / p90"),
     Column(count_share("never_decided_runs", "estimated_runs"), "never decided"),
     Column(interval(percent, "decided_time_share"), "time decided [95% CI]"),
+    Column(interval(percent, "steering_off_share"), "steering off [95% CI]"),
     Column(interval(fixed(3), "lateral_rmse_after_decision"), "lat. RMSE after dec. (m) [95% CI]"),
     Column(interval(fixed(2), "lateral_nees"), "lat. NEES [95% CI]"),
     Column(interval(fixed(3), "curved_lateral_rmse"), "curved lat. RMSE (m) [95% CI]"),

@@ -4,7 +4,8 @@
 (:data:`hasa_env.scenarios.SCENARIOS`), writes each scenario's results into its own
 folder and this table beside them (``scenarios.md``, ``scenarios.csv``): per scenario
 and estimator, the lateral RMSE and the gain over the best steering-free baseline with
-their 95 % hierarchical-bootstrap intervals, the time to decide, and the runs that end
+their 95 % hierarchical-bootstrap intervals, the time to decide, the share of the time the
+steering channel was off (speed or curvature rule), and the runs that end
 (or are at any step) confidently in a wrong lane, with exact binomial intervals.
 """
 
@@ -27,6 +28,7 @@ SUITE_COLUMNS = (
     "gain_over_steering_free", "gain_over_steering_free_ci_low",
     "gain_over_steering_free_ci_high",
     "time_to_decide_median", "time_to_decide_p90", "never_decided_runs",
+    "steering_off_share",
     "wrong_lane_confident_runs", "wrong_lane_confident_runs_share_ci_high",
     "wrong_lane_ever_runs", "wrong_lane_ever_runs_share_ci_high",
 )  # fmt: skip
@@ -60,6 +62,12 @@ def _interval(row: Mapping[str, Any], key: str, digits: int = 3) -> str:
     return f"{text} [{_number(low, digits)}, {_number(high, digits)}]"
 
 
+def _percent(value: Any) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    return f"{100 * value:.0f} %"
+
+
 def _count(row: Mapping[str, Any], key: str) -> str:
     runs, count = row.get("estimated_runs"), row.get(key)
     if not runs or count is None:
@@ -73,12 +81,12 @@ def format_suite(rows: list[dict[str, Any]]) -> str:
     """The table as Markdown, one block per scenario."""
     head = (
         "| Estimator | kind | lat. RMSE (m) [95% CI] | gain over best steering-free (m) "
-        "[95% CI] | decides in (s) median / p90 | never decided | ends conf. wrong "
-        "(95% upper) | ever conf. wrong (95% upper) |"
+        "[95% CI] | decides in (s) median / p90 | never decided | steering off | ends conf. "
+        "wrong (95% upper) | ever conf. wrong (95% upper) |"
     )
     lines = []
     for scenario, part in pd.DataFrame(rows).groupby("scenario", sort=False):
-        lines += [f"### {scenario}", "", head, "|" + "---|" * 8]
+        lines += [f"### {scenario}", "", head, "|" + "---|" * 9]
         for record in part.to_dict("records"):
             row = {str(k): v for k, v in record.items()}
             timing = (
@@ -88,7 +96,7 @@ def format_suite(rows: list[dict[str, Any]]) -> str:
             lines.append(
                 f"| {row['model']} | {row['kind']} | {_interval(row, 'lateral_rmse')} | "
                 f"{_interval(row, 'gain_over_steering_free')} | {timing} | "
-                f"{_count(row, 'never_decided_runs')} | "
+                f"{_count(row, 'never_decided_runs')} | {_percent(row.get('steering_off_share'))} | "
                 f"{_count(row, 'wrong_lane_confident_runs')} | "
                 f"{_count(row, 'wrong_lane_ever_runs')} |"
             )

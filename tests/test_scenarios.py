@@ -154,6 +154,11 @@ def test_hasa_bench_runs_every_scenario_and_writes_the_suite_table(tmp_path, cap
         assert {"generalized", "two_point", "lane_centring", "no_steering"} <= set(part["model"])
         assert (part["estimated_runs"] > 0).all()
     assert "### lane_shift" in (out / "scenarios.md").read_text()
+    # at 25 m/s the steering channel of a model trained near 15 m/s is off (the speed rule),
+    # and the table says so
+    off = table.set_index(["scenario", "model"])["steering_off_share"]
+    assert off["late_ambiguity", "generalized"] > 0.9 > 0.1 > off["paper", "generalized"]
+    assert np.isnan(off["paper", "lane_centring"]) or off["paper", "lane_centring"] == 0.0
     code = bench_main(
         ["paper", "--scenario", "lane_shift", "--recordings", str(tmp_path), "--out",
          str(tmp_path / "x")]

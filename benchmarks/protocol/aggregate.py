@@ -232,7 +232,8 @@ def _paper_steering(driver: str, model: str, track: str) -> dict[str, Any]:
     return keys
 
 
-_DECISION_COLUMNS = ("time_to_decide", "decided_time_share", "lateral_rmse_after_decision")
+_DECISION_COLUMNS = ("time_to_decide", "decided_time_share", "lateral_rmse_after_decision",
+                     "steering_off_share")  # fmt: skip
 """The per-run decision metrics (:func:`benchmarks.protocol.tasks._decision_metrics`)."""
 
 
@@ -304,6 +305,7 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             time_to_decide_median=("time_to_decide", lambda v: _censored_quantile(v, 0.5)),
             never_decided_runs=("time_to_decide", _never),
             decided_time_share=("decided_time_share", _finite_mean),
+            steering_off_share=("steering_off_share", _finite_mean),
             lateral_rmse_after_decision=("lateral_rmse_after_decision", _finite_mean),
             nis_speed=("nis_speed", _finite_mean),
             nis_camera=("nis_camera", _finite_mean),
@@ -353,7 +355,7 @@ def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
 
 _SAFETY_COUNTS = ("wrong_lane_confident_runs", "wrong_lane_ever_runs", "undecided_runs",
                   "model_mismatch_runs", "never_decided_runs")  # fmt: skip
-_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision")
+_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision", "steering_off_share")
 
 
 def summarize_seeds(
@@ -457,6 +459,7 @@ _VERDICT_KEYS = {
     "curved_lateral_rmse": ("curved_estimation", "lateral_rmse_mean", False),
     "lateral_nees": ("estimation", "lateral_nees", False),
     "decided_time_share": ("estimation", "decided_time_share", False),
+    "steering_off_share": ("estimation", "steering_off_share", False),
     "lateral_rmse_after_decision": ("estimation", "lateral_rmse_after_decision", False),
 }
 """Verdict key -> (per-driver table, its column, the per-seed statistic is the median over

@@ -440,6 +440,11 @@ def _estimation_rows(
     wrong_confident = result.wrong_lane_confident(task.weight_threshold)
     wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
     nees = result.lateral_nees()
+    off_share = (
+        np.full(len(refs), np.nan)
+        if result.low_speed is None
+        else (result.low_speed & result.valid).sum(axis=1) / result.lengths
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
         model_error = np.nanmedian(result.model_error, axis=1)
@@ -467,6 +472,7 @@ def _estimation_rows(
                 "wrong_lane_confident": bool(wrong_confident[j]),
                 "wrong_lane_confident_share": float(wrong_share[j]),
                 "lateral_nees": float(nees[j]),
+                "steering_off_share": float(off_share[j]),
                 "model_error_median": float(model_error[j]),
                 "nis_speed": float(nis[j, 0]),
                 "nis_camera": float(nis[j, 1]),
