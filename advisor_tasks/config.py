@@ -90,7 +90,6 @@ from hasa_env.drivers import (
     run_driver,
 )
 from hasa_env.drivers.archetypes import HumanParams
-from hasa_env.scenarios import scenario_drivers
 from hasa_env.sim.config import ConfigError, deep_merge
 from hasa_env.sim.config import default_config as env_default_config
 from hasa_env.sim.config import describe_config as env_describe_config
@@ -321,7 +320,7 @@ def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, fl
     or an evaluation shares it)."""
     name, seed, size = json.loads(population_key)
     config = json.loads(env_key)
-    trainer = scenario_drivers(population(name, seed, size), config["scenario"], seed)[0]
+    trainer = population(name, seed, size, scenario=config["scenario"])[0]
     frame = run_driver(
         make_driver(trainer), "hasa_env/LaneKeeping-v0", runs=1, seed=TRAINING_SEED, config=config
     )[0]

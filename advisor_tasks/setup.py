@@ -39,7 +39,6 @@ from estimators.road_geometry import lane_points_ahead, look_ahead_distances
 from estimators.wrappers import estimate_info_keys
 from hasa_env.drivers import POPULATIONS, population
 from hasa_env.drivers.archetypes import HumanParams
-from hasa_env.scenarios import scenario_drivers
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.sensors import SENSOR_NAMES
 from hasa_env.sim.setup import INFO_KEYS, EnvSetup, build_setup, physical_action
@@ -200,12 +199,12 @@ def build_advisor_setup(config: Mapping[str, Any] | None, track: str | None = No
         env_part = deep_merge(dict(POPULATIONS[advisor["population"]].env_config), env_part)
     env = build_setup(env_part, track)
     sample = dataclasses.replace(env, action_repeat=1)
-    seed = advisor["population_seed"]
     drivers = tuple(
-        scenario_drivers(
-            population(advisor["population"], seed, advisor["population_size"]),
-            env.config["scenario"],
-            seed,
+        population(
+            advisor["population"],
+            advisor["population_seed"],
+            advisor["population_size"],
+            scenario=env.config["scenario"],
         )
     )
     fixed = driver_index(advisor["driver"], list(drivers))

@@ -59,7 +59,7 @@ from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
-from hasa_env.scenarios import scenario_drivers, scenario_names
+from hasa_env.scenarios import scenario_names
 from hasa_env.session import (
     DriveSession,
     DriveSettings,
@@ -246,10 +246,7 @@ def _synthetic_driver(args: argparse.Namespace) -> tuple[Any, str]:
     (``--participant``, default ``synthetic-<population>-<seed>-<driver>[-<scenario>]``,
     the scenario named unless ``paper``); raises ValueError for an unknown driver."""
     seed = args.population_seed
-    drivers = {
-        p.name: p
-        for p in scenario_drivers(population(args.population, seed=seed), args.scenario, seed)
-    }
+    drivers = {p.name: p for p in population(args.population, seed=seed, scenario=args.scenario)}
     if args.driver not in drivers:
         raise ValueError(
             f"unknown driver {args.driver!r}; this population has {', '.join(drivers)}"

@@ -45,7 +45,7 @@ from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
-from hasa_env.scenarios import scenario_drivers, scenario_spec
+from hasa_env.scenarios import scenario_spec
 from hasa_env.session import (
     DriveSession,
     DriveSettings,
@@ -303,10 +303,7 @@ def _synthetic_participant(args: argparse.Namespace, scenario: str) -> _Particip
     :func:`hasa_env.scenarios.scenario_drivers`, from ``--population-seed``);
     :class:`_Exit` for an unknown driver (2) or no virtual wheel (3)."""
     drivers = {
-        p.name: p
-        for p in scenario_drivers(
-            population(args.population, seed=args.population_seed), scenario, args.population_seed
-        )
+        p.name: p for p in population(args.population, seed=args.population_seed, scenario=scenario)
     }
     if args.synthetic not in drivers:
         print(f"{PROG}: unknown driver {args.synthetic!r}; this population has "

@@ -14,7 +14,6 @@ from benchmarks.protocol.config import ILLUSTRATIVE, TRACK_ENV_IDS, BenchmarkErr
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
 from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
-from hasa_env.scenarios import scenario_drivers
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
 __all__ = [
@@ -158,10 +157,9 @@ def make_plan(config: ProtocolConfig, seed: int | None) -> Plan:
 def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
     """The runs of population seed ``seed``: drivers, main-track and curved runs, env config."""
     try:
-        params = population(config.population, seed, config.drivers)
+        params = population(config.population, seed, config.drivers, scenario=config.scenario)
     except ValueError as exc:
         raise BenchmarkError(str(exc)) from None
-    params = scenario_drivers(params, config.scenario, seed)
     by_name = {p.name: p for p in params}
     main: list[RunRef] = []
     for p in params:

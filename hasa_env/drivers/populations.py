@@ -34,6 +34,7 @@ from hasa_env.drivers.lqr import PreviewCost
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
 from hasa_env.drivers.preview import PreviewParams
 from hasa_env.drivers.two_point import TwoPointParams
+from hasa_env.scenarios import scenario_drivers
 
 __all__ = [
     "IntermittentRanges",
@@ -363,7 +364,9 @@ def _stable_hash(text: str) -> int:
     return zlib.crc32(text.encode("utf-8"))
 
 
-def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanParams]:
+def population(
+    name: str = "paper", seed: int = 0, size: int = 9, scenario: str = "paper"
+) -> list[HumanParams]:
     """A seeded population of synthetic drivers, regenerable anywhere by name and seed.
 
     Args:
@@ -371,12 +374,23 @@ def population(name: str = "paper", seed: int = 0, size: int = 9) -> list[HumanP
         seed: the seed; the same (name, seed, size) gives the same drivers.
         size: number of drivers; they are named "Ill", "1", ..., str(size - 1).
             Archetypes and speed behaviours cycle through the population's lists.
+        scenario: the scenario they drive in (:data:`hasa_env.scenarios.SCENARIOS`):
+            their preferred lateral offsets, :func:`hasa_env.scenarios.scenario_drivers`
+            with the same seed (``paper``: none).
 
     Returns:
         The drivers' parameters (of their archetypes), in name order; drive
         them with :func:`~hasa_env.drivers.archetypes.make_driver` or
         :class:`~hasa_env.drivers.archetypes.SyntheticDriver`.
+
+    Raises:
+        ValueError: an unknown population or scenario, a bad seed or size.
     """
+    return scenario_drivers(_population(name, seed, size), scenario, int(seed))
+
+
+def _population(name: str, seed: int, size: int) -> list[HumanParams]:
+    """:func:`population` before its scenario."""
     try:
         spec = POPULATIONS[name]
     except KeyError:
