@@ -28,7 +28,7 @@ from benchmarks.tables import (
 )
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
-__all__ = ["Section", "checks_rows", "pooled", "report_sections"]
+__all__ = ["Section", "checks_rows", "decision_time", "pooled", "report_sections"]
 
 
 def _paper(value: Any) -> str:
@@ -53,7 +53,7 @@ def _stability(row: dict[str, Any], rank: str) -> str:
     return shown if missing(share) else f"{shown} ({100 * share:.0f}%)"
 
 
-def _decision_time(row: dict[str, Any]) -> str:
+def decision_time(row: dict[str, Any]) -> str:
     """ "median / p90" of the time to decide; "never" for a quantile that is a run that never
     decided."""
     if not row.get("estimated_runs"):
@@ -95,7 +95,7 @@ _SAFETY_COLUMNS = [
     Column(count_share("wrong_lane_ever_runs", "estimated_runs"), "ever conf. wrong"),
     Column(count_share("undecided_runs", "estimated_runs"), "undecided"),
     Column(count_share("model_mismatch_runs", "estimated_runs"), "model mismatch"),
-    Column(_decision_time, "decides in (s) median / p90"),
+    Column(decision_time, "decides in (s) median / p90"),
     Column(count_share("never_decided_runs", "estimated_runs"), "never decided"),
     Column(interval(percent, "decided_time_share"), "time decided [95% CI]"),
     Column(interval(percent, "steering_off_share"), "steering off [95% CI]"),

@@ -11,7 +11,6 @@ steering channel was off (speed or curvature rule), and the runs that end
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,8 @@ from typing import Any
 import pandas as pd
 
 from benchmarks.protocol.results import BenchmarkResult
+from benchmarks.report_sections import decision_time
+from benchmarks.tables import Column, count_share, fixed, interval, percent, render_markdown
 
 __all__ = ["SUITE_COLUMNS", "format_suite", "suite_rows", "write_suite"]
 
@@ -27,10 +28,13 @@ SUITE_COLUMNS = (
     "lateral_rmse", "lateral_rmse_ci_low", "lateral_rmse_ci_high",
     "gain_over_steering_free", "gain_over_steering_free_ci_low",
     "gain_over_steering_free_ci_high",
-    "time_to_decide_median", "time_to_decide_p90", "never_decided_runs",
-    "steering_off_share",
-    "wrong_lane_confident_runs", "wrong_lane_confident_runs_share_ci_high",
-    "wrong_lane_ever_runs", "wrong_lane_ever_runs_share_ci_high",
+    "time_to_decide_median", "time_to_decide_p90",
+    "never_decided_runs", "never_decided_runs_share_ci_low", "never_decided_runs_share_ci_high",
+    "steering_off_share", "steering_off_share_ci_low", "steering_off_share_ci_high",
+    "wrong_lane_confident_runs", "wrong_lane_confident_runs_share_ci_low",
+    "wrong_lane_confident_runs_share_ci_high",
+    "wrong_lane_ever_runs", "wrong_lane_ever_runs_share_ci_low",
+    "wrong_lane_ever_runs_share_ci_high",
 )  # fmt: skip
 """The columns of ``scenarios.csv`` (the verdict's keys, :mod:`benchmarks.protocol.aggregate`)."""
 
@@ -46,61 +50,29 @@ def suite_rows(results: Mapping[str, BenchmarkResult]) -> list[dict[str, Any]]:
     return rows
 
 
-def _number(value: Any, digits: int) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "-"
-    if isinstance(value, float) and math.isinf(value):
-        return "never"
-    return f"{value:.{digits}f}"
-
-
-def _interval(row: Mapping[str, Any], key: str, digits: int = 3) -> str:
-    low, high = row.get(f"{key}_ci_low"), row.get(f"{key}_ci_high")
-    text = _number(row.get(key), digits)
-    if low is None or high is None or text == "-":
-        return text
-    return f"{text} [{_number(low, digits)}, {_number(high, digits)}]"
-
-
-def _percent(value: Any) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "-"
-    return f"{100 * value:.0f} %"
-
-
-def _count(row: Mapping[str, Any], key: str) -> str:
-    runs, count = row.get("estimated_runs"), row.get(key)
-    if not runs or count is None:
-        return "-"
-    high = row.get(f"{key}_share_ci_high")
-    bound = "" if high is None else f" (<= {100 * high:.0f} %)"
-    return f"{int(count)}/{int(runs)}{bound}"
+_TABLE = [
+    Column("model", "Estimator", left=True),
+    Column("kind", "kind", left=True),
+    Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
+    Column(
+        interval(fixed(3), "gain_over_steering_free"),
+        "gain over best steering-free (m) [95% CI]",
+    ),
+    Column(decision_time, "decides in (s) median / p90"),
+    Column(count_share("never_decided_runs", "estimated_runs"), "never decided"),
+    Column(interval(percent, "steering_off_share"), "steering off [95% CI]"),
+    Column(count_share("wrong_lane_confident_runs", "estimated_runs"), "ends conf. wrong"),
+    Column(count_share("wrong_lane_ever_runs", "estimated_runs"), "ever conf. wrong"),
+]
+"""The Markdown table's columns (the cells of the report's tables, :mod:`benchmarks.tables`)."""
 
 
 def format_suite(rows: list[dict[str, Any]]) -> str:
     """The table as Markdown, one block per scenario."""
-    head = (
-        "| Estimator | kind | lat. RMSE (m) [95% CI] | gain over best steering-free (m) "
-        "[95% CI] | decides in (s) median / p90 | never decided | steering off | ends conf. "
-        "wrong (95% upper) | ever conf. wrong (95% upper) |"
-    )
     lines = []
-    for scenario, part in pd.DataFrame(rows).groupby("scenario", sort=False):
-        lines += [f"### {scenario}", "", head, "|" + "---|" * 9]
-        for record in part.to_dict("records"):
-            row = {str(k): v for k, v in record.items()}
-            timing = (
-                f"{_number(row['time_to_decide_median'], 2)} / "
-                f"{_number(row['time_to_decide_p90'], 2)}"
-            )
-            lines.append(
-                f"| {row['model']} | {row['kind']} | {_interval(row, 'lateral_rmse')} | "
-                f"{_interval(row, 'gain_over_steering_free')} | {timing} | "
-                f"{_count(row, 'never_decided_runs')} | {_percent(row.get('steering_off_share'))} | "
-                f"{_count(row, 'wrong_lane_confident_runs')} | "
-                f"{_count(row, 'wrong_lane_ever_runs')} |"
-            )
-        lines.append("")
+    for scenario in dict.fromkeys(row["scenario"] for row in rows):
+        part = [row for row in rows if row["scenario"] == scenario]
+        lines += [f"### {scenario}", "", render_markdown(part, _TABLE), ""]
     return "\n".join(lines)
 
 
