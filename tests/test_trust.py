@@ -188,3 +188,20 @@ def test_hasa_replay_prints_where_the_estimator_does_not_listen(tmp_path, record
     line = next(ln for ln in out.splitlines() if "estimator trust:" in ln)
     assert line.startswith(f"model {path}: estimator trust: steering off ")
     assert "above 17.1 m/s" in line
+
+
+def test_the_benchmark_describes_each_models_limits() -> None:
+    from benchmarks.protocol.models import FittedModel, describe_trust
+
+    fitted = [
+        FittedModel("m", "user", _model(), 1e-3),
+        FittedModel("road_blind", "baseline", _model(), None),  # no estimator: no reasons
+    ]
+    infos = [{"name": "m"}, {"name": "road_blind"}]
+    describe_trust(fitted, infos, {"min_speed": 5.0})
+    assert infos[0]["steering_trust"] == [
+        *trusted_filter(_model()).reasons[:1],
+        "steering off below 5.0 m/s: set by the user (min_speed)",
+        "steering off above 17.1 m/s: outside the training speeds 15.2-16.1 m/s +- 1",
+    ]
+    assert "steering_trust" not in infos[1]

@@ -23,7 +23,7 @@ import math
 import multiprocessing
 import pickle
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
@@ -37,7 +37,7 @@ from benchmarks.protocol.config import (
     BenchmarkError,
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
-from estimators.trust import TrainingRecord, model_limits
+from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
@@ -57,6 +57,7 @@ __all__ = [
     "FittedModel",
     "ModelError",
     "check_lane_keeping",
+    "describe_trust",
     "describe",
     "fit_models",
     "load_models",
@@ -598,3 +599,20 @@ def check_lane_keeping(
         lane = {"keeps_lane": bool(outcome["passed"]), "lane_check": outcome.get("summary", "")}
         out.append(replace(fm, training=replace(fm.training, **lane)))
     return out
+
+
+def describe_trust(
+    fitted: Sequence[FittedModel],
+    infos: Sequence[dict[str, Any]],
+    overrides: Mapping[str, Any],
+) -> None:
+    """Put in each estimated model's description (key ``steering_trust``) the reasons
+    :func:`estimators.trust.trusted_filter` gives for every limit on its steering channel
+    (with the protocol's ``filter_settings`` as the user's ``overrides``)."""
+    described = {info["name"]: info for info in infos}
+    for fm in fitted:
+        info = described.get(fm.name)
+        if fm.residual_std is None or info is None:
+            continue
+        trust = trusted_filter(fm.model, training=fm.training, overrides=overrides)
+        info["steering_trust"] = list(trust.reasons)
