@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import copy
+import dataclasses
 import json
 import os
 import re
@@ -23,7 +24,9 @@ import pytest
 from jsonschema import Draft202012Validator
 
 from benchmarks.figures import FIGURES
-from benchmarks.report import CSV_TABLES
+from benchmarks.protocol import BenchmarkResult
+from benchmarks.report import CSV_TABLES, write_outputs
+from benchmarks.scenario_suite import html_suite
 from benchmarks.schema import (
     RESULTS_SCHEMA,
     TABLES_SCHEMA,
@@ -34,6 +37,8 @@ from benchmarks.schema import (
     results_problems,
     table_problems,
 )
+from benchmarks.tables import Column, fixed, render_html, render_markdown
+from hasa_cli import bench
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = ["--seeds", "0", "--population", "paper-pi", "--drivers", "1", "--runs", "1",
@@ -249,3 +254,57 @@ def test_a_headless_browser_shows_the_tables_and_the_figures(
     assert models == [r["model"] for r in doc["summary"]]
     widths = [int(str(image.get("data-w"))) for image in dom.images]
     assert len(widths) == len(_figures(run_folder)) and min(widths) > 100
+
+
+def _result_from(doc: dict) -> BenchmarkResult:
+    """A BenchmarkResult with the tables of a results.json (no figure data)."""
+    fields = {f.name for f in dataclasses.fields(BenchmarkResult)}
+    kept = {k: v for k, v in doc.items() if k in fields}
+    return BenchmarkResult(**kept, timing=doc["timing_seconds"], plots={})
+
+
+@pytest.mark.slow
+def test_a_result_that_breaks_the_schema_is_one_error_line_and_every_file_is_kept(
+    run_folder: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    doc = json.loads((run_folder / "results.json").read_text())
+    good = _result_from(doc)
+    out = tmp_path / "out"
+    write_outputs(good, out, figures=False)  # the same rows written again: no problem
+    assert folder_problems(out) == []
+    bad = _result_from(doc)
+    bad.summary[0]["surprise"] = 1.0  # a column the schema does not know
+    monkeypatch.setattr(bench, "run_protocol", lambda *args, **kwargs: bad)
+    code = bench.main(["paper", *TINY, "--no-plots", "--quiet", "--out", str(out), "--overwrite"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.count("hasa-bench: error: ") == 1
+    assert "results.json does not follow the shipped schema: results.json.summary[0]" in err
+    assert "'surprise' was unexpected" in err
+    # written all the same, the previous result replaced, no half-written folder left over
+    assert json.loads((out / "results.json").read_text())["summary"][0]["surprise"] == 1.0
+    assert (out / "report.html").is_file() and (out / "summary.csv").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_html_tables_have_the_markdown_tables_cells_escaped() -> None:
+    columns = [Column("model", "Model <name>", left=True), Column("x", "x & y", fixed(2))]
+    rows = [{"model": "<script>alert(1)</script>", "x": 0.5}, {"model": "a|b", "x": None}]
+    page = render_html(rows, columns, caption="Caption <i>")
+    assert "<script>" not in page and "&lt;script&gt;alert(1)&lt;/script&gt;" in page
+    assert "<caption>Caption &lt;i&gt;</caption>" in page
+    parsed = _parse(page)
+    assert parsed.tables == [
+        [["Model <name>", "x & y"], ["<script>alert(1)</script>", "0.50"], ["a|b", "-"]]
+    ]
+    assert _markdown_tables(render_markdown(rows, columns))[0][1:] == parsed.tables[0][1:]
+    assert '<td class="num">0.50</td>' in page and "<td>a|b</td>" in page
+
+
+def test_the_scenario_suite_page_links_each_scenarios_report() -> None:
+    row = {"scenario": "lane_shift", "model": "gen<eralized>", "kind": "builtin",
+           "estimated_runs": 4, "lateral_rmse": 0.1234}  # fmt: skip
+    page = html_suite([row])
+    assert '<a href="lane_shift/report.html">report</a>' in page
+    assert "gen&lt;eralized&gt;" in page and "0.123" in page
+    assert "<script" not in page and "http" not in page
