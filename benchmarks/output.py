@@ -1,8 +1,8 @@
 """A benchmark result's folder: checked before the protocol runs, replaced only when complete.
 
 ``hasa-bench paper|score --out DIR`` writes ``results.json``, the CSV tables,
-``report.md``, ``report.html`` and the figures (:func:`benchmarks.report.write_outputs`) into a
-new folder beside ``DIR`` and swaps it in at the end, so a failure leaves
+``report.md``, ``report.html`` and the figures (:func:`benchmarks.report.write_outputs`)
+into a new folder beside ``DIR`` and swaps it in at the end, so a failure leaves
 ``DIR`` as it was; a folder that holds anything but a previous result is
 never replaced.
 """

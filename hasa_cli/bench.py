@@ -10,7 +10,7 @@ Usage::
 
 ``paper`` and ``score`` print the tables and write into ``--out``
 (default ``hasa-bench-results``): ``results.json``, CSV tables,
-``report.md`` and PNG figures. A folder that holds a previous result is only
+``report.md``, ``report.html`` (self-contained) and PNG figures (docs/results.md). A folder that holds a previous result is only
 replaced with ``--overwrite`` (the new result is written beside it first and
 swapped in when complete). Exit status (:mod:`hasa_cli`): 0 success; 1
 partial: a user model failed, or recordings were skipped or runs left out
