@@ -22,6 +22,7 @@ code    meaning
 from __future__ import annotations
 
 import argparse
+import errno
 import functools
 import os
 import sys
@@ -38,6 +39,8 @@ __all__ = [
     "add_version",
     "console_script",
     "error",
+    "os_error_behind",
+    "report_write_failure",
     "warn",
 ]
 
@@ -57,6 +60,42 @@ def error(prog: str, message: str) -> None:
 def warn(prog: str, message: str) -> None:
     """Print ``prog: warning: message`` on stderr (something skipped or worth knowing)."""
     print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
+
+
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+"""Write errors that mean "no space left": the disk (or the quota, or the file-size limit)."""
+
+
+def os_error_behind(exc: BaseException) -> OSError | None:
+    """The operating-system error behind ``exc``: ``exc`` itself if it is an ``OSError`` with
+    an errno, else the first such one in its ``__cause__`` / ``__context__`` chain (e.g. a
+    ``RecordingError`` raised because a write failed); None if there is none."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, OSError) and current.errno is not None:
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
+
+
+def report_write_failure(prog: str, exc: BaseException, output: object, kept: str) -> int | None:
+    """One error line for a write into ``output`` that failed, and its exit status.
+
+    ``kept`` says what is on disk (e.g. "2 complete run(s) are kept"). Returns
+    :data:`EXIT_ENVIRONMENT` for a full disk (no space, quota, file-size limit),
+    :data:`EXIT_PARTIAL` for any other write error, None if no ``OSError`` is behind
+    ``exc`` (not a write failure: the caller re-raises it).
+    """
+    cause = os_error_behind(exc)
+    if cause is None:
+        return None
+    reason = cause.strerror or str(cause)
+    full = cause.errno in DISK_FULL_ERRNOS
+    where = f" ({cause.filename})" if cause.filename else ""
+    error(prog, f"cannot write to {output}: {reason}{where}; {kept}")
+    return EXIT_ENVIRONMENT if full else EXIT_PARTIAL
 
 
 def add_version(parser: argparse.ArgumentParser) -> None:

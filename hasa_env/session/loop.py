@@ -40,6 +40,7 @@ import numpy as np
 
 from hasa_env.devices.sources import InputManager, Notice
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.recording.format import RecordingError
 from hasa_env.recording.raw_inputs import (
     RAW_INPUT_HEADER,
     RAW_INPUT_UNITS,
@@ -97,6 +98,21 @@ class RunSpec:
     prefix: str = "run"
     label: str = ""
     metadata: Mapping[str, Any] = field(default_factory=dict)
+
+
+def _close_run(recorder: RecordingWrapper, raw: RawInputWriter | None, quietly: bool) -> None:
+    """Close a run's recording and raw-input file. ``quietly`` (an error already ends the
+    run): a write error while closing (e.g. the same full disk) is dropped so the first error
+    is the one reported; what is on disk stays (an incomplete sidecar reads as incomplete)."""
+    try:
+        try:
+            recorder.close()
+        finally:
+            if raw is not None:
+                raw.close()
+    except (OSError, RecordingError):
+        if not quietly:
+            raise
 
 
 class DriveSession:
@@ -591,12 +607,10 @@ class DriveSession:
                         self._draw(self.info, self.message if self.state != "driving" else None)
                         last_frame_step = self.steps
                 self._tick()
-        finally:
-            try:
-                recorder.close()
-            finally:
-                if raw is not None:
-                    raw.close()
+        except BaseException:
+            _close_run(recorder, raw, quietly=True)  # keep the first error, not a consequence
+            raise
+        _close_run(recorder, raw, quietly=False)
         if recorder.path is None:
             return None
         if self.state != "quit":
