@@ -33,7 +33,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +62,7 @@ from hasa_cli import (
     warn,
 )
 from hasa_env.scenarios import SCENARIOS
+from hasa_env.sim.config import ConfigError, make_config
 
 __all__ = ["main", "build_parser"]
 
@@ -102,7 +103,11 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         help="runs of the illustrative driver 'Ill', incl. the training run (default: runs + 4)",
     )
     data.add_argument(
-        "--duration", type=float, default=30.0, metavar="S", help="run length in s (30)"
+        "--duration",
+        type=_config_value("time_limit"),
+        default=30.0,
+        metavar="S",
+        help="run length in s (30)",
     )
     data.add_argument(
         "--track", choices=("straight", "curved"), default="straight", help="main track"
@@ -143,11 +148,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         help="also run every model's estimator without the evidence checks and the lane-keeping "
         "check ('<model> (no checks)')",
     )
-    noise = parser.add_argument_group("sensor noise (std; default: the env's)")
-    noise.add_argument("--speed-noise", type=float, metavar="M/S", help="speedometer (0.05)")
-    noise.add_argument("--camera-noise", type=float, metavar="M", help="camera offset (0.05)")
-    noise.add_argument("--imu-noise", type=float, metavar="M/S2", help="IMU (0.05)")
-    noise.add_argument("--steering-noise", type=float, metavar="RAD", help="steering (1e-4)")
+    _add_noise_options(parser)
     parser.add_argument(
         "--model",
         action="append",
@@ -157,6 +158,20 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "subclass, fitted on the training run like the built-ins) or a saved model file "
         "(scored with its own parameters); repeatable",
     )
+
+
+def _add_noise_options(parser: argparse.ArgumentParser) -> None:
+    """The sensor-noise options, each range-checked by the env config's validator."""
+    noise = parser.add_argument_group("sensor noise (std; default: the env's)")
+    for name, metavar, default in (
+        ("speed", "M/S", "speedometer (0.05)"),
+        ("camera", "M", "camera offset (0.05)"),
+        ("imu", "M/S2", "IMU (0.05)"),
+        ("steering", "RAD", "steering (1e-4)"),
+    ):
+        noise.add_argument(
+            f"--{name}-noise", type=_config_value(f"noise.{name}"), metavar=metavar, help=default
+        )
 
 
 def _add_recording_options(parser: argparse.ArgumentParser) -> None:
@@ -250,6 +265,29 @@ def _seconds(text: str) -> float:
     if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(f"expected a duration in s >= 0, got {text!r}")
     return value
+
+
+def _config_value(key: str) -> Callable[[str], float]:
+    """An argparse type: a number the env config accepts at the dotted ``key`` (e.g.
+    ``noise.camera``), its range checked by the config's own validator
+    (:func:`hasa_env.make_config`), so a bad value is a usage error naming the option and the
+    allowed range before anything runs."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        update: Any = value
+        for part in reversed(key.split(".")):
+            update = {part: update}
+        try:
+            make_config(update)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+
+    return parse
 
 
 def _time_limit(text: str) -> float | None:

@@ -29,6 +29,7 @@ the terminal while the participant's window stays clean
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -98,21 +99,6 @@ class RunSpec:
     prefix: str = "run"
     label: str = ""
     metadata: Mapping[str, Any] = field(default_factory=dict)
-
-
-def _close_run(recorder: RecordingWrapper, raw: RawInputWriter | None, quietly: bool) -> None:
-    """Close a run's recording and raw-input file. ``quietly`` (an error already ends the
-    run): a write error while closing (e.g. the same full disk) is dropped so the first error
-    is the one reported; what is on disk stays (an incomplete sidecar reads as incomplete)."""
-    try:
-        try:
-            recorder.close()
-        finally:
-            if raw is not None:
-                raw.close()
-    except (OSError, RecordingError):
-        if not quietly:
-            raise
 
 
 class DriveSession:
@@ -607,10 +593,18 @@ class DriveSession:
                         self._draw(self.info, self.message if self.state != "driving" else None)
                         last_frame_step = self.steps
                 self._tick()
-        except BaseException:
-            _close_run(recorder, raw, quietly=True)  # keep the first error, not a consequence
+        except BaseException:  # close quietly: report the first error, not its consequences
+            with contextlib.suppress(OSError, RecordingError):
+                recorder.close()
+            if raw is not None:
+                with contextlib.suppress(OSError):
+                    raw.close()
             raise
-        _close_run(recorder, raw, quietly=False)
+        try:
+            recorder.close()
+        finally:
+            if raw is not None:
+                raw.close()
         if recorder.path is None:
             return None
         if self.state != "quit":
