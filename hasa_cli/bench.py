@@ -39,7 +39,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from benchmarks.executor import SchedulerError, check_scheduler
+from benchmarks.executor import NO_WORKER_TIMEOUT, ClusterLost, SchedulerError, check_scheduler
 from benchmarks.output import output_problem, write_result_folder
 from benchmarks.perf import (
     BENCHMARKS,
@@ -229,6 +229,14 @@ def _add_execution_options(parser: argparse.ArgumentParser) -> None:
         "workers need hasa-env and the modules of your models)",
     )
     run.add_argument(
+        "--worker-timeout",
+        type=_positive_seconds,
+        default=NO_WORKER_TIMEOUT,
+        metavar="S",
+        help="with --scheduler: give up (exit 3) when the cluster has had no worker for this "
+        f"long (default {NO_WORKER_TIMEOUT:g} s); what finished is reported",
+    )
+    run.add_argument(
         "--batch-size",
         type=int,
         default=48,
@@ -288,6 +296,13 @@ def _config_value(key: str) -> Callable[[str], float]:
         return value
 
     return parse
+
+
+def _positive_seconds(text: str) -> float:
+    value = _seconds(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a duration in s > 0, got {text!r}")
+    return value
 
 
 def _time_limit(text: str) -> float | None:
@@ -506,11 +521,16 @@ def _run_scenario(
             workers=args.workers,
             scheduler=scheduler,
             progress=progress,
+            no_worker_timeout=args.worker_timeout,
         )
     except BenchmarkError as exc:
         progress.close()
         error(PROG, str(exc))
         return EXIT_USAGE, None
+    except ClusterLost as exc:  # the scheduler or every worker went away mid-run
+        progress.close()
+        error(PROG, f"{exc}; nothing was written")
+        return EXIT_ENVIRONMENT, None
     progress("writing results, tables and figures", 0, 0)
     try:
         written = write_result_folder(result, out, figures=not args.no_plots)
