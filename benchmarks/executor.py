@@ -7,9 +7,13 @@ on the number of workers; results come back in task order.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import ctypes
 import logging
 import os
+import signal
 import socket
+import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -28,6 +32,7 @@ __all__ = [
 SCHEDULER_TIMEOUT = 6.0
 """Seconds :func:`check_scheduler` waits, in all, for a Dask scheduler to answer."""
 
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 _SCHEMES = ("tcp", "tls", "ws", "wss", "inproc", "ucx")
 
 
@@ -198,14 +203,52 @@ def map_tasks(
             if progress:
                 progress(i)
         return out
-    with ProcessPoolExecutor(max_workers=min(n, len(tasks))) as pool:
+    pool = ProcessPoolExecutor(
+        max_workers=min(n, len(tasks)), initializer=_init_worker, initargs=(os.getpid(),)
+    )
+    try:
         futures = [pool.submit(func, task) for task in tasks]
         results = []
         for i, fut in enumerate(futures, start=1):
             results.append(fut.result())
             if progress:
                 progress(i)
-        return results
+    except BaseException:  # a task failed, Ctrl-C, SIGTERM: no worker may outlive this call
+        _terminate_pool(pool)
+        raise
+    pool.shutdown()
+    return results
+
+
+def _init_worker(parent: int) -> None:
+    """A pool worker: the default action for SIGTERM and SIGHUP (it must not inherit the
+    parent's handlers, which raise in Python and would let a task's loop catch them), and on
+    Linux ended with its parent even if that is killed with SIGKILL (``PR_SET_PDEATHSIG``)."""
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+        if os.getppid() != parent:  # the parent is gone already
+            os._exit(1)
+
+
+def _terminate_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a process pool now: pending tasks cancelled, running workers terminated
+    (SIGTERM, then SIGKILL after 2 s) and reaped."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        with contextlib.suppress(OSError, ValueError):
+            process.terminate()
+    deadline = time.monotonic() + 2.0
+    for process in processes:
+        with contextlib.suppress(OSError, ValueError, AssertionError):
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+                process.join(1.0)
 
 
 def _map_dask(
@@ -265,9 +308,7 @@ def _gather_dask(
                 finished = wait(list(pending), HEARTBEAT, return_when="FIRST_COMPLETED").done
         except TimeoutError:
             finished = set()
-        except (KeyboardInterrupt, SystemExit):
-            raise
-        except BaseException as exc:  # noqa: BLE001 - cancelled futures: the scheduler is gone
+        except Exception as exc:  # noqa: BLE001 - cancelled futures: the scheduler is gone
             raise lost(type(exc).__name__) from None
         for fut in finished:
             if fut.status == "cancelled":

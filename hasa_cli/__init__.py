@@ -22,11 +22,14 @@ code    meaning
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import functools
 import os
+import signal
 import sys
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 
 from hasa_env import __version__
 
@@ -36,11 +39,13 @@ __all__ = [
     "EXIT_OK",
     "EXIT_PARTIAL",
     "EXIT_USAGE",
+    "Stopped",
     "add_version",
     "console_script",
     "error",
     "os_error_behind",
     "report_write_failure",
+    "stop_on_signals",
     "warn",
 ]
 
@@ -98,6 +103,36 @@ def report_write_failure(prog: str, exc: BaseException, output: object, kept: st
     return EXIT_ENVIRONMENT if full else EXIT_PARTIAL
 
 
+class Stopped(BaseException):
+    """SIGTERM or SIGHUP arrived while :func:`stop_on_signals` was in force."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_stopped(signum: int, frame: object) -> None:
+    raise Stopped(signum)
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """While inside, SIGTERM and SIGHUP raise :class:`Stopped` in the main thread, so the
+    program unwinds (``finally`` blocks run, worker pools are terminated) and
+    :func:`console_script` ends it with ``prog: error: stopped by SIGTERM`` and 128 + the
+    signal's number (143, 129). The previous handlers come back on leaving."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    names = [n for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    previous = {n: signal.signal(getattr(signal, n), _raise_stopped) for n in names}
+    try:
+        yield
+    finally:
+        for name, handler in previous.items():
+            signal.signal(getattr(signal, name), handler)
+
+
 def add_version(parser: argparse.ArgumentParser) -> None:
     """Add ``--version`` (the installed hasa-env version) to a program's parser."""
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -110,7 +145,8 @@ def console_script(
 
     Ctrl-C prints ``prog: error: interrupted`` and returns :data:`EXIT_INTERRUPTED`
     (what has been written stays written: every writer in hasa_env flushes as
-    it goes); a closed stdout (``hasa-rec info ... | head``) ends the program
+    it goes), SIGTERM / SIGHUP under :func:`stop_on_signals` likewise with 128 + the
+    signal's number; a closed stdout (``hasa-rec info ... | head``) ends the program
     without a traceback. Everything else a user can cause is handled inside
     ``main``; an exception that reaches here is a bug and keeps its traceback.
     """
@@ -123,6 +159,10 @@ def console_script(
             except KeyboardInterrupt:
                 error(prog, "interrupted")
                 return EXIT_INTERRUPTED
+            except Stopped as stop:
+                name = signal.Signals(stop.signum).name
+                error(prog, f"stopped by {name} (what was written so far stays written)")
+                return 128 + stop.signum
             except BrokenPipeError:
                 # stdout was closed by the reader; silence the flush at exit
                 devnull = os.open(os.devnull, os.O_WRONLY)

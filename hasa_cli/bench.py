@@ -59,6 +59,7 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    stop_on_signals,
     warn,
 )
 from hasa_env.scenarios import SCENARIOS
@@ -531,6 +532,9 @@ def _run_scenario(
         progress.close()
         error(PROG, f"{exc}; nothing was written")
         return EXIT_ENVIRONMENT, None
+    except BaseException:  # Ctrl-C, SIGTERM: end the progress bar's line before the message
+        progress.close()
+        raise
     progress("writing results, tables and figures", 0, 0)
     try:
         written = write_result_folder(result, out, figures=not args.no_plots)
@@ -590,7 +594,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if user_models and os.getcwd() not in sys.path:
         # like other tools that import user code by path: modules in the working directory
         sys.path.insert(0, os.getcwd())
-    return _run_protocol(args, user_models)
+    with stop_on_signals():  # SIGTERM / SIGHUP: the worker pool is terminated, exit 143 / 129
+        return _run_protocol(args, user_models)
 
 
 if __name__ == "__main__":  # pragma: no cover
