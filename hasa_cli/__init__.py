@@ -15,7 +15,9 @@ code    meaning
 1       partial: some inputs failed (each named on stderr), the rest done
 2       usage or input error (nothing done)
 3       environment: something the machine lacks (no screen, a missing
-        optional package, an unreachable Dask scheduler, ...)
+        optional package, an unreachable or lost Dask scheduler, a full
+        disk, ...)
+130     Ctrl-C; 143 / 129: SIGTERM / SIGHUP under :func:`stop_on_signals`
 ======  ==============================================================
 """
 
