@@ -187,11 +187,7 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
             autocentre = _start_autocentre(inputs, args.autocentre, log)
         results = session.run()
     except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
-        kept = f"what was written before is kept ({len(session.results)} finished run(s))"
-        status = report_write_failure("hasa-drive", exc, settings.directory, kept)
-        if status is None:
-            raise
-        return status
+        return _write_failed(exc, session, settings)
     finally:
         signal.signal(signal.SIGTERM, previous)
         if autocentre is not None:
@@ -201,6 +197,16 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         pg.display.quit()
     log(f"hasa-drive: {len(results)} run(s) recorded in {settings.directory}")
     return 0
+
+
+def _write_failed(exc: Exception, session: DriveSession, settings: DriveSettings) -> int:
+    """One line for a drive that could not write (e.g. a full disk) and its exit status;
+    re-raises ``exc`` if no operating-system error is behind it (a bug)."""
+    kept = f"what was written before is kept ({len(session.results)} finished run(s))"
+    status = report_write_failure("hasa-drive", exc, settings.directory, kept)
+    if status is None:
+        raise exc
+    return status
 
 
 def _drive_setup(
@@ -325,11 +331,7 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     try:
         results = session.run()
     except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
-        kept = f"what was written before is kept ({len(session.results)} finished run(s))"
-        status = report_write_failure("hasa-drive", exc, settings.directory, kept)
-        if status is None:
-            raise
-        return status
+        return _write_failed(exc, session, settings)
     finally:
         session.close()
         inputs.close()
