@@ -59,6 +59,7 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    printable,
     warn,
 )
 from hasa_env.scenarios import SCENARIOS
@@ -156,6 +157,13 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         help="also score this steering model: 'package.module:ClassName' (a SteeringModel "
         "subclass, fitted on the training run like the built-ins) or a saved model file "
         "(scored with its own parameters); repeatable",
+    )
+    parser.add_argument(
+        "--trust-model-module",
+        action="store_true",
+        help="import the module a model file's 'class' field names when its type is not "
+        "registered (searched in the working directory, the file's folder and the installed "
+        "packages). A user model is code: importing it runs it; use only with files you trust",
     )
 
 
@@ -391,7 +399,8 @@ class _Progress:
             self.bar.update(done - self.bar.n)
             return
         self.close()
-        print(f"[{time.perf_counter() - self.start:5.1f} s] {phase}", file=sys.stderr, flush=True)
+        elapsed = time.perf_counter() - self.start
+        print(f"[{elapsed:5.1f} s] {printable(phase)}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:
@@ -442,7 +451,7 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         error(PROG, f"cannot write the scenario table to {out}: {exc}")
         return EXIT_ENVIRONMENT
     if not args.quiet:
-        print(format_suite(rows))
+        print(printable(format_suite(rows), newlines=True))
         print(
             f"wrote {len(results)} scenario folders and scenarios.md, scenarios.csv to {out}/; "
             f"{time.perf_counter() - started:.1f} s in all"
@@ -468,6 +477,7 @@ def _run_scenario(
             workers=args.workers,
             scheduler=scheduler,
             progress=progress,
+            trust_model_modules=args.trust_model_module,
         )
     except BenchmarkError as exc:
         progress.close()
@@ -482,7 +492,7 @@ def _run_scenario(
         return EXIT_ENVIRONMENT, None
     progress.close()
     if not args.quiet:
-        print(format_tables(result))
+        print(printable(format_tables(result), newlines=True))
         print()
         print(
             f"wrote {len(written)} files to {out}/ (results.json, report.md, "

@@ -137,6 +137,7 @@ def run_protocol(
     workers: int | None = None,
     scheduler: Any = None,
     progress: Progress | None = None,
+    trust_model_modules: bool = False,
 ) -> BenchmarkResult:
     """Run the benchmark protocol (see the module docstring).
 
@@ -150,6 +151,9 @@ def run_protocol(
             (its workers must be able to import the user models).
         progress: called as ``progress(phase, done, total)``; phases
             "runs" (done/total runs) and messages with total 0.
+        trust_model_modules: a model file in ``user_models`` whose type is not
+            registered imports the module its ``"class"`` names (``--trust-model-module``;
+            importing runs that module's code).
 
     Returns:
         A :class:`BenchmarkResult`; failed user models are in ``errors``.
@@ -164,7 +168,11 @@ def run_protocol(
     errors: list[ModelError] = []
     # 0. every model loads before any run is generated: one that does not is an input error
     candidates = load_models(
-        user_models, errors, time_limit=config.model_time_limit, stress=config.stress
+        user_models,
+        errors,
+        time_limit=config.model_time_limit,
+        stress=config.stress,
+        trust_module=trust_model_modules,
     )
     if errors:
         raise BenchmarkError(
