@@ -73,6 +73,7 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``paper`` and ``score``: runs, sensor noise, models, recordings,
     execution and output."""
     _add_run_options(parser)
+    _add_trust_option(parser)
     _add_recording_options(parser)
     _add_execution_options(parser)
 
@@ -158,6 +159,10 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "subclass, fitted on the training run like the built-ins) or a saved model file "
         "(scored with its own parameters); repeatable",
     )
+
+
+def _add_trust_option(parser: argparse.ArgumentParser) -> None:
+    """``--trust-model-module``: a model file may import the module its class lives in."""
     parser.add_argument(
         "--trust-model-module",
         action="store_true",
