@@ -406,9 +406,10 @@ def _drive_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--trust-model-module",
         action="store_true",
-        help="import the module --estimator's model file's 'class' field names when its type is not "
-        "registered (searched in the working directory, the file's folder and the installed "
-        "packages). A user model is code: importing it runs it; use only with files you trust",
+        help="import the module named by the 'class' field of --estimator's model file when "
+        "its type is not registered (searched in the working directory, the file's folder and "
+        "the installed packages). A user model is code: importing it runs it; use only with "
+        "files you trust",
     )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)

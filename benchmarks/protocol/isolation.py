@@ -31,6 +31,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+import threading
 import time
 import warnings
 from collections.abc import Callable
@@ -48,6 +49,7 @@ __all__ = [
     "ModelError",
     "describe",
     "guarded",
+    "guarded_in_time",
     "run_isolated",
 ]
 
@@ -90,13 +92,16 @@ def _fork_context() -> Any:
     return multiprocessing.get_context("fork")
 
 
+class _OutOfTime(BaseException):
+    """Raised by the alarm of :func:`guarded_in_time` (not an Exception: user code that
+    catches every Exception cannot swallow it)."""
+
+
 def guarded(func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str) -> Any:
     """``func(*args)``; any exception and ``SystemExit`` become this model's ModelError."""
     try:
         return func(*args)
-    except ModelError:
-        raise
-    except KeyboardInterrupt:
+    except (ModelError, KeyboardInterrupt, _OutOfTime):
         raise
     except BaseException as exc:  # noqa: BLE001 - SystemExit in user code is its failure
         raise ModelError(model, stage, f"raised {describe(exc)}") from None
@@ -234,6 +239,40 @@ def _await_result(receive: Any, pid: int, model: str, stage: str, time_limit: fl
             raise ModelError(
                 model, stage, f"took longer than the time limit of {time_limit:g} s and was stopped"
             )
+
+
+def guarded_in_time(
+    func: Callable[..., Result], args: tuple[Any, ...], model: str, stage: str,
+    time_limit: float | None,
+) -> Result:  # fmt: skip
+    """:func:`guarded` in this process, stopped by an alarm after ``time_limit`` s (only in
+    the main thread, where Python delivers signals; elsewhere, or without a limit, as
+    :func:`guarded`). For what must run here, e.g. importing a user module the workers need,
+    after it has imported isolated once.
+
+    Raises:
+        ModelError: as :func:`guarded`, or "took longer than the time limit".
+    """
+    if time_limit is None or threading.current_thread() is not threading.main_thread():
+        return guarded(func, args, model, stage)
+
+    def alarm(signum: int, frame: Any) -> None:
+        raise _OutOfTime
+
+    previous = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, time_limit)
+    try:
+        return guarded(func, args, model, stage)
+    except _OutOfTime:
+        raise ModelError(
+            model,
+            stage,
+            f"took longer than the time limit of {time_limit:g} s in hasa-bench's "
+            "own process (it had imported within the limit in its isolated process)",
+        ) from None
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def run_isolated(

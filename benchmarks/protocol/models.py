@@ -27,7 +27,7 @@ from benchmarks.protocol.isolation import (
     DEFAULT_MODEL_MEMORY_LIMIT,
     ModelError,
     describe,
-    guarded,
+    guarded_in_time,
     run_isolated,
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
@@ -189,7 +189,8 @@ def load_models(
     nothing and is reported at once. With a ``time_limit`` each user model is
     first imported and created in a child process (:func:`run_isolated`), so
     a module that hangs, exits or crashes while importing is reported, not
-    fatal; only then is it imported here (the model object is needed here). With
+    fatal; only then is it imported here (the model object is needed here), stopped by
+    an alarm after ``time_limit`` too (:func:`benchmarks.protocol.isolation.guarded_in_time`). With
     ``trust_module`` a model file may import the module its ``"class"`` names
     (:func:`hasa_env.steering.loading.load_model_file`).
     """
@@ -213,7 +214,9 @@ def load_models(
                     _check_user_model, (spec, trust_module), model=str(spec), stage="import",
                     time_limit=time_limit,
                 )  # fmt: skip
-            model = guarded(load_user_model, (spec, trust_module), str(spec), "import")
+            model = guarded_in_time(
+                load_user_model, (spec, trust_module), str(spec), "import", time_limit
+            )
         except ModelError as exc:
             errors.append(exc)
             continue
