@@ -36,7 +36,12 @@ import pandas as pd
 
 from hasa_env.files import read_bounded_text
 from hasa_env.steering.base import SteeringModel
-from hasa_env.steering.model_file import MAX_MODEL_FILE_BYTES, MODEL_TYPES, ModelFileError
+from hasa_env.steering.model_file import (
+    CLASS_PATH,
+    MAX_MODEL_FILE_BYTES,
+    MODEL_TYPES,
+    ModelFileError,
+)
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 
 __all__ = [
@@ -241,6 +246,8 @@ def load_model_file(path: str | os.PathLike[str], trust_module: bool = False) ->
         model_type, cls = document.get("type"), document.get("class")
         known = isinstance(model_type, str) and model_type in MODEL_TYPES
         if isinstance(model_type, str) and not known and isinstance(cls, str):
+            if not CLASS_PATH.fullmatch(cls):  # refused below, naming the field
+                return SteeringModel.from_json(document, source)
             if not trust_module:
                 raise ModelFileError(
                     f"{source}: model type {model_type!r} is not registered; the file names "
