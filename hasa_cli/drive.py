@@ -406,10 +406,9 @@ def _drive_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--trust-model-module",
         action="store_true",
-        help="import the module named by the 'class' field of --estimator's model file when "
-        "its type is not registered (searched in the working directory, the file's folder and "
-        "the installed packages). A user model is code: importing it runs it; use only with "
-        "files you trust",
+        help="let --estimator's model file import the module its 'class' names (from the "
+        "working directory, the file's folder, the installed packages): a user model is code, "
+        "importing it runs it; only for files you trust",
     )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)
