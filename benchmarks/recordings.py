@@ -132,6 +132,7 @@ def prepare_model(
     steering_ratio: float | None = None,
     lane_check: bool = False,
     say: Callable[[str], None] = lambda message: None,
+    trust_module: bool = False,
 ) -> PreparedModel:
     """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
     first recording (its ``steering`` signal: "measured" or "applied"; None: the model's);
@@ -139,14 +140,16 @@ def prepare_model(
     (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
     ``lane_check`` the model must keep a lane when it steers itself
     (:func:`hasa_env.drivers.require_lane_keeping`: 4 cars, 30 s, the straight track).
-    ``say`` hears what was fitted and the ratio used.
+    ``say`` hears what was fitted and the ratio used. ``trust_module``: a model file of a
+    type not registered yet imports the module its ``"class"`` names
+    (:func:`hasa_env.steering.loading.load_model_file`).
 
     Raises:
         ModelSetupError: the model does not load, or has no parameters and ``fit`` is off.
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
     try:
-        model = load_model(spec, recordings[0].dt)
+        model = load_model(spec, recordings[0].dt, trust_module=trust_module)
     except (ValueError, OSError) as exc:
         raise ModelSetupError(str(exc)) from None
     if not model.is_fitted and not fit:

@@ -28,6 +28,7 @@ import contextlib
 import errno
 import functools
 import os
+import re
 import signal
 import sys
 import threading
@@ -48,6 +49,7 @@ __all__ = [
     "os_error_behind",
     "report_write_failure",
     "stop_on_signals",
+    "printable",
     "warn",
 ]
 
@@ -59,14 +61,52 @@ EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (128 + SIGINT, the shell's convention)."""
 
 
+_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+_NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def _escape(match: re.Match[str]) -> str:
+    char = match.group()
+    if char in _NAMED:
+        return _NAMED[char]
+    return f"\\x{ord(char):02x}" if ord(char) < 0x100 else f"\\u{ord(char):04x}"
+
+
+def printable(text: object, newlines: bool = False) -> str:
+    """``str(text)`` with terminal control characters escaped as Python writes them in a repr
+    (``\\x1b``, ``\\n``, ``\\u2028``): C0 and C1 controls, DEL and the Unicode line
+    separators. Everything the programs print that comes from a file (file names, recording
+    metadata, model names) goes through it, so a file cannot move the cursor, clear the screen
+    or forge a line. ``newlines``: keep ``\\n`` (a table of several lines)."""
+    text = str(text)
+    if newlines:
+        return "\n".join(_CONTROL.sub(_escape, line) for line in text.split("\n"))
+    return _CONTROL.sub(_escape, text)
+
+
+def _one_message(prog: str, kind: str, message: str) -> str:
+    """``prog: kind: message``, escaped (:func:`printable`): a message's list items (a newline
+    and two spaces) stay on their own indented lines, every other newline is escaped, so
+    only the program writes a line starting ``prog:``."""
+    lines: list[str] = []
+    for line in printable(message, newlines=True).split("\n"):
+        if lines and not line.startswith("  "):
+            lines[-1] += "\\n" + line
+        else:
+            lines.append(line)
+    return "\n".join([f"{prog}: {kind}: {lines[0]}", *lines[1:]])
+
+
 def error(prog: str, message: str) -> None:
-    """Print ``prog: error: message`` on stderr (the one error format of every program)."""
-    print(f"{prog}: error: {message}", file=sys.stderr, flush=True)
+    """Print ``prog: error: message`` on stderr (the one error format of every program);
+    control characters in ``message`` are escaped (:func:`printable`)."""
+    print(_one_message(prog, "error", message), file=sys.stderr, flush=True)
 
 
 def warn(prog: str, message: str) -> None:
-    """Print ``prog: warning: message`` on stderr (something skipped or worth knowing)."""
-    print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
+    """Print ``prog: warning: message`` on stderr (something skipped or worth knowing);
+    control characters in ``message`` are escaped (:func:`printable`)."""
+    print(_one_message(prog, "warning", message), file=sys.stderr, flush=True)
 
 
 DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})

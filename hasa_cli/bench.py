@@ -60,6 +60,7 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    printable,
     stop_on_signals,
     warn,
 )
@@ -75,6 +76,7 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``paper`` and ``score``: runs, sensor noise, models, recordings,
     execution and output."""
     _add_run_options(parser)
+    _add_trust_option(parser)
     _add_recording_options(parser)
     _add_execution_options(parser)
 
@@ -174,6 +176,17 @@ def _add_noise_options(parser: argparse.ArgumentParser) -> None:
         noise.add_argument(
             f"--{name}-noise", type=_config_value(f"noise.{name}"), metavar=metavar, help=default
         )
+
+
+def _add_trust_option(parser: argparse.ArgumentParser) -> None:
+    """``--trust-model-module``: a model file may import the module its class lives in."""
+    parser.add_argument(
+        "--trust-model-module",
+        action="store_true",
+        help="import the module a model file's 'class' field names when its type is not "
+        "registered (searched in the working directory, the file's folder and the installed "
+        "packages). A user model is code: importing it runs it; use only with files you trust",
+    )
 
 
 def _add_recording_options(parser: argparse.ArgumentParser) -> None:
@@ -446,7 +459,8 @@ class _Progress:
             self.bar.update(done - self.bar.n)
             return
         self.close()
-        print(f"[{time.perf_counter() - self.start:5.1f} s] {phase}", file=sys.stderr, flush=True)
+        elapsed = time.perf_counter() - self.start
+        print(f"[{elapsed:5.1f} s] {printable(phase)}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:
@@ -500,7 +514,7 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         error(PROG, f"{out / 'scenarios.csv'} {exc} (every file is written; please report this)")
         status = max(status, EXIT_PARTIAL)
     if not args.quiet:
-        print(format_suite(rows))
+        print(printable(format_suite(rows), newlines=True))
         print(
             f"wrote {len(results)} scenario folders and scenarios.md, scenarios.html, "
             f"scenarios.csv to {out}/; "
@@ -528,6 +542,7 @@ def _run_scenario(
             scheduler=scheduler,
             progress=progress,
             no_worker_timeout=args.worker_timeout,
+            trust_model_modules=args.trust_model_module,
         )
     except BenchmarkError as exc:
         progress.close()
@@ -553,7 +568,7 @@ def _run_scenario(
         return EXIT_PARTIAL, result
     progress.close()
     if not args.quiet:
-        print(format_tables(result))
+        print(printable(format_tables(result), newlines=True))
         print()
         print(
             f"wrote {len(written)} files to {out}/ (results.json, report.md, report.html, "

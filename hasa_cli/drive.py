@@ -236,7 +236,11 @@ def _drive_setup(
     env_wrapper = None
     if args.estimator is not None:
         env_wrapper = _estimator(
-            args.estimator, _probe_env(settings), lane_check=not args.no_lane_check, log=log
+            args.estimator,
+            _probe_env(settings),
+            lane_check=not args.no_lane_check,
+            log=log,
+            trust_module=args.trust_model_module,
         )
     return settings, keyboard, profiles, env_wrapper
 
@@ -421,6 +425,13 @@ def _drive_parser() -> argparse.ArgumentParser:
         help="run --estimator even with a model that drives off the road when it steers "
         "itself (checked by default: 4 cars, 30 s, the straight track; the paper's two-point "
         "preset does)",
+    )
+    p.add_argument(
+        "--trust-model-module",
+        action="store_true",
+        help="let --estimator's model file import the module its 'class' names (from the "
+        "working directory, the file's folder, the installed packages): a user model is code, "
+        "importing it runs it; only for files you trust",
     )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)

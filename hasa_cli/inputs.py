@@ -54,11 +54,12 @@ def joystick_profiles(path: Path | None, log: Callable[[str], None]) -> list[Joy
     return profiles
 
 
-def estimator_model(spec: str, dt: float) -> SteeringModel:
-    """The steering model of ``--estimator``: fitted, with an ARX form (ValueError if not)."""
+def estimator_model(spec: str, dt: float, trust_module: bool = False) -> SteeringModel:
+    """The steering model of ``--estimator``: fitted, with an ARX form (ValueError if not);
+    ``trust_module``: ``--trust-model-module`` (a model file may import its class's module)."""
     if ":" in spec and os.getcwd() not in sys.path:
         sys.path.insert(0, os.getcwd())  # user models in the working directory
-    model = load_model(spec, dt)
+    model = load_model(spec, dt, trust_module=trust_module)
     if not model.is_fitted:
         raise ValueError(
             f"--estimator {spec}: the model has no parameters, and the estimator needs a fitted "
@@ -78,13 +79,15 @@ def estimator_for(
     probe: LaneKeepingEnv,
     lane_check: bool = True,
     log: Callable[[str], None] | None = None,
+    trust_module: bool = False,
 ) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """The env wrapper running the estimator with ``spec``'s model (checked on ``probe``;
     with ``lane_check``, ValueError if the model cannot keep the car on the road when it
     steers itself: :func:`hasa_env.drivers.require_lane_keeping`). ``log`` hears where the
     estimator does not listen to the model's steering, and why
-    (:func:`estimators.trust.trusted_filter`)."""
-    model = estimator_model(spec, probe.setup.env_step_duration)
+    (:func:`estimators.trust.trusted_filter`); ``trust_module``: a model file may import the
+    module its ``"class"`` names."""
+    model = estimator_model(spec, probe.setup.env_step_duration, trust_module)
     ratio = default_steering_ratio(spec, fitted=False)
     if lane_check:
         require_lane_keeping(model, steering_ratio=ratio, what=f"--estimator {spec!r}")

@@ -28,6 +28,7 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    printable,
 )
 from hasa_env.recording import Recording, RecordingError, RecordingWarning, load_recordings
 from hasa_env.recording.export import export_minari
@@ -52,7 +53,7 @@ def _info(args: argparse.Namespace) -> int:
         try:
             summary = summarize(name)
         except RecordingError as exc:
-            print(f"file           {name}")
+            print(f"file           {printable(name)}")
             print("valid          NO")
             _err(str(exc))
             failed += 1
@@ -60,7 +61,7 @@ def _info(args: argparse.Namespace) -> int:
         except ImportError as exc:
             _err(f"{name}: {exc}")
             return EXIT_ENVIRONMENT
-        print("\n".join(summary.lines()))
+        print("\n".join(printable(line) for line in summary.lines()))
     if not failed:
         return EXIT_OK
     return EXIT_USAGE if failed == len(args.files) else EXIT_PARTIAL
@@ -133,7 +134,7 @@ def _convert(args: argparse.Namespace) -> int:
             problems.append(f"{target}: cannot write: {exc}")
             continue
         written += 1
-        print(f"{rec.path} -> {path} ({rec.steps} steps)")
+        print(printable(f"{rec.path} -> {path} ({rec.steps} steps)"))
     for problem in problems:
         _err(f"skipped: {problem}")
     if not problems:
@@ -172,7 +173,7 @@ def _export(args: argparse.Namespace) -> int:
         f"{result.config['observation']['type']} observations)"
     )
     stored = Path(result.dataset.spec.data_path).parent
-    print(f"stored in {stored}")
+    print(printable(f"stored in {stored}"))
     if args.data_path:
         root = Path(args.data_path).resolve()
         print(
@@ -180,7 +181,11 @@ def _export(args: argparse.Namespace) -> int:
             f"minari.load_dataset({result.dataset_id!r})"
         )
     for path in result.cut:
-        print(f"note: {path} ended without termination or truncation; last step marked truncated")
+        print(
+            printable(
+                f"note: {path} ended without termination or truncation; last step marked truncated"
+            )
+        )
     for path, reason in result.skipped:
         _err(f"skipped {path}: {reason}")
     return EXIT_PARTIAL if result.skipped else EXIT_OK

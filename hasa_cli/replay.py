@@ -69,6 +69,7 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    printable,
 )
 from hasa_env.recording.reader import load_paths
 
@@ -136,6 +137,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="score a steering model: 'two-point', 'generalized' (paper presets), a saved model "
         "file, or 'package.module:ClassName' (a SteeringModel subclass; with --fit if it has "
         "no parameters)",
+    )
+    p.add_argument(
+        "--trust-model-module",
+        action="store_true",
+        help="import the module a model file's 'class' field names when its type is not "
+        "registered (searched in the working directory, the file's folder and the installed "
+        "packages). A user model is code: importing it runs it; use only with files you trust",
     )
     p.add_argument(
         "--fit", action="store_true", help="fit --model on the first recording, score on all"
@@ -208,7 +216,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     checks = check_recordings(recordings, args.atol)
     for check in checks:
-        print(check.describe())
+        print(printable(check.describe()))
     diverged = sum(not check.matches for check in checks)
 
     prepared = None
@@ -224,7 +232,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 steering=args.steering,
                 steering_ratio=args.steering_ratio,
                 lane_check=args.estimator and not args.no_lane_check,
-                say=print,
+                say=lambda message: print(printable(message)),
+                trust_module=args.trust_model_module,
             )
         except LaneKeepingError as exc:
             error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
@@ -235,7 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.model is not None:
             for rec, scores in zip(recordings, score_recordings(prepared, recordings), strict=True):
                 shown = ", ".join(f"{k} {_fmt(v)}" for k, v in scores.items())
-                print(f"{rec.path}: model {spec}: {shown}")
+                print(printable(f"{rec.path}: model {spec}: {shown}"))
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)
@@ -246,7 +255,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 problems.append(outcome.error)
                 continue
             weights[outcome.index] = outcome.value.weights
-            print(f"{outcome.path}: estimator: {describe_estimate(outcome.value)}")
+            print(printable(f"{outcome.path}: estimator: {describe_estimate(outcome.value)}"))
 
     if args.frames is not None or args.video is not None:
         options = {"every": args.frame_every, "view": args.view, "size": args.size,
@@ -258,7 +267,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 continue
             written, frames_dir = outcome.value
             if written:
-                print(f"{outcome.path}: wrote {len(written)} frames to {frames_dir}")
+                print(printable(f"{outcome.path}: wrote {len(written)} frames to {frames_dir}"))
     return EXIT_PARTIAL if problems or diverged else EXIT_OK
 
 

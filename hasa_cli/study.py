@@ -253,7 +253,11 @@ def _setup(args: argparse.Namespace) -> _Setup:
     env_wrapper = None
     if args.estimator is not None:
         track = study.document["measured"]["track"]
-        env_wrapper = estimator_for(args.estimator, LaneKeepingEnv(config=study.env_config(track)))
+        env_wrapper = estimator_for(
+            args.estimator,
+            LaneKeepingEnv(config=study.env_config(track)),
+            trust_module=args.trust_model_module,
+        )
     # the input is checked first: a bad file is exit 2 with or without a screen
     if not headless:
         reason = no_screen_reason()
@@ -511,6 +515,13 @@ def build_parser() -> argparse.ArgumentParser:
         "package.module:Class)",
     )
     p.add_argument("--no-status", action="store_true", help="no status line in the terminal")
+    p.add_argument(
+        "--trust-model-module",
+        action="store_true",
+        help="let --estimator's model file import the module its 'class' names (from the "
+        "working directory, the file's folder, the installed packages): a user model is code, "
+        "importing it runs it; only for files you trust",
+    )
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)
     p.add_argument("--fps", type=int, default=60, help="frame-rate cap (physics: 100 Hz)")

@@ -120,11 +120,17 @@ def test_a_model_whose_regressors_and_design_disagree_is_refused(user):
 
 
 def test_a_user_model_file_loads_in_a_fresh_process_through_its_class(user, tmp_path):
-    """The file names its class, so a program that never imported the module reads it."""
+    """The file names its class: a program that never imported the module reads it when told
+    to trust the module (--trust-model-module), from the file's folder, run from elsewhere as
+    the console script runs (-P: the working directory is not on sys.path)."""
     recording = user["recordings"] / "Ill" / "run_001.csv"
+    argv = [sys.executable, "-P", "-m", "hasa_cli.replay", str(recording), "--model",
+            str(user["model"])]  # fmt: skip
+    done = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "pass --trust-model-module" in done.stderr
     done = subprocess.run(
-        [sys.executable, "-m", "hasa_cli.replay", str(recording), "--model", str(user["model"])],
-        cwd=user["folder"], capture_output=True, text=True, timeout=120,
+        [*argv, "--trust-model-module"], cwd=tmp_path, capture_output=True, text=True,
+        timeout=120,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert f"model {user['model']}: rmse" in done.stdout
@@ -133,8 +139,10 @@ def test_a_user_model_file_loads_in_a_fresh_process_through_its_class(user, tmp_
     document["type"] = "never_registered"
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps(document))
-    with pytest.raises(ModelFileError, match="'no_such_module_abc' .* cannot be imported"):
+    with pytest.raises(ModelFileError, match="is not registered.*--trust-model-module"):
         load_model_file(broken)
+    with pytest.raises(ModelFileError, match="'no_such_module_abc' .* cannot be imported"):
+        load_model_file(broken, trust_module=True)
     del document["class"]
     broken.write_text(json.dumps(document))
     with pytest.raises(ModelFileError, match="'never_registered' is not allowed: one of"):

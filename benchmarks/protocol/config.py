@@ -194,7 +194,7 @@ class ProtocolConfig:
         model_time_limit: the longest one call into a user model may take (s):
             importing it, one fit, scoring one batch of runs; each call runs
             isolated in its own process, so a model that hangs, exits or
-            crashes fails alone (:func:`benchmarks.protocol.models.run_isolated`).
+            crashes fails alone (:func:`benchmarks.protocol.isolation.run_isolated`).
             None: no limit, user code runs in the benchmark's processes.
     """
 

@@ -1,31 +1,18 @@
 """The steering models a benchmark scores: user-model loading, fitting on the training run,
 and the isolation of user code.
 
-Isolation (:func:`run_isolated`): with a time limit (``ProtocolConfig.model_time_limit``,
-600 s by default) every call into a user model -- importing it, fitting it on one
-training run, scoring it on one batch of runs -- runs in a child process forked for
-it. A call that takes longer than the limit is stopped; ``sys.exit``, ``os._exit``,
-a segmentation fault or any exception inside it ends that model (a
-:class:`ModelError`), never the benchmark, and whatever the model does to the data it
-is given stays in its own process. Built-in models and baselines run in the calling
-process (trusted, and forking for them would cost time). Without a limit
-(``None``) user code runs in the calling process too: faster, but a model that
-hangs or exits takes the benchmark with it. Where processes cannot be forked
-(Windows, or a daemonic Dask worker: set ``distributed.worker.daemon: false``)
-user code runs in the calling process, guarded against exceptions and
-``SystemExit`` only.
+Isolation of user code: :mod:`benchmarks.protocol.isolation` (:func:`run_isolated`).
 """
 
 from __future__ import annotations
 
 import copy
 import math
-import multiprocessing
 import pickle
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, TypeVar
+from typing import Any
 
 import pandas as pd
 
@@ -36,6 +23,13 @@ from benchmarks.protocol.config import (
     STEERING_BASELINE,
     BenchmarkError,
 )
+from benchmarks.protocol.isolation import (
+    DEFAULT_MODEL_MEMORY_LIMIT,
+    ModelError,
+    describe,
+    guarded_in_time,
+    run_isolated,
+)
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import steering_residual_std
@@ -44,7 +38,6 @@ from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringMode
 from hasa_env.steering.features import steering_features
 from hasa_env.steering.loading import (
     ModelLoadError,
-    describe_exception,
     import_model,
     load_model,
     model_spec_kind,
@@ -52,6 +45,7 @@ from hasa_env.steering.loading import (
 from hasa_env.steering.model_file import ModelFileError
 
 __all__ = [
+    "DEFAULT_MODEL_MEMORY_LIMIT",
     "DEFAULT_MODEL_TIME_LIMIT",
     "Candidate",
     "FittedModel",
@@ -67,41 +61,16 @@ __all__ = [
 ]
 
 
-class ModelError(Exception):
-    """A user model failed; the message names the model and what went wrong.
-
-    Attributes:
-        model: the model's name (or its import path if it never loaded).
-        stage: "import", "interface", "fit", "lane-keeping check", "predict" or "estimate".
-        detail: what went wrong.
-    """
-
-    def __init__(self, model: str, stage: str, detail: str) -> None:
-        self.model = model
-        self.stage = stage
-        self.detail = detail
-        super().__init__(f"model {model!r} failed ({stage}): {detail}")
-
-    def __reduce__(self) -> tuple[Any, tuple[str, str, str]]:
-        # picklable, so it can come back from a worker process
-        return (type(self), (self.model, self.stage, self.detail))
-
-    def to_dict(self) -> dict[str, str]:
-        return {"model": self.model, "stage": self.stage, "message": str(self)}
-
-
-Result = TypeVar("Result")
-
-
-def load_user_model(spec: str) -> SteeringModel:
+def load_user_model(spec: str, trust_module: bool = False) -> SteeringModel:
     """The steering model a user names: ``"package.module:Name"`` or a saved model file.
 
     ``Name`` may be a :class:`hasa_env.steering.SteeringModel` subclass
     (instantiated without arguments), an instance of one, or a function
     returning one; a model file (``model.save("m.json")``, any registered
     type, user types included) gives a fitted model
-    (:func:`hasa_env.steering.loading.load_model`). A model whose
-    ``regressors`` and ``design()`` disagree is refused.
+    (:func:`hasa_env.steering.loading.load_model`; with ``trust_module`` a file
+    of a type not registered yet imports the module its ``"class"`` names). A model
+    whose ``regressors`` and ``design()`` disagree is refused.
 
     Raises:
         ModelError: naming ``spec``, with stage "import" (module or attribute
@@ -116,7 +85,9 @@ def load_user_model(spec: str) -> SteeringModel:
                 spec, "import", "the paper's presets are the built-in models already; name a "
                 "user model ('package.module:ClassName' or a saved model file)"
             )  # fmt: skip
-        return load_model(spec) if kind == "file" else _checked(import_model(spec), spec)
+        if kind == "file":
+            return load_model(spec, trust_module=trust_module)
+        return _checked(import_model(spec), spec)
     except ModelLoadError as exc:
         raise ModelError(str(spec), exc.stage, exc.detail) from None
     except ModelFileError as exc:
@@ -131,111 +102,11 @@ def _checked(model: SteeringModel, spec: str) -> SteeringModel:
     return model
 
 
-describe = describe_exception
-"""``Type: message (at file:line in function)`` of an exception (its innermost frame)."""
-
-
 def private_copy(frame: pd.DataFrame) -> pd.DataFrame:
     """A deep copy of a run frame (values and ``attrs``) for one model to do with as it likes."""
     out = frame.copy(deep=True)
     out.attrs = copy.deepcopy(frame.attrs)
     return out
-
-
-def _fork_context() -> Any:
-    """The multiprocessing "fork" context, or None where user code cannot be isolated."""
-    if "fork" not in multiprocessing.get_all_start_methods():
-        return None
-    if multiprocessing.current_process().daemon:  # e.g. a Dask worker under a nanny
-        return None
-    return multiprocessing.get_context("fork")
-
-
-def _guarded(func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str) -> Any:
-    """``func(*args)``; any exception and ``SystemExit`` become this model's ModelError."""
-    try:
-        return func(*args)
-    except ModelError:
-        raise
-    except KeyboardInterrupt:
-        raise
-    except BaseException as exc:  # noqa: BLE001 - SystemExit in user code is its failure
-        raise ModelError(model, stage, f"raised {describe(exc)}") from None
-
-
-def _child(
-    conn: Any, func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str
-) -> None:
-    try:
-        outcome: tuple[str, Any] = ("ok", _guarded(func, args, model, stage))
-    except ModelError as exc:
-        outcome = ("error", exc)
-    except KeyboardInterrupt:
-        outcome = ("error", ModelError(model, stage, "interrupted"))
-    try:
-        conn.send(outcome)
-    except Exception as exc:  # noqa: BLE001 - an unpicklable result
-        conn.send(
-            ("error", ModelError(model, stage, f"its result cannot be sent back: {describe(exc)}"))
-        )
-    conn.close()
-
-
-def run_isolated(
-    func: Callable[..., Result],
-    args: tuple[Any, ...],
-    *,
-    model: str,
-    stage: str,
-    time_limit: float | None,
-) -> Result:
-    """``func(*args)`` for user model ``model``, isolated (see the module docstring).
-
-    With ``time_limit`` (s) the call runs in a forked child process and its
-    result (picklable) comes back through a pipe; without one, or where
-    processes cannot be forked, it runs here, guarded.
-
-    Raises:
-        ModelError: ``func`` raised (or raised ModelError itself), called
-            ``sys.exit``/``os._exit``, crashed, or ran out of time.
-    """
-    context = _fork_context() if time_limit is not None else None
-    if context is None:
-        return _guarded(func, args, model, stage)
-    receive, send = context.Pipe(duplex=False)
-    process = context.Process(
-        target=_child, args=(send, func, args, model, stage), name=f"hasa-bench {model} {stage}"
-    )
-    process.daemon = True
-    process.start()
-    send.close()
-    try:
-        if not receive.poll(time_limit):
-            process.kill()
-            raise ModelError(
-                model, stage, f"took longer than the time limit of {time_limit:g} s and was stopped"
-            )
-        try:
-            status, value = receive.recv()
-        except (EOFError, OSError, pickle.UnpicklingError):
-            process.join(5.0)
-            code = process.exitcode
-            how = f"signal {-code}" if code is not None and code < 0 else f"exit status {code}"
-            raise ModelError(
-                model,
-                stage,
-                f"its process ended without a result ({how}: os._exit, a crash or "
-                "the system's out-of-memory killer)",
-            ) from None
-    finally:
-        receive.close()
-        process.join(5.0)
-        if process.is_alive():
-            process.kill()
-            process.join()
-    if status == "error":
-        raise value
-    return value
 
 
 @dataclass(frozen=True)
@@ -280,9 +151,9 @@ class Candidate:
     fixed: bool = False
 
 
-def _check_user_model(spec: str) -> str:
+def _check_user_model(spec: str, trust_module: bool = False) -> str:
     """Import and create the model (in a child process when isolated); its class name."""
-    model = load_user_model(spec)
+    model = load_user_model(spec, trust_module)
     try:
         pickle.dumps(model)
     except Exception as exc:  # noqa: BLE001
@@ -298,6 +169,7 @@ def load_models(
     *,
     time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
     stress: bool = False,
+    trust_module: bool = False,
 ) -> list[Candidate]:
     """The built-in models, every user model that loads (failures go to ``errors``)
     and, with ``stress``, the stress set (:mod:`benchmarks.stress`, kind "stress").
@@ -306,7 +178,10 @@ def load_models(
     nothing and is reported at once. With a ``time_limit`` each user model is
     first imported and created in a child process (:func:`run_isolated`), so
     a module that hangs, exits or crashes while importing is reported, not
-    fatal; only then is it imported here.
+    fatal; only then is it imported here (the model object is needed here), stopped by
+    an alarm after ``time_limit`` too (:func:`benchmarks.protocol.isolation.guarded_in_time`). With
+    ``trust_module`` a model file may import the module its ``"class"`` names
+    (:func:`hasa_env.steering.loading.load_model_file`).
     """
     candidates = [
         Candidate("two_point", "builtin", None, TwoPointModel()),
@@ -325,10 +200,12 @@ def load_models(
         try:
             if time_limit is not None:
                 run_isolated(
-                    _check_user_model, (spec,), model=str(spec), stage="import",
+                    _check_user_model, (spec, trust_module), model=str(spec), stage="import",
                     time_limit=time_limit,
                 )  # fmt: skip
-            model = _guarded(load_user_model, (spec,), str(spec), "import")
+            model = guarded_in_time(
+                load_user_model, (spec, trust_module), str(spec), "import", time_limit
+            )
         except ModelError as exc:
             errors.append(exc)
             continue

@@ -139,6 +139,7 @@ def run_protocol(
     scheduler: Any = None,
     progress: Progress | None = None,
     no_worker_timeout: float = NO_WORKER_TIMEOUT,
+    trust_model_modules: bool = False,
 ) -> BenchmarkResult:
     """Run the benchmark protocol (see the module docstring).
 
@@ -154,6 +155,9 @@ def run_protocol(
             "runs" (done/total runs) and messages with total 0.
         no_worker_timeout: on a Dask cluster, give up when it has had no worker
             for this many seconds (:func:`benchmarks.executor.map_tasks`).
+        trust_model_modules: a model file in ``user_models`` whose type is not
+            registered imports the module its ``"class"`` names (``--trust-model-module``;
+            importing runs that module's code).
 
     Returns:
         A :class:`BenchmarkResult`; failed user models are in ``errors``.
@@ -169,7 +173,11 @@ def run_protocol(
     errors: list[ModelError] = []
     # 0. every model loads before any run is generated: one that does not is an input error
     candidates = load_models(
-        user_models, errors, time_limit=config.model_time_limit, stress=config.stress
+        user_models,
+        errors,
+        time_limit=config.model_time_limit,
+        stress=config.stress,
+        trust_module=trust_model_modules,
     )
     if errors:
         raise BenchmarkError(

@@ -121,7 +121,7 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     residual autocorrelations); per run and estimator (main track only):
     lateral RMSE, steps to decide the lane, and the first seconds of lateral
     error. A user model scores its own copy of the runs, isolated
-    (:func:`benchmarks.protocol.models.run_isolated`, with ``task.time_limit``);
+    (:func:`benchmarks.protocol.isolation.run_isolated`, with ``task.time_limit``);
     one that fails is reported in ``failures``.
     """
     start = time.process_time()

@@ -31,7 +31,6 @@ import json
 import math
 import os
 import re
-import stat
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from hasa_env._versions import installed_versions
+from hasa_env.files import read_bounded_text
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
 from hasa_env.sim.sensors import SENSOR_NAMES, SENSOR_UNITS
@@ -244,38 +244,14 @@ MAX_FILE_BYTES = 2**31
 
 
 def read_regular_file(path: Path, what: str) -> str:
-    """The text of ``path`` if it is a regular file, read without blocking on a FIFO or device.
+    """The text of ``path`` if it is a regular file of at most :data:`MAX_FILE_BYTES`, read
+    without blocking on a FIFO or device (:func:`hasa_env.files.read_bounded_text`).
 
     Raises:
         FileNotFoundError: no such file.
         OSError, UnicodeDecodeError: unreadable (the message says why, e.g. a FIFO).
     """
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise OSError(f"{what} is {file_kind(info.st_mode)}, not a regular file")
-        if info.st_size > MAX_FILE_BYTES:
-            raise OSError(f"{what} is {info.st_size} bytes, more than the {MAX_FILE_BYTES} read")
-    except BaseException:
-        os.close(fd)
-        raise
-    with open(fd, "rb") as f:
-        data = f.read()
-    return data.decode("utf-8")
-
-
-def file_kind(mode: int) -> str:
-    """What a non-regular file of ``st_mode`` ``mode`` is, for an error message ("a FIFO ...")."""
-    if stat.S_ISFIFO(mode):
-        return "a FIFO (named pipe)"
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "a special file"
+    return read_bounded_text(path, what, MAX_FILE_BYTES)
 
 
 def format_value(column: str, value: Any) -> str:

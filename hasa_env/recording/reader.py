@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from hasa_env.files import file_kind
 from hasa_env.recording.format import (
     Recording,
     RecordingError,
@@ -21,7 +22,6 @@ from hasa_env.recording.format import (
     RecordingWarning,
     check_table,
     columns_frame,
-    file_kind,
     magnitude_limit,
     parse_lines,
     read_regular_file,

@@ -120,6 +120,7 @@ from typing import Any
 
 import numpy as np
 
+from hasa_env.files import read_bounded_bytes
 from hasa_env.render import ViewOptions
 from hasa_env.scenarios import scenario_spec
 from hasa_env.session.study_schema import (
@@ -136,6 +137,7 @@ from hasa_env.validation import validate
 
 __all__ = [
     "IDENTIFYING_KEYS",
+    "MAX_STUDY_FILE_BYTES",
     "SCHEDULE_KINDS",
     "STUDY_FORMAT_VERSION",
     "MetadataField",
@@ -146,6 +148,9 @@ __all__ = [
     "seed_from_entropy",
     "williams_square",
 ]
+
+MAX_STUDY_FILE_BYTES = 16 * 2**20
+"""Largest study file read (16 MiB; a study file is a few KB)."""
 
 
 class StudyError(ValueError):
@@ -316,18 +321,21 @@ class Study:
     # ---------------------------------------------------------------- loading
     @classmethod
     def load(cls, path: str | Path) -> Study:
-        """Read and validate a study file (``.toml``, or ``.json``).
+        """Read and validate a study file (``.toml``, or ``.json``): a regular file of at most
+        :data:`MAX_STUDY_FILE_BYTES`, read without blocking (a FIFO or a device is refused).
 
         Raises:
             StudyError: naming the file, the line, the key and what is allowed.
         """
         source = str(path)
         try:
-            raw = Path(path).read_bytes()
+            raw = read_bounded_bytes(path, "the study file", MAX_STUDY_FILE_BYTES)
         except FileNotFoundError:
             raise StudyError(f"{source}: no such study file") from None
-        except OSError as exc:
-            raise StudyError(f"{source}: cannot read the study file ({exc.strerror})") from None
+        except OSError as exc:  # a FIFO, a device, a directory, too large, unreadable
+            raise StudyError(
+                f"{source}: cannot read the study file ({exc.strerror or exc})"
+            ) from None
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:

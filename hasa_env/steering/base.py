@@ -75,12 +75,14 @@ from typing import Any, ClassVar, Self
 import numpy as np
 import pandas as pd
 
+from hasa_env.files import read_bounded_text
 from hasa_env.sim.road import Road
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 from hasa_env.steering.design import FEATURE_NAMES, Design, Regressor, lagged
 from hasa_env.steering.features import STEERING_SIGNALS, is_feature_frame, steering_features
 from hasa_env.steering.fitting import FitResult, fit_model
 from hasa_env.steering.model_file import (
+    MAX_MODEL_FILE_BYTES,
     MODEL_FILE_FORMAT,
     MODEL_FILE_VERSION,
     MODEL_TYPES,
@@ -536,7 +538,7 @@ class SteeringModel(ABC):
 
         ``class`` names the model's class (``"package.module:ClassName"``) so
         that :func:`hasa_env.steering.loading.load_model_file` can import a
-        user type's module; it is left out for a class defined in ``__main__``
+        user type's module when told to trust it; it is left out for a class defined in ``__main__``
         (a script), which no other program can import.
         """
         cls = type(self)
@@ -605,15 +607,19 @@ class SteeringModel(ABC):
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> SteeringModel:
-        """Read a model file written by :meth:`save` (``SteeringModel.load`` reads any type)."""
+        """Read a model file written by :meth:`save` (``SteeringModel.load`` reads any
+        registered type; it never imports a module: :func:`hasa_env.steering.loading.load_model_file`).
+
+        The file must be a regular file of at most ``MAX_MODEL_FILE_BYTES`` (16 MiB)."""
         source = os.fspath(path)
         try:
-            with open(path, encoding="utf-8") as handle:
-                text = handle.read()
+            text = read_bounded_text(path, "the model file", MAX_MODEL_FILE_BYTES)
         except FileNotFoundError:
             raise ModelFileError(f"{source}: no such model file") from None
         except UnicodeDecodeError as exc:
             raise ModelFileError(f"{source}: not a UTF-8 text file ({exc.reason})") from None
+        except OSError as exc:  # a FIFO, a device, too large, unreadable
+            raise ModelFileError(f"{source}: cannot read it: {exc.strerror or exc}") from None
         return cls.from_json(text, source)
 
     # ------------------------------------------------------------------ misc

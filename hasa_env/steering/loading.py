@@ -4,10 +4,12 @@
 
 - ``"two-point"`` / ``"generalized"``: the paper's presets
   (:meth:`TwoPointModel.paper`, :meth:`GeneralizedModel.paper`);
-- the path of a saved model file (``model.save("m.json")``, any registered
-  model type, user types included: a file names its class in ``"class"``,
-  e.g. ``"my_pkg.models:NearFarPD"``, and :func:`load_model_file` imports
-  that module when the type is not registered yet);
+- the path of a saved model file (``model.save("m.json")``) of a registered
+  model type: a built-in one, or a user type whose module has been imported.
+  A file names its class in ``"class"`` (e.g. ``"my_pkg.models:NearFarPD"``),
+  but reading a file imports that module only when the caller says so
+  (``trust_module=True``, ``--trust-model-module``): a user model is code,
+  and a file is data (docs/design.md, "Model files are data");
 - ``"package.module:Name"``: a :class:`SteeringModel` subclass (created
   without arguments), an instance of one, or a function returning one
   (:func:`import_model`).
@@ -25,14 +27,21 @@ import importlib
 import json
 import os
 import re
+import sys
 import traceback
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
+from hasa_env.files import read_bounded_text
 from hasa_env.steering.base import SteeringModel
-from hasa_env.steering.model_file import MODEL_TYPES, ModelFileError
+from hasa_env.steering.model_file import (
+    CLASS_PATH,
+    MAX_MODEL_FILE_BYTES,
+    MODEL_TYPES,
+    ModelFileError,
+)
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 
 __all__ = [
@@ -40,6 +49,7 @@ __all__ = [
     "PAPER_PRESETS",
     "PAPER_STEERING_RATIO",
     "ModelLoadError",
+    "add_module_folders",
     "default_steering_ratio",
     "describe_exception",
     "import_model",
@@ -181,53 +191,94 @@ def import_model(spec: str) -> SteeringModel:
     raise ModelLoadError(spec, "interface", f"{attribute} is a {type(obj).__name__}; {_HINT}")
 
 
-def load_model_file(path: str | os.PathLike[str]) -> SteeringModel:
-    """Read a saved model file of any registered type (user types included).
-
-    If the file's ``"type"`` is not registered yet and the file names its
-    class (``"class": "package.module:ClassName"``, written by
-    :meth:`SteeringModel.save`), that module is imported first, which
-    registers the type. Only the module is imported; nothing in the file is
-    executed.
-
-    Raises:
-        ModelFileError: the file cannot be read or is invalid (naming the
-            file and the field), or its class's module does not register the type.
-    """
+def _read_model_document(path: str | os.PathLike[str]) -> Any:
+    """The JSON document of a model file, read bounded (:data:`MAX_MODEL_FILE_BYTES`)."""
     source = os.fspath(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_bounded_text(path, "the model file", MAX_MODEL_FILE_BYTES)
     except FileNotFoundError:
         raise ModelFileError(f"{source}: no such model file") from None
     except IsADirectoryError:
         raise ModelFileError(f"{source}: is a directory, not a model file") from None
     except UnicodeDecodeError as exc:
         raise ModelFileError(f"{source}: not a UTF-8 text file ({exc.reason})") from None
+    except OSError as exc:  # a FIFO, a device, too large, unreadable
+        raise ModelFileError(f"{source}: cannot read it: {exc.strerror or exc}") from None
     try:
-        document = json.loads(text)
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise ModelFileError(
             f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
         ) from None
+    except RecursionError:
+        raise ModelFileError(f"{source}: not valid JSON (nested too deeply)") from None
+
+
+def add_module_folders(*folders: str | os.PathLike[str]) -> None:
+    """Put ``folders`` at the front of ``sys.path`` (each once, in the order given): where a
+    user's model module is imported from (the command-line tools add the working directory)."""
+    for folder in reversed([os.path.abspath(f) for f in folders]):
+        if folder not in sys.path:
+            sys.path.insert(0, folder)
+
+
+def load_model_file(path: str | os.PathLike[str], trust_module: bool = False) -> SteeringModel:
+    """Read a saved model file of a registered model type.
+
+    A model file is data: its ``"type"`` must be registered (a built-in type,
+    or a user type whose class has been defined, i.e. its module imported).
+    Reading it never imports anything unless ``trust_module`` is given: then,
+    if the type is not registered yet, the module its ``"class"`` field names
+    (``"package.module:ClassName"``, written by :meth:`SteeringModel.save`) is
+    imported first, searched in the working directory, the model file's folder
+    and the installed packages. Importing a module runs its code: a user model
+    is code, so trust only files whose module you trust. The file is read
+    bounded (a regular file of at most :data:`MAX_MODEL_FILE_BYTES` bytes).
+
+    Raises:
+        ModelFileError: the file cannot be read or is invalid (naming the
+            file and the field), its type is not registered (saying how to
+            import its module), or its class's module does not register it.
+    """
+    source = os.fspath(path)
+    document = _read_model_document(path)
     if isinstance(document, dict):
         model_type, cls = document.get("type"), document.get("class")
-        if isinstance(model_type, str) and model_type not in MODEL_TYPES and isinstance(cls, str):
-            module_name = cls.split(":")[0]
-            try:
-                importlib.import_module(module_name)
-            except Exception as exc:  # noqa: BLE001 - any error in the user's module
+        known = isinstance(model_type, str) and model_type in MODEL_TYPES
+        if isinstance(model_type, str) and not known and isinstance(cls, str):
+            if not CLASS_PATH.fullmatch(cls):  # refused below, naming the field
+                return SteeringModel.from_json(document, source)
+            if not trust_module:
                 raise ModelFileError(
-                    f"{source}: model type {model_type!r} is not registered and its class's "
-                    f"module {module_name!r} (field 'class' = {cls!r}) cannot be imported: "
-                    f"{describe_exception(exc)}"
-                ) from None
-            if model_type not in MODEL_TYPES:
-                raise ModelFileError(
-                    f"{source}: importing {module_name!r} (field 'class' = {cls!r}) did not "
-                    f"register the model type {model_type!r}; registered: "
-                    f"{', '.join(sorted(MODEL_TYPES))}"
+                    f"{source}: model type {model_type!r} is not registered; the file names "
+                    f"its class {cls!r}, but a model file never imports code by itself: a "
+                    "user model is code; if you trust that module, pass --trust-model-module "
+                    "(in Python: load_model_file(path, trust_module=True), or import the "
+                    "module first)"
                 )
+            _import_class_module(source, model_type, cls, Path(source).parent)
     return SteeringModel.from_json(document, source)
+
+
+def _import_class_module(source: str, model_type: str, cls: str, folder: Path) -> None:
+    """Import the module of a trusted model file's ``class`` field (ModelFileError if that
+    fails or does not register ``model_type``)."""
+    module_name = cls.split(":")[0]
+    add_module_folders(os.getcwd(), folder)
+    try:
+        importlib.import_module(module_name)
+    except Exception as exc:  # noqa: BLE001 - any error in the user's module
+        raise ModelFileError(
+            f"{source}: model type {model_type!r} is not registered and its class's "
+            f"module {module_name!r} (field 'class' = {cls!r}) cannot be imported: "
+            f"{describe_exception(exc)}"
+        ) from None
+    if model_type not in MODEL_TYPES:
+        raise ModelFileError(
+            f"{source}: importing {module_name!r} (field 'class' = {cls!r}) did not "
+            f"register the model type {model_type!r}; registered: "
+            f"{', '.join(sorted(MODEL_TYPES))}"
+        )
 
 
 def default_steering_ratio(spec: str, fitted: bool) -> float:
@@ -250,13 +301,15 @@ def in_model_units(frame: pd.DataFrame, steering_ratio: float) -> pd.DataFrame:
     return out
 
 
-def load_model(spec: str, dt: float = 0.01) -> SteeringModel:
+def load_model(spec: str, dt: float = 0.01, trust_module: bool = False) -> SteeringModel:
     """A steering model from any form of :data:`MODEL_SPEC_FORMS`, checked.
 
     ``dt`` (s) is the sample time the two-point preset is built for (its
     integral term depends on it); the generalized preset's coefficients
     belong to Ts = 0.01 s whatever ``dt`` is, and a file or an imported model
     carries its own. An imported model may be unfitted (``model.is_fitted``).
+    ``trust_module``: a model file of a type not registered yet may import the
+    module its ``"class"`` field names (:func:`load_model_file`).
 
     Raises:
         ModelLoadError: an unknown spec, a module or class that does not
@@ -267,7 +320,7 @@ def load_model(spec: str, dt: float = 0.01) -> SteeringModel:
     kind = model_spec_kind(spec)
     if kind == "preset":
         return TwoPointModel.paper(dt=dt) if spec == "two-point" else GeneralizedModel.paper()
-    model = load_model_file(spec) if kind == "file" else import_model(spec)
+    model = load_model_file(spec, trust_module) if kind == "file" else import_model(spec)
     try:
         model.check_regressors()
     except ValueError as exc:

@@ -8,9 +8,9 @@ object with ``format`` (= ``"hasa_env.steering_model"``), ``format_version``
 (s), ``features`` (near/far distances in m, decision lag, the regressors),
 ``structure`` (the model's keyword arguments, e.g. its orders),
 ``parameters``, ``standard_errors`` and, optionally, ``class``
-(``"package.module:ClassName"``, so that
-:func:`hasa_env.steering.loading.load_model_file` can import a user type's
-module). :func:`model_from_dict` validates every field through the shared
+(``"package.module:ClassName"``: with ``trust_module=True``,
+:func:`hasa_env.steering.loading.load_model_file` imports a user type's
+module; never otherwise, since importing runs code). :func:`model_from_dict` validates every field through the shared
 validator (:mod:`hasa_env.validation`) and names the file, the field and the
 allowed values.
 """
@@ -25,6 +25,7 @@ from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 from hasa_env.validation import ANY_JSON, Field, schema, validate, version
 
 __all__ = [
+    "MAX_MODEL_FILE_BYTES",
     "MODEL_FILE_FORMAT",
     "MODEL_FILE_VERSION",
     "MODEL_TYPES",
@@ -36,6 +37,9 @@ MODEL_FILE_FORMAT = "hasa_env.steering_model"
 """Value of the ``"format"`` field of a model file."""
 
 MODEL_FILE_VERSION = 1
+
+MAX_MODEL_FILE_BYTES = 16 * 2**20
+"""Largest model file read (16 MiB; a model file is a few KB)."""
 
 MODEL_TYPES: dict[str, type] = {}
 """Registered model types: JSON ``"type"`` -> class (filled when a subclass is defined)."""
@@ -107,9 +111,10 @@ def _schema(cls: str | None = None) -> Field:
             "type": Field(
                 "choice",
                 choices=tuple(sorted(MODEL_TYPES)),
-                hint=f"a custom model's class{where} must be defined (imported) before loading "
-                "its file; hasa_env.steering.loading.load_model_file imports the module its "
-                "'class' field names",
+                hint=f"a custom model's class{where} must be defined (its module imported) "
+                "before loading its file: a model file never imports code by itself "
+                "(hasa_env.steering.loading.load_model_file(..., trust_module=True) and "
+                "--trust-model-module import the module its 'class' field names)",
             ),
             "name": Field("string", None, "Label of the model (default: its type)."),
             "dt": Field(
