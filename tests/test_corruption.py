@@ -278,6 +278,15 @@ BAD: dict[str, Maker] = {
     "flag as 1": _cell(8, "terminated", "1"),
     "flag as yes": _cell(8, "truncated", "yes"),
     "flag empty": _cell(8, "truncated", ""),
+    # physically impossible or inconsistent rows (issue 22 item 8)
+    "bias_index outside the hypotheses": _cell(2, "bias_index", "7"),
+    "bias_index changes mid-run": _cell(6, "bias_index", "-1"),
+    "bias changes mid-run": _cell(6, "bias", "0.9"),
+    "terminated mid-run, then more rows": _cell(5, "terminated", "true"),
+    "truncated mid-run, then more rows": _cell(5, "truncated", "true"),
+    "negative speed": _cell(5, "speed", "-3.0"),
+    "speed above max_speed": _cell(5, "speed", "61.0"),
+    "y = 1e5 m": _cell(5, "lateral_offset", "1e5"),
     # time
     "time mismatch": _cell(9, "time", "0.5"),
     "time NaN": _cell(9, "time", "nan"),

@@ -551,6 +551,86 @@ def check_table(
             first_line + i,
             "time",
         )
+    check_physics(frame, config, source, first_line)
+
+
+def _first_bad(bad: np.ndarray, source: Path | str, first_line: int, column: str, why: Any) -> None:
+    """Raise :class:`RecordingError` at the first True of ``bad`` (``why(i)``: the reason)."""
+    rows = np.flatnonzero(bad)
+    if rows.size:
+        i = int(rows[0])
+        raise RecordingError(why(i), source, first_line + i, column)
+
+
+def lateral_limit(config: Mapping[str, Any]) -> float:
+    """Largest |lateral_offset| (m) an env with ``config`` can record: a reset may put the car
+    up to 30 m from the lane centre (or the road's outer edge plus ``offroad_margin``; or
+    the configured start, 20 m to a halfway point and 8 std of its randomisation), and the
+    episode ends at the first env step past the edge, during which the car moves at most
+    ``max_speed`` x the env step sideways."""
+    road, start = config["road"], config["initial_state"]
+    width = road["lane_width"]
+    edge = width / 2 + max(road["lanes_left"], road["lanes_right"]) * width
+    drawn = abs(start["lateral_offset"]) + 20.0 + 8.0 * start["lateral_offset_std"]
+    reach = max(30.0, edge + road["offroad_margin"], drawn)
+    return (
+        reach + config["vehicle"]["max_speed"] * config["action_repeat"] / config["sim_frequency"]
+    )
+
+
+def check_physics(
+    frame: pd.DataFrame, config: Mapping[str, Any], source: Path | str, first_line: int
+) -> None:
+    """Refuse rows that the env cannot have recorded (row i is on line ``first_line + i``).
+
+    The true lane (``bias_index``: -1 or an index of ``markings.hypotheses``, and ``bias``
+    that hypothesis's value) is drawn once per episode and never changes; ``terminated``
+    and ``truncated`` end the episode, so only the last row may have them; the speed is
+    within [0, ``vehicle.max_speed``] m/s; ``|lateral_offset|`` is at most
+    :func:`lateral_limit` m.
+    """
+    hyps = np.asarray(config["markings"]["hypotheses"], dtype=np.float64)
+    index = frame["bias_index"].to_numpy()
+    bias = frame["bias"].to_numpy()
+    _first_bad((index < -1) | (index >= len(hyps)), source, first_line, "bias_index", lambda i: (
+        f"bias_index = {int(index[i])} is none of the config's {len(hyps)} hypotheses "
+        f"(0 .. {len(hyps) - 1}; -1: a bias given as a reset option)"
+    ))  # fmt: skip
+    _first_bad(index != index[0], source, first_line, "bias_index", lambda i: (
+        f"bias_index = {int(index[i])} but row 0 has {int(index[0])}: the true lane is drawn "
+        "once per episode and cannot change"
+    ))  # fmt: skip
+    _first_bad(bias != bias[0], source, first_line, "bias", lambda i: (
+        f"bias = {float(bias[i])!r} m but row 0 has {float(bias[0])!r} m: the camera bias is "
+        "drawn once per episode and cannot change"
+    ))  # fmt: skip
+    if index[0] >= 0 and bias[0] != hyps[index[0]]:
+        raise RecordingError(
+            f"bias = {float(bias[0])!r} m but bias_index {int(index[0])} is the hypothesis "
+            f"{float(hyps[index[0]])!r} m of the config",
+            source,
+            first_line,
+            "bias",
+        )
+    for flag in ("terminated", "truncated"):
+        ends = frame[flag].to_numpy()[:-1]
+        _first_bad(ends, source, first_line, flag, lambda i, flag=flag: (
+            f"{flag} = true before the last row ({len(frame) - 1 - i} more row(s) follow): "
+            "an episode ends at its first terminated or truncated step"
+        ))  # fmt: skip
+    speed = frame["speed"].to_numpy()
+    top = config["vehicle"]["max_speed"]
+    _first_bad((speed < 0) | (speed > top), source, first_line, "speed", lambda i: (
+        f"speed = {float(speed[i])!r} m/s is outside [0, {top:g}] m/s (the env keeps the speed "
+        "between 0 and the config's vehicle.max_speed)"
+    ))  # fmt: skip
+    y = frame["lateral_offset"].to_numpy()
+    reach = lateral_limit(config)
+    _first_bad(np.abs(y) > reach, source, first_line, "lateral_offset", lambda i: (
+        f"lateral_offset = {float(y[i])!r} m is farther from the lane centre than the "
+        f"{reach:g} m this config's env can record (a reset at most 30 m or past the road "
+        "edge, then one env step before it terminates)"
+    ))  # fmt: skip
 
 
 _SIDECAR = schema(

@@ -1,0 +1,85 @@
+"""Odd, inconsistent and unreadable recordings and study folders (issue 22, round 2).
+
+Each test is a regression test of one item of the issue: it failed on the main branch
+before the fix. Command-line tools run as a user runs them (a subprocess) where the item
+is about what the user sees; library functions are called in this process otherwise.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hasa_env.drivers import population, run_population, save_runs
+from hasa_env.recording import RecordingError, load_recording
+from hasa_env.sim.setup import RECORDING_COLUMNS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_cli(module: str, *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """``python -m hasa_cli.<module> ARGS`` as a user runs it (headless, this tree's code)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "SDL_VIDEODRIVER": "dummy",
+           "SDL_AUDIODRIVER": "dummy", "MPLBACKEND": "Agg"}  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", f"hasa_cli.{module}", *args],
+        capture_output=True, text=True, timeout=120, cwd=cwd, env=env,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """Two good 2.5 s recordings (100 Hz, straight track) of the illustrative driver."""
+    folder = tmp_path_factory.mktemp("good")
+    drivers = population("paper", seed=0, size=1)
+    runs = run_population(drivers, runs=2, seed=0, config={"time_limit": 2.5})
+    return [Path(p) for p in save_runs(runs["Ill"], folder, prefix="good")]
+
+
+def copy(src: Path, dst: Path) -> Path:
+    """The recording ``src`` (CSV and sidecar) copied to ``dst`` (a CSV path)."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(src, dst)
+    shutil.copyfile(src.with_suffix(".json"), dst.with_suffix(".json"))
+    return dst
+
+
+def set_cell(path: Path, line: int, column: str, value: str) -> None:
+    """Set one CSV cell (line 1 = the header)."""
+    lines = path.read_text().split("\n")
+    fields = lines[line - 1].split(",")
+    fields[RECORDING_COLUMNS.index(column)] = value
+    lines[line - 1] = ",".join(fields)
+    path.write_text("\n".join(lines))
+
+
+# ---------------------------------------------------------------- item 8
+IMPOSSIBLE = {
+    "bias_index_7": (2, "bias_index", "7", "is none of the config's 2 hypotheses"),
+    "bias_changes": (6, "bias", "0.9", "cannot change"),
+    "terminated_early": (5, "terminated", "true", "terminated = true before the last row"),
+    "negative_speed": (5, "speed", "-3.0", "outside [0, 60] m/s"),
+    "y_1e5": (5, "lateral_offset", "1e5", "farther from the lane centre"),
+}
+
+
+def test_impossible_recordings_are_refused_with_row_and_reason(good, tmp_path):
+    files = []
+    for stem, (line, column, value, _) in IMPOSSIBLE.items():
+        path = copy(good[0], tmp_path / f"{stem}.csv")
+        set_cell(path, line, column, value)
+        files.append(str(path))
+        with pytest.raises(RecordingError) as info:
+            load_recording(path)
+        assert (info.value.line, info.value.column) == (line, column), str(info.value)
+    done = run_cli("rec", "info", *files)
+    assert done.returncode == 2, done.stderr  # no input is valid
+    assert "valid          yes" not in done.stdout
+    for stem, (line, column, _, reason) in IMPOSSIBLE.items():
+        assert f"{stem}.csv, line {line}, column {column!r}: " in done.stderr
+        assert reason in done.stderr
