@@ -222,6 +222,8 @@ BAD: dict[str, Maker] = {
     "nul bytes": _bytes_edit(lambda b: b[:500] + b"\x00" * 40 + b[540:]),
     "latin-1 byte": _bytes_edit(lambda b: b.replace(b"0.0", "0.\xe9".encode("latin-1"), 1)),
     "utf-16": _bytes_edit(lambda b: b.decode().encode("utf-16")),
+    "CR-only line ends": _text_edit(lambda t: t.replace("\n", "\r")),
+    "U+2028 line ends": _text_edit(lambda t: t.replace("\n", "\u2028")),
     "utf-8 BOM": _bytes_edit(lambda b: b"\xef\xbb\xbf" + b),
     "semicolons": _text_edit(lambda t: t.replace(",", ";")),
     "tabs in a row": _line_edit(4, lambda s: s.replace(",", "\t", 3)),

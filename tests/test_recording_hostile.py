@@ -83,3 +83,26 @@ def test_impossible_recordings_are_refused_with_row_and_reason(good, tmp_path):
     for stem, (line, column, _, reason) in IMPOSSIBLE.items():
         assert f"{stem}.csv, line {line}, column {column!r}: " in done.stderr
         assert reason in done.stderr
+
+
+# ---------------------------------------------------------------- item 18
+@pytest.mark.parametrize("newline", ["\r", "\u2028"])
+def test_an_error_quotes_a_bounded_part_of_the_file(good, tmp_path, newline):
+    path = copy(good[0], tmp_path / "one_line.csv")
+    text = good[0].read_text()
+    path.write_text(text.replace("\n", newline), encoding="utf-8", newline="")
+    with pytest.raises(RecordingError) as info:
+        load_recording(path)
+    message = str(info.value)
+    assert len(message) < 2000, len(message)  # was 242 KB: every cell of the file
+    assert "carriage return or a Unicode line separator" in message
+    assert " more" in message  # the rest counted, not quoted
+
+
+def test_the_cli_error_line_of_a_one_line_file_is_short(good, tmp_path):
+    path = copy(good[0], tmp_path / "cr.csv")
+    path.write_text(good[0].read_text().replace("\n", "\r"), newline="")
+    done = run_cli("rec", "info", str(path))
+    assert done.returncode == 2
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and len(lines[0]) < 2000 and lines[0].startswith("hasa-rec: error: ")

@@ -47,7 +47,7 @@ from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
 from hasa_env.sim.sensors import SENSOR_NAMES, SENSOR_UNITS
 from hasa_env.sim.setup import RECORDING_COLUMNS
-from hasa_env.validation import ABSENT, ANY_JSON, Field, schema, validate, version
+from hasa_env.validation import ABSENT, ANY_JSON, Field, schema, show, validate, version
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -135,7 +135,7 @@ class RecordingError(ValueError):
         if line is not None:
             where.append(f"line {line}")
         if column is not None:
-            where.append(f"column {column!r}")
+            where.append(f"column {show(column)}")
         super().__init__(f"{', '.join(where)}: {message}" if where else message)
 
 
@@ -404,18 +404,18 @@ _LONG_COLUMNS = frozenset({"time", "station"})
 def parse_float(text: str, limit: float = math.inf) -> float:
     """A finite float of plain ASCII ``text`` with ``|value| <= limit``; else ``ValueError``."""
     if not text.isascii():
-        raise ValueError(f"not a number: {text!r} (only ASCII digits are numbers here)")
+        raise ValueError(f"not a number: {show(text)} (only ASCII digits are numbers here)")
     try:
         value = float(text)
     except ValueError:
-        raise ValueError(f"not a number: {text!r}") from None
+        raise ValueError(f"not a number: {show(text)}") from None
     if not math.isfinite(value):
-        raise ValueError(f"non-finite value {text!r} (NaN and infinities are not allowed)")
+        raise ValueError(f"non-finite value {show(text)} (NaN and infinities are not allowed)")
     if "_" in text or text != text.strip():
-        raise ValueError(f"not a plain number: {text!r}")
+        raise ValueError(f"not a plain number: {show(text)}")
     if abs(value) > limit:
         raise ValueError(
-            f"implausible value {text!r}: |value| must be at most {limit:g} in this column's unit"
+            f"implausible value {show(text)}: |value| must be at most {limit:g} in this column's unit"
         )
     return value
 
@@ -428,9 +428,9 @@ def magnitude_limit(column: str) -> float:
 
 def _parse_int(text: str) -> int:
     if not _INT_RE.fullmatch(text):
-        raise ValueError(f"not an integer: {text!r}")
+        raise ValueError(f"not an integer: {show(text)}")
     if len(text.lstrip("+-")) > 18:
-        raise ValueError(f"integer {text[:40]!r} out of range: at most 18 digits")
+        raise ValueError(f"integer {show(text)} out of range: at most 18 digits")
     return int(text)
 
 
@@ -440,7 +440,7 @@ def _parse_bool(text: str) -> bool:
         return True
     if low == "false":
         return False
-    raise ValueError(f"not a bool: {text!r} (expected true or false)")
+    raise ValueError(f"not a bool: {show(text)} (expected true or false)")
 
 
 def _parser(column: str):  # noqa: ANN202
@@ -465,19 +465,37 @@ def check_header(names: list[str], source: Path | str) -> None:
     missing = [c for c in RECORDING_COLUMNS if c not in seen]
     problems = []
     if dup:
-        problems.append("duplicated column(s) " + ", ".join(repr(n) for n in dict.fromkeys(dup)))
+        problems.append("duplicated column(s) " + _some(list(dict.fromkeys(dup))))
     if unknown:
-        problems.append("unknown column(s) " + ", ".join(repr(n) for n in unknown))
+        problems.append("unknown column(s) " + _some(unknown))
     if missing:
-        problems.append("missing column(s) " + ", ".join(repr(n) for n in missing))
+        problems.append("missing column(s) " + _some(missing))
     if problems:
         column = (dup or unknown or missing)[0]
+        header = ",".join(names)
+        if "\r" in header or "\u2028" in header or "\u2029" in header:
+            problems.insert(
+                0,
+                "the header holds a carriage return or a Unicode line separator: lines must "
+                "end with \\n (or \\r\\n)",
+            )
         raise RecordingError(
             "bad header: " + "; ".join(problems) + f" (expected: {','.join(RECORDING_COLUMNS)})",
             source,
             1,
             column,
         )
+
+
+MAX_QUOTED = 6
+"""Most items of a list an error message quotes (then "and N more")."""
+
+
+def _some(items: Sequence[str]) -> str:
+    """At most :data:`MAX_QUOTED` of ``items``, each shortened (:func:`show`), then a count."""
+    shown = ", ".join(show(n) for n in items[:MAX_QUOTED])
+    more = len(items) - MAX_QUOTED
+    return shown + (f" and {more} more" if more > 0 else "")
 
 
 def parse_lines(lines: list[str], source: Path | str) -> dict[str, list[Any]]:
@@ -688,7 +706,7 @@ def validate_sidecar(meta: Any, source: Path) -> dict[str, Any]:
         raise RecordingError(f"invalid config: {exc}", source, column="config") from None
     if checked["columns"] != list(RECORDING_COLUMNS):
         raise RecordingError(
-            f"sidecar field 'columns' = {checked['columns']!r} differs from the schema's columns "
+            f"sidecar field 'columns' = {show(checked['columns'])} differs from the schema's columns "
             f"{list(RECORDING_COLUMNS)!r}",
             source,
             column="columns",

@@ -42,6 +42,10 @@ __all__ = [
 ]
 
 
+MAX_REASON = 300
+"""Most characters of an unexpected error's text a :class:`RecordingError` quotes."""
+
+
 def load_recording(path: str | os.PathLike[str]) -> Recording:
     """Load and validate one recording (the CSV or its sidecar's path; ``.csv`` may be omitted).
 
@@ -66,8 +70,11 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     except (ValueError, TypeError, KeyError, AttributeError, OverflowError, RecursionError) as exc:
         # the checks above name every problem they know; anything else a file can
         # cause is still this file's error, never a crash of the caller's batch
+        text = str(exc)
+        if len(text) > MAX_REASON:  # never quote a whole file in one line
+            text = f"{text[:MAX_REASON]}... ({len(text) - MAX_REASON} more characters)"
         raise RecordingError(
-            f"invalid recording ({type(exc).__name__}: {exc})", recording_paths(path)[0]
+            f"invalid recording ({type(exc).__name__}: {text})", recording_paths(path)[0]
         ) from exc
 
 
