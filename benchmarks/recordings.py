@@ -36,6 +36,7 @@ from hasa_env.steering import SteeringModel, score
 from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
 
 __all__ = [
+    "MAX_STEERING_RATIO",
     "SCORE_KEYS",
     "LaneKeepingError",
     "ModelSetupError",
@@ -49,6 +50,10 @@ __all__ = [
     "render_recordings",
     "score_recordings",
 ]
+
+MAX_STEERING_RATIO = 1e4
+"""Largest steering ratio (model units per road-wheel rad) accepted: a steering-wheel angle
+in degrees is about 15 x 57 = 860 per road-wheel rad."""
 
 SCORE_KEYS = ("rmse", "r2", "r2_increments", "ljung_box_p")
 """The scores :func:`score_recordings` keeps (of :func:`hasa_env.steering.score`)."""
@@ -139,9 +144,15 @@ def prepare_model(
     ``say`` hears what was fitted and the ratio used.
 
     Raises:
-        ModelSetupError: the model does not load, or has no parameters and ``fit`` is off.
+        ModelSetupError: the model does not load, has no parameters and ``fit`` is off, or
+            ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
+    if steering_ratio is not None and not (0 < steering_ratio <= MAX_STEERING_RATIO):
+        raise ModelSetupError(
+            f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
+            f"road-wheel rad), got {steering_ratio!r}"
+        )
     try:
         model = load_model(spec, recordings[0].dt)
     except (ValueError, OSError) as exc:

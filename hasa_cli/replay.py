@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.recordings import (
+    MAX_STEERING_RATIO,
     LaneKeepingError,
     ModelSetupError,
     check_recordings,
@@ -150,8 +151,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--steering-ratio",
         type=float,
         default=None,
-        help="model units per recorded road-wheel rad (default: 15 for the paper's presets, "
-        "which describe the steering-wheel angle; 1 for fitted or saved models)",
+        help="model units per recorded road-wheel rad, in (0, 10000] (default: 15 for the "
+        "paper's presets, which describe the steering-wheel angle; 1 for fitted or saved models)",
     )
     p.add_argument(
         "--estimator",
@@ -190,6 +191,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if not (math.isfinite(args.atol) and args.atol >= 0):
         p.error(f"--atol must be a finite tolerance >= 0, got {args.atol!r}")
+    ratio = args.steering_ratio
+    if ratio is not None and not (0 < ratio <= MAX_STEERING_RATIO):
+        p.error(
+            f"--steering-ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
+            f"road-wheel rad), got {ratio!r}"
+        )
     if args.video is not None:
         missing = _video_unavailable(args.video)
         if missing is not None:

@@ -106,3 +106,17 @@ def test_the_cli_error_line_of_a_one_line_file_is_short(good, tmp_path):
     assert done.returncode == 2
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and len(lines[0]) < 2000 and lines[0].startswith("hasa-rec: error: ")
+
+
+# ---------------------------------------------------------------- item 9
+def test_a_steering_ratio_that_is_no_positive_number_is_a_usage_error(good):
+    from benchmarks.recordings import ModelSetupError, prepare_model
+    from hasa_env.recording.reader import load_paths
+
+    recordings = load_paths([good[0]])
+    for bad in (float("nan"), 0.0, -15.0, float("inf"), 1e300):
+        with pytest.raises(ModelSetupError, match="steering ratio must be a number in"):
+            prepare_model("two-point", recordings, steering_ratio=bad)
+    done = run_cli("replay", str(good[0]), "--model", "two-point", "--steering-ratio", "nan")
+    assert done.returncode == 2 and "rmse" not in done.stdout, done.stdout  # was: exit 0, rmse nan
+    assert "--steering-ratio must be a number in (0, 10000]" in done.stderr
