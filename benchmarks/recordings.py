@@ -167,7 +167,10 @@ def prepare_model(
         model.steering_signal = steering
     fitted_on = None
     if fit:
-        model = model.fit(recordings[0].data, road)
+        try:
+            model = model.fit(recordings[0].data, road)
+        except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
+            raise ModelSetupError(f"cannot fit {spec} on {recordings[0].path}: {exc}") from None
         fitted_on = recordings[0].path
         say(f"model {spec}: fitted on {fitted_on}")
     curvature_limit = model_curvature_limit(model)  # the roads it was fitted on
@@ -181,16 +184,6 @@ def prepare_model(
     return PreparedModel(spec, model, ratio, curvature_limit, fitted_on)
 
 
-def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[dict[str, float]]:
-    """Per recording the model's one-step-ahead scores of :data:`SCORE_KEYS` (steering in
-    model units: the recorded steering times the ratio)."""
-    out = []
-    for rec in recordings:
-        scores = score(prepared.model, in_model_units(rec.data, prepared.steering_ratio), rec.road)
-        out.append({k: v for k, v in scores.items() if k in SCORE_KEYS})
-    return out
-
-
 @dataclass(frozen=True)
 class RecordingOutcome:
     """What a step produced for one recording (by its index), or why it failed."""
@@ -199,6 +192,24 @@ class RecordingOutcome:
     path: Path | None
     value: Any = None
     error: str | None = None
+
+
+def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[RecordingOutcome]:
+    """Per recording the model's one-step-ahead scores of :data:`SCORE_KEYS` (steering in
+    model units: the recorded steering times the ratio): outcomes whose ``value`` is the
+    scores' dict, or whose ``error`` says why it cannot be scored (e.g. a recording sampled
+    at another rate than the model's coefficients belong to)."""
+    out = []
+    for i, rec in enumerate(recordings):
+        try:
+            frame = in_model_units(rec.data, prepared.steering_ratio)
+            scores = score(prepared.model, frame, rec.road)
+        except ValueError as exc:
+            out.append(RecordingOutcome(i, rec.path, error=str(exc)))
+            continue
+        out.append(RecordingOutcome(i, rec.path, value={k: v for k, v in scores.items()
+                                                        if k in SCORE_KEYS}))  # fmt: skip
+    return out
 
 
 def estimate_recordings(

@@ -238,9 +238,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             error(PROG, str(exc))
             return EXIT_USAGE
         if args.model is not None:
-            for rec, scores in zip(recordings, score_recordings(prepared, recordings), strict=True):
-                shown = ", ".join(f"{k} {_fmt(v)}" for k, v in scores.items())
-                print(f"{rec.path}: model {spec}: {shown}")
+            for outcome in score_recordings(prepared, recordings):
+                if outcome.error is not None:
+                    error(PROG, f"{outcome.path}: cannot score model {spec}: {outcome.error}")
+                    problems.append(outcome.error)
+                    continue
+                shown = ", ".join(f"{k} {_fmt(v)}" for k, v in outcome.value.items())
+                print(f"{outcome.path}: model {spec}: {shown}")
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)

@@ -7,6 +7,7 @@ is about what the user sees; library functions are called in this process otherw
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -120,3 +121,55 @@ def test_a_steering_ratio_that_is_no_positive_number_is_a_usage_error(good):
     done = run_cli("replay", str(good[0]), "--model", "two-point", "--steering-ratio", "nan")
     assert done.returncode == 2 and "rmse" not in done.stdout, done.stdout  # was: exit 0, rmse nan
     assert "--steering-ratio must be a number in (0, 10000]" in done.stderr
+
+
+# ---------------------------------------------------------------- item 15
+@pytest.fixture(scope="module")
+def other_rates(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """A 50 Hz recording and one at 100 Hz with action_repeat 2 (both an env step of 0.02 s)."""
+    folder = tmp_path_factory.mktemp("rates")
+    drivers = population("paper", seed=0, size=1)
+    out = []
+    for prefix, config in (("r50", {"sim_frequency": 50.0}), ("ar2", {"action_repeat": 2})):
+        runs = run_population(drivers, runs=1, seed=0, config={"time_limit": 2.5, **config})
+        out += [Path(p) for p in save_runs(runs["Ill"], folder, prefix=prefix)]
+    return out
+
+
+@pytest.mark.slow
+def test_hasa_bench_skips_recordings_of_another_sample_time_in_one_line_each(
+    good, other_rates, tmp_path, capsys
+):
+    from hasa_cli.bench import main as bench_main
+
+    folder = tmp_path / "mixed"
+    for path in good + other_rates:
+        copy(path, folder / path.name)
+    out = tmp_path / "out"
+    code = bench_main(["paper", "--recordings", str(folder), "--min-duration", "0.5", "--out",
+                       str(out), "--workers", "1", "--quiet", "--no-plots", "--curved-runs", "0"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 1, err  # partial: was a traceback (a model's coefficients at another Ts)
+    doc = json.loads((out / "results.json").read_text())
+    skipped = {Path(s["file"]).name: s["reason"] for s in doc["skipped"]}
+    assert set(skipped) == {p.name for p in other_rates}
+    assert all("sampled every 0.02 s" in reason for reason in skipped.values())
+    scored = {Path(p).name for d in doc["drivers"] for p in d["recordings"]}
+    assert scored == {p.name for p in good}
+
+
+def test_hasa_replay_names_a_recording_of_another_sample_time_and_goes_on(
+    good, other_rates, capsys
+):
+    from hasa_cli.replay import main as replay_main
+
+    r50 = str(other_rates[0])
+    code = replay_main([r50, str(good[0]), "--model", "generalized"])
+    out, err = capsys.readouterr()
+    assert code == 1, err  # was a traceback
+    assert f"{r50}: cannot score model generalized: " in err
+    assert f"{good[0]}: model generalized: rmse" in out  # the other one is scored
+    code = replay_main([r50, "--model", "generalized", "--fit"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "cannot fit generalized on" in err

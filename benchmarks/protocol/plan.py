@@ -16,7 +16,12 @@ from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
+PROTOCOL_DT = 0.01
+"""Sample time (s) of the recordings the protocol scores: the paper's generalized preset's
+coefficients belong to it, and the baselines' filters step at it."""
+
 __all__ = [
+    "PROTOCOL_DT",
     "Plan",
     "RunRef",
     "chunks",
@@ -229,6 +234,19 @@ def quality_problem(rec: Recording, config: ProtocolConfig) -> str | None:
     return None
 
 
+def _rate_problem(rec: Recording) -> str | None:
+    """Why a recording's sample time cannot be scored by the protocol, or None: the paper's
+    generalized preset and the baselines' filters step every :data:`PROTOCOL_DT` s."""
+    if abs(rec.dt - PROTOCOL_DT) <= 1e-12:
+        return None
+    rate = (float(rec.config["sim_frequency"]), int(rec.config["action_repeat"]))
+    return (
+        f"sampled {_rate_text(rate)}; the protocol's models and filters step every "
+        f"{PROTOCOL_DT:g} s (record at 100 Hz with action_repeat 1, or score it with "
+        "hasa-replay --fit)"
+    )
+
+
 def _driver_of(rec: Recording, root: Path) -> str:
     metadata = rec.meta.get("metadata") or {}
     driver = metadata.get("driver") or metadata.get("participant")
@@ -316,6 +334,8 @@ class _Scan:
     session_notes: list[str]
     scenarios: dict[Path, str] = field(default_factory=dict)
     """Each found recording's scenario (its env config's; ``paper`` when it has none)."""
+    rates: dict[Path, tuple[float, int]] = field(default_factory=dict)
+    """Each found recording's (``sim_frequency`` (Hz), ``action_repeat``)."""
 
 
 def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | None) -> _Scan:
@@ -328,13 +348,14 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
     ]
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
     scenarios: dict[Path, str] = {}
+    rates: dict[Path, tuple[float, int]] = {}
     training: tuple[str, str] | None = None
     session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
     for rec in loaded:
         assert rec.path is not None
         if rec.path.resolve() in session_excluded:
             continue
-        problem = quality_problem(rec, config)
+        problem = quality_problem(rec, config) or _rate_problem(rec)
         if problem is not None:
             if training_file is not None and rec.path.resolve() == training_file:
                 raise BenchmarkError(f"the training file {rec.path} is not usable: {problem}")
@@ -344,6 +365,7 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
         track = str(rec.config["track"])
         found[(driver, track)].append(rec.path)
         scenarios[rec.path] = str(rec.config.get("scenario") or "paper")
+        rates[rec.path] = (float(rec.config["sim_frequency"]), int(rec.config["action_repeat"]))
         if training_file is not None and rec.path.resolve() == training_file:
             training = (driver, track)
     if not found:
@@ -353,32 +375,38 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
                 + "\n".join(f"  {s['file']}: {s['reason']}" for s in skipped)
             )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
-    return _Scan(found, skipped, training, session_details, session_notes, scenarios)
+    return _Scan(found, skipped, training, session_details, session_notes, scenarios, rates)
 
 
 def _keep_one_scenario(
     scan: _Scan, illustrative: str, track: str, training_index: int
 ) -> tuple[str, int]:
-    """Leave in ``scan`` the recordings of the training run's scenario only (the others go
-    to ``scan.skipped`` with the reason); the scenario scored and the training run's index
+    """Leave in ``scan`` the recordings of the training run's scenario and sample time
+    (``sim_frequency`` and ``action_repeat``) only (the others go to ``scan.skipped`` with
+    the reason: a model fitted at one sample time cannot score another); the scenario scored and the training run's index
     among the illustrative driver's remaining runs. Without that run (an index past the
     driver's runs: :meth:`Plan.training` says so) the scenario is that of the driver's first
     run (of the first recording found, if it has none on ``track``)."""
     own = scan.found.get((illustrative, track)) or [p for ps in scan.found.values() for p in ps]
     training = own[training_index] if training_index < len(own) else None
     scenario = scan.scenarios[training if training is not None else own[0]]
+    rate = scan.rates[training if training is not None else own[0]]
     for key in list(scan.found):
         kept = []
         for path in scan.found[key]:
             other = scan.scenarios[path]
-            if other == scenario:
+            if other == scenario and scan.rates[path] == rate:
                 kept.append(path)
                 continue
-            scan.skipped.append({
-                "file": str(path),
-                "reason": f"scenario {other}, not the training run's {scenario} (score it "
-                "with a folder of its own)",
-            })  # fmt: skip
+            reason = (
+                f"scenario {other}, not the training run's {scenario}"
+                if other != scenario
+                else f"sampled {_rate_text(scan.rates[path])}, not as the training run "
+                f"({_rate_text(rate)}): the models' coefficients belong to one sample time"
+            )
+            scan.skipped.append(
+                {"file": str(path), "reason": reason + " (score it with a folder of its own)"}
+            )
         if kept:
             scan.found[key] = kept
         else:
@@ -386,6 +414,12 @@ def _keep_one_scenario(
     if training is not None:
         training_index = scan.found[(illustrative, track)].index(training)
     return scenario, training_index
+
+
+def _rate_text(rate: tuple[float, int]) -> str:
+    """``every 0.02 s (50 Hz, action_repeat 1)`` of a (sim_frequency, action_repeat)."""
+    frequency, repeat = rate
+    return f"every {repeat / frequency:g} s ({frequency:g} Hz, action_repeat {repeat})"
 
 
 def _training_choice(
