@@ -173,3 +173,61 @@ def test_hasa_replay_names_a_recording_of_another_sample_time_and_goes_on(
     err = capsys.readouterr().err
     assert code == 2 and len(err.splitlines()) == 1, err
     assert "cannot fit generalized on" in err
+
+
+# ---------------------------------------------------------------- item 6
+def _study(good: list[Path], root: Path) -> Path:
+    """A study folder: P1 a folder, P2 a symlink to a folder elsewhere, P3 a folder."""
+    copy(good[0], root / "study" / "P1" / "run_000.csv")
+    copy(good[1], root / "elsewhere" / "run_000.csv")
+    (root / "study" / "P2").symlink_to(root / "elsewhere", target_is_directory=True)
+    copy(good[1], root / "study" / "P3" / "run_000.csv")
+    return root / "study"
+
+
+def test_a_participant_folder_linked_into_the_study_is_analysed(good, tmp_path, capsys):
+    from hasa_cli.replay import main as replay_main
+
+    study = _study(good, tmp_path)
+    (study / "loop").symlink_to(study, target_is_directory=True)  # a cycle ends at once
+    assert replay_main([str(study)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("replay matches") == 3 and "P2/run_000.csv" in out  # was: P2 left out
+
+
+def test_an_unreadable_participant_folder_is_named(good, tmp_path, monkeypatch, capsys):
+    from hasa_cli.replay import main as replay_main
+    from hasa_env.recording.reader import load_paths
+
+    study = _study(good, tmp_path)
+    real_scandir = os.scandir
+
+    def scandir(path):  # what a normal user meets in a folder of mode 000
+        if Path(path).name == "P3":
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    loaded = load_paths([study])
+    assert len(loaded) == 2
+    assert [(e.path.name, e.reason) for e in loaded.errors] == [
+        ("P3", "cannot read this folder: Permission denied")
+    ]  # was: left out without a word, exit 0
+    assert replay_main([str(study)]) == 1
+    assert "P3: cannot read this folder: Permission denied" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root reads folders of any mode")
+def test_folders_of_mode_000_and_0644_are_named_as_a_user_meets_them(good, tmp_path):
+    study = _study(good, tmp_path)
+    (study / "P3").chmod(0o000)
+    (study / "P1").chmod(0o644)  # listed but not searchable
+    try:
+        done = run_cli("replay", str(study))
+    finally:
+        (study / "P3").chmod(0o755)
+        (study / "P1").chmod(0o755)
+    assert done.returncode == 1, done.stderr
+    assert "P3: cannot read this folder" in done.stderr
+    assert "P1: cannot search this folder" in done.stderr
+    assert "no such recording" not in done.stderr

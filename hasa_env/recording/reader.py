@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from hasa_env._walk import walk_files
 from hasa_env.recording.format import (
     Recording,
     RecordingError,
@@ -80,6 +81,13 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
 
 def _load_recording(path: str | os.PathLike[str]) -> Recording:
     csv_path, json_path = recording_paths(path)
+    for p in (csv_path, json_path):
+        try:
+            os.lstat(p)
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        except OSError as exc:  # e.g. a folder that can be listed but not searched
+            raise RecordingError(f"cannot reach the file: {exc.strerror or exc}", p) from None
     if not os.path.lexists(csv_path) and not os.path.lexists(json_path):
         raise RecordingError(
             f"no such recording (neither it nor {json_path.name} exists)", csv_path
@@ -232,11 +240,13 @@ def load_paths(paths: Sequence[str | os.PathLike[str]]) -> RecordingList:
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            found = sorted(path.rglob("*.csv")) + sorted(path.rglob("*.json"))
+            files, unreadable = walk_files(path, (".csv", ".json", ".parquet"))
+            problems += [RecordingError(reason, folder) for folder, reason in unreadable]
+            found = [p for p in files if p.suffix in (".csv", ".json")]
             parquets = [
-                p for p in sorted(path.rglob("*.parquet")) if not p.with_suffix(".csv").exists()
+                p for p in files if p.suffix == ".parquet" and not p.with_suffix(".csv").exists()
             ]
-            if not found and not parquets:
+            if not found and not parquets and not unreadable:
                 problems.append(
                     RecordingError(
                         "no recordings (no *.csv or *.parquet files) here or below", path

@@ -42,6 +42,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from hasa_env._walk import walk_files
 from hasa_env.session.study import ScheduledRun, Study
 from hasa_env.validation import ANY_JSON, Field, schema, validate
 
@@ -400,5 +401,6 @@ class SessionFile:
 
 
 def find_session_files(root: str | os.PathLike[str]) -> list[Path]:
-    """Every ``session.json`` under ``root`` (sorted)."""
-    return sorted(Path(root).rglob(SESSION_FILE))
+    """Every ``session.json`` under ``root``, in folders linked into it too (sorted; a
+    folder that cannot be read is left to the recordings' loader to name)."""
+    return walk_files(root, names=(SESSION_FILE,))[0]
