@@ -231,3 +231,85 @@ def test_folders_of_mode_000_and_0644_are_named_as_a_user_meets_them(good, tmp_p
     assert "P3: cannot read this folder" in done.stderr
     assert "P1: cannot search this folder" in done.stderr
     assert "no such recording" not in done.stderr
+
+
+# ---------------------------------------------------------------- items 7 and 14
+def _session_doc() -> dict:
+    """A valid session file of participant P2: a practice run, then a measured run."""
+    runs = [
+        {"position": i, "block": block, "number": 1, "track": "straight", "bias": 0.0,
+         "bias_index": 0, "seed": 7 + i, "prefix": f"{block}_01"}
+        for i, block in enumerate(("practice", "measured"))
+    ]  # fmt: skip
+    attempts = [
+        {"position": i, "block": r["block"], "number": 1, "attempt": 0,
+         "file": f"{r['prefix']}_000.csv", "status": "completed", "end_reason": "truncated",
+         "steps": 250}
+        for i, r in enumerate(runs)
+    ]  # fmt: skip
+    return {
+        "format": "hasa_env.study_session", "format_version": 1,
+        "study": {"name": "s", "spec": {"runs": {"repeat_aborted": False}}},
+        "participant": {"id": "P2", "slot": None, "metadata": {}},
+        "seed": 3, "hypotheses": [0.0, -1.8], "schedule": runs, "attempts": attempts,
+        "sessions": [], "state": "complete",
+    }  # fmt: skip
+
+
+def _nested(depth: int) -> str:
+    return "[" * depth + "]" * depth
+
+
+BAD_SESSIONS = {
+    "seed NaN": lambda text: text.replace('"seed": 3', '"seed": NaN'),
+    "nested 5000 levels": lambda text: text.replace(
+        '"sessions": []', '"sessions": ' + _nested(5000)
+    ),
+    "5000-digit integer": lambda text: text.replace('"seed": 3', '"seed": ' + "9" * 5000),
+    "attempts not objects": lambda text: text.replace('"sessions": []', '"sessions": []').replace(
+        '"attempts": [', '"attempts": [1, '
+    ),
+}
+
+
+@pytest.mark.parametrize("kind", list(BAD_SESSIONS))
+def test_a_session_file_that_cannot_be_used_is_named_and_its_folder_skipped(
+    good, tmp_path, kind, capsys
+):
+    from benchmarks.protocol.config import ProtocolConfig
+    from benchmarks.protocol.plan import recording_plan
+    from hasa_env.session import SessionError, SessionFile
+
+    study = tmp_path / "study"
+    for i, path in enumerate(good):
+        copy(path, study / "P1" / f"run_{i:03d}.csv")
+    copy(good[0], study / "P2" / "practice_01_000.csv")
+    copy(good[1], study / "P2" / "measured_01_000.csv")
+    text = json.dumps(_session_doc())
+    (study / "P2" / "session.json").write_text(text)
+    assert SessionFile.open(study / "P2" / "session.json").participant == "P2"  # valid
+    (study / "P2" / "session.json").write_text(BAD_SESSIONS[kind](text))
+    if kind != "attempts not objects":
+        with pytest.raises(SessionError, match="session.json"):
+            SessionFile.open(study / "P2" / "session.json")  # was RecursionError, ValueError
+    plan = recording_plan(ProtocolConfig(recordings=str(study), min_duration=0.5))
+    scored = {Path(r.path).relative_to(study).as_posix() for r in plan.main + plan.curved}
+    assert scored == {"P1/run_000.csv", "P1/run_001.csv"}  # was: P2's practice run scored too
+    skipped = {Path(s["file"]).name: s["reason"] for s in plan.skipped}
+    assert set(skipped) == {"practice_01_000.csv", "measured_01_000.csv"}
+    assert all("session file cannot be used" in r for r in skipped.values())
+    assert any(n.startswith("skipped the session file") for n in plan.notes)
+
+
+def test_deeply_nested_and_huge_study_files_are_one_line_errors(tmp_path):
+    from hasa_env.session.study import Study, StudyError
+
+    cases = {
+        "deep.json": '{"a": ' + _nested(5000) + "}",
+        "huge.json": '{"seed": ' + "9" * 5000 + "}",
+        "deep.toml": "a = " + _nested(5000) + "\n",
+    }
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(StudyError, match=name):  # was RecursionError / ValueError
+            Study.load(tmp_path / name)

@@ -257,68 +257,98 @@ def _driver_of(rec: Recording, root: Path) -> str:
     return relative.parts[0] if relative.parts else "driver"
 
 
-def _study_sessions(root: Path) -> tuple[dict[Path, str], set[Path], dict[str, Any], list[str]]:
+def _study_sessions(
+    root: Path,
+) -> tuple[dict[Path, str], dict[Path, str], dict[str, Any], list[str]]:
     """What the study session files under ``root`` say (``hasa-drive study``).
 
-    Returns (measured recording -> participant, recordings to leave out (practice
-    runs, aborted attempts, files the session does not list), per-participant
-    details, notes). A session file that cannot be read is named in the notes and its
-    folder's recordings are read like any others.
+    Returns (measured recording -> participant, recordings to leave out -> why (practice
+    runs, aborted attempts, files the session does not list, every recording of a folder
+    whose session file cannot be used), per-participant details, notes). A session file
+    that cannot be read or is invalid is named, and its folder's recordings are all left
+    out: without it practice runs cannot be told from measured ones.
     """
     measured: dict[Path, str] = {}
-    excluded: set[Path] = set()
+    excluded: dict[Path, str] = {}
     details: dict[str, Any] = {}
     notes: list[str] = []
     for path in find_session_files(root):
         try:
-            session = SessionFile.open(path)
-        except SessionError as exc:
-            notes.append(f"skipped the session file {exc}")
+            found = _one_session(path)
+        except (SessionError, KeyError, TypeError, AttributeError, ValueError) as exc:
+            text = str(exc) if isinstance(exc, SessionError) else f"{path}: {exc!s:.200}"
+            notes.append(f"skipped the session file {text}")
+            reason = (
+                f"its folder's session file cannot be used ({text}): practice and measured "
+                "runs cannot be told apart"
+            )
+            for csv in path.parent.glob("*.csv"):
+                excluded[csv.resolve()] = reason
             continue
-        folder = path.parent
-        who = session.participant
-        listed: set[Path] = set()
-        practice = aborted = 0
-        for attempt in session.attempts:
-            if not attempt.get("file"):
-                continue
-            csv = (folder / attempt["file"]).resolve()
-            listed.add(csv)
-            if attempt["status"] == "completed" and attempt["block"] == "measured":
-                measured[csv] = who
-                continue
-            excluded.add(csv)
-            if attempt["block"] == "practice":
-                practice += 1
-            if attempt["status"] != "completed":
-                aborted += 1
-                notes.append(
-                    f"aborted run not analysed: {who} {attempt['block']} run "
-                    f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
-                    f"{attempt['steps']} steps): {folder / attempt['file']}"
-                )
-        unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
-        excluded |= unlisted
-        summary = session.summary()
-        details[who] = {
-            "session_file": str(path),
-            "study": session.doc["study"]["name"],
-            "participant_metadata": session.doc["participant"]["metadata"],
-            "session_state": summary["state"],
-            "measured_runs": summary["measured_completed"],
-            "measured_scheduled": summary["measured_scheduled"],
-            "practice_runs_excluded": practice,
-            "aborted_runs": aborted,
-        }
-        text = (
-            f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
-            f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
-            f"{practice} practice run(s) left out, {aborted} aborted"
-        )
-        if unlisted:
-            text += f", {len(unlisted)} recording(s) the session file does not list left out"
-        notes.append(text)
+        measured.update(found[0])
+        excluded.update(found[1])
+        details.update(found[2])
+        notes += found[3]
     return measured, excluded, details, notes
+
+
+def _one_session(
+    path: Path,
+) -> tuple[dict[Path, str], dict[Path, str], dict[str, Any], list[str]]:
+    """What the session file ``path`` says, as :func:`_study_sessions` returns it.
+
+    Raises:
+        SessionError: the file cannot be read or is invalid (or KeyError, TypeError, ...:
+            a field holds something else than a session file's).
+    """
+    session = SessionFile.open(path)
+    measured: dict[Path, str] = {}
+    excluded: dict[Path, str] = {}
+    notes: list[str] = []
+    folder = path.parent
+    who = session.participant
+    listed: set[Path] = set()
+    practice = aborted = 0
+    for attempt in session.attempts:
+        if not attempt.get("file"):
+            continue
+        csv = (folder / attempt["file"]).resolve()
+        listed.add(csv)
+        if attempt["status"] == "completed" and attempt["block"] == "measured":
+            measured[csv] = who
+            continue
+        excluded[csv] = ""
+        if attempt["block"] == "practice":
+            practice += 1
+        if attempt["status"] != "completed":
+            aborted += 1
+            notes.append(
+                f"aborted run not analysed: {who} {attempt['block']} run "
+                f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
+                f"{attempt['steps']} steps): {folder / attempt['file']}"
+            )
+    unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
+    excluded.update(dict.fromkeys(unlisted, ""))
+    summary = session.summary()
+    detail = {
+        "session_file": str(path),
+        "study": session.doc["study"]["name"],
+        "participant_metadata": session.doc["participant"]["metadata"],
+        "session_state": summary["state"],
+        "measured_runs": summary["measured_completed"],
+        "measured_scheduled": summary["measured_scheduled"],
+        "practice_runs_excluded": practice,
+        "aborted_runs": aborted,
+    }
+    text = (
+        f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
+        f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
+        f"{practice} practice run(s) left out, {aborted} aborted"
+    )
+    if unlisted:
+        text += f", {len(unlisted)} recording(s) the session file does not list left out"
+    notes.append(text)
+    return measured, excluded, {who: detail}, notes
 
 
 @dataclass
@@ -354,6 +384,9 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
     for rec in loaded:
         assert rec.path is not None
         if rec.path.resolve() in session_excluded:
+            why = session_excluded[rec.path.resolve()]
+            if why:  # (practice runs and aborted attempts are in the notes)
+                skipped.append({"file": str(rec.path), "reason": why})
             continue
         problem = quality_problem(rec, config) or _rate_problem(rec)
         if problem is not None:

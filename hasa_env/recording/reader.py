@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import warnings
 from collections.abc import Sequence
@@ -158,11 +159,19 @@ def _other_document(path: Path) -> bool:
     """A JSON file that says it is something else than a recording's sidecar (a study's
     session file, a calibration, a model file: its ``format`` names another document)."""
     try:
-        doc = json.loads(read_regular_file(path, "the file"))
-    except (OSError, ValueError, RecursionError):
+        text = read_regular_file(path, "the file")
+    except (OSError, ValueError):
         return False
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError):  # an invalid one still says what it is, near its top
+        named = _FORMAT_RE.search(text[:4096])
+        return named is not None and named.group(1) != "hasa_env recording"
     fmt = doc.get("format") if isinstance(doc, dict) else None
     return isinstance(fmt, str) and fmt != "hasa_env recording"
+
+
+_FORMAT_RE = re.compile(r'^\s*\{\s*"format"\s*:\s*"([^"\\]*)"')
 
 
 def _is_started_episode(csv_path: Path) -> bool:

@@ -194,6 +194,10 @@ class SessionFile:
             raise SessionError(
                 f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
             ) from None
+        except RecursionError:
+            raise SessionError(f"{path}: not a session file: JSON nested too deeply") from None
+        except ValueError as exc:  # an integer of more than 4300 digits
+            raise SessionError(f"{path}: cannot be read as JSON: {str(exc)[:200]}") from None
         doc = validate(
             raw,
             _SCHEMA,
