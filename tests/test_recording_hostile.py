@@ -313,3 +313,29 @@ def test_deeply_nested_and_huge_study_files_are_one_line_errors(tmp_path):
         (tmp_path / name).write_text(text)
         with pytest.raises(StudyError, match=name):  # was RecursionError / ValueError
             Study.load(tmp_path / name)
+
+
+# ---------------------------------------------------------------- item 10
+@pytest.mark.parametrize("how", ["raises ENOSPC", "writes too little"])
+def test_an_export_cut_by_a_full_disk_leaves_no_dataset_behind(good, tmp_path, monkeypatch, how):
+    minari = pytest.importorskip("minari")
+    from hasa_env.recording.export import export_minari
+
+    folder = tmp_path / "recs"
+    for path in good:
+        copy(path, folder / path.name)
+    real = minari.create_dataset_from_buffers
+
+    def cut(**kwargs):  # the first episode fits on the disk, the second does not
+        dataset = real(**{**kwargs, "buffer": kwargs["buffer"][:1]})
+        if how == "raises ENOSPC":
+            raise OSError(28, "No space left on device")
+        return dataset
+
+    monkeypatch.setattr(minari, "create_dataset_from_buffers", cut)
+    with pytest.raises(OSError, match="No space left|a full disk"):
+        export_minari(folder, "hasa/full-v0", data_path=tmp_path / "data")
+    assert not (tmp_path / "data" / "hasa" / "full-v0").exists()  # was: a 1-episode dataset
+    monkeypatch.setattr(minari, "create_dataset_from_buffers", real)
+    result = export_minari(folder, "hasa/full-v0", data_path=tmp_path / "data")  # not blocked
+    assert result.dataset.total_episodes == 2
