@@ -286,6 +286,17 @@ def read_regular_file(path: Path, what: str) -> str:
         FileNotFoundError: no such file.
         OSError, UnicodeDecodeError: unreadable (the message says why, e.g. a FIFO).
     """
+    return read_regular_bytes(path, what).decode("utf-8")
+
+
+def read_regular_bytes(path: Path, what: str) -> bytes:
+    """The bytes of ``path`` if it is a regular file (:func:`read_regular_file`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        OSError: unreadable (the message says why, e.g. a FIFO, or larger than
+            :data:`MAX_FILE_BYTES`).
+    """
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     try:
         info = os.fstat(fd)
@@ -297,8 +308,7 @@ def read_regular_file(path: Path, what: str) -> str:
         os.close(fd)
         raise
     with open(fd, "rb") as f:
-        data = f.read()
-    return data.decode("utf-8")
+        return f.read()
 
 
 def file_kind(mode: int) -> str:
@@ -429,7 +439,7 @@ def magnitude_limit(column: str) -> float:
 def _parse_int(text: str) -> int:
     if not _INT_RE.fullmatch(text):
         raise ValueError(f"not an integer: {show(text)}")
-    if len(text.lstrip("+-")) > 18:
+    if len(text.lstrip("+-").lstrip("0")) > 18:  # (leading zeros are no digits of the value)
         raise ValueError(f"integer {show(text)} out of range: at most 18 digits")
     return int(text)
 
