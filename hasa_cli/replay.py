@@ -53,6 +53,7 @@ from benchmarks.recordings import (
     MAX_STEERING_RATIO,
     LaneKeepingError,
     ModelSetupError,
+    PreparedModel,
     check_recordings,
     describe_estimate,
     estimate_recordings,
@@ -178,6 +179,39 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _prepare_and_score(
+    args: argparse.Namespace, recordings: Sequence[Any], problems: list[str]
+) -> PreparedModel:
+    """The model of ``--model`` (default generalized) prepared; with ``--model`` its scores on
+    every recording printed (a recording it cannot score named on stderr and added to
+    ``problems``).
+
+    Raises:
+        LaneKeepingError, ModelSetupError: as :func:`benchmarks.recordings.prepare_model`.
+    """
+    spec = args.model or "generalized"
+    if ":" in spec and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())  # user models in the working directory
+    prepared = prepare_model(
+        spec,
+        recordings,
+        fit=args.fit,
+        steering=args.steering,
+        steering_ratio=args.steering_ratio,
+        lane_check=args.estimator and not args.no_lane_check,
+        say=print,
+    )
+    if args.model is not None:
+        for outcome in score_recordings(prepared, recordings):
+            if outcome.error is not None:
+                error(PROG, f"{outcome.path}: cannot score model {spec}: {outcome.error}")
+                problems.append(outcome.error)
+                continue
+            shown = ", ".join(f"{k} {_fmt(v)}" for k, v in outcome.value.items())
+            print(f"{outcome.path}: model {spec}: {shown}")
+    return prepared
+
+
 @console_script(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-replay`` (see the module docstring)."""
@@ -218,33 +252,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     prepared = None
     if args.model is not None or args.estimator:
-        spec = args.model or "generalized"
-        if ":" in spec and os.getcwd() not in sys.path:
-            sys.path.insert(0, os.getcwd())  # user models in the working directory
         try:
-            prepared = prepare_model(
-                spec,
-                recordings,
-                fit=args.fit,
-                steering=args.steering,
-                steering_ratio=args.steering_ratio,
-                lane_check=args.estimator and not args.no_lane_check,
-                say=print,
-            )
+            prepared = _prepare_and_score(args, recordings, problems)
         except LaneKeepingError as exc:
             error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
             return EXIT_USAGE
         except ModelSetupError as exc:
             error(PROG, str(exc))
             return EXIT_USAGE
-        if args.model is not None:
-            for outcome in score_recordings(prepared, recordings):
-                if outcome.error is not None:
-                    error(PROG, f"{outcome.path}: cannot score model {spec}: {outcome.error}")
-                    problems.append(outcome.error)
-                    continue
-                shown = ", ".join(f"{k} {_fmt(v)}" for k, v in outcome.value.items())
-                print(f"{outcome.path}: model {spec}: {shown}")
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)

@@ -339,3 +339,57 @@ def test_an_export_cut_by_a_full_disk_leaves_no_dataset_behind(good, tmp_path, m
     monkeypatch.setattr(minari, "create_dataset_from_buffers", real)
     result = export_minari(folder, "hasa/full-v0", data_path=tmp_path / "data")  # not blocked
     assert result.dataset.total_episodes == 2
+
+
+# ---------------------------------------------------------------- item 19
+def _long_recording(good: Path, target: Path, rows: int) -> Path:
+    """A valid recording of ``rows`` steps: the good one's rows repeated, steps and times
+    renumbered."""
+    lines = good.read_text().split("\n")[:-1]
+    body = [line.split(",") for line in lines[1:]]
+    body[-1][-2:] = ["false", "false"]
+    with open(target, "w") as f:
+        f.write(lines[0] + "\n")
+        for k in range(rows + 1):
+            fields = body[k % len(body)]
+            f.write(",".join([str(k), repr(k * (1.0 / 100.0)), *fields[2:]]) + "\n")
+    meta = json.loads(good.with_suffix(".json").read_text())
+    meta["steps"] = rows
+    target.with_suffix(".json").write_text(json.dumps(meta))
+    return target
+
+
+def test_an_ordinary_file_is_read_by_the_fast_parser_with_the_exact_values(good, tmp_path):
+    import pandas as pd
+
+    from hasa_env.recording import reader
+
+    data = good[0].read_bytes()
+    fast = reader._fast_frame(data, good[0])
+    assert fast is not None  # an ordinary recording takes the fast path
+    exact = reader._exact_frame(data, {"complete": True}, good[0], [])
+    pd.testing.assert_frame_equal(fast, exact, check_exact=True)  # bit for bit, same dtypes
+    for edit in (b"1.0,", b"1e0,", b"01,"):  # a step written as a float: refused; leading 0 fine
+        odd = data.replace(b"\n1,", b"\n" + edit, 1)
+        assert (reader._fast_frame(odd, good[0]) is None) == (edit != b"01,")
+
+
+@pytest.mark.slow
+def test_a_long_recording_loads_in_bounded_memory(good, tmp_path):
+    path = _long_recording(good[0], tmp_path / "long.csv", 100_000)
+    size = path.stat().st_size
+    script = (
+        "import resource, sys\n"
+        "from hasa_env.recording import load_recording\n"
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+        "rec = load_recording(sys.argv[1])\n"
+        "after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+        "print(rec.steps, (after - before) * 1024)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True,
+                          text=True, timeout=120, env=env)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    steps, grown = (int(v) for v in done.stdout.split())
+    assert steps == 100_000
+    assert grown < 3.0 * size, grown / size  # was 5.4 x the file

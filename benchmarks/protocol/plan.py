@@ -1,4 +1,9 @@
-"""Which runs the protocol drives or loads: run references, plans, frames."""
+"""Which runs the protocol drives or loads: run references, plans, frames.
+
+Why this module is long: a plan of recorded runs is made of what every file, quality gate,
+sample time, scenario and study session file says, and each of those decisions is named
+in the plan's notes or skipped files; they are kept next to the plan they decide.
+"""
 
 from __future__ import annotations
 
