@@ -393,3 +393,16 @@ def test_a_long_recording_loads_in_bounded_memory(good, tmp_path):
     steps, grown = (int(v) for v in done.stdout.split())
     assert steps == 100_000
     assert grown < 3.0 * size, grown / size  # was 5.4 x the file
+
+
+def test_deeply_nested_and_huge_model_files_are_model_file_errors(tmp_path):
+    from hasa_env.steering import ModelFileError, SteeringModel
+    from hasa_env.steering.loading import load_model
+
+    for name, text in {"deep.json": '{"a": ' + _nested(5000) + "}",
+                       "huge.json": '{"a": ' + "9" * 5000 + "}"}.items():  # fmt: skip
+        (tmp_path / name).write_text(text)
+        with pytest.raises(ModelFileError, match=name):  # was RecursionError / ValueError
+            load_model(str(tmp_path / name))
+        with pytest.raises(ModelFileError):
+            SteeringModel.from_json(text)

@@ -209,6 +209,10 @@ def load_model_file(path: str | os.PathLike[str]) -> SteeringModel:
         raise ModelFileError(
             f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
         ) from None
+    except RecursionError:
+        raise ModelFileError(f"{source}: not a model file: JSON nested too deeply") from None
+    except ValueError as exc:  # an integer of more than 4300 digits
+        raise ModelFileError(f"{source}: cannot be read as JSON: {str(exc)[:200]}") from None
     if isinstance(document, dict):
         model_type, cls = document.get("type"), document.get("class")
         if isinstance(model_type, str) and model_type not in MODEL_TYPES and isinstance(cls, str):
