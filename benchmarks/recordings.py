@@ -36,6 +36,7 @@ from hasa_env.steering import SteeringModel, score
 from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
 
 __all__ = [
+    "MAX_STEERING_RATIO",
     "SCORE_KEYS",
     "LaneKeepingError",
     "ModelSetupError",
@@ -49,6 +50,10 @@ __all__ = [
     "render_recordings",
     "score_recordings",
 ]
+
+MAX_STEERING_RATIO = 1e4
+"""Largest steering ratio (model units per road-wheel rad) accepted: a steering-wheel angle
+in degrees is about 15 x 57 = 860 per road-wheel rad."""
 
 SCORE_KEYS = ("rmse", "r2", "r2_increments", "ljung_box_p")
 """The scores :func:`score_recordings` keeps (of :func:`hasa_env.steering.score`)."""
@@ -145,9 +150,15 @@ def prepare_model(
     (:func:`hasa_env.steering.loading.load_model_file`).
 
     Raises:
-        ModelSetupError: the model does not load, or has no parameters and ``fit`` is off.
+        ModelSetupError: the model does not load, has no parameters and ``fit`` is off, or
+            ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
+    if steering_ratio is not None and not (0 < steering_ratio <= MAX_STEERING_RATIO):
+        raise ModelSetupError(
+            f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
+            f"road-wheel rad), got {steering_ratio!r}"
+        )
     try:
         model = load_model(spec, recordings[0].dt, trust_module=trust_module)
     except (ValueError, OSError) as exc:
@@ -162,7 +173,10 @@ def prepare_model(
         model.steering_signal = steering
     fitted_on = None
     if fit:
-        model = model.fit(recordings[0].data, road)
+        try:
+            model = model.fit(recordings[0].data, road)
+        except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
+            raise ModelSetupError(f"cannot fit {spec} on {recordings[0].path}: {exc}") from None
         fitted_on = recordings[0].path
         say(f"model {spec}: fitted on {fitted_on}")
     ratio = default_steering_ratio(spec, fit) if steering_ratio is None else steering_ratio
@@ -175,16 +189,6 @@ def prepare_model(
     return PreparedModel(spec, model, ratio, fitted_on)
 
 
-def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[dict[str, float]]:
-    """Per recording the model's one-step-ahead scores of :data:`SCORE_KEYS` (steering in
-    model units: the recorded steering times the ratio)."""
-    out = []
-    for rec in recordings:
-        scores = score(prepared.model, in_model_units(rec.data, prepared.steering_ratio), rec.road)
-        out.append({k: v for k, v in scores.items() if k in SCORE_KEYS})
-    return out
-
-
 @dataclass(frozen=True)
 class RecordingOutcome:
     """What a step produced for one recording (by its index), or why it failed."""
@@ -193,6 +197,24 @@ class RecordingOutcome:
     path: Path | None
     value: Any = None
     error: str | None = None
+
+
+def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[RecordingOutcome]:
+    """Per recording the model's one-step-ahead scores of :data:`SCORE_KEYS` (steering in
+    model units: the recorded steering times the ratio): outcomes whose ``value`` is the
+    scores' dict, or whose ``error`` says why it cannot be scored (e.g. a recording sampled
+    at another rate than the model's coefficients belong to)."""
+    out = []
+    for i, rec in enumerate(recordings):
+        try:
+            frame = in_model_units(rec.data, prepared.steering_ratio)
+            scores = score(prepared.model, frame, rec.road)
+        except ValueError as exc:
+            out.append(RecordingOutcome(i, rec.path, error=str(exc)))
+            continue
+        out.append(RecordingOutcome(i, rec.path, value={k: v for k, v in scores.items()
+                                                        if k in SCORE_KEYS}))  # fmt: skip
+    return out
 
 
 def estimate_recordings(

@@ -52,8 +52,10 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.recordings import (
+    MAX_STEERING_RATIO,
     LaneKeepingError,
     ModelSetupError,
+    PreparedModel,
     check_recordings,
     describe_estimate,
     estimate_recordings,
@@ -160,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--steering-ratio",
         type=float,
         default=None,
-        help="model units per recorded road-wheel rad (default: 15 for the paper's presets, "
-        "which describe the steering-wheel angle; 1 for fitted or saved models)",
+        help="model units per recorded road-wheel rad, in (0, 10000] (default: 15 for the "
+        "paper's presets, which describe the steering-wheel angle; 1 for fitted or saved models)",
     )
     p.add_argument(
         "--estimator",
@@ -187,6 +189,40 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _prepare_and_score(
+    args: argparse.Namespace, recordings: Sequence[Any], problems: list[str]
+) -> PreparedModel:
+    """The model of ``--model`` (default generalized) prepared; with ``--model`` its scores on
+    every recording printed (a recording it cannot score named on stderr and added to
+    ``problems``).
+
+    Raises:
+        LaneKeepingError, ModelSetupError: as :func:`benchmarks.recordings.prepare_model`.
+    """
+    spec = args.model or "generalized"
+    if ":" in spec and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())  # user models in the working directory
+    prepared = prepare_model(
+        spec,
+        recordings,
+        fit=args.fit,
+        steering=args.steering,
+        steering_ratio=args.steering_ratio,
+        lane_check=args.estimator and not args.no_lane_check,
+        say=lambda message: print(printable(message)),
+        trust_module=args.trust_model_module,
+    )
+    if args.model is not None:
+        for outcome in score_recordings(prepared, recordings):
+            if outcome.error is not None:
+                error(PROG, f"{outcome.path}: cannot score model {spec}: {outcome.error}")
+                problems.append(outcome.error)
+                continue
+            shown = ", ".join(f"{k} {_fmt(v)}" for k, v in outcome.value.items())
+            print(printable(f"{outcome.path}: model {spec}: {shown}"))
+    return prepared
+
+
 @console_script(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-replay`` (see the module docstring)."""
@@ -200,6 +236,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if not (math.isfinite(args.atol) and args.atol >= 0):
         p.error(f"--atol must be a finite tolerance >= 0, got {args.atol!r}")
+    ratio = args.steering_ratio
+    if ratio is not None and not (0 < ratio <= MAX_STEERING_RATIO):
+        p.error(
+            f"--steering-ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
+            f"road-wheel rad), got {ratio!r}"
+        )
     if args.video is not None:
         missing = _video_unavailable(args.video)
         if missing is not None:
@@ -221,30 +263,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     prepared = None
     if args.model is not None or args.estimator:
-        spec = args.model or "generalized"
-        if ":" in spec and os.getcwd() not in sys.path:
-            sys.path.insert(0, os.getcwd())  # user models in the working directory
         try:
-            prepared = prepare_model(
-                spec,
-                recordings,
-                fit=args.fit,
-                steering=args.steering,
-                steering_ratio=args.steering_ratio,
-                lane_check=args.estimator and not args.no_lane_check,
-                say=lambda message: print(printable(message)),
-                trust_module=args.trust_model_module,
-            )
+            prepared = _prepare_and_score(args, recordings, problems)
         except LaneKeepingError as exc:
             error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
             return EXIT_USAGE
         except ModelSetupError as exc:
             error(PROG, str(exc))
             return EXIT_USAGE
-        if args.model is not None:
-            for rec, scores in zip(recordings, score_recordings(prepared, recordings), strict=True):
-                shown = ", ".join(f"{k} {_fmt(v)}" for k, v in scores.items())
-                print(printable(f"{rec.path}: model {spec}: {shown}"))
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)

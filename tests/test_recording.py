@@ -134,11 +134,19 @@ finite = st.floats(-MAX_MAGNITUDE, MAX_MAGNITUDE, allow_nan=False, allow_infinit
 def test_save_recording_round_trips_any_plausible_float(data, n, action_repeat):
     config = {"action_repeat": action_repeat, "sim_frequency": 60.0}
     columns = {}
+    index = data.draw(st.integers(-1, 1))  # drawn once per episode: -1 or a default hypothesis
     for c in RECORDING_COLUMNS:
-        if c in ("terminated", "truncated"):
-            columns[c] = data.draw(st.lists(st.booleans(), min_size=n, max_size=n))
+        if c in ("terminated", "truncated"):  # an episode ends at its last row
+            columns[c] = [False] * (n - 1) + [data.draw(st.booleans())]
         elif c == "bias_index":
-            columns[c] = data.draw(st.lists(st.integers(-1, 5), min_size=n, max_size=n))
+            columns[c] = [index] * n
+        elif c == "bias":
+            bias = data.draw(finite) if index == -1 else (0.0, -1.8)[index]
+            columns[c] = [bias] * n
+        elif c == "speed":  # within [0, vehicle.max_speed]
+            columns[c] = data.draw(st.lists(st.floats(0.0, 60.0), min_size=n, max_size=n))
+        elif c == "lateral_offset":  # within the reach of a reset and one step
+            columns[c] = data.draw(st.lists(st.floats(-30.0, 30.0), min_size=n, max_size=n))
         else:
             columns[c] = data.draw(st.lists(finite, min_size=n, max_size=n))
     columns["step"] = list(range(n))

@@ -1,4 +1,9 @@
-"""Which runs the protocol drives or loads: run references, plans, frames."""
+"""Which runs the protocol drives or loads: run references, plans, frames.
+
+Why this module is long: a plan of recorded runs is made of what every file, quality gate,
+sample time, scenario and study session file says, and each of those decisions is named
+in the plan's notes or skipped files; they are kept next to the plan they decide.
+"""
 
 from __future__ import annotations
 
@@ -16,7 +21,12 @@ from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 
+PROTOCOL_DT = 0.01
+"""Sample time (s) of the recordings the protocol scores: the paper's generalized preset's
+coefficients belong to it, and the baselines' filters step at it."""
+
 __all__ = [
+    "PROTOCOL_DT",
     "Plan",
     "RunRef",
     "chunks",
@@ -229,6 +239,19 @@ def quality_problem(rec: Recording, config: ProtocolConfig) -> str | None:
     return None
 
 
+def _rate_problem(rec: Recording) -> str | None:
+    """Why a recording's sample time cannot be scored by the protocol, or None: the paper's
+    generalized preset and the baselines' filters step every :data:`PROTOCOL_DT` s."""
+    if abs(rec.dt - PROTOCOL_DT) <= 1e-12:
+        return None
+    rate = (float(rec.config["sim_frequency"]), int(rec.config["action_repeat"]))
+    return (
+        f"sampled {_rate_text(rate)}; the protocol's models and filters step every "
+        f"{PROTOCOL_DT:g} s (record at 100 Hz with action_repeat 1, or score it with "
+        "hasa-replay --fit)"
+    )
+
+
 def _driver_of(rec: Recording, root: Path) -> str:
     metadata = rec.meta.get("metadata") or {}
     driver = metadata.get("driver") or metadata.get("participant")
@@ -239,68 +262,98 @@ def _driver_of(rec: Recording, root: Path) -> str:
     return relative.parts[0] if relative.parts else "driver"
 
 
-def _study_sessions(root: Path) -> tuple[dict[Path, str], set[Path], dict[str, Any], list[str]]:
+def _study_sessions(
+    root: Path,
+) -> tuple[dict[Path, str], dict[Path, str], dict[str, Any], list[str]]:
     """What the study session files under ``root`` say (``hasa-drive study``).
 
-    Returns (measured recording -> participant, recordings to leave out (practice
-    runs, aborted attempts, files the session does not list), per-participant
-    details, notes). A session file that cannot be read is named in the notes and its
-    folder's recordings are read like any others.
+    Returns (measured recording -> participant, recordings to leave out -> why (practice
+    runs, aborted attempts, files the session does not list, every recording of a folder
+    whose session file cannot be used), per-participant details, notes). A session file
+    that cannot be read or is invalid is named, and its folder's recordings are all left
+    out: without it practice runs cannot be told from measured ones.
     """
     measured: dict[Path, str] = {}
-    excluded: set[Path] = set()
+    excluded: dict[Path, str] = {}
     details: dict[str, Any] = {}
     notes: list[str] = []
     for path in find_session_files(root):
         try:
-            session = SessionFile.open(path)
-        except SessionError as exc:
-            notes.append(f"skipped the session file {exc}")
+            found = _one_session(path)
+        except (SessionError, KeyError, TypeError, AttributeError, ValueError) as exc:
+            text = str(exc) if isinstance(exc, SessionError) else f"{path}: {exc!s:.200}"
+            notes.append(f"skipped the session file {text}")
+            reason = (
+                f"its folder's session file cannot be used ({text}): practice and measured "
+                "runs cannot be told apart"
+            )
+            for csv in path.parent.glob("*.csv"):
+                excluded[csv.resolve()] = reason
             continue
-        folder = path.parent
-        who = session.participant
-        listed: set[Path] = set()
-        practice = aborted = 0
-        for attempt in session.attempts:
-            if not attempt.get("file"):
-                continue
-            csv = (folder / attempt["file"]).resolve()
-            listed.add(csv)
-            if attempt["status"] == "completed" and attempt["block"] == "measured":
-                measured[csv] = who
-                continue
-            excluded.add(csv)
-            if attempt["block"] == "practice":
-                practice += 1
-            if attempt["status"] != "completed":
-                aborted += 1
-                notes.append(
-                    f"aborted run not analysed: {who} {attempt['block']} run "
-                    f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
-                    f"{attempt['steps']} steps): {folder / attempt['file']}"
-                )
-        unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
-        excluded |= unlisted
-        summary = session.summary()
-        details[who] = {
-            "session_file": str(path),
-            "study": session.doc["study"]["name"],
-            "participant_metadata": session.doc["participant"]["metadata"],
-            "session_state": summary["state"],
-            "measured_runs": summary["measured_completed"],
-            "measured_scheduled": summary["measured_scheduled"],
-            "practice_runs_excluded": practice,
-            "aborted_runs": aborted,
-        }
-        text = (
-            f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
-            f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
-            f"{practice} practice run(s) left out, {aborted} aborted"
-        )
-        if unlisted:
-            text += f", {len(unlisted)} recording(s) the session file does not list left out"
-        notes.append(text)
+        measured.update(found[0])
+        excluded.update(found[1])
+        details.update(found[2])
+        notes += found[3]
     return measured, excluded, details, notes
+
+
+def _one_session(
+    path: Path,
+) -> tuple[dict[Path, str], dict[Path, str], dict[str, Any], list[str]]:
+    """What the session file ``path`` says, as :func:`_study_sessions` returns it.
+
+    Raises:
+        SessionError: the file cannot be read or is invalid (or KeyError, TypeError, ...:
+            a field holds something else than a session file's).
+    """
+    session = SessionFile.open(path)
+    measured: dict[Path, str] = {}
+    excluded: dict[Path, str] = {}
+    notes: list[str] = []
+    folder = path.parent
+    who = session.participant
+    listed: set[Path] = set()
+    practice = aborted = 0
+    for attempt in session.attempts:
+        if not attempt.get("file"):
+            continue
+        csv = (folder / attempt["file"]).resolve()
+        listed.add(csv)
+        if attempt["status"] == "completed" and attempt["block"] == "measured":
+            measured[csv] = who
+            continue
+        excluded[csv] = ""
+        if attempt["block"] == "practice":
+            practice += 1
+        if attempt["status"] != "completed":
+            aborted += 1
+            notes.append(
+                f"aborted run not analysed: {who} {attempt['block']} run "
+                f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
+                f"{attempt['steps']} steps): {folder / attempt['file']}"
+            )
+    unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
+    excluded.update(dict.fromkeys(unlisted, ""))
+    summary = session.summary()
+    detail = {
+        "session_file": str(path),
+        "study": session.doc["study"]["name"],
+        "participant_metadata": session.doc["participant"]["metadata"],
+        "session_state": summary["state"],
+        "measured_runs": summary["measured_completed"],
+        "measured_scheduled": summary["measured_scheduled"],
+        "practice_runs_excluded": practice,
+        "aborted_runs": aborted,
+    }
+    text = (
+        f"study session {who} ({session.doc['study']['name']}, {summary['state']}): "
+        f"{summary['measured_completed']}/{summary['measured_scheduled']} measured runs, "
+        f"{practice} practice run(s) left out, {aborted} aborted"
+    )
+    if unlisted:
+        text += f", {len(unlisted)} recording(s) the session file does not list left out"
+    notes.append(text)
+    return measured, excluded, {who: detail}, notes
 
 
 @dataclass
@@ -316,6 +369,8 @@ class _Scan:
     session_notes: list[str]
     scenarios: dict[Path, str] = field(default_factory=dict)
     """Each found recording's scenario (its env config's; ``paper`` when it has none)."""
+    rates: dict[Path, tuple[float, int]] = field(default_factory=dict)
+    """Each found recording's (``sim_frequency`` (Hz), ``action_repeat``)."""
 
 
 def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | None) -> _Scan:
@@ -328,13 +383,17 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
     ]
     found: dict[tuple[str, str], list[Path]] = defaultdict(list)
     scenarios: dict[Path, str] = {}
+    rates: dict[Path, tuple[float, int]] = {}
     training: tuple[str, str] | None = None
     session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
     for rec in loaded:
         assert rec.path is not None
         if rec.path.resolve() in session_excluded:
+            why = session_excluded[rec.path.resolve()]
+            if why:  # (practice runs and aborted attempts are in the notes)
+                skipped.append({"file": str(rec.path), "reason": why})
             continue
-        problem = quality_problem(rec, config)
+        problem = quality_problem(rec, config) or _rate_problem(rec)
         if problem is not None:
             if training_file is not None and rec.path.resolve() == training_file:
                 raise BenchmarkError(f"the training file {rec.path} is not usable: {problem}")
@@ -344,6 +403,7 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
         track = str(rec.config["track"])
         found[(driver, track)].append(rec.path)
         scenarios[rec.path] = str(rec.config.get("scenario") or "paper")
+        rates[rec.path] = (float(rec.config["sim_frequency"]), int(rec.config["action_repeat"]))
         if training_file is not None and rec.path.resolve() == training_file:
             training = (driver, track)
     if not found:
@@ -353,32 +413,38 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
                 + "\n".join(f"  {s['file']}: {s['reason']}" for s in skipped)
             )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
-    return _Scan(found, skipped, training, session_details, session_notes, scenarios)
+    return _Scan(found, skipped, training, session_details, session_notes, scenarios, rates)
 
 
 def _keep_one_scenario(
     scan: _Scan, illustrative: str, track: str, training_index: int
 ) -> tuple[str, int]:
-    """Leave in ``scan`` the recordings of the training run's scenario only (the others go
-    to ``scan.skipped`` with the reason); the scenario scored and the training run's index
+    """Leave in ``scan`` the recordings of the training run's scenario and sample time
+    (``sim_frequency`` and ``action_repeat``) only (the others go to ``scan.skipped`` with
+    the reason: a model fitted at one sample time cannot score another); the scenario scored and the training run's index
     among the illustrative driver's remaining runs. Without that run (an index past the
     driver's runs: :meth:`Plan.training` says so) the scenario is that of the driver's first
     run (of the first recording found, if it has none on ``track``)."""
     own = scan.found.get((illustrative, track)) or [p for ps in scan.found.values() for p in ps]
     training = own[training_index] if training_index < len(own) else None
     scenario = scan.scenarios[training if training is not None else own[0]]
+    rate = scan.rates[training if training is not None else own[0]]
     for key in list(scan.found):
         kept = []
         for path in scan.found[key]:
             other = scan.scenarios[path]
-            if other == scenario:
+            if other == scenario and scan.rates[path] == rate:
                 kept.append(path)
                 continue
-            scan.skipped.append({
-                "file": str(path),
-                "reason": f"scenario {other}, not the training run's {scenario} (score it "
-                "with a folder of its own)",
-            })  # fmt: skip
+            reason = (
+                f"scenario {other}, not the training run's {scenario}"
+                if other != scenario
+                else f"sampled {_rate_text(scan.rates[path])}, not as the training run "
+                f"({_rate_text(rate)}): the models' coefficients belong to one sample time"
+            )
+            scan.skipped.append(
+                {"file": str(path), "reason": reason + " (score it with a folder of its own)"}
+            )
         if kept:
             scan.found[key] = kept
         else:
@@ -386,6 +452,12 @@ def _keep_one_scenario(
     if training is not None:
         training_index = scan.found[(illustrative, track)].index(training)
     return scenario, training_index
+
+
+def _rate_text(rate: tuple[float, int]) -> str:
+    """``every 0.02 s (50 Hz, action_repeat 1)`` of a (sim_frequency, action_repeat)."""
+    frequency, repeat = rate
+    return f"every {repeat / frequency:g} s ({frequency:g} Hz, action_repeat {repeat})"
 
 
 def _training_choice(

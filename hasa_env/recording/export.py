@@ -28,6 +28,7 @@ import contextlib
 import dataclasses
 import os
 import re
+import shutil
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -214,6 +215,16 @@ class ExportResult:
     cut: list[Path | None] = field(default_factory=list)
     env_id: str = ""
     config: dict[str, Any] = field(default_factory=dict)
+
+
+def _check_written(dataset: Any, buffers: Sequence[Any], target: Path) -> None:
+    """Raise OSError unless ``dataset`` holds every episode and step of ``buffers``."""
+    episodes, steps = len(buffers), sum(len(b.rewards) for b in buffers)
+    if dataset.total_episodes != episodes or dataset.total_steps != steps:
+        raise OSError(
+            f"{target}: the dataset written holds {dataset.total_episodes} of {episodes} "
+            f"episodes and {dataset.total_steps} of {steps} steps (a full disk?); removed"
+        )
 
 
 @contextlib.contextmanager
@@ -451,19 +462,28 @@ def export_minari(
         if overwrite:
             with contextlib.suppress(FileNotFoundError):
                 minari.delete_dataset(dataset_id)
-        with warnings.catch_warnings():
-            # Minari's recommendations (author, e-mail, code permalink, eval env) are optional
-            warnings.filterwarnings("ignore", message=".* is set to None", category=UserWarning)
-            dataset = minari.create_dataset_from_buffers(
-                dataset_id=dataset_id,
-                buffer=buffers,
-                env=spec,
-                algorithm_name=algorithm_name or "hasa_env recordings (human or synthetic drivers)",
-                author=author,
-                description=description or default_description,
-                requirements=["hasa-env"],
-                data_format="arrow",
-            )
+        target = Path(minari.storage.get_dataset_path(dataset_id))
+        new = not os.path.lexists(target)
+        try:
+            with warnings.catch_warnings():
+                # Minari's recommendations (author, e-mail, code permalink, eval env) are optional
+                warnings.filterwarnings("ignore", message=".* is set to None", category=UserWarning)
+                dataset = minari.create_dataset_from_buffers(
+                    dataset_id=dataset_id,
+                    buffer=buffers,
+                    env=spec,
+                    algorithm_name=algorithm_name
+                    or "hasa_env recordings (human or synthetic drivers)",
+                    author=author,
+                    description=description or default_description,
+                    requirements=["hasa-env"],
+                    data_format="arrow",
+                )
+            _check_written(dataset, buffers, target)
+        except BaseException:
+            if new:  # a dataset cut by a full disk would load, and block the next export
+                shutil.rmtree(target, ignore_errors=True)
+            raise
     return ExportResult(
         dataset=dataset,
         dataset_id=dataset_id,

@@ -40,12 +40,12 @@ import numpy as np
 import pandas as pd
 
 from hasa_env._versions import installed_versions
-from hasa_env.files import read_bounded_text
+from hasa_env.files import read_bounded_bytes, read_bounded_text
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.road import Road, make_road
 from hasa_env.sim.sensors import SENSOR_NAMES, SENSOR_UNITS
 from hasa_env.sim.setup import RECORDING_COLUMNS
-from hasa_env.validation import ABSENT, ANY_JSON, Field, schema, validate, version
+from hasa_env.validation import ABSENT, ANY_JSON, Field, schema, show, validate, version
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -133,7 +133,7 @@ class RecordingError(ValueError):
         if line is not None:
             where.append(f"line {line}")
         if column is not None:
-            where.append(f"column {column!r}")
+            where.append(f"column {show(column)}")
         super().__init__(f"{', '.join(where)}: {message}" if where else message)
 
 
@@ -254,6 +254,18 @@ def read_regular_file(path: Path, what: str) -> str:
     return read_bounded_text(path, what, MAX_FILE_BYTES)
 
 
+def read_regular_bytes(path: Path, what: str) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most :data:`MAX_FILE_BYTES`
+    (:func:`hasa_env.files.read_bounded_bytes`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        OSError: unreadable (the message says why, e.g. a FIFO, or larger than
+            :data:`MAX_FILE_BYTES`).
+    """
+    return read_bounded_bytes(path, what, MAX_FILE_BYTES)
+
+
 def format_value(column: str, value: Any) -> str:
     """One CSV field; raises ValueError/TypeError with a reason on a bad value."""
     if column in BOOL_COLUMNS:
@@ -344,18 +356,18 @@ _LONG_COLUMNS = frozenset({"time", "station"})
 def parse_float(text: str, limit: float = math.inf) -> float:
     """A finite float of plain ASCII ``text`` with ``|value| <= limit``; else ``ValueError``."""
     if not text.isascii():
-        raise ValueError(f"not a number: {text!r} (only ASCII digits are numbers here)")
+        raise ValueError(f"not a number: {show(text)} (only ASCII digits are numbers here)")
     try:
         value = float(text)
     except ValueError:
-        raise ValueError(f"not a number: {text!r}") from None
+        raise ValueError(f"not a number: {show(text)}") from None
     if not math.isfinite(value):
-        raise ValueError(f"non-finite value {text!r} (NaN and infinities are not allowed)")
+        raise ValueError(f"non-finite value {show(text)} (NaN and infinities are not allowed)")
     if "_" in text or text != text.strip():
-        raise ValueError(f"not a plain number: {text!r}")
+        raise ValueError(f"not a plain number: {show(text)}")
     if abs(value) > limit:
         raise ValueError(
-            f"implausible value {text!r}: |value| must be at most {limit:g} in this column's unit"
+            f"implausible value {show(text)}: |value| must be at most {limit:g} in this column's unit"
         )
     return value
 
@@ -368,9 +380,9 @@ def magnitude_limit(column: str) -> float:
 
 def _parse_int(text: str) -> int:
     if not _INT_RE.fullmatch(text):
-        raise ValueError(f"not an integer: {text!r}")
-    if len(text.lstrip("+-")) > 18:
-        raise ValueError(f"integer {text[:40]!r} out of range: at most 18 digits")
+        raise ValueError(f"not an integer: {show(text)}")
+    if len(text.lstrip("+-").lstrip("0")) > 18:  # (leading zeros are no digits of the value)
+        raise ValueError(f"integer {show(text)} out of range: at most 18 digits")
     return int(text)
 
 
@@ -380,7 +392,7 @@ def _parse_bool(text: str) -> bool:
         return True
     if low == "false":
         return False
-    raise ValueError(f"not a bool: {text!r} (expected true or false)")
+    raise ValueError(f"not a bool: {show(text)} (expected true or false)")
 
 
 def _parser(column: str):  # noqa: ANN202
@@ -405,19 +417,37 @@ def check_header(names: list[str], source: Path | str) -> None:
     missing = [c for c in RECORDING_COLUMNS if c not in seen]
     problems = []
     if dup:
-        problems.append("duplicated column(s) " + ", ".join(repr(n) for n in dict.fromkeys(dup)))
+        problems.append("duplicated column(s) " + _some(list(dict.fromkeys(dup))))
     if unknown:
-        problems.append("unknown column(s) " + ", ".join(repr(n) for n in unknown))
+        problems.append("unknown column(s) " + _some(unknown))
     if missing:
-        problems.append("missing column(s) " + ", ".join(repr(n) for n in missing))
+        problems.append("missing column(s) " + _some(missing))
     if problems:
         column = (dup or unknown or missing)[0]
+        header = ",".join(names)
+        if "\r" in header or "\u2028" in header or "\u2029" in header:
+            problems.insert(
+                0,
+                "the header holds a carriage return or a Unicode line separator: lines must "
+                "end with \\n (or \\r\\n)",
+            )
         raise RecordingError(
             "bad header: " + "; ".join(problems) + f" (expected: {','.join(RECORDING_COLUMNS)})",
             source,
             1,
             column,
         )
+
+
+MAX_QUOTED = 6
+"""Most items of a list an error message quotes (then "and N more")."""
+
+
+def _some(items: Sequence[str]) -> str:
+    """At most :data:`MAX_QUOTED` of ``items``, each shortened (:func:`show`), then a count."""
+    shown = ", ".join(show(n) for n in items[:MAX_QUOTED])
+    more = len(items) - MAX_QUOTED
+    return shown + (f" and {more} more" if more > 0 else "")
 
 
 def parse_lines(lines: list[str], source: Path | str) -> dict[str, list[Any]]:
@@ -491,6 +521,86 @@ def check_table(
             first_line + i,
             "time",
         )
+    check_physics(frame, config, source, first_line)
+
+
+def _first_bad(bad: np.ndarray, source: Path | str, first_line: int, column: str, why: Any) -> None:
+    """Raise :class:`RecordingError` at the first True of ``bad`` (``why(i)``: the reason)."""
+    rows = np.flatnonzero(bad)
+    if rows.size:
+        i = int(rows[0])
+        raise RecordingError(why(i), source, first_line + i, column)
+
+
+def lateral_limit(config: Mapping[str, Any]) -> float:
+    """Largest |lateral_offset| (m) an env with ``config`` can record: a reset may put the car
+    up to 30 m from the lane centre (or the road's outer edge plus ``offroad_margin``; or
+    the configured start, 20 m to a halfway point and 8 std of its randomisation), and the
+    episode ends at the first env step past the edge, during which the car moves at most
+    ``max_speed`` x the env step sideways."""
+    road, start = config["road"], config["initial_state"]
+    width = road["lane_width"]
+    edge = width / 2 + max(road["lanes_left"], road["lanes_right"]) * width
+    drawn = abs(start["lateral_offset"]) + 20.0 + 8.0 * start["lateral_offset_std"]
+    reach = max(30.0, edge + road["offroad_margin"], drawn)
+    return (
+        reach + config["vehicle"]["max_speed"] * config["action_repeat"] / config["sim_frequency"]
+    )
+
+
+def check_physics(
+    frame: pd.DataFrame, config: Mapping[str, Any], source: Path | str, first_line: int
+) -> None:
+    """Refuse rows that the env cannot have recorded (row i is on line ``first_line + i``).
+
+    The true lane (``bias_index``: -1 or an index of ``markings.hypotheses``, and ``bias``
+    that hypothesis's value) is drawn once per episode and never changes; ``terminated``
+    and ``truncated`` end the episode, so only the last row may have them; the speed is
+    within [0, ``vehicle.max_speed``] m/s; ``|lateral_offset|`` is at most
+    :func:`lateral_limit` m.
+    """
+    hyps = np.asarray(config["markings"]["hypotheses"], dtype=np.float64)
+    index = frame["bias_index"].to_numpy()
+    bias = frame["bias"].to_numpy()
+    _first_bad((index < -1) | (index >= len(hyps)), source, first_line, "bias_index", lambda i: (
+        f"bias_index = {int(index[i])} is none of the config's {len(hyps)} hypotheses "
+        f"(0 .. {len(hyps) - 1}; -1: a bias given as a reset option)"
+    ))  # fmt: skip
+    _first_bad(index != index[0], source, first_line, "bias_index", lambda i: (
+        f"bias_index = {int(index[i])} but row 0 has {int(index[0])}: the true lane is drawn "
+        "once per episode and cannot change"
+    ))  # fmt: skip
+    _first_bad(bias != bias[0], source, first_line, "bias", lambda i: (
+        f"bias = {float(bias[i])!r} m but row 0 has {float(bias[0])!r} m: the camera bias is "
+        "drawn once per episode and cannot change"
+    ))  # fmt: skip
+    if index[0] >= 0 and bias[0] != hyps[index[0]]:
+        raise RecordingError(
+            f"bias = {float(bias[0])!r} m but bias_index {int(index[0])} is the hypothesis "
+            f"{float(hyps[index[0]])!r} m of the config",
+            source,
+            first_line,
+            "bias",
+        )
+    for flag in ("terminated", "truncated"):
+        ends = frame[flag].to_numpy()[:-1]
+        _first_bad(ends, source, first_line, flag, lambda i, flag=flag: (
+            f"{flag} = true before the last row ({len(frame) - 1 - i} more row(s) follow): "
+            "an episode ends at its first terminated or truncated step"
+        ))  # fmt: skip
+    speed = frame["speed"].to_numpy()
+    top = config["vehicle"]["max_speed"]
+    _first_bad((speed < 0) | (speed > top), source, first_line, "speed", lambda i: (
+        f"speed = {float(speed[i])!r} m/s is outside [0, {top:g}] m/s (the env keeps the speed "
+        "between 0 and the config's vehicle.max_speed)"
+    ))  # fmt: skip
+    y = frame["lateral_offset"].to_numpy()
+    reach = lateral_limit(config)
+    _first_bad(np.abs(y) > reach, source, first_line, "lateral_offset", lambda i: (
+        f"lateral_offset = {float(y[i])!r} m is farther from the lane centre than the "
+        f"{reach:g} m this config's env can record (a reset at most 30 m or past the road "
+        "edge, then one env step before it terminates)"
+    ))  # fmt: skip
 
 
 _SIDECAR = schema(
@@ -548,7 +658,7 @@ def validate_sidecar(meta: Any, source: Path) -> dict[str, Any]:
         raise RecordingError(f"invalid config: {exc}", source, column="config") from None
     if checked["columns"] != list(RECORDING_COLUMNS):
         raise RecordingError(
-            f"sidecar field 'columns' = {checked['columns']!r} differs from the schema's columns "
+            f"sidecar field 'columns' = {show(checked['columns'])} differs from the schema's columns "
             f"{list(RECORDING_COLUMNS)!r}",
             source,
             column="columns",

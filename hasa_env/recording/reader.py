@@ -4,8 +4,11 @@ the files and name the file, line and column of every problem.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
+import re
 import stat
 import warnings
 from collections.abc import Sequence
@@ -13,17 +16,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
+from hasa_env._walk import walk_files
 from hasa_env.files import file_kind
 from hasa_env.recording.format import (
+    BOOL_COLUMNS,
+    INT_COLUMNS,
     Recording,
     RecordingError,
     RecordingList,
     RecordingWarning,
+    check_header,
     check_table,
     columns_frame,
     magnitude_limit,
     parse_lines,
+    read_regular_bytes,
     read_regular_file,
     read_sidecar,
     recording_paths,
@@ -40,6 +49,10 @@ __all__ = [
     "read_parquet",
     "require_pyarrow",
 ]
+
+
+MAX_REASON = 300
+"""Most characters of an unexpected error's text a :class:`RecordingError` quotes."""
 
 
 def load_recording(path: str | os.PathLike[str]) -> Recording:
@@ -66,13 +79,23 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     except (ValueError, TypeError, KeyError, AttributeError, OverflowError, RecursionError) as exc:
         # the checks above name every problem they know; anything else a file can
         # cause is still this file's error, never a crash of the caller's batch
+        text = str(exc)
+        if len(text) > MAX_REASON:  # never quote a whole file in one line
+            text = f"{text[:MAX_REASON]}... ({len(text) - MAX_REASON} more characters)"
         raise RecordingError(
-            f"invalid recording ({type(exc).__name__}: {exc})", recording_paths(path)[0]
+            f"invalid recording ({type(exc).__name__}: {text})", recording_paths(path)[0]
         ) from exc
 
 
 def _load_recording(path: str | os.PathLike[str]) -> Recording:
     csv_path, json_path = recording_paths(path)
+    for p in (csv_path, json_path):
+        try:
+            os.lstat(p)
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        except OSError as exc:  # e.g. a folder that can be listed but not searched
+            raise RecordingError(f"cannot reach the file: {exc.strerror or exc}", p) from None
     if not os.path.lexists(csv_path) and not os.path.lexists(json_path):
         raise RecordingError(
             f"no such recording (neither it nor {json_path.name} exists)", csv_path
@@ -88,33 +111,16 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
             ) from None
         raise
     try:
-        text = read_regular_file(csv_path, "the CSV")
+        data = read_regular_bytes(csv_path, "the CSV")
     except FileNotFoundError:
         raise RecordingError("missing CSV file (the sidecar exists)", csv_path) from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise RecordingError(f"unreadable CSV: {exc}", csv_path) from None
-    lines = text.split("\n")
+    frame = _fast_frame(data, csv_path)
     notes: list[str] = []
-    if lines[-1] == "":
-        lines.pop()
-    elif meta["complete"] and len(lines) > 1:
-        raise RecordingError(
-            "the last line has no final newline: the file was cut inside it (a complete "
-            "recording ends with a newline)",
-            csv_path,
-            len(lines),
-        )
-    elif not meta["complete"]:
-        partial = lines.pop()
-        note = (
-            f"{csv_path}: dropped the partly written line {len(lines) + 1} of this incomplete "
-            f"recording ({len(partial)} characters, no final newline)"
-        )
-        notes.append(note)
-        warnings.warn(note, RecordingWarning, stacklevel=2)
-    lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
-    columns = parse_lines(lines, csv_path)
-    frame = columns_frame(columns)
+    if frame is None:  # anything unusual: the exact parser names the line and the column
+        frame = _exact_frame(data, meta, csv_path, notes)
+    del data
     check_table(frame, meta["config"], csv_path, 2)
     if meta["complete"]:
         steps = meta.get("steps")
@@ -139,15 +145,145 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(frame, meta, csv_path, notes)
 
 
+def _exact_frame(
+    data: bytes, meta: dict[str, Any], csv_path: Path, notes: list[str]
+) -> pd.DataFrame:
+    """The rows of the CSV ``data``, parsed line by line and field by field (each problem
+    named by line and column); a partly written last line of an incomplete recording is
+    dropped with a note in ``notes``."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"unreadable CSV: {exc}", csv_path) from None
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()
+    elif meta["complete"] and len(lines) > 1:
+        raise RecordingError(
+            "the last line has no final newline: the file was cut inside it (a complete "
+            "recording ends with a newline)",
+            csv_path,
+            len(lines),
+        )
+    elif not meta["complete"]:
+        partial = lines.pop()
+        note = (
+            f"{csv_path}: dropped the partly written line {len(lines) + 1} of this incomplete "
+            f"recording ({len(partial)} characters, no final newline)"
+        )
+        notes.append(note)
+        warnings.warn(note, RecordingWarning, stacklevel=2)
+    lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    return columns_frame(parse_lines(lines, csv_path))
+
+
+_PLAIN = b"0123456789.eE+-,\r\ntrufalsTRUFALS"
+"""The bytes of an ordinary recording's rows (no spaces, quotes, nor letters of nan or inf)."""
+
+
+def _plain(data: bytes, start: int, end: int, block: int = 1 << 24) -> bool:
+    """Whether ``data[start:end]`` holds :data:`_PLAIN` bytes only (read in 16 MB blocks)."""
+    view = memoryview(data)
+    return not any(
+        bytes(view[i : min(i + block, end)]).translate(None, _PLAIN)
+        for i in range(start, end, block)
+    )
+
+
+def _fast_frame(data: bytes, source: Path) -> pd.DataFrame | None:
+    """The rows of the CSV ``data`` read by pandas' C parser (bit-exact floats, memory about
+    half the file's size on top of it), or None when the file is anything but an ordinary,
+    complete CSV of plain numbers and flags: the exact parser then reads it and names the
+    problem. What this accepts, the exact parser accepts with the same values.
+    """
+    header_end = data.find(b"\n")
+    if not data.endswith(b"\n") or header_end < 0:
+        return None
+    try:
+        names = data[:header_end].decode("ascii").removesuffix("\r").split(",")
+        check_header(names, source)
+    except (UnicodeDecodeError, RecordingError):
+        return None
+    rows = data.count(b"\n") - 1
+    start, end = header_end + 1, len(data)
+    if (
+        rows < 1
+        or not _plain(data, start, end)
+        or data.count(b"\r", start, end) != data.count(b"\r\n", start, end)
+        or data.find(b"\n\n", header_end, end) >= 0
+        or data.find(b"\n\r\n", header_end, end) >= 0
+        or data.count(b",", start, end) != rows * (len(names) - 1)
+    ):
+        return None
+    dtypes = {c: ("int64" if c in INT_COLUMNS else "category" if c in BOOL_COLUMNS else "float64")
+              for c in names}  # fmt: skip
+    options = {"header": 0, "engine": "c", "quoting": csv.QUOTE_NONE, "na_filter": False,
+               "skip_blank_lines": False, **_ROUND_TRIP}  # fmt: skip
+    try:
+        raw = pd.read_csv(io.BytesIO(data), dtype=dtypes, **options)
+        if len(raw) != rows or list(raw.columns) != names or not _plain_integers(data, options):
+            return None
+    except (ValueError, OverflowError, TypeError):  # ParserError is a ValueError
+        return None
+    return _checked_columns(raw)
+
+
+_ROUND_TRIP = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+"""pandas' option for floats read bit-exactly (its default from pandas 3 on)."""
+
+
+def _plain_integers(data: bytes, options: dict[str, Any], chunk: int = 1 << 16) -> bool:
+    """Whether every integer cell (``step``, ``bias_index``) is written as an integer: pandas
+    reads ``1.0`` and ``1e0`` as 1, which the format refuses. Read as text in chunks of
+    ``chunk`` rows (memory bounded)."""
+    with pd.read_csv(io.BytesIO(data), usecols=sorted(INT_COLUMNS), dtype=str,
+                     chunksize=chunk, **options) as reader:  # fmt: skip
+        for part in reader:
+            for column in INT_COLUMNS:
+                if part[column].str.contains(r"[.eE]", regex=True).any():
+                    return False
+    return True
+
+
+def _checked_columns(raw: pd.DataFrame) -> pd.DataFrame | None:
+    """``raw``'s columns in :data:`RECORDING_COLUMNS` order with the recording's dtypes, or
+    None if a value is one the exact parser refuses (non-finite, implausible, an integer of
+    more than 18 digits, a flag other than true/false in any case)."""
+    out: dict[str, np.ndarray] = {}
+    for c in RECORDING_COLUMNS:
+        column = raw[c]
+        if c in BOOL_COLUMNS:
+            words = [str(w).lower() for w in column.cat.categories]
+            if not set(words) <= {"true", "false"}:
+                return None
+            truth = np.asarray([w == "true" for w in words], dtype=bool)
+            out[c] = truth[column.cat.codes.to_numpy()]
+            continue
+        values = column.to_numpy()
+        limit = 10**18 - 1 if c in INT_COLUMNS else magnitude_limit(c)
+        if not np.all(np.abs(values) <= limit):  # NaN too
+            return None
+        out[c] = values
+    return pd.DataFrame(out, copy=False)
+
+
 def _other_document(path: Path) -> bool:
     """A JSON file that says it is something else than a recording's sidecar (a study's
     session file, a calibration, a model file: its ``format`` names another document)."""
     try:
-        doc = json.loads(read_regular_file(path, "the file"))
-    except (OSError, ValueError, RecursionError):
+        text = read_regular_file(path, "the file")
+    except (OSError, ValueError):
         return False
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError):  # an invalid one still says what it is, near its top
+        named = _FORMAT_RE.search(text[:4096])
+        return named is not None and named.group(1) != "hasa_env recording"
     fmt = doc.get("format") if isinstance(doc, dict) else None
     return isinstance(fmt, str) and fmt != "hasa_env recording"
+
+
+_FORMAT_RE = re.compile(r'^\s*\{\s*"format"\s*:\s*"([^"\\]*)"')
 
 
 def _is_started_episode(csv_path: Path) -> bool:
@@ -225,11 +361,13 @@ def load_paths(paths: Sequence[str | os.PathLike[str]]) -> RecordingList:
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            found = sorted(path.rglob("*.csv")) + sorted(path.rglob("*.json"))
+            files, unreadable = walk_files(path, (".csv", ".json", ".parquet"))
+            problems += [RecordingError(reason, folder) for folder, reason in unreadable]
+            found = [p for p in files if p.suffix in (".csv", ".json")]
             parquets = [
-                p for p in sorted(path.rglob("*.parquet")) if not p.with_suffix(".csv").exists()
+                p for p in files if p.suffix == ".parquet" and not p.with_suffix(".csv").exists()
             ]
-            if not found and not parquets:
+            if not found and not parquets and not unreadable:
                 problems.append(
                     RecordingError(
                         "no recordings (no *.csv or *.parquet files) here or below", path

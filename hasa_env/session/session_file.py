@@ -44,6 +44,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from hasa_env._walk import walk_files
 from hasa_env.atomic import write_atomic
 from hasa_env.session.study import ScheduledRun, Study
 from hasa_env.validation import ANY_JSON, Field, schema, validate
@@ -233,6 +234,10 @@ class SessionFile:
             raise SessionError(
                 f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
             ) from None
+        except RecursionError:
+            raise SessionError(f"{path}: not a session file: JSON nested too deeply") from None
+        except ValueError as exc:  # an integer of more than 4300 digits
+            raise SessionError(f"{path}: cannot be read as JSON: {str(exc)[:200]}") from None
         doc = validate(
             raw,
             _SCHEMA,
@@ -421,5 +426,6 @@ class SessionFile:
 
 
 def find_session_files(root: str | os.PathLike[str]) -> list[Path]:
-    """Every ``session.json`` under ``root`` (sorted)."""
-    return sorted(Path(root).rglob(SESSION_FILE))
+    """Every ``session.json`` under ``root``, in folders linked into it too (sorted; a
+    folder that cannot be read is left to the recordings' loader to name)."""
+    return walk_files(root, names=(SESSION_FILE,))[0]

@@ -347,11 +347,15 @@ class Study:
                 raise StudyError(
                     f"{source}, line {exc.lineno}: not valid JSON (column {exc.colno}: {exc.msg})"
                 ) from None
+            except (ValueError, RecursionError) as exc:  # a huge integer, deep nesting
+                raise StudyError(f"{source}: cannot be read as JSON: {_brief(exc)}") from None
         else:
             try:
                 document = tomllib.loads(text)
             except tomllib.TOMLDecodeError as exc:
                 raise StudyError(f"{source}: not valid TOML: {exc}") from None
+            except (ValueError, RecursionError) as exc:
+                raise StudyError(f"{source}: cannot be read as TOML: {_brief(exc)}") from None
         return cls.from_dict(document, source, text, hashlib.sha256(raw).hexdigest())
 
     @classmethod
@@ -585,6 +589,13 @@ def _leaves(tree: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
         else:
             out.append((path, value))
     return out
+
+
+def _brief(exc: BaseException) -> str:
+    """Why a parser gave up, in a few words (a RecursionError's text says nothing useful)."""
+    if isinstance(exc, RecursionError):
+        return "nested too deeply"
+    return str(exc)[:200]
 
 
 def seed_from_entropy() -> int:

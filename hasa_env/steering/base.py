@@ -597,6 +597,10 @@ class SteeringModel(ABC):
             raise ModelFileError(
                 f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
             ) from None
+        except RecursionError:
+            raise ModelFileError(f"{source}: not a model file: JSON nested too deeply") from None
+        except ValueError as exc:  # an integer of more than 4300 digits
+            raise ModelFileError(f"{source}: cannot be read as JSON: {str(exc)[:200]}") from None
         return cls.from_dict(document, source)
 
     def save(self, path: str | os.PathLike[str]) -> None:

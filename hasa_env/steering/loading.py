@@ -212,6 +212,8 @@ def _read_model_document(path: str | os.PathLike[str]) -> Any:
         ) from None
     except RecursionError:
         raise ModelFileError(f"{source}: not valid JSON (nested too deeply)") from None
+    except ValueError as exc:  # an integer of more than 4300 digits
+        raise ModelFileError(f"{source}: cannot be read as JSON: {str(exc)[:200]}") from None
 
 
 def add_module_folders(*folders: str | os.PathLike[str]) -> None:
