@@ -32,7 +32,12 @@ from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.filter_matrices import FilterMatrices
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
-from estimators.offline import EstimationResult, hypotheses_of, run_estimator
+from estimators.offline import (
+    EstimationResult,
+    expected_calibration_error,
+    hypotheses_of,
+    run_estimator,
+)
 from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
 from estimators.wrappers import (
@@ -50,6 +55,7 @@ __all__ = [
     "ARXStateSpace",
     "Estimate",
     "EstimationResult",
+    "expected_calibration_error",
     "EstimatorInfoWrapper",
     "EstimatorObservationWrapper",
     "FilterMatrices",

@@ -39,6 +39,7 @@ __all__ = [
     "EstimatorRun",
     "TRUTH_COLUMNS",
     "estimate_recording",
+    "expected_calibration_error",
     "hypotheses_of",
     "run_estimator",
 ]
@@ -89,6 +90,8 @@ class EstimationResult:
             0 undecided, 1 decided, 2 model_mismatch; -1 where invalid).
         model_error: (R, T) the statistic behind ``model_mismatch``
             (:attr:`estimators.base.Estimate.model_error`).
+        evidence_scale: (R, T) the factor tau (>= 1) the steering evidence was divided by
+            (:attr:`estimators.base.Estimate.evidence_scale`; 1 for estimators without one).
         channel_nis: (R, T, 3) normalized innovation squared of each channel
             [speed, camera, steering] (:attr:`GaussianMixtureEKF.channel_nis`;
             None if the estimator has none; NaN where not used).
@@ -110,6 +113,7 @@ class EstimationResult:
     decision: np.ndarray | None = None
     model_error: np.ndarray | None = None
     channel_nis: np.ndarray | None = None
+    evidence_scale: np.ndarray | None = None
 
     @property
     def num_runs(self) -> int:
@@ -173,6 +177,40 @@ class EstimationResult:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.nanmean(err * err / var, axis=1)
 
+    def steering_live_share(self, max_scale: float = 2.0) -> np.ndarray:
+        """(R,) share of each run's valid steps at which the steering channel counted as lane
+        evidence at no less than ``1 / max_scale`` of its weight: the channel was used (on,
+        observed, not gated: a finite steering NIS), the run was not in ``model_mismatch``
+        and the evidence scale tau was at most ``max_scale`` (NaN for an estimator that
+        reports no steering channel)."""
+        if self.channel_nis is None or self.low_speed is None:
+            return np.full(self.num_runs, np.nan)
+        scale = np.ones_like(self.valid, dtype=np.float64)
+        if self.evidence_scale is not None:
+            scale = np.where(np.isnan(self.evidence_scale), np.inf, self.evidence_scale)
+        live = self.valid & np.isfinite(self.channel_nis[..., 2]) & (scale <= max_scale)
+        if self.decision is not None:
+            live &= self.decision != 2  # model_mismatch: the weights are frozen
+        return live.sum(axis=1) / np.maximum(self.lengths, 1)
+
+    def lane_calibration_bins(self, n_bins: int = 10) -> np.ndarray:
+        """(R, 3, n_bins) what a reliability diagram of the lane probabilities needs, per run:
+        every (valid step, hypothesis) pair's weight ``w`` goes into the bin
+        ``min(floor(w n_bins), n_bins - 1)`` of equal width on [0, 1]; per bin the number of
+        pairs, the sum of their weights (predicted) and the number whose hypothesis is the true
+        lane (observed). Summed over runs, :func:`expected_calibration_error` reads it."""
+        truth = np.broadcast_to(self._true_component()[:, None, :], self.weights.shape)
+        w = np.clip(self.weights, 0.0, 1.0)
+        index = np.minimum((w * n_bins).astype(np.int64), n_bins - 1)
+        keep = np.broadcast_to(self.valid[:, :, None], w.shape) & np.isfinite(self.weights)
+        out = np.zeros((self.num_runs, 3, n_bins))
+        flat = (np.arange(self.num_runs)[:, None, None] * n_bins + index)[keep]
+        size = self.num_runs * n_bins
+        out[:, 0] = np.bincount(flat, minlength=size).reshape(self.num_runs, n_bins)
+        out[:, 1] = np.bincount(flat, weights=w[keep], minlength=size).reshape(-1, n_bins)
+        out[:, 2] = np.bincount(flat, weights=truth[keep], minlength=size).reshape(-1, n_bins)
+        return out
+
     def mean_channel_nis(self, start: int = 0) -> np.ndarray:
         """(R, 3) mean normalized innovation squared per channel [speed, camera,
         steering] over the steps the channel was used (NaN: never)."""
@@ -201,6 +239,22 @@ class EstimationResult:
                 data[key] = values[r, :length]
             frames.append(pd.DataFrame(data))
         return frames
+
+
+def expected_calibration_error(bins: np.ndarray) -> float:
+    """Expected calibration error of lane probabilities from summed reliability bins (3, B)
+    (:meth:`EstimationResult.lane_calibration_bins` summed over runs)::
+
+        ECE = sum_b (n_b / N) |predicted_b / n_b - observed_b / n_b|
+            = sum_b |predicted_b - observed_b| / N
+
+    NaN without any pair. 0: the probabilities mean what they say (of the pairs given
+    probability p, a share p was the true lane)."""
+    bins = np.asarray(bins, dtype=np.float64)
+    total = bins[0].sum()
+    if total <= 0:
+        return math.nan
+    return float(np.abs(bins[1] - bins[2]).sum() / total)
 
 
 @runtime_checkable
@@ -382,6 +436,7 @@ class _Trace:
         )
         self.decision = np.full((n_runs, n_steps), -1, dtype=np.int8)
         self.model_error = np.full((n_runs, n_steps), np.nan)
+        self.evidence_scale = np.full((n_runs, n_steps), np.nan)
         self.channel_nis = (
             np.full((n_runs, n_steps, 3), np.nan) if self.checking is not None else None
         )
@@ -409,6 +464,7 @@ class _Trace:
             [names == name for name in DECISIONS], range(len(DECISIONS)), -1
         )
         self.model_error[:, k] = e.model_error
+        self.evidence_scale[:, k] = e.evidence_scale
         if self.channel_nis is not None and self.checking is not None and k:
             self.channel_nis[:, k] = self.checking.channel_nis
 
@@ -437,6 +493,7 @@ class _Trace:
             low_speed=None if self.low_speed is None else self.low_speed & valid,
             decision=np.where(valid, self.decision, -1),
             model_error=np.where(valid, self.model_error, np.nan),
+            evidence_scale=np.where(valid, self.evidence_scale, np.nan),
             channel_nis=None
             if self.channel_nis is None
             else np.where(valid[:, :, None], self.channel_nis, np.nan),

@@ -53,6 +53,7 @@ from benchmarks.protocol.intervals import (
     percentile_interval,
     replicate_ranks,
 )
+from estimators.offline import expected_calibration_error
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = [
@@ -233,7 +234,7 @@ def _paper_steering(driver: str, model: str, track: str) -> dict[str, Any]:
 
 
 _DECISION_COLUMNS = ("time_to_decide", "decided_time_share", "lateral_rmse_after_decision",
-                     "steering_off_share")  # fmt: skip
+                     "steering_off_share", "steering_live_share")  # fmt: skip
 """The per-run decision metrics (:func:`benchmarks.protocol.tasks._decision_metrics`)."""
 
 
@@ -306,6 +307,7 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             never_decided_runs=("time_to_decide", _never),
             decided_time_share=("decided_time_share", _finite_mean),
             steering_off_share=("steering_off_share", _finite_mean),
+            steering_live_share=("steering_live_share", _finite_mean),
             lateral_rmse_after_decision=("lateral_rmse_after_decision", _finite_mean),
             nis_speed=("nis_speed", _finite_mean),
             nis_camera=("nis_camera", _finite_mean),
@@ -355,7 +357,8 @@ def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
 
 _SAFETY_COUNTS = ("wrong_lane_confident_runs", "wrong_lane_ever_runs", "undecided_runs",
                   "model_mismatch_runs", "never_decided_runs")  # fmt: skip
-_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision", "steering_off_share")
+_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision", "steering_off_share",
+                   "steering_live_share")  # fmt: skip
 
 
 def summarize_seeds(
@@ -460,6 +463,7 @@ _VERDICT_KEYS = {
     "lateral_nees": ("estimation", "lateral_nees", False),
     "decided_time_share": ("estimation", "decided_time_share", False),
     "steering_off_share": ("estimation", "steering_off_share", False),
+    "steering_live_share": ("estimation", "steering_live_share", False),
     "lateral_rmse_after_decision": ("estimation", "lateral_rmse_after_decision", False),
 }
 """Verdict key -> (per-driver table, its column, the per-seed statistic is the median over
@@ -560,6 +564,68 @@ def _decision_times(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None
             table.at[i, key] = _censored_quantile(mine, q) if len(mine) else None
 
 
+CALIBRATION_REPLICATES = 1000
+"""Bootstrap replicates of the expected calibration error's interval."""
+
+
+def _run_calibration_bins(frame: pd.DataFrame) -> np.ndarray | None:
+    """(R, 3, B) the per-run reliability bins of ``frame``'s rows (None: no row has them)."""
+    if "calibration_count" not in frame or not len(frame):
+        return None
+    rows = frame.dropna(subset=["calibration_count"])
+    if not len(rows):
+        return None
+    return np.stack(
+        [
+            np.array([c, p, o], dtype=np.float64)
+            for c, p, o in zip(
+                rows["calibration_count"],
+                rows["calibration_predicted"],
+                rows["calibration_observed"],
+                strict=True,
+            )
+        ]
+    )
+
+
+def _lane_calibration(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None:
+    """``lane_ece`` per model in ``table`` with its 95 % interval (percentile bootstrap: seeds
+    resampled, then runs within each seed), and ``reliability`` (per bin of the lane
+    probability, of equal width on [0, 1]: the mean probability given and the share that was
+    the true lane; None for an empty bin) from the per-run bins of
+    :meth:`estimators.offline.EstimationResult.lane_calibration_bins`."""
+    frame = pd.DataFrame(list(runs))
+    for key in ("lane_ece", "lane_ece_ci_low", "lane_ece_ci_high", "reliability"):
+        table[key] = None
+    if not len(frame) or "calibration_count" not in frame:
+        return
+    rng = np.random.default_rng(20261202)
+    for i, name in table["model"].items():
+        mine = frame[frame["model"] == name]
+        bins = _run_calibration_bins(mine)
+        if bins is None:
+            continue
+        total = bins.sum(axis=0)
+        table.at[i, "lane_ece"] = expected_calibration_error(total)
+        table.at[i, "reliability"] = [
+            None if n == 0 else [round(p / n, 4), round(o / n, 4), int(n)]
+            for n, p, o in zip(*total, strict=True)
+        ]
+        seeds = mine.loc[mine["calibration_count"].notna(), "seed"].astype(object).to_numpy()
+        groups = [
+            bins[np.flatnonzero(same_seed(pd.Series(seeds), s))] for s in dict.fromkeys(seeds)
+        ]
+        replicates = np.empty(CALIBRATION_REPLICATES)
+        for b in range(CALIBRATION_REPLICATES):
+            picked = [groups[j] for j in rng.integers(len(groups), size=len(groups))]
+            replicates[b] = expected_calibration_error(
+                sum(g[rng.integers(len(g), size=len(g))].sum(axis=0) for g in picked)
+            )
+        if len(bins) >= 2:
+            low, high = np.percentile(replicates, [2.5, 97.5])
+            table.at[i, "lane_ece_ci_low"], table.at[i, "lane_ece_ci_high"] = low, high
+
+
 def verdict(
     seed_rows: Sequence[dict[str, Any]],
     models: Sequence[str],
@@ -608,4 +674,5 @@ def verdict(
     rows, col = (by_driver[source], column) if driver_level else (seed_rows, "lateral_rmse")
     table = table.assign(**steering_free_gain(_seed_groups(rows, seeds, col, names), names))
     _decision_times(table, runs_estimation)
+    _lane_calibration(table, runs_estimation)
     return _records(table)

@@ -445,6 +445,8 @@ def _estimation_rows(
         if result.low_speed is None
         else (result.low_speed & result.valid).sum(axis=1) / result.lengths
     )
+    live_share = result.steering_live_share()
+    calibration = result.lane_calibration_bins()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
         model_error = np.nanmedian(result.model_error, axis=1)
@@ -473,6 +475,10 @@ def _estimation_rows(
                 "wrong_lane_confident_share": float(wrong_share[j]),
                 "lateral_nees": float(nees[j]),
                 "steering_off_share": float(off_share[j]),
+                "steering_live_share": float(live_share[j]),
+                "calibration_count": calibration[j, 0].astype(int).tolist(),
+                "calibration_predicted": calibration[j, 1].round(6).tolist(),
+                "calibration_observed": calibration[j, 2].astype(int).tolist(),
                 "model_error_median": float(model_error[j]),
                 "nis_speed": float(nis[j, 0]),
                 "nis_camera": float(nis[j, 1]),
