@@ -450,6 +450,13 @@ def _estimation_rows(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
         model_error = np.nanmedian(result.model_error, axis=1)
+        scale = (
+            np.full(len(refs), np.nan)
+            if result.evidence_scale is None
+            else np.nanmedian(np.where(result.low_speed, np.nan, result.evidence_scale), axis=1)
+            if result.low_speed is not None
+            else np.nanmedian(result.evidence_scale, axis=1)
+        )
     nis = (
         result.mean_channel_nis()
         if result.channel_nis is not None
@@ -480,6 +487,7 @@ def _estimation_rows(
                 "calibration_predicted": calibration[j, 1].round(6).tolist(),
                 "calibration_observed": calibration[j, 2].astype(int).tolist(),
                 "model_error_median": float(model_error[j]),
+                "evidence_scale_median": float(scale[j]),
                 "nis_speed": float(nis[j, 0]),
                 "nis_camera": float(nis[j, 1]),
                 "nis_steering": float(nis[j, 2]),
