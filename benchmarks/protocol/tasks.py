@@ -402,7 +402,7 @@ def _estimate_model(
                 group[0].attrs["config"], **task.filter_settings
             )
             result = run_estimator(make(settings), group)
-            rows += _estimation_rows(task, indices, result, name, scratch)
+            rows += _estimation_rows(task, indices, result, name, scratch, kind)
     except ModelError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -422,7 +422,12 @@ def _estimate_model(
 
 
 def _estimation_rows(
-    task: ChunkTask, indices: Sequence[int], result: Any, name: str, out: ChunkResult
+    task: ChunkTask,
+    indices: Sequence[int],
+    result: Any,
+    name: str,
+    out: ChunkResult,
+    kind: str = "builtin",
 ) -> list[dict[str, Any]]:
     refs = [task.runs[i] for i in indices]
     error = result.lateral_error()
@@ -446,6 +451,8 @@ def _estimation_rows(
         else (result.low_speed & result.valid).sum(axis=1) / result.lengths
     )
     live_share = result.steering_live_share()
+    if kind == "baseline":  # no steering model: nothing to be live
+        live_share = np.full(len(refs), np.nan)
     calibration = result.lane_calibration_bins()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
