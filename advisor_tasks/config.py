@@ -44,13 +44,15 @@ estimator.lane_check            refuse (ConfigError) a model that drives off the
                                 hasa_env.drivers.require_lane_keeping; only for the
                                 'mixture' estimator); the two-point preset does, at
                                 15 m/s (true)
-estimator.settings              further FilterSettings fields by name ({}); by default
-                                steering_curvature_limit from the roads the model was
-                                fitted on (presets and 'fit:' models: straight, 2e-4 1/m;
-                                no lane evidence from the steering on a bend,
+estimator.settings              further FilterSettings fields by name ({}); each one
+                                named wins over the rule of estimators.trust, which by
+                                default sets steering_curvature_limit from the roads the
+                                model was fitted on (presets and 'fit:' models: straight,
+                                2e-4 1/m; no lane evidence from the steering on a bend,
                                 docs/design.md §8.11), and min_speed / steering_max_speed
                                 from the speeds it was fitted at ('fit:' models; the
-                                presets' are unknown)
+                                presets' are unknown; :func:`trusted_estimator` gives the
+                                filter with the reasons)
 ==============================  ==========================================================
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
@@ -74,13 +76,9 @@ from typing import Any
 from estimators.base import LaneEstimator
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.gm_ekf import GaussianMixtureEKF
-from estimators.settings import (
-    FilterSettings,
-    model_curvature_limit,
-    model_speed_limits,
-    speed_settings,
-)
+from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time
+from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import (
     POPULATIONS,
@@ -93,7 +91,6 @@ from hasa_env.drivers.archetypes import HumanParams
 from hasa_env.sim.config import ConfigError, deep_merge
 from hasa_env.sim.config import default_config as env_default_config
 from hasa_env.sim.config import describe_config as env_describe_config
-from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.loading import default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 from hasa_env.validation import Field, schema, validate
@@ -106,6 +103,7 @@ __all__ = [
     "driver_index",
     "estimator_factory",
     "split_config",
+    "trusted_estimator",
 ]
 
 ESTIMATORS: dict[str, type] = {
@@ -332,26 +330,25 @@ def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, fl
 
 def _steering_model(
     own: Mapping[str, Any], env_config: Mapping[str, Any]
-) -> tuple[ARXForm | None, int, float, float | None, float, tuple[float, float]]:
-    """(ARX form, decision lag, steering ratio, residual std or None, curvature limit 1/m,
-    (min, max) speed m/s) of the configured model."""
+) -> tuple[Any, float, TrainingRecord]:
+    """(the configured steering model or None, its steering ratio, its training record)."""
     est = own["estimator"]
     if est["type"] == "no_steering":
-        return None, 0, 1.0, est["steering_residual_std"], math.inf, (0.0, math.inf)
+        return None, 1.0, TrainingRecord()
     spec = est["steering_model"]
     dt = 1.0 / env_config["sim_frequency"]
-    residual = est["steering_residual_std"]
+    training = TrainingRecord()
     if spec in _FITTED:
         advisor = own["advisor"]
         population_key = json.dumps(
             [advisor["population"], advisor["population_seed"], advisor["population_size"]]
         )
-        training = deep_merge(env_config, {"action_repeat": 1, "track": "straight"})
-        training.pop("observation", None)
+        config = deep_merge(env_config, {"action_repeat": 1, "track": "straight"})
+        config.pop("observation", None)
         model, fit_residual = _fitted_model(
-            spec, population_key, json.dumps(training, sort_keys=True)
+            spec, population_key, json.dumps(config, sort_keys=True)
         )
-        residual = fit_residual if residual is None else residual
+        training = TrainingRecord(residual_std=fit_residual)
         ratio = 1.0
     else:
         try:
@@ -359,8 +356,7 @@ def _steering_model(
         except (ValueError, OSError) as exc:
             raise ConfigError(f"config key 'estimator.steering_model' = {spec!r}: {exc}") from None
         ratio = default_steering_ratio(spec, fitted=False)
-    arx = model.arx()
-    if arx is None:
+    if model.arx() is None:
         raise ConfigError(
             f"config key 'estimator.steering_model' = {spec!r}: the model has no ARX form "
             "(or no coefficients): the estimator needs one"
@@ -380,15 +376,15 @@ def _steering_model(
                 f"config key 'estimator.steering_model' = {spec!r}: {_LANE_CHECKS[key]} "
                 "(set 'estimator.lane_check' to false to use it anyway)"
             )
-    limit = model_curvature_limit(model)
-    speeds = model_speed_limits(model)
-    return arx, int(getattr(model, "decision_lag", 1)), ratio, residual, limit, speeds
+        training = dataclasses.replace(training, keeps_lane=True)
+    return model, ratio, training
 
 
-def estimator_factory(
-    own: Mapping[str, Any], env_config: Mapping[str, Any]
-) -> Callable[[], LaneEstimator]:
-    arx, lag, ratio, residual, curvature_limit, speeds = _steering_model(own, env_config)
+def trusted_estimator(own: Mapping[str, Any], env_config: Mapping[str, Any]) -> TrustedFilter:
+    """The configured steering model as :func:`estimators.trust.trusted_filter` trusts it, on
+    the env's sensor noise, with ``estimator.settings`` (and ``estimator.steering_residual_std``,
+    ``estimator.outlier_gate``) as the user's overrides; ConfigError for a bad setting."""
+    model, ratio, training = _steering_model(own, env_config)
     est = own["estimator"]
     overrides = dict(est["settings"])
     names = {f.name for f in dataclasses.fields(FilterSettings)}
@@ -398,21 +394,30 @@ def estimator_factory(
             f"unknown config key 'estimator.settings.{unknown[0]}' (allowed keys here: "
             f"{', '.join(sorted(names))})"
         )
-    overrides.setdefault("steering_ratio", ratio)
     if not est["outlier_gate"]:
         overrides.setdefault("innovation_gate", math.inf)
-    if residual is not None:
-        overrides.setdefault("steering_residual_std", residual)
-    # no lane evidence from the steering on roads more curved than the model was fitted on
-    # (the presets and 'fit:' models: a straight road; docs/design.md §8.11)
-    overrides.setdefault("steering_curvature_limit", curvature_limit)
-    # and at speeds like those it was fitted at ('fit:' models; the presets' are unknown)
-    for key, value in speed_settings(speeds).items():
-        overrides.setdefault(key, value)
+    if est["steering_residual_std"] is not None:
+        overrides.setdefault("steering_residual_std", est["steering_residual_std"])
     try:
-        settings = FilterSettings.from_env_config(env_config, **overrides)
+        return trusted_filter(
+            model,
+            FilterSettings.from_env_config(env_config),
+            steering_ratio=ratio,
+            training=training,
+            overrides=overrides,
+        )
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"config key 'estimator.settings': {exc}") from None
+
+
+def estimator_factory(
+    own: Mapping[str, Any], env_config: Mapping[str, Any]
+) -> Callable[[], LaneEstimator]:
+    """A maker of fresh estimators of the configured type on :func:`trusted_estimator`'s
+    filter; ConfigError for a bad setting or a sample time the estimator cannot take."""
+    trusted = trusted_estimator(own, env_config)
+    settings, arx, lag = trusted.settings, trusted.arx, trusted.decision_lag
+    est = own["estimator"]
     dt = 1.0 / env_config["sim_frequency"]
     kind = est["type"]
 

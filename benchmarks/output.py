@@ -1,8 +1,8 @@
 """A benchmark result's folder: checked before the protocol runs, replaced only when complete.
 
 ``hasa-bench paper|score --out DIR`` writes ``results.json``, the CSV tables,
-``report.md`` and the figures (:func:`benchmarks.report.write_outputs`) into a
-new folder beside ``DIR`` and swaps it in at the end, so a failure leaves
+``report.md``, ``report.html`` and the figures (:func:`benchmarks.report.write_outputs`)
+into a new folder beside ``DIR`` and swaps it in at the end, so a failure leaves
 ``DIR`` as it was; a folder that holds anything but a previous result is
 never replaced.
 """
@@ -17,6 +17,7 @@ from pathlib import Path
 
 from benchmarks.protocol.results import RESULTS_FORMAT, BenchmarkResult
 from benchmarks.report import write_outputs
+from benchmarks.schema import ResultsSchemaError
 
 __all__ = ["output_problem", "write_result_folder"]
 
@@ -57,11 +58,17 @@ def write_result_folder(result: BenchmarkResult, out: Path, figures: bool) -> di
     """Write into a new folder beside ``out``, then swap it in: a failure leaves ``out`` as it was.
 
     Returns the files written (name -> path inside ``out``). Raises OSError if they cannot be
-    written.
+    written, and :class:`ResultsSchemaError` (the folder swapped in all the same: nothing
+    measured is lost) if results.json breaks the shipped schema.
     """
     fresh = out.with_name(f".{out.name}.new-{secrets.token_hex(4)}")
+    schema_error = None
     try:
-        written = write_outputs(result, fresh, figures=figures)
+        try:
+            written = write_outputs(result, fresh, figures=figures)
+        except ResultsSchemaError as exc:
+            schema_error = exc
+            written = {p.name: p for p in fresh.iterdir()}
         old = None
         if out.exists():
             old = out.with_name(f".{out.name}.old-{secrets.token_hex(4)}")
@@ -72,4 +79,6 @@ def write_result_folder(result: BenchmarkResult, out: Path, figures: bool) -> di
         raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
+    if schema_error is not None:
+        raise schema_error
     return {name: out / path.relative_to(fresh) for name, path in written.items()}

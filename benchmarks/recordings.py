@@ -8,7 +8,7 @@ each take a list of loaded recordings (:func:`hasa_env.recording.load_paths`):
    ``atol``;
 2. :func:`prepare_model`: a steering model (:func:`hasa_env.steering.loading.load_model`),
    optionally fitted on the first recording, with its steering ratio (model units
-   per recorded road-wheel rad) and the road curvatures it is trusted on, and
+   per recorded road-wheel rad) and where the estimator trusts it (:meth:`PreparedModel.trust`), and
    :func:`score_recordings`: its one-step-ahead scores on every recording
    (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the increments, Ljung-Box p);
 3. :func:`estimate_recordings`: the Gaussian-mixture EKF with that model over each
@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from estimators.offline import EstimatorRun, estimate_recording
-from estimators.settings import model_curvature_limit, model_speed_limits
+from estimators.trust import TrustedFilter, trusted_filter
 from hasa_env.drivers import require_lane_keeping
 from hasa_env.recording import check_replay
 from hasa_env.render.frames import write_frames
@@ -108,16 +108,19 @@ class PreparedModel:
     Attributes:
         spec: how it was named (a preset, a model file, ``package.module:Class``);
         model: the model (fitted); steering_ratio: model units per recorded road-wheel
-        rad; curvature_limit: largest road curvature (1/m) it is trusted on (its
-        fitted roads'; inf: any); fitted_on: the recording it was fitted on (None: as
-        loaded).
+        rad; fitted_on: the recording it was fitted on (None: as loaded).
     """
 
     spec: str
     model: SteeringModel
     steering_ratio: float
-    curvature_limit: float
     fitted_on: Path | None = None
+
+    def trust(self) -> TrustedFilter:
+        """Where the estimator trusts the model's steering, and why not elsewhere
+        (:func:`estimators.trust.trusted_filter`; the reasons do not depend on the
+        recording)."""
+        return trusted_filter(self.model, steering_ratio=self.steering_ratio)
 
 
 def prepare_model(
@@ -159,7 +162,6 @@ def prepare_model(
         model = model.fit(recordings[0].data, road)
         fitted_on = recordings[0].path
         say(f"model {spec}: fitted on {fitted_on}")
-    curvature_limit = model_curvature_limit(model)  # the roads it was fitted on
     ratio = default_steering_ratio(spec, fit) if steering_ratio is None else steering_ratio
     say(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
     if lane_check:
@@ -167,7 +169,7 @@ def prepare_model(
             require_lane_keeping(model, steering_ratio=ratio, what=f"model {spec!r}")
         except ValueError as exc:
             raise LaneKeepingError(str(exc)) from None
-    return PreparedModel(spec, model, ratio, curvature_limit, fitted_on)
+    return PreparedModel(spec, model, ratio, fitted_on)
 
 
 def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[dict[str, float]]:
@@ -199,13 +201,7 @@ def estimate_recordings(
     out = []
     for i, rec in enumerate(recordings):
         try:
-            run: EstimatorRun = estimate_recording(
-                rec,
-                prepared.model,
-                prepared.steering_ratio,
-                steering_curvature_limit=prepared.curvature_limit,
-                speed_limits=model_speed_limits(prepared.model),
-            )
+            run: EstimatorRun = estimate_recording(rec, prepared.model, prepared.steering_ratio)
         except ValueError as exc:
             out.append(RecordingOutcome(i, rec.path, error=str(exc)))
             continue

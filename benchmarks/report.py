@@ -1,10 +1,12 @@
-"""Tables, CSV files and the Markdown report of a benchmark result.
+"""Tables, CSV files and the Markdown and HTML reports of a benchmark result.
 
 :func:`format_tables` renders the tables for the terminal and
 :func:`markdown_report` the report (the tables' columns and captions are
 :mod:`benchmarks.report_sections`), both with the paper's published values
 beside ours; :func:`write_outputs` writes ``results.json``, the CSV tables
-(every per-seed row), ``report.md`` and the figures (:mod:`benchmarks.figures`).
+(every per-seed row), ``report.md``, ``report.html`` (the same cells, one self-contained
+page with the figures embedded: :func:`html_report`) and the figures
+(:mod:`benchmarks.figures`).
 
 The tables, in order:
 
@@ -23,6 +25,8 @@ The tables, in order:
 
 from __future__ import annotations
 
+import base64
+import html
 import json
 import math
 from pathlib import Path
@@ -34,16 +38,25 @@ from benchmarks.figures import write_figures
 from benchmarks.protocol import BenchmarkResult
 from benchmarks.protocol.results import json_clean
 from benchmarks.report_sections import checks_rows, pooled, report_sections
+from benchmarks.schema import ResultsSchemaError, results_problems
 from benchmarks.tables import (
     fixed,
     interval,
     percent,
+    render_html,
     render_markdown,
     render_text,
 )
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
-__all__ = ["format_tables", "write_outputs", "markdown_report", "CSV_TABLES", "pooled"]
+__all__ = [
+    "CSV_TABLES",
+    "format_tables",
+    "html_report",
+    "markdown_report",
+    "pooled",
+    "write_outputs",
+]
 
 CSV_TABLES = {
     "steering": "steering.csv",
@@ -126,47 +139,49 @@ def _unsafe_estimators(result: BenchmarkResult) -> list[str]:
     return out
 
 
-def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
-    """Headline numbers next to the paper's claims (means over seeds, with intervals)."""
+def _finding_items(result: BenchmarkResult) -> list[str]:
+    """Headline numbers next to the paper's claims (means over seeds, with intervals), one
+    plain-text item each (none without both built-in models)."""
     by = {r["model"]: r for r in result.summary}
     gen, tp = by.get("generalized"), by.get("two_point")
-    bullet = "- " if markdown else "  "
-    lines: list[str] = []
     if not (gen and tp):
-        return lines
-    lines.append("")
-    lines.append("Headline (ours vs the paper):")
+        return []
     dec = interval(percent, "rmse_decrease_vs_two_point")(gen)
-    lines.append(
-        f"{bullet}steering RMSE decrease of the generalized model vs two-point: {dec} (paper: 85 %)"
-    )
-    lines.append(
-        f"{bullet}one-step steering RMSE / the paper's (median over drivers): two-point "
+    items = [
+        f"steering RMSE decrease of the generalized model vs two-point: {dec} (paper: 85 %)",
+        f"one-step steering RMSE / the paper's (median over drivers): two-point "
         f"{interval(fixed(2), 'rmse_over_paper_median')(tp)}, generalized "
-        f"{interval(fixed(2), 'rmse_over_paper_median')(gen)}"
-    )
-    lines.append(
-        f"{bullet}lateral RMSE: generalized {interval(fixed(3), 'lateral_rmse')(gen)} m "
+        f"{interval(fixed(2), 'rmse_over_paper_median')(gen)}",
+        f"lateral RMSE: generalized {interval(fixed(3), 'lateral_rmse')(gen)} m "
         f"(paper: under 0.25), two-point {interval(fixed(3), 'lateral_rmse')(tp)} m "
-        "(paper: 0.93-1.0)"
-    )
+        "(paper: 0.93-1.0)",
+    ]
     base, oracle = by.get("no_steering"), by.get("oracle")
     if base and oracle:
-        lines.append(
-            f"{bullet}baselines: no steering {interval(fixed(3), 'lateral_rmse')(base)} m "
+        items.append(
+            f"baselines: no steering {interval(fixed(3), 'lateral_rmse')(base)} m "
             f"(paper: 0.9), oracle {interval(fixed(3), 'lateral_rmse')(oracle)} m"
         )
     unsafe = _unsafe_estimators(result)
     if unsafe:
-        lines.append(
-            f"{bullet}confidently in the wrong lane (> 0.95) in more than "
+        items.append(
+            f"confidently in the wrong lane (> 0.95) in more than "
             f"{UNSAFE_SHARE:.0%} of runs: " + ", ".join(unsafe)
         )
     flagged = [r for r in checks_rows(result) if r.get("flags") and r.get("kind") != "baseline"]
     if flagged:
         shown = ", ".join(f"{r['name']} seed {r['seed']}: {', '.join(r['flags'])}" for r in flagged)
-        lines.append(f"{bullet}flagged fits: {shown}")
-    return lines
+        items.append(f"flagged fits: {shown}")
+    return items
+
+
+def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
+    """:func:`_finding_items` under a "Headline" line, as Markdown or terminal bullets."""
+    items = _finding_items(result)
+    if not items:
+        return []
+    bullet = "- " if markdown else "  "
+    return ["", "Headline (ours vs the paper):", *(bullet + item for item in items)]
 
 
 # --------------------------------------------------------------------- markdown
@@ -204,17 +219,19 @@ def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     return "\n".join(lines)
 
 
+_TITLE = "hasa-bench: the human-as-advisor benchmark"
+_INTRO = (
+    "Protocol of Mai et al. (sections 3.3 and 4.3; docs/design.md §9). Our numbers are "
+    "what the code measured; the paper's published values are printed beside them for "
+    "comparison, nothing is tuned toward them. The paper's steering RMSEs are steering-"
+    f"wheel angles; beside ours they are divided by the steering ratio "
+    f"{PAPER_STEERING_RATIO:g} (road-wheel rad)."
+)
+
+
 def _markdown_head(cfg: dict[str, Any]) -> list[str]:
     """The report's title, what it compares, the data and the configuration."""
-    lines = ["# hasa-bench: the human-as-advisor benchmark", ""]
-    lines.append(
-        "Protocol of Mai et al. (sections 3.3 and 4.3; docs/design.md §9). Our numbers are "
-        "what the code measured; the paper's published values are printed beside them for "
-        "comparison, nothing is tuned toward them. The paper's steering RMSEs are steering-"
-        f"wheel angles; beside ours they are divided by the steering ratio "
-        f"{PAPER_STEERING_RATIO:g} (road-wheel rad)."
-    )
-    lines.append("")
+    lines = [f"# {_TITLE}", "", _INTRO, ""]
     lines.append(f"Data: {_source(cfg)}.")
     lines.append("")
     lines.append("## Configuration")
@@ -226,28 +243,37 @@ def _markdown_head(cfg: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _markdown_models(result: BenchmarkResult) -> list[str]:
-    """One item per fitted model: parameters, identifiability, residual std, notes, warnings."""
-    lines = ["## Models", ""]
+def _model_items(result: BenchmarkResult) -> list[tuple[str, str, list[str]]]:
+    """Per fitted model: (name, "(kind, seed): parameters", its sub-items: identifiability,
+    residual std, note, warnings), plain text."""
+    items = []
     for m in result.models:
         if m.get("error"):
             continue
         params = m.get("parameters") or {}
         shown = ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
         seed = "" if m.get("seed") is None else f", seed {m['seed']}"
-        lines.append(f"- **{m['name']}** ({m['kind']}{seed}): {shown}")
+        sub = []
         ident = m.get("identifiability")
         if ident:
-            lines.append(f"  - {ident['message']}")
+            sub.append(str(ident["message"]))
         if m.get("filter_residual_std") is not None:
-            lines.append(
-                f"  - filter steering-residual std (training run): "
-                f"{m['filter_residual_std']:.3g} rad"
+            sub.append(
+                f"filter steering-residual std (training run): {m['filter_residual_std']:.3g} rad"
             )
         if m.get("note"):
-            lines.append(f"  - {m['note']}")
-        for w in m.get("warnings") or []:
-            lines.append(f"  - warning: {w}")
+            sub.append(str(m["note"]))
+        sub.extend(f"warning: {w}" for w in m.get("warnings") or [])
+        items.append((str(m["name"]), f"({m['kind']}{seed}): {shown}", sub))
+    return items
+
+
+def _markdown_models(result: BenchmarkResult) -> list[str]:
+    """One item per fitted model: parameters, identifiability, residual std, notes, warnings."""
+    lines = ["## Models", ""]
+    for name, head, sub in _model_items(result):
+        lines.append(f"- **{name}** {head}")
+        lines.extend(f"  - {item}" for item in sub)
     lines.append("")
     return lines
 
@@ -282,36 +308,152 @@ def _markdown_figures(cfg: dict[str, Any], figures: dict[str, str]) -> list[str]
     return lines
 
 
-def _markdown_run(result: BenchmarkResult) -> list[str]:
-    """How the protocol ran (executor, wall time) and the versions."""
+def _run_paragraphs(result: BenchmarkResult) -> list[str]:
+    """How the protocol ran (executor, wall time) and the versions, one paragraph each."""
     ex = result.executor
     return [
-        "## Run",
-        "",
         f"Executor: {ex['kind']}"
         + (f", {ex['workers']} workers" if ex.get("workers") else "")
         + (f", scheduler {ex['scheduler']}" if ex.get("scheduler") else "")
         + f", {ex['tasks']} tasks of up to {ex.get('batch_size')} runs. Protocol wall time "
         f"{result.timing.get('total', float('nan')):.1f} s (writing files and figures excluded).",
-        "",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in result.versions.items() if k != "platform"),
-        "",
     ]
+
+
+def _markdown_run(result: BenchmarkResult) -> list[str]:
+    """How the protocol ran (executor, wall time) and the versions."""
+    first, second = _run_paragraphs(result)
+    return ["## Run", "", first, "", second, ""]
+
+
+# ------------------------------------------------------------------------- html
+_CSS = """
+body { font-family: sans-serif; margin: 2em auto; max-width: 75em; padding: 0 1em;
+       color: #222; line-height: 1.4; }
+table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
+caption { text-align: left; font-style: italic; padding-bottom: 0.3em; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: left; vertical-align: top; }
+th { background: #eee; }
+.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+.scroll { overflow-x: auto; }
+pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
+figure { margin: 1em 0 2em; }
+figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+.error { color: #a00; }
+"""
+
+
+def _esc(value: Any) -> str:
+    return html.escape(str(value))
+
+
+def _html_list(items: list[str], css: str = "") -> list[str]:
+    """A <ul> of escaped plain-text items."""
+    attr = f' class="{css}"' if css else ""
+    return [f"<ul{attr}>", *(f"<li>{_esc(item)}</li>" for item in items), "</ul>"]
+
+
+def _data_uri(path: Path) -> str:
+    """The PNG at ``path`` as a ``data:`` URI (the report needs no other file)."""
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def _html_body(result: BenchmarkResult) -> list[str]:
+    """The configuration, the tables (the cells of :func:`report_sections`) and the findings."""
+    cfg = result.config
+    parts = [
+        f"<h1>{_esc(_TITLE)}</h1>",
+        f"<p>{_esc(_INTRO)}</p>",
+        f"<p>Data: {_esc(_source(cfg))}.</p>",
+    ]
+    for key, title, rows, columns, _ in report_sections(result):
+        parts.append(f'<h2 id="{_esc(key)}">{_esc(key.replace("_", " ").capitalize())}</h2>')
+        table = render_html(rows, columns, caption=title + ".") if rows else "<p>(no rows)</p>"
+        parts.append(f'<div class="scroll">{table}</div>')
+    items = _finding_items(result)
+    if items:
+        parts += ['<h2 id="findings">Findings</h2>', *_html_list(items)]
+    if result.errors:
+        parts += [
+            '<h2 id="errors">Errors</h2>',
+            "<p>These models failed and are left out of the tables:</p>",
+            *_html_list(
+                [f"{e['model']} ({e['stage']}): {e['message']}" for e in result.errors], "error"
+            ),
+        ]
+    parts.append('<h2 id="models">Models</h2>')
+    parts.append("<ul>")
+    for name, head, sub in _model_items(result):
+        nested = "".join(_html_list(sub)) if sub else ""
+        parts.append(f"<li><strong>{_esc(name)}</strong> {_esc(head)}{nested}</li>")
+    parts.append("</ul>")
+    return parts
+
+
+def _html_figures(cfg: dict[str, Any], figures: dict[str, str], folder: Path) -> list[str]:
+    """The figures, embedded as base64 PNG data, with their captions (nothing without figures)."""
+    if not figures:
+        return []
+    parts = ['<h2 id="figures">Figures</h2>']
+    first = (cfg.get("seeds") or [None])[0]
+    if first is not None:
+        parts.append(f"<p>The figures show population seed {_esc(first)}.</p>")
+    for key, name in figures.items():
+        caption = _FIGURE_CAPTIONS.get(key, key)
+        parts += [
+            f'<figure id="{_esc(key)}">',
+            f'<img src="{_data_uri(folder / name)}" alt="{_esc(caption)}">',
+            f"<figcaption>{_esc(caption)} ({_esc(name)})</figcaption>",
+            "</figure>",
+        ]
+    return parts
+
+
+def html_report(result: BenchmarkResult, figures: dict[str, str], folder: str | Path) -> str:
+    """The report as one self-contained HTML page: the same sections and cells as
+    :func:`markdown_report`, the figures (PNG files in ``folder``) embedded as ``data:`` URIs;
+    no script, no link to anything outside the file."""
+    parts = _html_body(result)
+    parts += _html_figures(result.config, figures, Path(folder))
+    if result.notes:
+        parts += ['<h2 id="notes">Notes</h2>', *_html_list(list(result.notes))]
+    parts += ['<h2 id="configuration">Configuration</h2>']
+    parts.append(f"<pre>{_esc(json.dumps(json_clean(result.config), indent=2))}</pre>")
+    parts += ['<h2 id="run">Run</h2>', *(f"<p>{_esc(p)}</p>" for p in _run_paragraphs(result))]
+    head = [
+        "<!DOCTYPE html>",
+        '<html lang="en">',
+        "<head>",
+        '<meta charset="utf-8">',
+        f"<title>{_esc(_TITLE)}</title>",
+        f"<style>{_CSS}</style>",
+        "</head>",
+        "<body>",
+    ]
+    return "\n".join([*head, *parts, "</body>", "</html>"]) + "\n"
 
 
 # ----------------------------------------------------------------------- output
 def write_outputs(
     result: BenchmarkResult, out_dir: str | Path, *, figures: bool = True
 ) -> dict[str, Path]:
-    """Write results.json, the CSV tables, report.md and (optionally) the figures.
+    """Write results.json, the CSV tables, report.md, report.html and (optionally) the figures.
+
+    results.json is checked against the shipped schema (:mod:`benchmarks.schema`); every file
+    is written either way, so nothing measured is lost.
 
     Returns:
         {name: path} of every file written.
+
+    Raises:
+        ResultsSchemaError: after writing, if results.json breaks the schema (a bug to report).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}
     doc = result.to_json_dict()
+    problems = results_problems(doc)  # checked here, raised once every file is written
     path = out / "results.json"
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     written["results.json"] = path
@@ -326,4 +468,9 @@ def write_outputs(
     report = out / "report.md"
     report.write_text(markdown_report(result, figure_names), encoding="utf-8")
     written["report.md"] = report
+    page = out / "report.html"
+    page.write_text(html_report(result, figure_names, out), encoding="utf-8")
+    written["report.html"] = page
+    if problems:
+        raise ResultsSchemaError(problems)
     return written

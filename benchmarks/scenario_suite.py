@@ -2,7 +2,7 @@
 
 ``hasa-bench paper --scenario all`` runs the protocol once per scenario
 (:data:`hasa_env.scenarios.SCENARIOS`), writes each scenario's results into its own
-folder and this table beside them (``scenarios.md``, ``scenarios.csv``): per scenario
+folder and this table beside them (``scenarios.md``, ``scenarios.html``, ``scenarios.csv``): per scenario
 and estimator, the lateral RMSE and the gain over the best steering-free baseline with
 their 95 % hierarchical-bootstrap intervals, the time to decide, the share of the time the
 steering channel was off (speed or curvature rule), and the runs that end
@@ -11,6 +11,7 @@ steering channel was off (speed or curvature rule), and the runs that end
 
 from __future__ import annotations
 
+import html
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -19,9 +20,18 @@ import pandas as pd
 
 from benchmarks.protocol.results import BenchmarkResult
 from benchmarks.report_sections import decision_time
-from benchmarks.tables import Column, count_share, fixed, interval, percent, render_markdown
+from benchmarks.schema import ResultsSchemaError, table_problems
+from benchmarks.tables import (
+    Column,
+    count_share,
+    fixed,
+    interval,
+    percent,
+    render_html,
+    render_markdown,
+)
 
-__all__ = ["SUITE_COLUMNS", "format_suite", "suite_rows", "write_suite"]
+__all__ = ["SUITE_COLUMNS", "format_suite", "html_suite", "suite_rows", "write_suite"]
 
 SUITE_COLUMNS = (
     "scenario", "model", "kind", "estimated_runs",
@@ -78,9 +88,35 @@ def format_suite(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def html_suite(rows: list[dict[str, Any]]) -> str:
+    """The table as one self-contained HTML page (no script, nothing outside the file), one
+    table per scenario linking to that scenario's report.html."""
+    title = "The scenario suite"
+    parts = [
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">',
+        f"<title>{title}</title>",
+        "<style>body { font-family: sans-serif; margin: 2em; } table { border-collapse: "
+        "collapse; margin-bottom: 1.5em; } th, td { border: 1px solid #bbb; padding: 0.2em "
+        "0.5em; text-align: left; } th { background: #eee; } .num { text-align: right; }</style>",
+        f"</head>\n<body>\n<h1>{title}</h1>",
+    ]
+    for scenario in dict.fromkeys(row["scenario"] for row in rows):
+        part = [row for row in rows if row["scenario"] == scenario]
+        name = html.escape(str(scenario))
+        parts.append(f'<h2 id="{name}">{name} (<a href="{name}/report.html">report</a>)</h2>')
+        parts.append(render_html(part, _TABLE))
+    return "\n".join([*parts, "</body>\n</html>\n"])
+
+
 def write_suite(rows: list[dict[str, Any]], out: Path) -> list[Path]:
-    """``scenarios.md`` and ``scenarios.csv`` in ``out``; returns their paths."""
-    md, csv = out / "scenarios.md", out / "scenarios.csv"
+    """``scenarios.md``, ``scenarios.html`` and ``scenarios.csv`` in ``out``; returns their
+    paths. Raises :class:`ResultsSchemaError` after writing them if the rows break the
+    shipped schema (:mod:`benchmarks.schema`)."""
+    md, page, csv = out / "scenarios.md", out / "scenarios.html", out / "scenarios.csv"
     md.write_text("# The scenario suite\n\n" + format_suite(rows) + "\n", encoding="utf-8")
+    page.write_text(html_suite(rows), encoding="utf-8")
     pd.DataFrame(rows, columns=list(SUITE_COLUMNS)).to_csv(csv, index=False)
-    return [md, csv]
+    problems = table_problems("scenarios.csv", rows)
+    if problems:
+        raise ResultsSchemaError(problems)
+    return [md, page, csv]

@@ -1,4 +1,5 @@
-"""The one table renderer of the benchmarks: plain text for the terminal, Markdown for reports.
+"""The one table renderer of the benchmarks: plain text for the terminal, Markdown and HTML
+for reports.
 
 A table is a list of row dicts and a list of :class:`Column` (which key,
 which header, how to format, left or right aligned). ``hasa-bench paper``'s
@@ -10,6 +11,7 @@ twenty lines below.)
 
 from __future__ import annotations
 
+import html
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -22,6 +24,7 @@ __all__ = [
     "interval",
     "missing",
     "percent",
+    "render_html",
     "render_markdown",
     "render_text",
     "scientific",
@@ -129,3 +132,23 @@ def render_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[Column]) -
     rule = "|" + "|".join(":---" if c.left else "---:" for c in columns) + "|"
     body = ["| " + " | ".join(c.cell(r) or " " for c in columns) + " |" for r in rows]
     return "\n".join([head, rule, *body])
+
+
+def render_html(
+    rows: Sequence[dict[str, Any]], columns: Sequence[Column], caption: str | None = None
+) -> str:
+    """An HTML ``<table>`` of the same cells as :func:`render_markdown` (every text escaped);
+    right-aligned columns get ``class="num"``."""
+
+    def attr(c: Column) -> str:
+        return "" if c.left else ' class="num"'
+
+    head = "".join(f"<th{attr(c)}>{html.escape(c.header)}</th>" for c in columns)
+    body = [
+        "<tr>" + "".join(f"<td{attr(c)}>{html.escape(c.cell(r))}</td>" for c in columns) + "</tr>"
+        for r in rows
+    ]
+    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    return "\n".join(
+        [f"<table>{cap}", f"<thead><tr>{head}</tr></thead>", "<tbody>", *body, "</tbody></table>"]
+    )

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import pandas as pd
@@ -24,10 +24,10 @@ import pandas as pd
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.evidence import DECISIONS
-from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
-from estimators.settings import FilterSettings, speed_settings
+from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time, recording_sample_time
+from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
 from estimators.tuning import steering_residual_std
 from hasa_env.recording.format import Recording
 from hasa_env.sim.road import Road
@@ -41,6 +41,7 @@ __all__ = [
     "estimate_recording",
     "expected_calibration_error",
     "hypotheses_of",
+    "recording_filter",
     "run_estimator",
 ]
 
@@ -524,57 +525,74 @@ class EstimatorRun:
     trusted_from: float
 
 
+def recording_filter(
+    recording: Recording,
+    steering_model: SteeringModelLike,
+    steering_ratio: float = 1.0,
+    residual_std: float | None = None,
+    *,
+    training: TrainingRecord | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> TrustedFilter:
+    """The filter :func:`estimate_recording` runs over ``recording``:
+    :func:`estimators.trust.trusted_filter` of the steering model on filter settings from the
+    recording's config. ``steering_ratio``: model units per recorded road-wheel radian.
+    ``residual_std``: the steering model's equation-error level (rad, model units;
+    ``FilterSettings.steering_residual_std``); None: the training record's, else the model's
+    one-step residual on this recording's true states
+    (:func:`estimators.tuning.steering_residual_std`): the evidence checks
+    (:mod:`estimators.evidence`) temper evidence whose residuals exceed the level they are
+    given, but cannot recover evidence a level set far too high hides. ``training``,
+    ``overrides``: as :func:`~estimators.trust.trusted_filter` takes them (the model's own
+    record of its training roads and speeds limits where its steering counts).
+    """
+    training = training or TrainingRecord()
+    arx = steering_model.arx()
+    level = training.residual_std if residual_std is None else residual_std
+    if arx is not None and level is None:
+        level = steering_residual_std(
+            arx,
+            recording.data,
+            decision_lag=getattr(steering_model, "decision_lag", 1),
+            steering_ratio=steering_ratio,
+        )
+    return trusted_filter(
+        steering_model,
+        FilterSettings.from_env_config(recording.config),
+        steering_ratio=steering_ratio,
+        training=replace(training, residual_std=level),
+        overrides=overrides,
+    )
+
+
 def estimate_recording(
     recording: Recording,
     steering_model: SteeringModelLike,
     steering_ratio: float = 1.0,
     residual_std: float | None = None,
-    steering_curvature_limit: float = math.inf,
-    speed_limits: tuple[float, float] = (0.0, math.inf),
+    *,
+    training: TrainingRecord | None = None,
+    overrides: Mapping[str, Any] | None = None,
 ) -> EstimatorRun:
     """Run the mixture EKF (:class:`estimators.gm_ekf.GaussianMixtureEKF`) over a recording.
 
     Through :func:`estimators.offline.run_estimator`: it sees what the car's
     sensors recorded (speed, biased camera, steering, IMU), with the
-    hypotheses of the recording's config and filter settings from that
-    config; the steering model enters through its ARX form, and
-    ``steering_ratio`` (model units per recorded road-wheel radian) goes to
-    the filter settings. ``residual_std`` is the steering model's equation-
-    error level (rad, model units; ``FilterSettings.steering_residual_std``);
-    None: the model's one-step residual on this recording's true states
-    (:func:`estimators.tuning.steering_residual_std`): the evidence checks
-    (:mod:`estimators.evidence`) temper evidence whose residuals exceed the
-    level they are given, but cannot recover evidence a level set far too
-    high hides. ``steering_curvature_limit`` (1/m): no lane evidence from the steering
-    where the road ahead curves more (:class:`FilterSettings`; the model's training
-    roads, :func:`estimators.settings.steering_curvature_limit`); ``speed_limits``: (min, max)
-    speed (m/s) outside which too (:func:`estimators.settings.model_speed_limits`).
+    hypotheses of the recording's config and the filter of :func:`recording_filter`
+    (same arguments).
     """
     data = recording.data
     cfg = recording.config
     hypotheses = np.asarray(cfg["markings"]["hypotheses"], dtype=np.float64)
-    arx = steering_model.arx()
-    overrides: dict[str, float] = {
-        "steering_ratio": steering_ratio,
-        "steering_curvature_limit": steering_curvature_limit,
-        **speed_settings(speed_limits),
-    }
-    if arx is not None:
-        level = residual_std
-        if level is None:
-            level = steering_residual_std(
-                arx,
-                data,
-                decision_lag=getattr(steering_model, "decision_lag", 1),
-                steering_ratio=steering_ratio,
-            )
-        overrides["steering_residual_std"] = max(float(level), 1e-9)
-    estimator = GaussianMixtureEKF(
-        arx,
-        FilterSettings.from_env_config(cfg, **overrides),
-        dt=recording.dt,
-        decision_lag=getattr(steering_model, "decision_lag", 1),
+    trust = recording_filter(
+        recording,
+        steering_model,
+        steering_ratio,
+        residual_std,
+        training=training,
+        overrides=overrides,
     )
+    estimator = trust.estimator(dt=recording.dt)
     result = run_estimator(estimator, data, hypotheses=hypotheses)
     n = len(data)
     weights = result.weights[0, :n]

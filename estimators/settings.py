@@ -17,7 +17,6 @@ __all__ = [
     "FilterSettings",
     "model_curvature_limit",
     "model_speed_limits",
-    "speed_settings",
     "steering_curvature_limit",
     "steering_speed_limits",
 ]
@@ -146,7 +145,7 @@ class FilterSettings:
             0.99 on the wrong lane, each flipped within 1 s of the first bend
             while its model error stayed near 1 (consistent). The benchmark,
             the advisor task and the command-line programs set it per model
-            from the roads it was fitted on (:func:`model_curvature_limit`);
+            from the roads it was fitted on (:func:`estimators.trust.trusted_filter`);
             ``math.inf`` (the default) trusts the model on any road.
         steering_max_speed: above this speed (m/s, the mixture's estimate) the
             steering channel is off as below ``min_speed`` (memory held,
@@ -154,7 +153,7 @@ class FilterSettings:
             evidence to the speeds a model was fitted at. ``math.inf`` (the
             default): any speed. The benchmark, the advisor task and the
             command-line programs set both per model from the speeds it was
-            fitted at (:func:`model_speed_limits`; docs/design.md §8.11).
+            fitted at (:func:`estimators.trust.trusted_filter`; docs/design.md §8.11).
         max_acceleration: IMU readings with |a| above this (m/s^2) are
             implausible and treated as missing, like NaN (input 0 with
             ``missing_acceleration_std``). Default 50 m/s^2 (about 5 g):
@@ -315,12 +314,3 @@ def model_speed_limits(model: Any) -> tuple[float, float]:
     :func:`steering_speed_limits`), ``(0, math.inf)`` when they are unknown (the paper's
     presets, old model files)."""
     return steering_speed_limits(getattr(model, "training_speed_range", None))
-
-
-def speed_settings(
-    limits: tuple[float, float], min_speed: float = FilterSettings.min_speed
-) -> dict[str, float]:
-    """The :class:`FilterSettings` fields for speed ``limits`` (m/s, :func:`model_speed_limits`):
-    ``min_speed`` the higher of ``min_speed`` and the lower limit, ``steering_max_speed`` the
-    upper one."""
-    return {"min_speed": max(min_speed, limits[0]), "steering_max_speed": limits[1]}

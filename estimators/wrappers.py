@@ -36,7 +36,6 @@ Example::
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
 from typing import Any, SupportsFloat
 
@@ -48,10 +47,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES
 from estimators.base import Estimate, LaneEstimator, inputs_from_info, measurements_from_info
 from estimators.evidence import DECISIONS
-from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances
-from estimators.settings import FilterSettings, speed_settings
+from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time, config_sample_time
+from estimators.trust import TrainingRecord, trusted_filter
 from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
@@ -502,24 +501,22 @@ class VectorEstimatorObservationWrapper(VectorEstimatorInfoWrapper):
 def estimator_wrapper(
     model: SteeringModelLike,
     steering_ratio: float = 1.0,
-    steering_curvature_limit: float = math.inf,
-    speed_limits: tuple[float, float] = (0.0, math.inf),
+    *,
+    training: TrainingRecord | None = None,
+    overrides: Mapping[str, Any] | None = None,
 ) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """A wrapper factory: the Gaussian-mixture EKF runs alongside each env it wraps.
 
     Used as ``hasa_env.session.DriveSession(env_wrapper=...)`` by ``hasa-drive
     --estimator``: each run's env is wrapped in :class:`EstimatorInfoWrapper`
-    with :class:`estimators.gm_ekf.GaussianMixtureEKF` on the steering
-    ``model``'s ARX form and filter settings from the env's config, so
+    with the filter :func:`estimators.trust.trusted_filter` makes of the steering
+    ``model`` on filter settings from the env's config, so
     ``info["estimate_weights"]`` carries the live hypothesis weights the HUD
     shows (the recording keeps its standard columns). ``steering_ratio``:
     model units per road-wheel radian (15 for the paper's presets,
-    :func:`hasa_env.steering.loading.default_steering_ratio`);
-    ``steering_curvature_limit``: :class:`estimators.settings.FilterSettings`' field (1/m;
-    the steering channel is off on roads more curved than the model was fitted on);
-    ``speed_limits``: (min, max) speed (m/s) outside which it is off too
-    (:func:`estimators.settings.model_speed_limits`; the lower end never below the default
-    ``min_speed``).
+    :func:`hasa_env.steering.loading.default_steering_ratio`); ``training``
+    and ``overrides``: as :func:`~estimators.trust.trusted_filter` takes them (the
+    model's own record of its training roads and speeds limits where its steering counts).
     """
     arx = model.arx()
     if arx is None:
@@ -531,12 +528,13 @@ def estimator_wrapper(
     def wrap(env: gym.Env) -> EstimatorInfoWrapper:
         config = hasa_unwrapped(env).config
         dt = config["action_repeat"] / config["sim_frequency"]
-        settings = FilterSettings.from_env_config(
-            config,
+        trusted = trusted_filter(
+            model,
+            FilterSettings.from_env_config(config),
             steering_ratio=steering_ratio,
-            steering_curvature_limit=steering_curvature_limit,
-            **speed_settings(speed_limits),
+            training=training,
+            overrides=overrides,
         )
-        return EstimatorInfoWrapper(env, GaussianMixtureEKF(arx, settings, dt=dt))
+        return EstimatorInfoWrapper(env, trusted.estimator(dt=dt))
 
     return wrap

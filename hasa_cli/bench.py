@@ -10,7 +10,7 @@ Usage::
 
 ``paper`` and ``score`` print the tables and write into ``--out``
 (default ``hasa-bench-results``): ``results.json``, CSV tables,
-``report.md`` and PNG figures. A folder that holds a previous result is only
+``report.md``, ``report.html`` (self-contained) and PNG figures (docs/results.md). A folder that holds a previous result is only
 replaced with ``--overwrite`` (the new result is written beside it first and
 swapped in when complete). Exit status (:mod:`hasa_cli`): 0 success; 1
 partial: a user model failed, or recordings were skipped or runs left out
@@ -51,6 +51,7 @@ from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
 from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
 from benchmarks.report import format_tables
 from benchmarks.scenario_suite import format_suite, suite_rows, write_suite
+from benchmarks.schema import ResultsSchemaError
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -441,10 +442,14 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     except OSError as exc:
         error(PROG, f"cannot write the scenario table to {out}: {exc}")
         return EXIT_ENVIRONMENT
+    except ResultsSchemaError as exc:
+        error(PROG, f"{out / 'scenarios.csv'} {exc} (every file is written; please report this)")
+        status = max(status, EXIT_PARTIAL)
     if not args.quiet:
         print(format_suite(rows))
         print(
-            f"wrote {len(results)} scenario folders and scenarios.md, scenarios.csv to {out}/; "
+            f"wrote {len(results)} scenario folders and scenarios.md, scenarios.html, "
+            f"scenarios.csv to {out}/; "
             f"{time.perf_counter() - started:.1f} s in all"
         )
     return status
@@ -480,12 +485,16 @@ def _run_scenario(
         progress.close()
         error(PROG, f"cannot write the results to {out}: {exc}")
         return EXIT_ENVIRONMENT, None
+    except ResultsSchemaError as exc:  # a bug of ours: the files are written all the same
+        progress.close()
+        error(PROG, f"{out / 'results.json'} {exc} (every file is written; please report this)")
+        return EXIT_PARTIAL, result
     progress.close()
     if not args.quiet:
         print(format_tables(result))
         print()
         print(
-            f"wrote {len(written)} files to {out}/ (results.json, report.md, "
+            f"wrote {len(written)} files to {out}/ (results.json, report.md, report.html, "
             f"CSV tables{', figures' if not args.no_plots else ''}); "
             f"{time.perf_counter() - started:.1f} s in all"
         )

@@ -216,7 +216,7 @@ def _drive_setup(
     env_wrapper = None
     if args.estimator is not None:
         env_wrapper = _estimator(
-            args.estimator, _probe_env(settings), lane_check=not args.no_lane_check
+            args.estimator, _probe_env(settings), lane_check=not args.no_lane_check, log=log
         )
     return settings, keyboard, profiles, env_wrapper
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from estimators.settings import model_curvature_limit, model_speed_limits
+from estimators.trust import trusted_filter
 from estimators.wrappers import EstimatorInfoWrapper, estimator_wrapper
 from hasa_env.devices.calibration import (
     CalibrationError,
@@ -74,19 +74,25 @@ def estimator_model(spec: str, dt: float) -> SteeringModel:
 
 
 def estimator_for(
-    spec: str, probe: LaneKeepingEnv, lane_check: bool = True
+    spec: str,
+    probe: LaneKeepingEnv,
+    lane_check: bool = True,
+    log: Callable[[str], None] | None = None,
 ) -> Callable[[gym.Env], EstimatorInfoWrapper]:
     """The env wrapper running the estimator with ``spec``'s model (checked on ``probe``;
     with ``lane_check``, ValueError if the model cannot keep the car on the road when it
-    steers itself: :func:`hasa_env.drivers.require_lane_keeping`)."""
+    steers itself: :func:`hasa_env.drivers.require_lane_keeping`). ``log`` hears where the
+    estimator does not listen to the model's steering, and why
+    (:func:`estimators.trust.trusted_filter`)."""
     model = estimator_model(spec, probe.setup.env_step_duration)
     ratio = default_steering_ratio(spec, fitted=False)
     if lane_check:
         require_lane_keeping(model, steering_ratio=ratio, what=f"--estimator {spec!r}")
-    wrapper = estimator_wrapper(
-        model, ratio, model_curvature_limit(model), model_speed_limits(model)
-    )
+    wrapper = estimator_wrapper(model, ratio)
     wrapper(probe)  # fail now, not after the countdown
+    if log is not None:
+        trusted = trusted_filter(model, steering_ratio=ratio)
+        log(f"hasa-drive: --estimator {spec}: {trusted.describe()}")
     return wrapper
 
 

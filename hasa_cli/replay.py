@@ -19,7 +19,9 @@ recording in a directory and its subdirectories) it:
 3. optionally (``--estimator``) runs the Gaussian-mixture EKF with that
    steering model over the recorded sensors and prints its lateral RMSE, the
    final weight of the true lane hypothesis and when it was first trusted
-   (:func:`estimators.offline.estimate_recording`);
+   (:func:`estimators.offline.estimate_recording`), after one line saying where the
+   estimator does not listen to the model's steering, and why
+   (:func:`estimators.trust.trusted_filter`: e.g. above its training speeds);
 4. optionally writes PNG frames (``--frames DIR``) of the driver's or the
    top-down view, with the estimator's live weights in the HUD when it ran,
    and a video (``--video FILE.mp4``) if ``imageio`` with ffmpeg is
@@ -237,6 +239,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)
+        print(f"model {prepared.spec}: estimator trust: {prepared.trust().describe()}")
         for outcome in estimate_recordings(prepared, recordings):
             if outcome.error is not None:
                 error(PROG, f"{outcome.path}: cannot run the estimator: {outcome.error}")

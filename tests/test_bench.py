@@ -31,6 +31,7 @@ from benchmarks.protocol import (
     run_protocol,
 )
 from benchmarks.report import CSV_TABLES, _unsafe_estimators, format_tables, write_outputs
+from benchmarks.schema import folder_problems
 from hasa_cli.bench import main
 
 # the all-PI drivers without remnant ("paper-pi") until the default population is calibrated
@@ -257,7 +258,13 @@ def test_results_sanity(outputs) -> None:
 
 def test_output_files(outputs) -> None:
     result, out, written = outputs
-    for name in ["results.json", "report.md", *CSV_TABLES.values(), *FIGURES.values()]:
+    for name in [
+        "results.json",
+        "report.md",
+        "report.html",
+        *CSV_TABLES.values(),
+        *FIGURES.values(),
+    ]:
         assert (out / name).is_file(), name
         assert name in written
     for name in FIGURES.values():
@@ -395,9 +402,12 @@ def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     assert "Verdict over 2 population seeds [3, 4]" in text and "95% CI" in text
 
 
-def test_stress_set_and_unchecked_estimators_are_scored() -> None:
+def test_stress_set_and_unchecked_estimators_are_scored(tmp_path: Path) -> None:
     config = ProtocolConfig(**(SMALL | {"curved_runs": 0}), stress=True, compare_checks=True)
     result = run_protocol(config, workers=1)
+    write_outputs(result, tmp_path, figures=False)  # the schema knows the stress rows
+    assert folder_problems(tmp_path) == []
+    assert "stress_sign_flipped (no checks)" in (tmp_path / "report.html").read_text()
     summary = {r["model"]: r for r in result.summary}
     stress = ["stress_no_lane_info", "stress_sign_flipped", "stress_random_arx",
               "stress_unregularized"]  # fmt: skip

@@ -23,6 +23,7 @@ import pytest
 
 from benchmarks.executor import SchedulerError, check_scheduler
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
+from benchmarks.schema import folder_problems
 from hasa_cli.bench import main
 from hasa_env.drivers import population, run_population, save_runs
 
@@ -206,6 +207,7 @@ def test_recordings_quality_gates_curved_runs_and_degenerate_runs(recordings, tm
     # curved recordings of a driver other than the illustrative one are scored, not dropped
     assert {r["driver"] for r in doc["curved"]} == {"1"}
     assert any("trained on" in n and "a_000.csv" in n for n in doc["notes"])
+    assert (out / "report.html").is_file() and folder_problems(out) == []
 
 
 def test_the_training_file_can_be_chosen_and_a_bad_one_is_refused(recordings):

@@ -25,6 +25,7 @@ from benchmarks.protocol.intervals import (
     percentile_interval,
     replicate_ranks,
 )
+from benchmarks.schema import folder_problems
 from hasa_cli.bench import main
 
 
@@ -140,6 +141,8 @@ def test_a_recorded_study_gets_the_verdict_tables_and_the_headline(
     assert code == 0
     doc = json.loads((out / "results.json").read_text())
     assert doc["format_version"] == 3
+    page = (out / "report.html").read_text()
+    assert folder_problems(out) == [] and "Verdict over the recordings" in page
     summary = {r["model"]: r for r in doc["summary"]}
     assert {"two_point", "generalized", "no_steering", "oracle"} <= set(summary)
     assert doc["seed_summary"] and all(r["seed"] is None for r in doc["seed_summary"])

@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from benchmarks.schema import folder_problems, read_table, table_problems
 from hasa_cli.bench import main as bench_main
 from hasa_env import ConfigError, make_config
 from hasa_env.drivers import SyntheticDriver, population, run_drivers
@@ -154,6 +155,12 @@ def test_hasa_bench_runs_every_scenario_and_writes_the_suite_table(tmp_path, cap
         assert {"generalized", "two_point", "lane_centring", "no_steering"} <= set(part["model"])
         assert (part["estimated_runs"] > 0).all()
     assert "### lane_shift" in (out / "scenarios.md").read_text()
+    # the suite's page and every scenario's report.html; scenarios.csv follows its schema
+    page = (out / "scenarios.html").read_text()
+    for name in SCENARIOS:
+        assert f'<a href="{name}/report.html">' in page and (out / name / "report.html").is_file()
+        assert folder_problems(out / name) == []
+    assert table_problems("scenarios.csv", read_table(out / "scenarios.csv")) == []
     # at 25 m/s the steering channel of a model trained near 15 m/s is off (the speed rule),
     # and the table says so
     off = table.set_index(["scenario", "model"])["steering_off_share"]

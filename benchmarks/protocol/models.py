@@ -23,7 +23,7 @@ import math
 import multiprocessing
 import pickle
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
@@ -37,12 +37,7 @@ from benchmarks.protocol.config import (
     BenchmarkError,
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
-from estimators.settings import (
-    model_curvature_limit,
-    model_speed_limits,
-    steering_curvature_limit,
-    steering_speed_limits,
-)
+from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
@@ -62,6 +57,7 @@ __all__ = [
     "FittedModel",
     "ModelError",
     "check_lane_keeping",
+    "describe_trust",
     "describe",
     "fit_models",
     "load_models",
@@ -250,26 +246,19 @@ class FittedModel:
         name: the name in the results; kind: "builtin" or "user";
         model: the fitted :class:`SteeringModel`; residual_std: its one-step
         residual level on the training run for the filter (rad; None: no
-        ARX form, no estimation); curvature_limit: the filter's
-        ``steering_curvature_limit`` (1/m) from the roads the model was fitted on
-        (:func:`estimators.settings.model_curvature_limit`; for a model the
-        benchmark fitted without that record, its training run's; ``math.inf``
-        for a saved model whose file does not say); keeps_lane: the model passed
-        its lane-keeping check (:func:`check_lane_keeping`): with the evidence
-        checks on, a model that fails it gets the no-steering estimator; speed_limits:
-        the filter's (``min_speed``, ``steering_max_speed``) (m/s) from the speeds it was
-        fitted at (:func:`estimators.settings.model_speed_limits`; for a model the benchmark
-        fitted without that record, its training run's; none for a saved model whose file does
-        not say).
+        ARX form, no estimation); training: what the filter's rule
+        (:func:`estimators.trust.trusted_filter`) needs beyond the model's own record:
+        for a model the benchmark fitted, its training run's road curvatures and speeds
+        (:meth:`~estimators.trust.TrainingRecord.from_run`; none for a saved model), and
+        the outcome of its lane-keeping check (:func:`check_lane_keeping`): with the
+        evidence checks on, a model that fails it gets the no-steering estimator.
     """
 
     name: str
     kind: str
     model: Any
     residual_std: float | None
-    curvature_limit: float = math.inf
-    keeps_lane: bool = True
-    speed_limits: tuple[float, float] = (0.0, math.inf)
+    training: TrainingRecord = TrainingRecord()
 
 
 @dataclass(frozen=True)
@@ -404,19 +393,13 @@ def fit_models(
         info["error"] = None
         # the road-blind baseline is a steering reference only: it has no lane information
         residual = None if kind == "baseline" else info_fit["filter_residual_std"]
-        # trusted on roads up to those it was fitted on: its own record (fit, model file),
-        # else the training run's for a model the benchmark fitted
-        limit = model_curvature_limit(model_fitted)
-        if math.isinf(limit) and not candidate.fixed and "road_curvature" in own:
-            limit = steering_curvature_limit(own["road_curvature"].to_numpy())
+        # trusted on roads and at speeds like those it was fitted on: its own record (fit,
+        # model file), else the training run's for a model the benchmark fitted
+        training = TrainingRecord() if candidate.fixed else TrainingRecord.from_run(own)
+        limit, speeds = model_limits(model_fitted, training)
         info["steering_curvature_limit"] = limit
-        # and at speeds like those it was fitted at: its own record, else (a model the
-        # benchmark fitted) its training run's
-        speeds = model_speed_limits(model_fitted)
-        if math.isinf(speeds[1]) and not candidate.fixed and "speed" in own:
-            speeds = steering_speed_limits(own["speed"].to_numpy())
         info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
-        fitted.append(FittedModel(name, kind, model_fitted, residual, limit, speed_limits=speeds))
+        fitted.append(FittedModel(name, kind, model_fitted, residual, training))
         infos.append(info)
     return fitted, infos
 
@@ -575,7 +558,7 @@ def check_lane_keeping(
     """Let every fitted model with an estimator drive (:func:`hasa_env.drivers.lane_keeping_check`:
     4 cars, no equation noise, on the training run's env and config, for
     :data:`LANE_CHECK_DURATION`) and keep the outcome: in each model's description
-    (``infos``, key ``lane_keeping``) and as :attr:`FittedModel.keeps_lane`.
+    (``infos``, key ``lane_keeping``) and in :attr:`FittedModel.training`.
 
     A model that drives off the road has lane terms that do not keep a lane, so the
     estimator takes no lane evidence from it (docs/design.md §8.11). A user model's drive
@@ -613,5 +596,23 @@ def check_lane_keeping(
         info = described.get(fm.name)
         if info is not None:
             info["lane_keeping"] = outcome
-        out.append(replace(fm, keeps_lane=bool(outcome["passed"])))
+        lane = {"keeps_lane": bool(outcome["passed"]), "lane_check": outcome.get("summary", "")}
+        out.append(replace(fm, training=replace(fm.training, **lane)))
     return out
+
+
+def describe_trust(
+    fitted: Sequence[FittedModel],
+    infos: Sequence[dict[str, Any]],
+    overrides: Mapping[str, Any],
+) -> None:
+    """Put in each estimated model's description (key ``steering_trust``) the reasons
+    :func:`estimators.trust.trusted_filter` gives for every limit on its steering channel
+    (with the protocol's ``filter_settings`` as the user's ``overrides``)."""
+    described = {info["name"]: info for info in infos}
+    for fm in fitted:
+        info = described.get(fm.name)
+        if fm.residual_std is None or info is None:
+            continue
+        trust = trusted_filter(fm.model, training=fm.training, overrides=overrides)
+        info["steering_trust"] = list(trust.reasons)

@@ -99,6 +99,7 @@ from benchmarks.protocol.models import (
     ModelError,
     check_lane_keeping,
     describe,
+    describe_trust,
     fit_models,
     load_models,
 )
@@ -265,6 +266,7 @@ def fit_and_check(
             seed=seed,
             time_limit=config.model_time_limit,
         )
+        describe_trust(fitted, fit_info, config.filter_settings)
     lane_centring, baseline_info = _fit_baselines(config, train_frame, seed)
     seconds = time.perf_counter() - t0
     return FittedPlan(

@@ -28,7 +28,8 @@ from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
 from estimators.offline import run_estimator
-from estimators.settings import FilterSettings, speed_settings
+from estimators.settings import FilterSettings
+from estimators.trust import trusted_filter
 from hasa_env.steering import residual_diagnostics, score_runs
 
 __all__ = [
@@ -37,6 +38,7 @@ __all__ = [
     "ChunkResult",
     "ChunkTask",
     "degenerate_reason",
+    "model_estimator",
     "run_chunk",
 ]
 
@@ -189,27 +191,7 @@ def _model_part(
     preds = _score_model(fm, task, frames, part)
     residual_std = fm.residual_std
     if task.estimate and residual_std is not None:
-        # the model is trusted on roads as curved as its training run's, unless --filter says
-        own_limit = "steering_curvature_limit" not in task.filter_settings
-        own_speeds = not {"min_speed", "steering_max_speed"} & set(task.filter_settings)
-
-        def make(settings: Any, fm: FittedModel = fm, checks: bool = True) -> Any:
-            if checks and not fm.keeps_lane:  # it drove off the road: no lane evidence from it
-                return NoSteeringEKF(settings)
-            limit = fm.curvature_limit if own_limit else settings.steering_curvature_limit
-            if checks and own_speeds:  # and at speeds like those it was fitted at
-                settings = replace(settings, **speed_settings(fm.speed_limits, settings.min_speed))
-            return GaussianMixtureEKF(
-                fm.model.arx(),
-                replace(
-                    settings,
-                    steering_residual_std=max(residual_std, 1e-9),
-                    evidence_checks=checks,
-                    steering_curvature_limit=limit if checks else math.inf,
-                ),
-                decision_lag=fm.model.decision_lag,
-            )
-
+        make = partial(model_estimator, fm, overrides=task.filter_settings)
         _estimate_model(task, frames, fm.name, fm.kind, make, part)
         if task.compare_checks:  # the same filter without the evidence checks
             _estimate_model(
@@ -222,6 +204,22 @@ def _model_part(
             )
     traced = {i: preds[i] for i, ref in enumerate(task.runs) if ref.key in task.trace_runs}
     return part, traced
+
+
+def model_estimator(
+    fm: FittedModel,
+    settings: FilterSettings,
+    overrides: Mapping[str, Any] | None = None,
+    checks: bool = True,
+) -> GaussianMixtureEKF:
+    """The benchmark's filter for a fitted model: :func:`estimators.trust.trusted_filter` on
+    ``settings`` (the runs' config with the protocol's ``filter_settings``, the user's
+    ``overrides``) with the model's residual level and training record; ``checks`` False:
+    the same filter without the evidence checks and the model's limits."""
+    training = replace(fm.training, residual_std=fm.residual_std)
+    return trusted_filter(
+        fm.model, settings, training=training, overrides=overrides, checks=checks
+    ).estimator()
 
 
 def _merge(out: ChunkResult, part: ChunkResult) -> None:

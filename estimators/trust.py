@@ -1,0 +1,250 @@
+"""One rule: a steering model (+ its training record + the user's overrides) -> a trusted filter.
+
+:func:`trusted_filter` is the only place that turns a steering model into the settings of
+the Gaussian-mixture EKF that listens to it (docs/design.md §8.13). The benchmark
+(:mod:`benchmarks.protocol.tasks`), the env wrappers (:func:`estimators.wrappers.estimator_wrapper`,
+used by ``hasa-drive``), the offline runner (:func:`estimators.offline.estimate_recording`,
+used by ``hasa-replay``) and the advisor task (:mod:`advisor_tasks.config`) all call it.
+
+The rule, field by field (a field the user names in ``overrides`` is the user's, always):
+
+- ``steering_ratio``: the caller's (model units per measured road-wheel radian).
+- ``steering_residual_std`` (rad, model units): the record's residual level, at least 1e-9;
+  unknown: the base settings' (FilterSettings' 2e-3).
+- ``steering_curvature_limit`` (1/m): the largest road curvature the model was fitted on
+  (its own record, else the training record's) plus
+  :data:`~estimators.settings.STRAIGHT_CURVATURE` (:func:`~estimators.settings.steering_curvature_limit`);
+  unknown: ``math.inf``.
+- ``min_speed`` / ``steering_max_speed`` (m/s): the speeds it was fitted at (its own record,
+  else the training record's) widened by :data:`~estimators.settings.SPEED_MARGIN`, the lower end
+  never below the base settings' ``min_speed`` (:func:`~estimators.settings.steering_speed_limits`).
+- A model that failed its lane-keeping check, or has no ARX form, gives no lane evidence at all:
+  the filter is the no-steering one (:class:`~estimators.baselines.NoSteeringEKF`).
+- ``checks=False`` (the benchmark's unchecked comparison): ``evidence_checks`` off and none of
+  the limits above (curvature limit ``math.inf`` even when the user set one).
+
+Every channel the rule switches off comes with a reason in :attr:`TrustedFilter.reasons`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from estimators.baselines import NoSteeringEKF
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.settings import (
+    SPEED_MARGIN,
+    STRAIGHT_CURVATURE,
+    FilterSettings,
+    steering_curvature_limit,
+    steering_speed_limits,
+)
+from hasa_env.steering.arx import ARXForm
+
+__all__ = ["TrainingRecord", "TrustedFilter", "model_limits", "trusted_filter"]
+
+
+@dataclass(frozen=True)
+class TrainingRecord:
+    """What a caller knows of how a steering model was fitted and checked, beyond what the
+    model keeps itself (its ``training_curvature`` and ``training_speed_range`` come first).
+
+    Attributes:
+        residual_std: the model's one-step residual level (rad, model units) on its training
+            data or on the data filtered; None: unknown (the base settings' level).
+        curvature: the largest ``|road curvature|`` (1/m) of the roads it was fitted on;
+            None: unknown.
+        speed_range: (min, max) speed (m/s) it was fitted at; None: unknown.
+        keeps_lane: the outcome of its lane-keeping check
+            (:func:`hasa_env.drivers.lane_keeping_check`); None: not checked.
+        lane_check: that check's one-line summary (for the reason).
+    """
+
+    residual_std: float | None = None
+    curvature: float | None = None
+    speed_range: tuple[float, float] | None = None
+    keeps_lane: bool | None = None
+    lane_check: str = ""
+
+    @classmethod
+    def from_run(cls, frame: Any, residual_std: float | None = None) -> TrainingRecord:
+        """The record of a training run (a DataFrame with the recording columns): the
+        largest finite ``|road_curvature|`` (1/m) and the finite ``speed`` range (m/s), each
+        None when the run lacks the column or has no finite value."""
+        return cls(
+            residual_std=residual_std,
+            curvature=_finite_max_abs(
+                frame["road_curvature"] if "road_curvature" in frame else None
+            ),
+            speed_range=_finite_range(frame["speed"] if "speed" in frame else None),
+        )
+
+
+def _finite(values: Any) -> np.ndarray:
+    out = np.asarray(values, dtype=np.float64).reshape(-1)
+    return out[np.isfinite(out)]
+
+
+def _finite_max_abs(values: Any) -> float | None:
+    finite = np.abs(_finite(values)) if values is not None else np.empty(0)
+    return float(finite.max()) if finite.size else None
+
+
+def _finite_range(values: Any) -> tuple[float, float] | None:
+    finite = _finite(values) if values is not None else np.empty(0)
+    return (float(finite.min()), float(finite.max())) if finite.size else None
+
+
+@dataclass(frozen=True)
+class TrustedFilter:
+    """The filter :func:`trusted_filter` makes of a steering model.
+
+    Attributes:
+        settings: the filter's :class:`FilterSettings`.
+        arx: the model's ARX form; None: no lane evidence from the steering (no model, no ARX
+            form, or the model failed its lane-keeping check).
+        decision_lag: the model's decision lag (samples; 0 without ``arx``).
+        reasons: one human-readable line per channel the rule switches off or tempers
+            (empty: the steering counts at every speed and on every road).
+    """
+
+    settings: FilterSettings
+    arx: ARXForm | None
+    decision_lag: int
+    reasons: tuple[str, ...] = ()
+
+    def estimator(self, dt: float | None = None) -> GaussianMixtureEKF:
+        """A fresh filter (sample time ``dt`` s; None: the filter's default): the mixture EKF
+        on the model's ARX form, or the no-steering one without it."""
+        kwargs = {} if dt is None else {"dt": dt}
+        if self.arx is None:
+            return NoSteeringEKF(self.settings, **kwargs)
+        return GaussianMixtureEKF(self.arx, self.settings, decision_lag=self.decision_lag, **kwargs)
+
+    def describe(self) -> str:
+        """The reasons in one line."""
+        if self.arx is not None and not self.reasons:
+            return "the steering counts at every speed and on every road"
+        return "; ".join(self.reasons)
+
+
+def model_limits(
+    model: Any, training: TrainingRecord | None = None
+) -> tuple[float, tuple[float, float]]:
+    """(``steering_curvature_limit`` 1/m, (``min_speed``, ``steering_max_speed``) m/s) of a
+    steering model: from its own record of the roads and speeds it was fitted on, else from
+    ``training``'s; ``math.inf`` and ``(0, math.inf)`` when neither says."""
+    training = training or TrainingRecord()
+    curvature = getattr(model, "training_curvature", None)
+    if curvature is None:
+        curvature = training.curvature
+    speeds = getattr(model, "training_speed_range", None)
+    if speeds is None:
+        speeds = training.speed_range
+    return steering_curvature_limit(curvature), steering_speed_limits(speeds)
+
+
+def trusted_filter(
+    model: Any,
+    base: FilterSettings | None = None,
+    *,
+    steering_ratio: float = 1.0,
+    training: TrainingRecord | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    checks: bool | None = None,
+) -> TrustedFilter:
+    """The filter for steering ``model`` (any object with ``arx()``; None: no model) by the
+    rule of this module's docstring.
+
+    Args:
+        base: the settings the rule starts from (e.g. :meth:`FilterSettings.from_env_config`
+            of the env or recording; None: the defaults).
+        steering_ratio: model units per measured road-wheel radian (> 0).
+        training: what the caller knows of the fit and its checks (:class:`TrainingRecord`).
+        overrides: :class:`FilterSettings` fields the user set; each wins over the rule.
+        checks: True / False: force ``evidence_checks`` (False also drops the model's
+            limits and lane-keeping check); None: keep the settings' own.
+
+    Raises:
+        ValueError / TypeError: an override names no field or is out of its range.
+    """
+    training = training or TrainingRecord()
+    overrides = dict(overrides or {})
+    settings = FilterSettings.with_overrides(base, overrides)
+    arx = None if model is None else model.arx()
+    off = _switched_off(model, arx, training, checks)
+    rule: dict[str, Any] = {"steering_ratio": steering_ratio}
+    if training.residual_std is not None:
+        rule["steering_residual_std"] = max(float(training.residual_std), 1e-9)
+    if checks is not None:  # the caller's choice, over the user's
+        rule["evidence_checks"] = checks
+        overrides.pop("evidence_checks", None)
+    if checks is False:  # the unchecked filter: no limits, not even the user's curvature limit
+        rule["steering_curvature_limit"] = math.inf
+        overrides.pop("steering_curvature_limit", None)
+    elif not off:
+        curvature, (low, high) = model_limits(model, training)
+        rule["steering_curvature_limit"] = curvature
+        rule["min_speed"] = max(settings.min_speed, low)
+        rule["steering_max_speed"] = high
+    settings = replace(settings, **{k: v for k, v in rule.items() if k not in overrides})
+    if off:
+        return TrustedFilter(settings, None, 0, off)
+    reasons = _reasons(settings, model, training, overrides, checks)
+    return TrustedFilter(settings, arx, int(getattr(model, "decision_lag", 1)), reasons)
+
+
+def _switched_off(
+    model: Any, arx: ARXForm | None, training: TrainingRecord, checks: bool | None
+) -> tuple[str, ...]:
+    """The reason the steering gives no lane evidence at all (empty: it may)."""
+    if model is None:
+        return ("steering off: no steering model",)
+    if arx is None:
+        return (f"steering off: the model {getattr(model, 'name', '')!r} has no ARX form",)
+    if checks is not False and training.keeps_lane is False:
+        summary = f" ({training.lane_check})" if training.lane_check else ""
+        return (
+            "steering off: the model does not keep the car in its lane when it steers itself"
+            + summary,
+        )
+    return ()
+
+
+def _reasons(
+    settings: FilterSettings,
+    model: Any,
+    training: TrainingRecord,
+    overrides: Mapping[str, Any],
+    checks: bool | None,
+) -> tuple[str, ...]:
+    """One line per limit the settings put on the steering channel, and why."""
+    if checks is False:
+        return ("no trust rules: the evidence checks and the model's limits are off",)
+    user = "set by the user"
+    reasons = []
+    limit = settings.steering_curvature_limit
+    if math.isfinite(limit):
+        why = f"{user} (steering_curvature_limit)"
+        if "steering_curvature_limit" not in overrides:
+            roads = limit - STRAIGHT_CURVATURE
+            why = f"beyond the roads it was fitted on (|curvature| up to {roads:.3g} 1/m)"
+        reasons.append(f"steering off where the road ahead curves more than {limit:.3g} 1/m: {why}")
+    speeds = getattr(model, "training_speed_range", None) or training.speed_range
+    fitted = (
+        f"outside the training speeds {speeds[0]:.1f}-{speeds[1]:.1f} m/s +- {SPEED_MARGIN:g}"
+        if speeds is not None
+        else "set in the filter settings"
+    )
+    if settings.min_speed > FilterSettings.min_speed:
+        why = f"{user} (min_speed)" if "min_speed" in overrides else fitted
+        reasons.append(f"steering off below {settings.min_speed:.1f} m/s: {why}")
+    if math.isfinite(settings.steering_max_speed):
+        why = f"{user} (steering_max_speed)" if "steering_max_speed" in overrides else fitted
+        reasons.append(f"steering off above {settings.steering_max_speed:.1f} m/s: {why}")
+    return tuple(reasons)

@@ -1,0 +1,207 @@
+"""One rule turns a steering model into a trusted filter (estimators.trust), for every caller."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+
+from estimators.baselines import NoSteeringEKF
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.settings import STRAIGHT_CURVATURE, FilterSettings
+from estimators.trust import TrainingRecord, trusted_filter
+from hasa_env.steering import GeneralizedModel
+
+SPEEDS = (15.2, 16.1)
+"""The training speeds (m/s) given to the test model: limits 14.2 and 17.1 m/s."""
+
+
+def _model() -> GeneralizedModel:
+    model = GeneralizedModel.paper()  # fitted on a straight road (its own record)
+    model.training_speed_range = SPEEDS
+    return model
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A 50-step recording of the default env (its config: the default sensor noise)."""
+    from hasa_env.recording import RecordingWrapper, load_recording
+
+    directory = tmp_path_factory.mktemp("rec")
+    env = RecordingWrapper(
+        gym.make("hasa_env/LaneKeeping-v0", config={"time_limit": 0.5}), directory
+    )
+    env.reset(seed=3)
+    for _ in range(50):
+        env.step(np.zeros(2, dtype=np.float32))
+    env.close()
+    return load_recording(env.path)
+
+
+def _captured_runs(monkeypatch) -> list:
+    """Patch the offline runner to keep every estimator it is given."""
+    import estimators.offline as offline
+
+    seen: list = []
+    original = offline.run_estimator
+
+    def run(estimator, *args, **kwargs):
+        seen.append(estimator)
+        return original(estimator, *args, **kwargs)
+
+    monkeypatch.setattr(offline, "run_estimator", run)
+    return seen
+
+
+def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording, monkeypatch):
+    from advisor_tasks.config import estimator_factory, split_config
+    from benchmarks.protocol.models import FittedModel
+    from benchmarks.protocol.tasks import model_estimator
+    from benchmarks.recordings import estimate_recordings, prepare_model
+    from estimators.offline import estimate_recording
+    from estimators.wrappers import estimator_wrapper
+    from hasa_cli.inputs import estimator_for
+    from hasa_env.envs.lane_keeping import LaneKeepingEnv
+
+    model = _model()
+    path = tmp_path / "model.json"
+    model.save(path)
+    env = LaneKeepingEnv()
+    level = FilterSettings.steering_residual_std  # what a caller without data uses
+    seen = _captured_runs(monkeypatch)
+    estimate_recording(recording, model, residual_std=level)
+    estimate_recordings(prepare_model(str(path), [recording]), [recording])
+    _, own = split_config(
+        {"estimator": {"steering_model": str(path), "lane_check": False, "outlier_gate": True}}
+    )
+    lines: list[str] = []
+    filters = {
+        "estimators.wrappers": estimator_wrapper(model)(env).estimator,
+        "hasa-drive": estimator_for(str(path), env, lane_check=False, log=lines.append)(
+            env
+        ).estimator,
+        "advisor task": estimator_factory(own, env.unwrapped.config)(),
+        "estimators.offline": seen[0],
+        "hasa-replay": seen[1],
+        "hasa-bench": model_estimator(
+            FittedModel("m", "user", model, level, TrainingRecord(keeps_lane=True)),
+            FilterSettings.from_env_config(recording.config),
+        ),
+    }
+    expected = trusted_filter(model, FilterSettings.from_env_config(env.unwrapped.config))
+    assert expected.settings.steering_max_speed == pytest.approx(SPEEDS[1] + 1.0)
+    assert expected.settings.min_speed == pytest.approx(SPEEDS[0] - 1.0)
+    assert expected.settings.steering_curvature_limit == STRAIGHT_CURVATURE
+    # hasa-replay measures the residual level on the recording itself: all else is the same
+    replay_level = filters["hasa-replay"].settings.steering_residual_std
+    assert 0 < replay_level != level
+    for caller, ekf in filters.items():
+        assert type(ekf) is GaussianMixtureEKF, caller
+        settings = ekf.settings
+        if caller == "hasa-replay":
+            settings = dataclasses.replace(settings, steering_residual_std=level)
+        assert settings == expected.settings, caller
+        assert ekf.decision_lag == model.decision_lag, caller
+        assert ekf.steering_model == model.arx(), caller
+    assert lines == [f"hasa-drive: --estimator {path}: {expected.describe()}"]
+
+
+def test_the_reasons_say_what_is_off_and_why() -> None:
+    trusted = trusted_filter(_model())
+    speeds = "outside the training speeds 15.2-16.1 m/s +- 1"
+    assert trusted.reasons == (
+        "steering off where the road ahead curves more than 0.0002 1/m: beyond the roads it "
+        "was fitted on (|curvature| up to 0 1/m)",
+        f"steering off below 14.2 m/s: {speeds}",
+        f"steering off above 17.1 m/s: {speeds}",
+    )
+    assert trusted.describe() == "; ".join(trusted.reasons)
+    model = GeneralizedModel.paper()
+    model.training_curvature = None  # a model that does not say where it was fitted
+    unknown = trusted_filter(model)
+    assert unknown.reasons == () and unknown.settings == FilterSettings()
+    assert unknown.describe() == "the steering counts at every speed and on every road"
+
+
+def test_the_user_overrides_win_field_by_field() -> None:
+    trusted = trusted_filter(
+        _model(),
+        training=TrainingRecord(residual_std=1e-4),
+        overrides={"steering_max_speed": 30.0, "steering_residual_std": 3e-3},
+    )
+    assert trusted.settings.steering_max_speed == 30.0
+    assert trusted.settings.min_speed == pytest.approx(14.2)  # still the rule's
+    assert trusted.settings.steering_residual_std == 3e-3
+    assert (
+        trusted.reasons[-1] == "steering off above 30.0 m/s: set by the user (steering_max_speed)"
+    )
+    assert (
+        trusted_filter(
+            _model(), training=TrainingRecord(residual_std=0.0)
+        ).settings.steering_residual_std
+        == 1e-9
+    )
+    with pytest.raises(ValueError, match="steering_max_speed"):
+        trusted_filter(_model(), overrides={"steering_max_speed": -1.0})
+
+
+def test_a_model_that_cannot_drive_gives_no_lane_evidence_unless_unchecked() -> None:
+    training = TrainingRecord(keeps_lane=False, lane_check="left the road after 15.5 s")
+    trusted = trusted_filter(_model(), training=training)
+    assert trusted.arx is None and isinstance(trusted.estimator(), NoSteeringEKF)
+    assert trusted.reasons == (
+        "steering off: the model does not keep the car in its lane when it steers itself "
+        "(left the road after 15.5 s)",
+    )
+    unchecked = trusted_filter(
+        _model(), training=training, overrides={"steering_curvature_limit": 0.01}, checks=False
+    )
+    assert unchecked.arx is not None and not unchecked.settings.evidence_checks
+    assert unchecked.settings.steering_curvature_limit == math.inf
+    assert unchecked.settings.steering_max_speed == math.inf
+    assert trusted_filter(None).reasons == ("steering off: no steering model",)
+
+
+def test_a_training_run_stands_in_for_what_the_model_does_not_record() -> None:
+    run = pd.DataFrame({"speed": [15.0, 16.0, np.nan], "road_curvature": [0.0, -0.01, np.nan]})
+    record = TrainingRecord.from_run(run)
+    assert record.speed_range == (15.0, 16.0) and record.curvature == 0.01
+    paper = GeneralizedModel.paper()  # keeps its roads (straight), not its speeds
+    settings = trusted_filter(paper, training=record).settings
+    assert settings.steering_curvature_limit == STRAIGHT_CURVATURE  # its own record first
+    assert (settings.min_speed, settings.steering_max_speed) == (14.0, 17.0)
+    assert TrainingRecord.from_run(pd.DataFrame({"x": [1.0]})) == TrainingRecord()
+
+
+def test_hasa_replay_prints_where_the_estimator_does_not_listen(tmp_path, recording, capsys):
+    from hasa_cli.replay import main
+
+    path = tmp_path / "model.json"
+    _model().save(path)
+    argv = [str(recording.path), "--model", str(path), "--estimator", "--no-lane-check"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if "estimator trust:" in ln)
+    assert line.startswith(f"model {path}: estimator trust: steering off ")
+    assert "above 17.1 m/s" in line
+
+
+def test_the_benchmark_describes_each_models_limits() -> None:
+    from benchmarks.protocol.models import FittedModel, describe_trust
+
+    fitted = [
+        FittedModel("m", "user", _model(), 1e-3),
+        FittedModel("road_blind", "baseline", _model(), None),  # no estimator: no reasons
+    ]
+    infos = [{"name": "m"}, {"name": "road_blind"}]
+    describe_trust(fitted, infos, {"min_speed": 5.0})
+    assert infos[0]["steering_trust"] == [
+        *trusted_filter(_model()).reasons[:1],
+        "steering off below 5.0 m/s: set by the user (min_speed)",
+        "steering off above 17.1 m/s: outside the training speeds 15.2-16.1 m/s +- 1",
+    ]
+    assert "steering_trust" not in infos[1]
