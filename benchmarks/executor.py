@@ -7,18 +7,32 @@ on the number of workers; results come back in task order.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import ctypes
+import logging
 import os
+import signal
 import socket
+import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
-__all__ = ["SCHEDULER_TIMEOUT", "SchedulerError", "check_scheduler", "default_workers", "map_tasks"]
+__all__ = [
+    "NO_WORKER_TIMEOUT",
+    "SCHEDULER_TIMEOUT",
+    "ClusterLost",
+    "SchedulerError",
+    "check_scheduler",
+    "default_workers",
+    "map_tasks",
+]
 
 SCHEDULER_TIMEOUT = 6.0
 """Seconds :func:`check_scheduler` waits, in all, for a Dask scheduler to answer."""
 
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 _SCHEMES = ("tcp", "tls", "ws", "wss", "inproc", "ucx")
 
 
@@ -124,6 +138,21 @@ def check_scheduler(address: str, timeout: float = SCHEDULER_TIMEOUT) -> str:
 
 T = TypeVar("T")
 
+NO_WORKER_TIMEOUT = 60.0
+"""Seconds :func:`map_tasks` waits on a Dask cluster without a worker before it gives up."""
+HEARTBEAT = 1.0
+"""Seconds between the checks of a Dask cluster while a task is awaited."""
+
+
+class ClusterLost(SchedulerError):
+    """The Dask cluster went away during :func:`map_tasks`: its scheduler (``kind ==
+    "lost"``) or every worker for longer than the timeout (``"no_workers"``). :attr:`done`
+    maps the index of every task that had finished to its result."""
+
+    def __init__(self, kind: str, message: str, done: Mapping[int, Any]) -> None:
+        super().__init__(kind, message)
+        self.done = dict(done)
+
 
 def default_workers() -> int:
     """Worker processes used by default: the CPUs this process may use."""
@@ -139,6 +168,7 @@ def map_tasks(
     workers: int | None = None,
     scheduler: str | None = None,
     progress: Callable[[int], None] | None = None,
+    no_worker_timeout: float = NO_WORKER_TIMEOUT,
 ) -> list[T]:
     """``[func(t) for t in tasks]``, in parallel, in task order.
 
@@ -151,12 +181,18 @@ def map_tasks(
             ``distributed.Client``/``LocalCluster``-like object with a
             ``scheduler_address``; tasks then run on that cluster.
         progress: called with the number of finished tasks after each one.
+        no_worker_timeout: on a Dask cluster, give up (:class:`ClusterLost`) when it has had
+            no worker for this many seconds (all killed: it would wait for ever).
+
+    Raises:
+        ClusterLost: the Dask scheduler went away, or the cluster had no worker for
+            ``no_worker_timeout`` s; the finished tasks' results are in its ``done``.
     """
     tasks = list(tasks)
     if not tasks:
         return []
     if scheduler is not None:
-        return _map_dask(func, tasks, scheduler, progress)
+        return _map_dask(func, tasks, scheduler, progress, no_worker_timeout)
     n = default_workers() if workers is None else int(workers)
     if n < 1:
         raise ValueError(f"workers must be >= 1, got {workers!r}")
@@ -167,17 +203,61 @@ def map_tasks(
             if progress:
                 progress(i)
         return out
-    with ProcessPoolExecutor(max_workers=min(n, len(tasks))) as pool:
+    pool = ProcessPoolExecutor(
+        max_workers=min(n, len(tasks)), initializer=_init_worker, initargs=(os.getpid(),)
+    )
+    try:
         futures = [pool.submit(func, task) for task in tasks]
         results = []
         for i, fut in enumerate(futures, start=1):
             results.append(fut.result())
             if progress:
                 progress(i)
-        return results
+    except BaseException:  # a task failed, Ctrl-C, SIGTERM: no worker may outlive this call
+        _terminate_pool(pool)
+        raise
+    pool.shutdown()
+    return results
 
 
-def _map_dask(func: Callable[[Any], T], tasks: list[Any], scheduler: Any, progress: Any) -> list[T]:
+def _init_worker(parent: int) -> None:
+    """A pool worker: the default action for SIGTERM and SIGHUP (it must not inherit the
+    parent's handlers, which raise in Python and would let a task's loop catch them), and on
+    Linux ended with its parent even if that is killed with SIGKILL (``PR_SET_PDEATHSIG``)."""
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+        if os.getppid() != parent:  # the parent is gone already
+            os._exit(1)
+
+
+def _terminate_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a process pool now: pending tasks cancelled, running workers terminated
+    (SIGTERM, then SIGKILL after 2 s) and reaped."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        with contextlib.suppress(OSError, ValueError):
+            process.terminate()
+    deadline = time.monotonic() + 2.0
+    for process in processes:
+        with contextlib.suppress(OSError, ValueError, AssertionError):
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+                process.join(1.0)
+
+
+def _map_dask(
+    func: Callable[[Any], T],
+    tasks: list[Any],
+    scheduler: Any,
+    progress: Any,
+    no_worker_timeout: float,
+) -> list[T]:
     try:
         from distributed import Client  # optional extra 'dask'
     except ImportError as exc:  # pragma: no cover - depends on the install
@@ -187,9 +267,68 @@ def _map_dask(func: Callable[[Any], T], tasks: list[Any], scheduler: Any, progre
     address = check_scheduler(getattr(scheduler, "scheduler_address", scheduler))
     with Client(address, set_as_default=False, timeout=f"{SCHEDULER_TIMEOUT:g}s") as client:
         futures = client.map(func, tasks, pure=False)
-        results = []
-        for i, fut in enumerate(futures, start=1):
-            results.append(fut.result())
+        try:
+            done = _gather_dask(client, futures, address, no_worker_timeout, progress)
+        except ClusterLost:
+            # the client's reconnection attempts, cancelled by close(), log a traceback
+            logger = logging.getLogger("distributed.client")
+            level, logger.level = logger.level, logging.CRITICAL + 1
+            try:
+                client.close(timeout=2)
+            finally:
+                logger.setLevel(level)
+            raise
+        return [done[i] for i in range(len(tasks))]
+
+
+def _gather_dask(
+    client: Any, futures: list[Any], address: str, no_worker_timeout: float, progress: Any
+) -> dict[int, Any]:
+    """Each future's result by task index, fetched as soon as it finishes (so a worker lost
+    later costs nothing finished), waiting in heartbeats of :data:`HEARTBEAT` s. A task's own
+    exception propagates; a lost scheduler, or a cluster without a worker for
+    ``no_worker_timeout`` s, raises :class:`ClusterLost` with the results so far."""
+    from distributed import wait  # optional extra 'dask'
+
+    pending = {fut: i for i, fut in enumerate(futures)}
+    done: dict[int, Any] = {}
+    workerless_since: float | None = None
+
+    def lost(why: str) -> ClusterLost:
+        return ClusterLost(
+            "lost",
+            f"the Dask scheduler at {address} went away ({why}) after {len(done)} of "
+            f"{len(futures)} tasks",
+            done,
+        )
+
+    while pending:
+        try:
+            with client.as_current():
+                finished = wait(list(pending), HEARTBEAT, return_when="FIRST_COMPLETED").done
+        except TimeoutError:
+            finished = set()
+        except Exception as exc:  # noqa: BLE001 - cancelled futures: the scheduler is gone
+            raise lost(type(exc).__name__) from None
+        for fut in finished:
+            if fut.status == "cancelled":
+                raise lost("its tasks were cancelled")
+            done[pending.pop(fut)] = fut.result()  # a task's own error propagates
             if progress:
-                progress(i)
-        return results
+                progress(len(done))
+        if finished:
+            continue
+        try:
+            workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
+        except Exception as exc:  # noqa: BLE001 - the scheduler's connection, in any way
+            raise lost(type(exc).__name__) from None
+        now = time.monotonic()
+        workerless_since = None if workers else (workerless_since or now)
+        if workerless_since is not None and now - workerless_since >= no_worker_timeout:
+            raise ClusterLost(
+                "no_workers",
+                f"the Dask cluster at {address} has had no worker for {no_worker_timeout:g} s "
+                f"({len(done)} of {len(futures)} tasks finished); start workers and run again",
+                done,
+            )
+    return done

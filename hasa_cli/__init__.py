@@ -15,17 +15,23 @@ code    meaning
 1       partial: some inputs failed (each named on stderr), the rest done
 2       usage or input error (nothing done)
 3       environment: something the machine lacks (no screen, a missing
-        optional package, an unreachable Dask scheduler, ...)
+        optional package, an unreachable or lost Dask scheduler, a full
+        disk, ...)
+130     Ctrl-C; 143 / 129: SIGTERM / SIGHUP under :func:`stop_on_signals`
 ======  ==============================================================
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import functools
 import os
+import signal
 import sys
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 
 from hasa_env import __version__
 
@@ -35,9 +41,13 @@ __all__ = [
     "EXIT_OK",
     "EXIT_PARTIAL",
     "EXIT_USAGE",
+    "Stopped",
     "add_version",
     "console_script",
     "error",
+    "os_error_behind",
+    "report_write_failure",
+    "stop_on_signals",
     "warn",
 ]
 
@@ -59,6 +69,72 @@ def warn(prog: str, message: str) -> None:
     print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
 
 
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+"""Write errors that mean "no space left": the disk (or the quota, or the file-size limit)."""
+
+
+def os_error_behind(exc: BaseException) -> OSError | None:
+    """The operating-system error behind ``exc``: ``exc`` itself if it is an ``OSError`` with
+    an errno, else the first such one in its ``__cause__`` / ``__context__`` chain (e.g. a
+    ``RecordingError`` raised because a write failed); None if there is none."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, OSError) and current.errno is not None:
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
+
+
+def report_write_failure(prog: str, exc: BaseException, output: object, kept: str) -> int | None:
+    """One error line for a write into ``output`` that failed, and its exit status.
+
+    ``kept`` says what is on disk (e.g. "2 complete run(s) are kept"). Returns
+    :data:`EXIT_ENVIRONMENT` for a full disk (no space, quota, file-size limit),
+    :data:`EXIT_PARTIAL` for any other write error, None if no ``OSError`` is behind
+    ``exc`` (not a write failure: the caller re-raises it).
+    """
+    cause = os_error_behind(exc)
+    if cause is None:
+        return None
+    reason = cause.strerror or str(cause)
+    full = cause.errno in DISK_FULL_ERRNOS
+    where = f" ({cause.filename})" if cause.filename else ""
+    error(prog, f"cannot write to {output}: {reason}{where}; {kept}")
+    return EXIT_ENVIRONMENT if full else EXIT_PARTIAL
+
+
+class Stopped(BaseException):
+    """SIGTERM or SIGHUP arrived while :func:`stop_on_signals` was in force."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_stopped(signum: int, frame: object) -> None:
+    raise Stopped(signum)
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """While inside, SIGTERM and SIGHUP raise :class:`Stopped` in the main thread, so the
+    program unwinds (``finally`` blocks run, worker pools are terminated) and
+    :func:`console_script` ends it with ``prog: error: stopped by SIGTERM`` and 128 + the
+    signal's number (143, 129). The previous handlers come back on leaving."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    names = [n for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    previous = {n: signal.signal(getattr(signal, n), _raise_stopped) for n in names}
+    try:
+        yield
+    finally:
+        for name, handler in previous.items():
+            signal.signal(getattr(signal, name), handler)
+
+
 def add_version(parser: argparse.ArgumentParser) -> None:
     """Add ``--version`` (the installed hasa-env version) to a program's parser."""
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -71,7 +147,8 @@ def console_script(
 
     Ctrl-C prints ``prog: error: interrupted`` and returns :data:`EXIT_INTERRUPTED`
     (what has been written stays written: every writer in hasa_env flushes as
-    it goes); a closed stdout (``hasa-rec info ... | head``) ends the program
+    it goes), SIGTERM / SIGHUP under :func:`stop_on_signals` likewise with 128 + the
+    signal's number; a closed stdout (``hasa-rec info ... | head``) ends the program
     without a traceback. Everything else a user can cause is handled inside
     ``main``; an exception that reaches here is a bug and keeps its traceback.
     """
@@ -84,6 +161,10 @@ def console_script(
             except KeyboardInterrupt:
                 error(prog, "interrupted")
                 return EXIT_INTERRUPTED
+            except Stopped as stop:
+                name = signal.Signals(stop.signum).name
+                error(prog, f"stopped by {name} (what was written so far stays written)")
+                return 128 + stop.signum
             except BrokenPipeError:
                 # stdout was closed by the reader; silence the flush at exit
                 devnull = os.open(os.devnull, os.O_WRONLY)

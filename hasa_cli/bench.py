@@ -33,13 +33,13 @@ import math
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
-from benchmarks.executor import SchedulerError, check_scheduler
+from benchmarks.executor import NO_WORKER_TIMEOUT, ClusterLost, SchedulerError, check_scheduler
 from benchmarks.output import output_problem, write_result_folder
 from benchmarks.perf import (
     BENCHMARKS,
@@ -60,9 +60,11 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    stop_on_signals,
     warn,
 )
 from hasa_env.scenarios import SCENARIOS
+from hasa_env.sim.config import ConfigError, make_config
 
 __all__ = ["main", "build_parser"]
 
@@ -103,7 +105,11 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         help="runs of the illustrative driver 'Ill', incl. the training run (default: runs + 4)",
     )
     data.add_argument(
-        "--duration", type=float, default=30.0, metavar="S", help="run length in s (30)"
+        "--duration",
+        type=_config_value("time_limit"),
+        default=30.0,
+        metavar="S",
+        help="run length in s (30)",
     )
     data.add_argument(
         "--track", choices=("straight", "curved"), default="straight", help="main track"
@@ -144,11 +150,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         help="also run every model's estimator without the evidence checks and the lane-keeping "
         "check ('<model> (no checks)')",
     )
-    noise = parser.add_argument_group("sensor noise (std; default: the env's)")
-    noise.add_argument("--speed-noise", type=float, metavar="M/S", help="speedometer (0.05)")
-    noise.add_argument("--camera-noise", type=float, metavar="M", help="camera offset (0.05)")
-    noise.add_argument("--imu-noise", type=float, metavar="M/S2", help="IMU (0.05)")
-    noise.add_argument("--steering-noise", type=float, metavar="RAD", help="steering (1e-4)")
+    _add_noise_options(parser)
     parser.add_argument(
         "--model",
         action="append",
@@ -158,6 +160,20 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "subclass, fitted on the training run like the built-ins) or a saved model file "
         "(scored with its own parameters); repeatable",
     )
+
+
+def _add_noise_options(parser: argparse.ArgumentParser) -> None:
+    """The sensor-noise options, each range-checked by the env config's validator."""
+    noise = parser.add_argument_group("sensor noise (std; default: the env's)")
+    for name, metavar, default in (
+        ("speed", "M/S", "speedometer (0.05)"),
+        ("camera", "M", "camera offset (0.05)"),
+        ("imu", "M/S2", "IMU (0.05)"),
+        ("steering", "RAD", "steering (1e-4)"),
+    ):
+        noise.add_argument(
+            f"--{name}-noise", type=_config_value(f"noise.{name}"), metavar=metavar, help=default
+        )
 
 
 def _add_recording_options(parser: argparse.ArgumentParser) -> None:
@@ -215,6 +231,14 @@ def _add_execution_options(parser: argparse.ArgumentParser) -> None:
         "workers need hasa-env and the modules of your models)",
     )
     run.add_argument(
+        "--worker-timeout",
+        type=_positive_seconds,
+        default=NO_WORKER_TIMEOUT,
+        metavar="S",
+        help="with --scheduler: give up (exit 3) when the cluster has had no worker for this "
+        f"long (default {NO_WORKER_TIMEOUT:g} s); what finished is reported",
+    )
+    run.add_argument(
         "--batch-size",
         type=int,
         default=48,
@@ -250,6 +274,36 @@ def _seconds(text: str) -> float:
         value = math.nan
     if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(f"expected a duration in s >= 0, got {text!r}")
+    return value
+
+
+def _config_value(key: str) -> Callable[[str], float]:
+    """An argparse type: a number the env config accepts at the dotted ``key`` (e.g.
+    ``noise.camera``), its range checked by the config's own validator
+    (:func:`hasa_env.make_config`), so a bad value is a usage error naming the option and the
+    allowed range before anything runs."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        update: Any = value
+        for part in reversed(key.split(".")):
+            update = {part: update}
+        try:
+            make_config(update)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+
+    return parse
+
+
+def _positive_seconds(text: str) -> float:
+    value = _seconds(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a duration in s > 0, got {text!r}")
     return value
 
 
@@ -473,11 +527,19 @@ def _run_scenario(
             workers=args.workers,
             scheduler=scheduler,
             progress=progress,
+            no_worker_timeout=args.worker_timeout,
         )
     except BenchmarkError as exc:
         progress.close()
         error(PROG, str(exc))
         return EXIT_USAGE, None
+    except ClusterLost as exc:  # the scheduler or every worker went away mid-run
+        progress.close()
+        error(PROG, f"{exc}; nothing was written")
+        return EXIT_ENVIRONMENT, None
+    except BaseException:  # Ctrl-C, SIGTERM: end the progress bar's line before the message
+        progress.close()
+        raise
     progress("writing results, tables and figures", 0, 0)
     try:
         written = write_result_folder(result, out, figures=not args.no_plots)
@@ -541,7 +603,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if user_models and os.getcwd() not in sys.path:
         # like other tools that import user code by path: modules in the working directory
         sys.path.insert(0, os.getcwd())
-    return _run_protocol(args, user_models)
+    with stop_on_signals():  # SIGTERM / SIGHUP: the worker pool is terminated, exit 143 / 129
+        return _run_protocol(args, user_models)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -41,7 +41,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from hasa_cli import EXIT_ENVIRONMENT, EXIT_USAGE, add_version, console_script, error
+from hasa_cli import (
+    EXIT_ENVIRONMENT,
+    EXIT_USAGE,
+    add_version,
+    console_script,
+    error,
+    report_write_failure,
+)
 from hasa_cli.inputs import estimator_for as _estimator
 from hasa_cli.inputs import joystick_profiles as _joystick_profiles
 from hasa_cli.inputs import start_autocentre as _start_autocentre
@@ -59,6 +66,7 @@ from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.recording import RecordingError
 from hasa_env.scenarios import scenario_names
 from hasa_env.session import (
     DriveSession,
@@ -178,6 +186,8 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         if args.autocentre is not None:
             autocentre = _start_autocentre(inputs, args.autocentre, log)
         results = session.run()
+    except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
+        return _write_failed(exc, session, settings)
     finally:
         signal.signal(signal.SIGTERM, previous)
         if autocentre is not None:
@@ -187,6 +197,16 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
         pg.display.quit()
     log(f"hasa-drive: {len(results)} run(s) recorded in {settings.directory}")
     return 0
+
+
+def _write_failed(exc: Exception, session: DriveSession, settings: DriveSettings) -> int:
+    """One line for a drive that could not write (e.g. a full disk) and its exit status;
+    re-raises ``exc`` if no operating-system error is behind it (a bug)."""
+    kept = f"what was written before is kept ({len(session.results)} finished run(s))"
+    status = report_write_failure("hasa-drive", exc, settings.directory, kept)
+    if status is None:
+        raise exc
+    return status
 
 
 def _drive_setup(
@@ -310,6 +330,8 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     session = DriveSession(settings, inputs, realtime=False, hook=hook, metadata=metadata, log=log)
     try:
         results = session.run()
+    except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
+        return _write_failed(exc, session, settings)
     finally:
         session.close()
         inputs.close()

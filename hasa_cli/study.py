@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from hasa_cli import EXIT_ENVIRONMENT, EXIT_PARTIAL
+from hasa_cli import EXIT_ENVIRONMENT, EXIT_PARTIAL, error, report_write_failure
 from hasa_cli.inputs import estimator_for, joystick_profiles, start_autocentre
 from hasa_env.devices.calibration import (
     CalibrationError,
@@ -45,6 +45,7 @@ from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
 from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.recording import RecordingError
 from hasa_env.scenarios import scenario_spec
 from hasa_env.session import (
     DriveSession,
@@ -370,7 +371,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
         setup = _setup(args)
     except (StudyError, SessionError, ValueError, ConfigError, ImportError, OSError) as exc:
-        print(f"{PROG}: {exc}", file=sys.stderr)
+        error(PROG, str(exc))
         return 2
     except _Exit as exit_:
         return exit_.status
@@ -387,7 +388,7 @@ def run(args: argparse.Namespace) -> int:
     except _Exit as exit_:
         return exit_.status
     except (StudyError, SessionError, ValueError, OSError) as exc:
-        print(f"{PROG}: {exc}", file=sys.stderr)
+        error(PROG, str(exc))
         return 2
     try:
         inputs = InputManager(setup.keyboard, who.profiles, use_joystick=not args.keyboard_only,
@@ -410,7 +411,7 @@ def run(args: argparse.Namespace) -> int:
             fsync=args.fsync,
         )
     except (StudyError, SessionError, ValueError, OSError) as exc:
-        print(f"{PROG}: {exc}", file=sys.stderr)
+        error(PROG, str(exc))
         if who.wheel is not None:
             who.wheel.detach()
         return 2
@@ -435,8 +436,18 @@ def _drive_session(
         outcome = session.run()
     except (StudyError, SessionError) as exc:
         status.close()
-        print(f"{PROG}: {exc}", file=sys.stderr)
+        error(PROG, str(exc))
         return 2
+    except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
+        status.close()
+        kept = (
+            "every completed run and the session file as last written are kept (the next start "
+            "resumes)"
+        )
+        code = report_write_failure(PROG, exc, session.directory, kept)
+        if code is None:
+            raise
+        return code
     finally:
         signal.signal(signal.SIGTERM, previous)
         status.close()

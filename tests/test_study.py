@@ -28,6 +28,7 @@ from hasa_env.session import (
     StudySession,
     VirtualWheelDriver,
 )
+from hasa_env.session.session_file import SessionLock
 from hasa_env.session.study import participant_slot, williams_square
 
 PAPER = Path(__file__).resolve().parents[1] / "studies" / "paper.toml"
@@ -300,16 +301,19 @@ def test_session_file_recovery_and_lock(tmp_path):
     again.doc["study"]["spec"]["runs"]["repeat_aborted"] = False
     assert [r.position for r in again.remaining()] == [3, 4, 5]  # or go on after it
     assert b["position"] == 2
-    # the lock: a live process holds it, a dead one's is taken over
-    lock = again.lock_path
-    lock.write_text("1 otherhost\n")  # pid 1 is alive
-    with pytest.raises(SessionError, match=r"another program \(process 1\) is running"):
+    # the lock (flock): a holder refuses a second one; released, it can be taken again
+    holder = SessionLock(record.path.parent)
+    holder.acquire()
+    assert holder.path.read_text().split()[0] == str(os.getpid())
+    with pytest.raises(SessionError, match=rf"another program \(process {os.getpid()}\) is run"):
         again.acquire()
-    lock.write_text(f"{2**22 + 12345} gone\n")
+    holder.release()
+    assert not holder.path.exists()
+    holder.path.write_text("1 otherhost\n")  # a file left behind locks nothing
     again.acquire()
-    assert lock.read_text().split()[0] == str(os.getpid())
+    assert again.lock_path.read_text().split()[0] == str(os.getpid())
     again.release()
-    assert not lock.exists()
+    assert not again.lock_path.exists()
     record.path.write_text('{"format": "hasa_env.study_session", "format_version": 2}')
     with pytest.raises(SessionError, match="field 'format_version' = 2 is not allowed"):
         SessionFile.open(record.path)

@@ -10,7 +10,7 @@ from typing import Any
 from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
 from hasa_env.scenarios import SCENARIOS
-from hasa_env.sim.config import deep_merge
+from hasa_env.sim.config import ConfigError, deep_merge, make_config
 from hasa_env.validation import ABSENT, Field, schema, validate_fields
 
 __all__ = [
@@ -246,6 +246,11 @@ class ProtocolConfig:
             FilterSettings(**self.filter_settings)
         except (TypeError, ValueError) as exc:
             raise BenchmarkError(f"protocol setting 'filter_settings': {exc}") from None
+        if self.recordings is None:  # the env's own ranges (noise, run length), named
+            try:
+                make_config(self.env_config())
+            except ConfigError as exc:
+                raise BenchmarkError(f"protocol setting: {exc}") from None
         if self.recordings is None and self.training_run >= self.illustrative_runs:
             raise BenchmarkError(
                 f"protocol setting 'training_run' = {self.training_run} needs at least "

@@ -79,7 +79,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from benchmarks.executor import default_workers, map_tasks
+from benchmarks.executor import NO_WORKER_TIMEOUT, ClusterLost, default_workers, map_tasks
 from benchmarks.protocol.aggregate import (
     aggregate_estimation,
     aggregate_steering,
@@ -138,6 +138,7 @@ def run_protocol(
     workers: int | None = None,
     scheduler: Any = None,
     progress: Progress | None = None,
+    no_worker_timeout: float = NO_WORKER_TIMEOUT,
 ) -> BenchmarkResult:
     """Run the benchmark protocol (see the module docstring).
 
@@ -151,6 +152,8 @@ def run_protocol(
             (its workers must be able to import the user models).
         progress: called as ``progress(phase, done, total)``; phases
             "runs" (done/total runs) and messages with total 0.
+        no_worker_timeout: on a Dask cluster, give up when it has had no worker
+            for this many seconds (:func:`benchmarks.executor.map_tasks`).
 
     Returns:
         A :class:`BenchmarkResult`; failed user models are in ``errors``.
@@ -158,6 +161,7 @@ def run_protocol(
     Raises:
         BenchmarkError: the configuration or the data do not allow the
             protocol (nothing measured).
+        ClusterLost: the Dask scheduler, or every worker, went away mid-run.
     """
     config = config or ProtocolConfig()
     say = progress or (lambda phase, done, total: None)
@@ -179,7 +183,9 @@ def run_protocol(
     ]
     tasks = [task for i, fit in enumerate(fits) for task in chunk_tasks(config, fit, i == 0)]
     # 3. every seed's tasks at once
-    done = schedule(tasks, workers=workers, scheduler=scheduler, say=say)
+    done = schedule(
+        tasks, workers=workers, scheduler=scheduler, say=say, no_worker_timeout=no_worker_timeout
+    )
     # 4. aggregate
     say("aggregating", 0, 0)
     result = aggregate_result(config, user_models, candidates, errors, fits, done)
@@ -340,13 +346,19 @@ class Schedule:
 
 
 def schedule(
-    tasks: Sequence[ChunkTask], *, workers: int | None, scheduler: Any, say: Progress
+    tasks: Sequence[ChunkTask],
+    *,
+    workers: int | None,
+    scheduler: Any,
+    say: Progress,
+    no_worker_timeout: float = NO_WORKER_TIMEOUT,
 ) -> Schedule:
     """Run every task (:func:`run_chunk`) on local processes or the Dask ``scheduler``,
     reporting the runs done to ``say``.
 
     Raises:
         BenchmarkError: the Dask scheduler fails (an OSError or a timeout on it).
+        ClusterLost: the scheduler, or every worker, went away mid-run.
     """
     n_workers = default_workers() if workers is None else max(1, int(workers))
     total_runs = sum(len(t.runs) for t in tasks)
@@ -359,8 +371,15 @@ def schedule(
     t_tasks = time.perf_counter()
     try:
         results: list[ChunkResult] = map_tasks(
-            run_chunk, list(tasks), workers=workers, scheduler=scheduler, progress=on_task
+            run_chunk,
+            list(tasks),
+            workers=workers,
+            scheduler=scheduler,
+            progress=on_task,
+            no_worker_timeout=no_worker_timeout,
         )
+    except ClusterLost:
+        raise
     except (OSError, TimeoutError) as exc:
         if scheduler is None:
             raise

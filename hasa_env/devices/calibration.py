@@ -59,6 +59,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hasa_env.atomic import write_atomic
 from hasa_env.validation import Field, schema, validate, version
 
 __all__ = [
@@ -546,12 +547,12 @@ def user_calibration_path() -> Path:
 def save_calibration(
     calibration: JoystickCalibration | KeyboardCalibration, path: str | os.PathLike[str]
 ) -> Path:
-    """Validate and write a calibration file atomically (temporary file + ``os.replace``)."""
+    """Validate and write a calibration file atomically (:func:`hasa_env.atomic.write_atomic`:
+    a new randomly named temporary file, never one a symlink could redirect, then
+    ``os.replace``)."""
     data = calibration.to_dict()
     parse_calibration(data, str(path))  # never write a file we would refuse to read
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, target)
+    write_atomic(target, json.dumps(data, indent=2) + "\n")
     return target

@@ -20,19 +20,17 @@ Writing: :mod:`hasa_env.recording.writer`; reading: :mod:`hasa_env.recording.rea
 re-simulating: :mod:`hasa_env.recording.replay`.
 
 Why this module is long: it is the one definition of the files on disk (columns, units, value
-formatting and parsing, the sidecar's schema, atomic writes, safe reads), which the writer,
+formatting and parsing, the sidecar's schema, safe reads; atomic writes are :mod:`hasa_env.atomic`), which the writer,
 the reader, the replay and the Parquet export share through its documented public names.
 """
 
 from __future__ import annotations
 
-import contextlib
 import datetime as _dt
 import json
 import math
 import os
 import re
-import secrets
 import stat
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -239,40 +237,6 @@ def to_json_text(obj: Any) -> str:
     """``obj`` as indented JSON text ending in a newline; numpy values and paths converted,
     NaN and infinities refused (``ValueError``)."""
     return json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
-
-
-def new_temporary_file(path: Path) -> tuple[int, Path]:
-    """A new, randomly named file next to ``path`` (``O_CREAT | O_EXCL``, mode 0o666 & ~umask).
-
-    ``O_EXCL`` never opens an existing file, so a pre-placed file or symlink
-    at a predictable ``<name>.tmp`` is neither followed nor overwritten.
-    """
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
-    for _ in range(100):
-        tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
-        try:
-            return os.open(tmp, flags, 0o666), tmp
-        except FileExistsError:
-            continue
-    raise FileExistsError(f"no free temporary file name next to {path}")
-
-
-def write_atomic(path: Path, text: str, fsync: bool = True) -> None:
-    """Write ``text`` to ``path`` via a new temporary file (:func:`new_temporary_file`) and
-    ``os.replace``; on any failure the temporary file is removed and ``path`` is left as it
-    was."""
-    fd, tmp = new_temporary_file(path)
-    try:
-        with open(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            if fsync:
-                os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
 
 
 MAX_FILE_BYTES = 2**31

@@ -11,7 +11,8 @@ import json
 import os
 from pathlib import Path
 
-from hasa_env.recording.format import Recording, new_temporary_file
+from hasa_env.atomic import new_temporary_file
+from hasa_env.recording.format import Recording
 from hasa_env.recording.reader import (
     PARQUET_METADATA_KEY,
     load_recording,

@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from hasa_env.atomic import write_atomic
 from hasa_env.envs.base import hasa_unwrapped
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording.format import (
@@ -47,7 +48,6 @@ from hasa_env.recording.format import (
     recording_paths,
     to_json_text,
     utc_now_text,
-    write_atomic,
 )
 from hasa_env.sim.config import ConfigError, make_config
 from hasa_env.sim.setup import RECORDING_COLUMNS, recording_row

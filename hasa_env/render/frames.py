@@ -6,6 +6,7 @@ info keys), headless; used by ``hasa-replay --frames/--video``.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -13,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from hasa_env.atomic import write_atomic
 from hasa_env.render import make_renderer, surface_to_array
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.setup import INFO_KEYS, build_setup
@@ -39,6 +41,10 @@ def write_frames(
     weights into the HUD. The video (``.mp4``, ``.gif``, ...; frame rate
     ``100 / every`` for 100 Hz recordings, i.e. real time) needs ``imageio``
     (and ``imageio-ffmpeg`` for mp4); without them it is skipped with a message.
+
+    Each PNG is written to a new randomly named temporary file and moved into
+    place (:func:`hasa_env.atomic.write_atomic`), so a file or symlink already
+    at ``frame_NNNNN.png`` is replaced, never written through.
 
     Returns:
         The PNG files written.
@@ -78,7 +84,10 @@ def write_frames(
             surface = renderer.draw(info, w)
             if out is not None:
                 path = out / f"frame_{row:05d}.png"
-                pygame.image.save(surface, str(path))
+                png = io.BytesIO()
+                pygame.image.save(surface, png, "png")
+                # a new random temporary name + os.replace: never through a pre-placed symlink
+                write_atomic(path, png.getvalue(), fsync=False)
                 written.append(path)
             if writer is not None:
                 writer.append_data(surface_to_array(surface))

@@ -29,6 +29,7 @@ the terminal while the participant's window stays clean
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -40,6 +41,7 @@ import numpy as np
 
 from hasa_env.devices.sources import InputManager, Notice
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
+from hasa_env.recording.format import RecordingError
 from hasa_env.recording.raw_inputs import (
     RAW_INPUT_HEADER,
     RAW_INPUT_UNITS,
@@ -591,12 +593,18 @@ class DriveSession:
                         self._draw(self.info, self.message if self.state != "driving" else None)
                         last_frame_step = self.steps
                 self._tick()
-        finally:
-            try:
+        except BaseException:  # close quietly: report the first error, not its consequences
+            with contextlib.suppress(OSError, RecordingError):
                 recorder.close()
-            finally:
-                if raw is not None:
+            if raw is not None:
+                with contextlib.suppress(OSError):
                     raw.close()
+            raise
+        try:
+            recorder.close()
+        finally:
+            if raw is not None:
+                raw.close()
         if recorder.path is None:
             return None
         if self.state != "quit":

@@ -1,8 +1,8 @@
 """The session file of a study participant: ``<output>/<participant>/session.json``.
 
 ``hasa-drive study`` keeps one JSON document per participant next to their
-recordings. It is rewritten atomically (temporary file, fsync, ``os.replace``,
-fsync of the folder) at every change, so at any moment it holds either the
+recordings. It is rewritten atomically (a new randomly named temporary file, fsync,
+``os.replace``, fsync of the folder: :func:`hasa_env.atomic.write_atomic`) at every change, so at any moment it holds either the
 previous or the new state, never a torn one. It records:
 
 - ``study``: the study's name, file, SHA-256 and the whole validated study;
@@ -23,14 +23,16 @@ SIGKILL, a power cut): :meth:`SessionFile.recover` marks it ``aborted``
 (``interrupted``) and counts the steps its recording kept. The session goes
 on at the next run not completed: with the study's ``repeat_aborted`` the
 aborted run is driven again into a new file (``measured_03_001.csv`` after
-``measured_03_000.csv``); recordings are never overwritten. A lock file
-(``session.lock``, the owner's process id) stops two programs from running
-one session at once; a lock whose process is gone is taken over.
+``measured_03_000.csv``); recordings are never overwritten. A lock on the
+participant's folder (``session.lock``, ``flock``; it holds the owner's
+process id) stops two programs from creating or running one session at once;
+the operating system drops it when its process ends, however it ends.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import platform
@@ -42,6 +44,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from hasa_env.atomic import write_atomic
 from hasa_env.session.study import ScheduledRun, Study
 from hasa_env.validation import ANY_JSON, Field, schema, validate
 
@@ -51,6 +54,7 @@ __all__ = [
     "SESSION_FORMAT_VERSION",
     "SessionError",
     "SessionFile",
+    "SessionLock",
     "find_session_files",
 ]
 
@@ -91,21 +95,6 @@ def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    with contextlib.suppress(OSError):  # not every platform opens directories
-        fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
 def _version() -> str:
     try:
         return version("hasa-env")
@@ -113,14 +102,64 @@ def _version() -> str:
         return "0.0.0+unknown"
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+class SessionLock:
+    """The lock of a participant's folder: ``<folder>/session.lock``, locked with ``flock``.
+
+    Taken before the session file is read or created, so two programs started at once for
+    one participant cannot both create or run the session: the second is refused at once
+    with the first one's process id. The operating system releases the lock when its
+    process ends in any way (even SIGKILL), so a lock is never stale. The file holds the
+    owner's process id, host and start time (for the message) and is removed on release.
+    """
+
+    def __init__(self, directory: str | os.PathLike[str]) -> None:
+        self.path = Path(directory) / LOCK_FILE
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        """Lock the folder (created if missing).
+
+        Raises:
+            SessionError: another process holds the lock (its id named).
+            OSError: the folder or the lock file cannot be created.
+        """
+        if self._fd is not None:
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0)
+        for _ in range(100):
+            fd = os.open(self.path, flags, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                owner = os.read(fd, 200).decode("utf-8", "replace").split()
+                os.close(fd)
+                pid = f"process {owner[0]}" if owner else "starting"
+                raise SessionError(
+                    f"{self.path}: another program ({pid}) is running this participant's "
+                    "session; wait for it to end or stop it first"
+                ) from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.path, follow_symlinks=False))
+            except FileNotFoundError:
+                same = False
+            if same:  # not a file its previous owner removed while we waited to lock it
+                self._fd = fd
+                with contextlib.suppress(OSError):  # a full disk: the lock holds all the same
+                    os.ftruncate(fd, 0)
+                    os.write(fd, f"{os.getpid()} {socket.gethostname()} {_now()}\n".encode())
+                return
+            os.close(fd)
+        raise SessionError(f"{self.path}: cannot take the lock file")
+
+    def release(self) -> None:
+        """Remove the lock file and unlock (no-op if not held)."""
+        fd, self._fd = self._fd, None
+        if fd is None:
+            return
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+        os.close(fd)
 
 
 class SessionFile:
@@ -132,6 +171,7 @@ class SessionFile:
     def __init__(self, path: Path, document: dict[str, Any]) -> None:
         self.path = Path(path)
         self.doc = document
+        self._lock: SessionLock | None = None
 
     # ------------------------------------------------------------ creation
     @classmethod
@@ -208,7 +248,7 @@ class SessionFile:
 
     def save(self) -> None:
         """Write the document to disk atomically."""
-        _write_atomic(self.path, json.dumps(self.doc, indent=2, allow_nan=False) + "\n")
+        write_atomic(self.path, json.dumps(self.doc, indent=2, allow_nan=False) + "\n")
 
     # ------------------------------------------------------------- locking
     @property
@@ -216,39 +256,20 @@ class SessionFile:
         return self.path.with_name(LOCK_FILE)
 
     def acquire(self) -> None:
-        """Take the session's lock file (a stale one, whose process is gone, is taken over).
+        """Take the participant folder's lock (:class:`SessionLock`), held until
+        :meth:`release` or the process ends.
 
         Raises:
-            SessionError: another live process holds it.
+            SessionError: another process holds it.
         """
-        lock = self.lock_path
-        for _ in range(2):
-            try:
-                fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                try:
-                    pid = int(lock.read_text().split()[0])
-                except (OSError, ValueError, IndexError):
-                    pid = -1
-                if pid > 0 and pid != os.getpid() and _pid_alive(pid):
-                    raise SessionError(
-                        f"{lock}: another program (process {pid}) is running this session; "
-                        "stop it first (or delete the lock file if that process is not "
-                        "hasa-drive)"
-                    ) from None
-                with contextlib.suppress(FileNotFoundError):
-                    lock.unlink()
-                continue
-            with os.fdopen(fd, "w") as f:
-                f.write(f"{os.getpid()} {socket.gethostname()} {_now()}\n")
-            return
-        raise SessionError(f"{lock}: cannot take the session's lock file")
+        if self._lock is None:
+            self._lock = SessionLock(self.path.parent)
+        self._lock.acquire()
 
     def release(self) -> None:
-        """Remove the lock file if this process holds it."""
-        with contextlib.suppress(OSError, ValueError, IndexError):
-            if int(self.lock_path.read_text().split()[0]) == os.getpid():
-                self.lock_path.unlink()
+        """Release the lock if this object holds it."""
+        if self._lock is not None:
+            self._lock.release()
 
     # ----------------------------------------------------------- accessors
     @property

@@ -25,6 +25,7 @@ terminal).
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -34,7 +35,7 @@ from typing import Any
 from hasa_env.devices.sources import InputManager
 from hasa_env.recording import load_recording
 from hasa_env.session.loop import DriveSession, RunResult, RunSpec
-from hasa_env.session.session_file import SESSION_FILE, SessionError, SessionFile
+from hasa_env.session.session_file import SESSION_FILE, SessionError, SessionFile, SessionLock
 from hasa_env.session.settings import DriveSettings
 from hasa_env.session.study import ScheduledRun, Study, participant_slot, seed_from_entropy
 
@@ -295,70 +296,77 @@ class StudySession:
             StudyError, SessionError: see :meth:`open`; anything the drive loop
                 raises (the run is then recorded as aborted, ``error``).
         """
-        record, resumed = self.open()
-        record.acquire()
-        results: list[RunResult] = []
+        lock = SessionLock(self.directory)
+        lock.acquire()  # before the session file is read or created: one program at a time
         try:
-            recovered = record.recover(_count_steps)
-            for a in recovered:
-                self.log(
-                    f"hasa-drive: {a['block']} run {a['number']} (attempt {a['attempt']}) was "
-                    f"interrupted after {a['steps']} steps; its recording {a['file']} is kept"
-                )
-            remaining = record.remaining()
-            if not remaining:
-                self.log(f"hasa-drive: the session of {self.participant} is already complete")
-                record.end("complete")
-                return StudyOutcome("already_complete", record, results, resumed)
-            if resumed:
-                first = remaining[0]
-                self.log(
-                    f"hasa-drive: resuming {self.participant} at {first.block} run "
-                    f"{first.number} ({len(remaining)} run(s) to go)"
-                )
-            drive = self._drive_session(remaining[0].track, record)
-            drive.poll_devices()  # devices already plugged in
-            record.begin(drive.input_description(), {"resumed": resumed})
-            previous: ScheduledRun | None = None
-            for run in remaining:
-                self.current = run
-                drive = self._drive_session(run.track, record)
-                info = drive.preview(run.seed, self.study.reset_options(run))
-                for message, state, seconds in self._screen(run, previous, resumed):
-                    if not drive.show(message, state=state, info=info, min_seconds=seconds):
-                        record.end("quit")
-                        return StudyOutcome("quit", record, results, resumed)
-                attempt = record.start_attempt(run, self.inputs.source_name)
-                drive.on_recording = lambda path, a=attempt: record.recording_started(a, path)
-                try:
-                    result = drive.drive(self._spec(run, record, attempt["attempt"]))
-                except BaseException as exc:
+            return self._run_locked()
+        finally:
+            lock.release()
+
+    def _run_locked(self) -> StudyOutcome:
+        record, resumed = self.open()
+        results: list[RunResult] = []
+        recovered = record.recover(_count_steps)
+        for a in recovered:
+            self.log(
+                f"hasa-drive: {a['block']} run {a['number']} (attempt {a['attempt']}) was "
+                f"interrupted after {a['steps']} steps; its recording {a['file']} is kept"
+            )
+        remaining = record.remaining()
+        if not remaining:
+            self.log(f"hasa-drive: the session of {self.participant} is already complete")
+            record.end("complete")
+            return StudyOutcome("already_complete", record, results, resumed)
+        if resumed:
+            first = remaining[0]
+            self.log(
+                f"hasa-drive: resuming {self.participant} at {first.block} run "
+                f"{first.number} ({len(remaining)} run(s) to go)"
+            )
+        drive = self._drive_session(remaining[0].track, record)
+        drive.poll_devices()  # devices already plugged in
+        record.begin(drive.input_description(), {"resumed": resumed})
+        previous: ScheduledRun | None = None
+        for run in remaining:
+            self.current = run
+            drive = self._drive_session(run.track, record)
+            info = drive.preview(run.seed, self.study.reset_options(run))
+            for message, state, seconds in self._screen(run, previous, resumed):
+                if not drive.show(message, state=state, info=info, min_seconds=seconds):
+                    record.end("quit")
+                    return StudyOutcome("quit", record, results, resumed)
+            attempt = record.start_attempt(run, self.inputs.source_name)
+            drive.on_recording = lambda path, a=attempt: record.recording_started(a, path)
+            try:
+                result = drive.drive(self._spec(run, record, attempt["attempt"]))
+            except BaseException as exc:
+                # best effort: on a full disk the session file cannot be written either;
+                # it then still says "started", which the next start marks as aborted
+                with contextlib.suppress(OSError):
                     record.finish_attempt(
                         attempt, "error", drive.steps, note=f"{type(exc).__name__}: {exc}"
                     )
                     record.end("error")
-                    raise
-                if result is None:  # quit in the countdown: nothing was recorded
-                    record.doc["attempts"].remove(attempt)
-                    record.end("quit")
-                    return StudyOutcome("quit", record, results, resumed)
-                note = "stopped by the driver or the experimenter" if (
-                    result.end_reason == "stopped") else None  # fmt: skip
-                record.finish_attempt(attempt, result.end_reason, result.steps, note)
-                results.append(result)
-                self.log(
-                    f"hasa-drive: {run.block} run {run.number}: {result.steps} steps, "
-                    f"{result.end_reason} -> {result.path}"
-                )
-                if drive.state == "quit":
-                    record.end("quit")
-                    return StudyOutcome("quit", record, results, resumed)
-                previous = run
-            record.end("complete")
-            drive.show(self.study.text("end"), state="end")
-            return StudyOutcome("complete", record, results, resumed)
-        finally:
-            record.release()
+                raise
+            if result is None:  # quit in the countdown: nothing was recorded
+                record.doc["attempts"].remove(attempt)
+                record.end("quit")
+                return StudyOutcome("quit", record, results, resumed)
+            note = "stopped by the driver or the experimenter" if (
+                result.end_reason == "stopped") else None  # fmt: skip
+            record.finish_attempt(attempt, result.end_reason, result.steps, note)
+            results.append(result)
+            self.log(
+                f"hasa-drive: {run.block} run {run.number}: {result.steps} steps, "
+                f"{result.end_reason} -> {result.path}"
+            )
+            if drive.state == "quit":
+                record.end("quit")
+                return StudyOutcome("quit", record, results, resumed)
+            previous = run
+        record.end("complete")
+        drive.show(self.study.text("end"), state="end")
+        return StudyOutcome("complete", record, results, resumed)
 
     def close(self) -> None:
         """Close every drive session (their preview envs and renderers)."""
