@@ -102,6 +102,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -221,8 +222,6 @@ def _normal_quantile(probability: float) -> float:
     """The standard-normal quantile of ``probability`` (0 for 0.5 or less: no bound)."""
     if probability <= 0.5:
         return 0.0
-    from statistics import NormalDist
-
     return NormalDist().inv_cdf(probability)
 
 
