@@ -29,15 +29,15 @@ from estimators.base import (
     measurements_from_info,
 )
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
+from estimators.calibration import (
+    expected_calibration_error,
+    lane_calibration_bins,
+    steering_live_share,
+)
 from estimators.filter_matrices import FilterMatrices
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
-from estimators.offline import (
-    EstimationResult,
-    expected_calibration_error,
-    hypotheses_of,
-    run_estimator,
-)
+from estimators.offline import EstimationResult, hypotheses_of, run_estimator
 from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
 from estimators.wrappers import (
@@ -56,6 +56,8 @@ __all__ = [
     "Estimate",
     "EstimationResult",
     "expected_calibration_error",
+    "lane_calibration_bins",
+    "steering_live_share",
     "EstimatorInfoWrapper",
     "EstimatorObservationWrapper",
     "FilterMatrices",

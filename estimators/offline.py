@@ -39,7 +39,6 @@ __all__ = [
     "EstimatorRun",
     "TRUTH_COLUMNS",
     "estimate_recording",
-    "expected_calibration_error",
     "hypotheses_of",
     "recording_filter",
     "run_estimator",
@@ -132,7 +131,7 @@ class EstimationResult:
         err = self.lateral_error()[:, start:]
         return np.sqrt(np.nanmean(err * err, axis=1))
 
-    def _true_component(self) -> np.ndarray:
+    def true_lane_mask(self) -> np.ndarray:
         """(R, C) mask of the hypotheses equal to each run's true bias."""
         bias = self.truth.get("bias")
         if bias is None:
@@ -141,14 +140,14 @@ class EstimationResult:
 
     def true_lane_weight(self) -> np.ndarray:
         """(R, T) total weight of the hypotheses equal to the true bias."""
-        return np.einsum("rtc,rc->rt", self.weights, self._true_component().astype(np.float64))
+        return np.einsum("rtc,rc->rt", self.weights, self.true_lane_mask().astype(np.float64))
 
     def picked_true_lane(self, at: int = -1) -> np.ndarray:
         """(R,) whether the most likely hypothesis at step ``at`` (default: each
         run's last valid step) has the true bias."""
         steps = self.lengths - 1 if at == -1 else np.minimum(at, self.lengths - 1)
         rows = np.arange(self.num_runs)
-        return self._true_component()[rows, self.most_likely[rows, steps]]
+        return self.true_lane_mask()[rows, self.most_likely[rows, steps]]
 
     def final_decision(self) -> np.ndarray:
         """(R,) decision state name at each run's last valid step."""
@@ -161,12 +160,12 @@ class EstimationResult:
         """(R,) runs that end with more than ``threshold`` weight on a single wrong lane."""
         rows = np.arange(self.num_runs)
         final = self.weights[rows, self.lengths - 1]  # (R, C)
-        wrong = np.where(self._true_component(), 0.0, final)
+        wrong = np.where(self.true_lane_mask(), 0.0, final)
         return wrong.max(axis=1) > threshold
 
     def wrong_lane_confident_share(self, threshold: float = 0.95) -> np.ndarray:
         """(R,) share of each run's valid steps with more than ``threshold`` on a wrong lane."""
-        wrong = np.where(self._true_component()[:, None, :], 0.0, self.weights).max(axis=2)
+        wrong = np.where(self.true_lane_mask()[:, None, :], 0.0, self.weights).max(axis=2)
         return ((wrong > threshold) & self.valid).sum(axis=1) / self.lengths
 
     def lateral_nees(self, start: int = 0) -> np.ndarray:
@@ -177,40 +176,6 @@ class EstimationResult:
         var = self.std[:, start:, 1] ** 2
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.nanmean(err * err / var, axis=1)
-
-    def steering_live_share(self, max_scale: float = 2.0) -> np.ndarray:
-        """(R,) share of each run's valid steps at which the steering channel counted as lane
-        evidence at no less than ``1 / max_scale`` of its weight: the channel was used (on,
-        observed, not gated: a finite steering NIS), the run was not in ``model_mismatch``
-        and the evidence scale tau was at most ``max_scale`` (NaN for an estimator that
-        reports no steering channel)."""
-        if self.channel_nis is None or self.low_speed is None:
-            return np.full(self.num_runs, np.nan)
-        scale = np.ones_like(self.valid, dtype=np.float64)
-        if self.evidence_scale is not None:
-            scale = np.where(np.isnan(self.evidence_scale), np.inf, self.evidence_scale)
-        live = self.valid & np.isfinite(self.channel_nis[..., 2]) & (scale <= max_scale)
-        if self.decision is not None:
-            live &= self.decision != 2  # model_mismatch: the weights are frozen
-        return live.sum(axis=1) / np.maximum(self.lengths, 1)
-
-    def lane_calibration_bins(self, n_bins: int = 10) -> np.ndarray:
-        """(R, 3, n_bins) what a reliability diagram of the lane probabilities needs, per run:
-        every (valid step, hypothesis) pair's weight ``w`` goes into the bin
-        ``min(floor(w n_bins), n_bins - 1)`` of equal width on [0, 1]; per bin the number of
-        pairs, the sum of their weights (predicted) and the number whose hypothesis is the true
-        lane (observed). Summed over runs, :func:`expected_calibration_error` reads it."""
-        truth = np.broadcast_to(self._true_component()[:, None, :], self.weights.shape)
-        w = np.clip(self.weights, 0.0, 1.0)
-        index = np.minimum((w * n_bins).astype(np.int64), n_bins - 1)
-        keep = np.broadcast_to(self.valid[:, :, None], w.shape) & np.isfinite(self.weights)
-        out = np.zeros((self.num_runs, 3, n_bins))
-        flat = (np.arange(self.num_runs)[:, None, None] * n_bins + index)[keep]
-        size = self.num_runs * n_bins
-        out[:, 0] = np.bincount(flat, minlength=size).reshape(self.num_runs, n_bins)
-        out[:, 1] = np.bincount(flat, weights=w[keep], minlength=size).reshape(-1, n_bins)
-        out[:, 2] = np.bincount(flat, weights=truth[keep], minlength=size).reshape(-1, n_bins)
-        return out
 
     def mean_channel_nis(self, start: int = 0) -> np.ndarray:
         """(R, 3) mean normalized innovation squared per channel [speed, camera,
@@ -240,22 +205,6 @@ class EstimationResult:
                 data[key] = values[r, :length]
             frames.append(pd.DataFrame(data))
         return frames
-
-
-def expected_calibration_error(bins: np.ndarray) -> float:
-    """Expected calibration error of lane probabilities from summed reliability bins (3, B)
-    (:meth:`EstimationResult.lane_calibration_bins` summed over runs)::
-
-        ECE = sum_b (n_b / N) |predicted_b / n_b - observed_b / n_b|
-            = sum_b |predicted_b - observed_b| / N
-
-    NaN without any pair. 0: the probabilities mean what they say (of the pairs given
-    probability p, a share p was the true lane)."""
-    bins = np.asarray(bins, dtype=np.float64)
-    total = bins[0].sum()
-    if total <= 0:
-        return math.nan
-    return float(np.abs(bins[1] - bins[2]).sum() / total)
 
 
 @runtime_checkable

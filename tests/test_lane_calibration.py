@@ -7,7 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from estimators import EstimationResult, expected_calibration_error
+from estimators import (
+    EstimationResult,
+    expected_calibration_error,
+    lane_calibration_bins,
+    steering_live_share,
+)
 
 
 def _result(weights: np.ndarray, bias: np.ndarray, **extra: np.ndarray) -> EstimationResult:
@@ -30,7 +35,7 @@ def _result(weights: np.ndarray, bias: np.ndarray, **extra: np.ndarray) -> Estim
 def test_bins_count_every_step_and_hypothesis() -> None:
     # run 0: true lane 0 at 0.75 then 0.95; run 1: true lane -1.8 at 0.25 (the wrong one at 0.75)
     weights = np.array([[[0.75, 0.25], [0.95, 0.05]], [[0.75, 0.25], [0.75, 0.25]]])
-    bins = _result(weights, np.array([0.0, -1.8])).lane_calibration_bins(10)
+    bins = lane_calibration_bins(_result(weights, np.array([0.0, -1.8])), 10)
     assert bins.shape == (2, 3, 10)
     assert bins[:, 0].sum() == 8  # 2 runs x 2 steps x 2 hypotheses
     np.testing.assert_array_equal(bins[0, 0, [0, 2, 7, 9]], [1, 1, 1, 1])
@@ -51,10 +56,10 @@ def test_calibrated_probabilities_have_a_small_ece_and_overconfident_ones_not() 
     first_true = rng.uniform(0, 1, n) < p  # the first lane is true with probability p
     weights = np.stack([p, 1 - p], axis=1)[:, None, :]  # (runs, 1 step, 2)
     bias = np.where(first_true, 0.0, -1.8)
-    assert expected_calibration_error(_result(weights, bias).lane_calibration_bins().sum(0)) < 0.03
+    assert expected_calibration_error(lane_calibration_bins(_result(weights, bias)).sum(0)) < 0.03
     sure = np.where(p > 0.5, 0.999, 0.001)  # the same guesses, stated as certainties
     over = np.stack([sure, 1 - sure], axis=1)[:, None, :]
-    assert expected_calibration_error(_result(over, bias).lane_calibration_bins().sum(0)) > 0.2
+    assert expected_calibration_error(lane_calibration_bins(_result(over, bias)).sum(0)) > 0.2
 
 
 def test_ece_without_data_is_nan() -> None:
@@ -75,5 +80,5 @@ def test_steering_live_share_counts_used_unmismatched_weakly_tempered_steps() ->
         evidence_scale=scale,
         decision=decision,
     )
-    assert result.steering_live_share()[0] == pytest.approx(2 / 5)  # steps 0 and 3
-    assert math.isnan(_result(weights, np.array([0.0])).steering_live_share()[0])
+    assert steering_live_share(result)[0] == pytest.approx(2 / 5)  # steps 0 and 3
+    assert math.isnan(steering_live_share(_result(weights, np.array([0.0])))[0])

@@ -45,6 +45,7 @@ import pandas as pd
 from scipy import stats
 
 from benchmarks import paper_values
+from benchmarks.protocol.calibration import lane_calibration
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
 from benchmarks.protocol.gain import steering_free_gain
 from benchmarks.protocol.intervals import (
@@ -53,7 +54,6 @@ from benchmarks.protocol.intervals import (
     percentile_interval,
     replicate_ranks,
 )
-from estimators.offline import expected_calibration_error
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = [
@@ -564,68 +564,6 @@ def _decision_times(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None
             table.at[i, key] = _censored_quantile(mine, q) if len(mine) else None
 
 
-CALIBRATION_REPLICATES = 1000
-"""Bootstrap replicates of the expected calibration error's interval."""
-
-
-def _run_calibration_bins(frame: pd.DataFrame) -> np.ndarray | None:
-    """(R, 3, B) the per-run reliability bins of ``frame``'s rows (None: no row has them)."""
-    if "calibration_count" not in frame or not len(frame):
-        return None
-    rows = frame.dropna(subset=["calibration_count"])
-    if not len(rows):
-        return None
-    return np.stack(
-        [
-            np.array([c, p, o], dtype=np.float64)
-            for c, p, o in zip(
-                rows["calibration_count"],
-                rows["calibration_predicted"],
-                rows["calibration_observed"],
-                strict=True,
-            )
-        ]
-    )
-
-
-def _lane_calibration(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None:
-    """``lane_ece`` per model in ``table`` with its 95 % interval (percentile bootstrap: seeds
-    resampled, then runs within each seed), and ``reliability`` (per bin of the lane
-    probability, of equal width on [0, 1]: the mean probability given and the share that was
-    the true lane; None for an empty bin) from the per-run bins of
-    :meth:`estimators.offline.EstimationResult.lane_calibration_bins`."""
-    frame = pd.DataFrame(list(runs))
-    for key in ("lane_ece", "lane_ece_ci_low", "lane_ece_ci_high", "reliability"):
-        table[key] = None
-    if not len(frame) or "calibration_count" not in frame:
-        return
-    rng = np.random.default_rng(20261202)
-    for i, name in table["model"].items():
-        mine = frame[frame["model"] == name]
-        bins = _run_calibration_bins(mine)
-        if bins is None:
-            continue
-        total = bins.sum(axis=0)
-        table.at[i, "lane_ece"] = expected_calibration_error(total)
-        table.at[i, "reliability"] = [
-            None if n == 0 else [round(p / n, 4), round(o / n, 4), int(n)]
-            for n, p, o in zip(*total, strict=True)
-        ]
-        seeds = mine.loc[mine["calibration_count"].notna(), "seed"].astype(object).to_numpy()
-        groups = [
-            bins[np.flatnonzero(same_seed(pd.Series(seeds), s))] for s in dict.fromkeys(seeds)
-        ]
-        replicates = np.empty(CALIBRATION_REPLICATES)
-        for b in range(CALIBRATION_REPLICATES):
-            picked = [groups[j] for j in rng.integers(len(groups), size=len(groups))]
-            replicates[b] = expected_calibration_error(
-                sum(g[rng.integers(len(g), size=len(g))].sum(axis=0) for g in picked)
-            )
-        if len(bins) >= 2:
-            low, high = np.percentile(replicates, [2.5, 97.5])
-            table.at[i, "lane_ece_ci_low"], table.at[i, "lane_ece_ci_high"] = low, high
-
-
 def verdict(
     seed_rows: Sequence[dict[str, Any]],
     models: Sequence[str],
@@ -674,5 +612,5 @@ def verdict(
     rows, col = (by_driver[source], column) if driver_level else (seed_rows, "lateral_rmse")
     table = table.assign(**steering_free_gain(_seed_groups(rows, seeds, col, names), names))
     _decision_times(table, runs_estimation)
-    _lane_calibration(table, runs_estimation)
+    lane_calibration(table, runs_estimation)
     return _records(table)
