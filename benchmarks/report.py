@@ -459,6 +459,11 @@ def write_outputs(
     written["results.json"] = path
     for attribute, name in CSV_TABLES.items():
         frame = pd.DataFrame(list(doc[attribute]))
+        for column in frame.columns:  # list cells (reliability bins) as JSON text
+            if frame[column].map(lambda v: isinstance(v, list)).any():
+                frame[column] = frame[column].map(
+                    lambda v: json.dumps(v) if isinstance(v, list) else v
+                )
         if attribute in ("steering", "curved", "estimation", "summary") or not frame.empty:
             frame.to_csv(out / name, index=False)
             written[name] = out / name

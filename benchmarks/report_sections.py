@@ -99,8 +99,10 @@ _SAFETY_COLUMNS = [
     Column(count_share("never_decided_runs", "estimated_runs"), "never decided"),
     Column(interval(percent, "decided_time_share"), "time decided [95% CI]"),
     Column(interval(percent, "steering_off_share"), "steering off [95% CI]"),
+    Column(interval(percent, "steering_live_share"), "steering live [95% CI]"),
     Column(interval(fixed(3), "lateral_rmse_after_decision"), "lat. RMSE after dec. (m) [95% CI]"),
     Column(interval(fixed(2), "lateral_nees"), "lat. NEES [95% CI]"),
+    Column(interval(fixed(3), "lane_ece"), "lane ECE [95% CI]"),
     Column(interval(fixed(3), "curved_lateral_rmse"), "curved lat. RMSE (m) [95% CI]"),
     Column(
         count_share("curved_wrong_lane_confident_runs", "curved_estimated_runs"),
@@ -283,7 +285,12 @@ def _verdict_sections(result: BenchmarkResult) -> list[Section]:
             f"Lane decisions {over} (a safety output): runs that end with more than "
             f"{float(cfg.get('weight_threshold', 0.95)):g} on a wrong lane, runs left undecided "
             "or with a model mismatch at the end (estimators.evidence), the lateral NEES "
-            "(mean (y_hat - y)^2 / sigma^2; 1: the reported std is right), and the curved "
+            "(mean (y_hat - y)^2 / sigma^2; 1: the reported std is right), the lane ECE "
+            "(expected calibration error of the lane probabilities, every step and hypothesis; "
+            "0: they mean what they say; the reliability table below), steering off = share of "
+            "a run's time the steering channel is switched off, steering live = share of it "
+            "the steering counts as lane evidence at half its weight or more (used, not gated, "
+            "no mismatch, evidence scale <= 2), and the curved "
             f"track with the road ahead as a known input; decides in = time until the true "
             f"lane's weight first exceeds {float(cfg.get('weight_threshold', 0.95)):g}, median "
             "and 90th percentile over runs (never: that quantile is a run that never did), "
@@ -302,6 +309,41 @@ def _verdict_sections(result: BenchmarkResult) -> list[Section]:
             "seed",
         ),
     ]
+
+
+RELIABILITY_BINS = 10
+"""Bins of equal width on [0, 1] of the reliability table (the ECE's bins)."""
+
+
+def _reliability_cell(index: int) -> Any:
+    def cell(row: dict[str, Any]) -> str:
+        bins = row.get("reliability") or []
+        entry = bins[index] if index < len(bins) else None
+        return "" if entry is None else f"{entry[1]:.2f} ({entry[2]})"
+
+    return cell
+
+
+_RELIABILITY_COLUMNS = [
+    Column("model", "Estimator", left=True),
+    *(
+        Column(_reliability_cell(b), f"{b / RELIABILITY_BINS:.1f}-{(b + 1) / RELIABILITY_BINS:.1f}")
+        for b in range(RELIABILITY_BINS)
+    ),
+]
+
+
+def _reliability_section(result: BenchmarkResult) -> Section:
+    return (
+        "reliability",
+        "Reliability of the lane probabilities (main track): every (step, hypothesis) pair by "
+        "the probability the estimator gave the hypothesis (columns); each cell is the share "
+        "of those pairs whose hypothesis was the true lane (calibrated: inside the column's "
+        "range) and, in brackets, how many pairs fell there",
+        [r for r in result.summary if r.get("reliability")],
+        _RELIABILITY_COLUMNS,
+        None,
+    )
 
 
 def _checks_section(result: BenchmarkResult) -> Section:
@@ -388,6 +430,7 @@ def report_sections(result: BenchmarkResult) -> list[Section]:
     """Every table of the report, in order."""
     return [
         *_verdict_sections(result),
+        _reliability_section(result),
         _checks_section(result),
         *_steering_sections(result),
         *_estimation_sections(result),

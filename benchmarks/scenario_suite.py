@@ -41,6 +41,7 @@ SUITE_COLUMNS = (
     "time_to_decide_median", "time_to_decide_p90",
     "never_decided_runs", "never_decided_runs_share_ci_low", "never_decided_runs_share_ci_high",
     "steering_off_share", "steering_off_share_ci_low", "steering_off_share_ci_high",
+    "steering_live_share", "steering_live_share_ci_low", "steering_live_share_ci_high",
     "wrong_lane_confident_runs", "wrong_lane_confident_runs_share_ci_low",
     "wrong_lane_confident_runs_share_ci_high",
     "wrong_lane_ever_runs", "wrong_lane_ever_runs_share_ci_low",
@@ -71,6 +72,7 @@ _TABLE = [
     Column(decision_time, "decides in (s) median / p90"),
     Column(count_share("never_decided_runs", "estimated_runs"), "never decided"),
     Column(interval(percent, "steering_off_share"), "steering off [95% CI]"),
+    Column(interval(percent, "steering_live_share"), "steering live [95% CI]"),
     Column(count_share("wrong_lane_confident_runs", "estimated_runs"), "ends conf. wrong"),
     Column(count_share("wrong_lane_ever_runs", "estimated_runs"), "ever conf. wrong"),
 ]

@@ -29,6 +29,11 @@ from estimators.base import (
     measurements_from_info,
 )
 from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
+from estimators.calibration import (
+    expected_calibration_error,
+    lane_calibration_bins,
+    steering_live_share,
+)
 from estimators.filter_matrices import FilterMatrices
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
@@ -50,6 +55,9 @@ __all__ = [
     "ARXStateSpace",
     "Estimate",
     "EstimationResult",
+    "expected_calibration_error",
+    "lane_calibration_bins",
+    "steering_live_share",
     "EstimatorInfoWrapper",
     "EstimatorObservationWrapper",
     "FilterMatrices",

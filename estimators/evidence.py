@@ -102,6 +102,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -134,6 +135,30 @@ NOT_COMMITTED, CONTRADICTED = -1.0, -2.0
 
 MIN_CHECKED_SAMPLES = 2.0
 """Effective samples lambda needs before weights count as verified."""
+
+
+MAX_EVIDENCE_SCALE = 1e12
+"""tau is capped here (an upper bound on lambda from almost no data is unbounded)."""
+
+
+def model_error_bound(model_error: np.ndarray, samples: np.ndarray, z: float) -> np.ndarray:
+    """The one-sided upper confidence bound on the model-error ratio lambda from ``samples``
+    effective squared innovations (Wilson-Hilferty; ``z`` the standard-normal quantile of the
+    confidence; ``z = 0``: lambda itself)::
+
+        h = 2 / (9 N),  r = (1 - h - z sqrt(h))^3,  lambda_up = lambda / r   (r <= 0: infinite)
+
+    A mean of N squared innovations whose true variance ratio is lambda_up falls below the
+    observed lambda with probability 1 - confidence: the largest model error the data so far
+    cannot rule out."""
+    if z == 0:
+        return model_error
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = 2.0 / (9.0 * np.asarray(samples, dtype=np.float64))
+        root = 1.0 - h - z * np.sqrt(h)
+        ratio = np.where(root > 0, root * root * root, 0.0)
+        bound = np.where(ratio > 0, model_error / ratio, np.inf)
+    return np.where(np.isnan(model_error), np.nan, bound)  # no data: no bound either
 
 
 def chi2_upper_ratio(samples: np.ndarray) -> np.ndarray:
@@ -170,6 +195,7 @@ class EvidenceRule:
     decision_threshold: float
     log_floor: float
     commit_steps: float = math.inf
+    bound_z: float = 0.0
 
     @property
     def log_decision_threshold(self) -> float:
@@ -188,7 +214,15 @@ class EvidenceRule:
             commit_steps=max(1.0, round(settings.commit_time / dt))
             if math.isfinite(settings.commit_time)
             else math.inf,
+            bound_z=_normal_quantile(settings.evidence_confidence),
         )
+
+
+def _normal_quantile(probability: float) -> float:
+    """The standard-normal quantile of ``probability`` (0 for 0.5 or less: no bound)."""
+    if probability <= 0.5:
+        return 0.0
+    return NormalDist().inv_cdf(probability)
 
 
 def initial_evidence_state(log_prior: np.ndarray) -> dict[str, np.ndarray]:
@@ -347,7 +381,11 @@ def _weigh_one(
         mismatch = model_error > rule.mismatch_model_error * (ratio * ratio * ratio)
     else:
         mismatch = False
-    scale = (1.0 if math.isnan(model_error) else max(model_error, 1.0)) * inflation
+    bounded = model_error
+    if rule.bound_z and not math.isnan(model_error):  # model_error_bound in floats
+        root = 1.0 - 2.0 / (9.0 * samples) - rule.bound_z * math.sqrt(2.0 / (9.0 * samples))
+        bounded = model_error / (root * root * root) if root > 0 else math.inf
+    scale = min((1.0 if math.isnan(bounded) else max(bounded, 1.0)) * inflation, MAX_EVIDENCE_SCALE)
     new_state = dict(state)
     new_state["_evidence_weight"] = np.array([weight])
     new_state["_evidence_weight_sq"] = np.array([weight_sq])
@@ -405,7 +443,8 @@ def _weigh(
     # effective number of independent squared innovations behind lambda (0 before any data)
     samples = weight * weight / (weight_sq * inflation)
     mismatch = model_error > rule.mismatch_model_error * chi2_upper_ratio(samples)
-    scale = np.fmax(model_error, 1.0) * inflation  # (NaN lambda: 1)
+    bounded = model_error_bound(model_error, samples, rule.bound_z) if rule.bound_z else model_error
+    scale = np.minimum(np.fmax(bounded, 1.0) * inflation, MAX_EVIDENCE_SCALE)  # (NaN lambda: 1)
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)

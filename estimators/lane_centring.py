@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -188,8 +188,12 @@ class LaneCentringEKF(GaussianMixtureEKF):
         super().__init__(None, settings, dt=dt, decision_lag=0, **overrides)
         self.params = params
         self.decimation = max(1, int(round(params.decimation_time / self.dt)))
-        # the rule's statistics run at the decimated rate: its window stays in seconds
-        self._rule = EvidenceRule.from_settings(self.settings, self.dt * self.decimation)
+        # the rule's statistics run at the decimated rate: its window stays in seconds; its
+        # first term is a level check made once, and its fitted q already carries an upper
+        # bound: the tempering uses lambda itself (no evidence_confidence bound)
+        self._rule = replace(
+            EvidenceRule.from_settings(self.settings, self.dt * self.decimation), bound_z=0.0
+        )
         self._posterior: np.ndarray | None = None
 
     def _initial_state(

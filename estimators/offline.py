@@ -90,6 +90,8 @@ class EstimationResult:
             0 undecided, 1 decided, 2 model_mismatch; -1 where invalid).
         model_error: (R, T) the statistic behind ``model_mismatch``
             (:attr:`estimators.base.Estimate.model_error`).
+        evidence_scale: (R, T) the factor tau (>= 1) the steering evidence was divided by
+            (:attr:`estimators.base.Estimate.evidence_scale`; 1 for estimators without one).
         channel_nis: (R, T, 3) normalized innovation squared of each channel
             [speed, camera, steering] (:attr:`GaussianMixtureEKF.channel_nis`;
             None if the estimator has none; NaN where not used).
@@ -111,6 +113,7 @@ class EstimationResult:
     decision: np.ndarray | None = None
     model_error: np.ndarray | None = None
     channel_nis: np.ndarray | None = None
+    evidence_scale: np.ndarray | None = None
 
     @property
     def num_runs(self) -> int:
@@ -128,7 +131,7 @@ class EstimationResult:
         err = self.lateral_error()[:, start:]
         return np.sqrt(np.nanmean(err * err, axis=1))
 
-    def _true_component(self) -> np.ndarray:
+    def true_lane_mask(self) -> np.ndarray:
         """(R, C) mask of the hypotheses equal to each run's true bias."""
         bias = self.truth.get("bias")
         if bias is None:
@@ -137,14 +140,14 @@ class EstimationResult:
 
     def true_lane_weight(self) -> np.ndarray:
         """(R, T) total weight of the hypotheses equal to the true bias."""
-        return np.einsum("rtc,rc->rt", self.weights, self._true_component().astype(np.float64))
+        return np.einsum("rtc,rc->rt", self.weights, self.true_lane_mask().astype(np.float64))
 
     def picked_true_lane(self, at: int = -1) -> np.ndarray:
         """(R,) whether the most likely hypothesis at step ``at`` (default: each
         run's last valid step) has the true bias."""
         steps = self.lengths - 1 if at == -1 else np.minimum(at, self.lengths - 1)
         rows = np.arange(self.num_runs)
-        return self._true_component()[rows, self.most_likely[rows, steps]]
+        return self.true_lane_mask()[rows, self.most_likely[rows, steps]]
 
     def final_decision(self) -> np.ndarray:
         """(R,) decision state name at each run's last valid step."""
@@ -157,12 +160,12 @@ class EstimationResult:
         """(R,) runs that end with more than ``threshold`` weight on a single wrong lane."""
         rows = np.arange(self.num_runs)
         final = self.weights[rows, self.lengths - 1]  # (R, C)
-        wrong = np.where(self._true_component(), 0.0, final)
+        wrong = np.where(self.true_lane_mask(), 0.0, final)
         return wrong.max(axis=1) > threshold
 
     def wrong_lane_confident_share(self, threshold: float = 0.95) -> np.ndarray:
         """(R,) share of each run's valid steps with more than ``threshold`` on a wrong lane."""
-        wrong = np.where(self._true_component()[:, None, :], 0.0, self.weights).max(axis=2)
+        wrong = np.where(self.true_lane_mask()[:, None, :], 0.0, self.weights).max(axis=2)
         return ((wrong > threshold) & self.valid).sum(axis=1) / self.lengths
 
     def lateral_nees(self, start: int = 0) -> np.ndarray:
@@ -383,6 +386,7 @@ class _Trace:
         )
         self.decision = np.full((n_runs, n_steps), -1, dtype=np.int8)
         self.model_error = np.full((n_runs, n_steps), np.nan)
+        self.evidence_scale = np.full((n_runs, n_steps), np.nan)
         self.channel_nis = (
             np.full((n_runs, n_steps, 3), np.nan) if self.checking is not None else None
         )
@@ -410,6 +414,7 @@ class _Trace:
             [names == name for name in DECISIONS], range(len(DECISIONS)), -1
         )
         self.model_error[:, k] = e.model_error
+        self.evidence_scale[:, k] = e.evidence_scale
         if self.channel_nis is not None and self.checking is not None and k:
             self.channel_nis[:, k] = self.checking.channel_nis
 
@@ -438,6 +443,7 @@ class _Trace:
             low_speed=None if self.low_speed is None else self.low_speed & valid,
             decision=np.where(valid, self.decision, -1),
             model_error=np.where(valid, self.model_error, np.nan),
+            evidence_scale=np.where(valid, self.evidence_scale, np.nan),
             channel_nis=None
             if self.channel_nis is None
             else np.where(valid[:, :, None], self.channel_nis, np.nan),

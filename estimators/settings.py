@@ -54,6 +54,7 @@ _SCHEMA = schema(
         "max_acceleration": _positive("m/s^2", infinite=True),
         "evidence_checks": Field("bool"),
         "evidence_window": _positive("s"),
+        "evidence_confidence": Field("number", low=0.0, high=1.0, high_open=True),
         "mismatch_model_error": Field("number", low=1.0, low_open=True, infinite=True),
         "forgetting_time": _positive("s", infinite=True),
         "decision_threshold": Field("number", low=0.5, high=1.0, high_open=True),
@@ -165,6 +166,11 @@ class FilterSettings:
             decision state is still reported).
         evidence_window: time constant (s) of the running normalized-
             innovation statistics (lambda, rho) of the steering channel.
+        evidence_confidence: the steering evidence is tempered by an upper
+            confidence bound on lambda at this one-sided probability, not by
+            lambda itself (:func:`estimators.evidence.model_error_bound`): a
+            model earns its weight as the data check it. 0 (or 0.5 and
+            below): lambda itself.
         mismatch_model_error: lambda (the best hypothesis' running mean
             normalized steering innovation squared; 1 for a consistent model)
             above which the model fits no hypothesis: a model mismatch, while
@@ -209,6 +215,7 @@ class FilterSettings:
     max_acceleration: float = 50.0
     evidence_checks: bool = True
     evidence_window: float = 5.0
+    evidence_confidence: float = 0.0
     mismatch_model_error: float = 9.0
     forgetting_time: float = math.inf
     decision_threshold: float = 0.95

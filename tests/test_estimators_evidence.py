@@ -192,11 +192,12 @@ def test_the_wrappers_report_the_decision_state():
         max_size=300,
     ),
     st.sampled_from([(0.5, 0.5), (0.99, 0.01), (1.0, 0.0)]),
+    st.sampled_from([0.0, 0.95]),
 )
-def test_the_single_run_path_equals_the_batched_one(steps, prior):
+def test_the_single_run_path_equals_the_batched_one(steps, prior, confidence):
     from estimators.evidence import _weigh, _weigh_one
 
-    rule = _rule(mismatch_model_error=2.0)
+    rule = _rule(mismatch_model_error=2.0, evidence_confidence=confidence)
     with np.errstate(divide="ignore"):
         log_w = np.log(np.array([prior]))
     one, batched = (log_w, initial_evidence_state(log_w)), (log_w, initial_evidence_state(log_w))
@@ -212,3 +213,31 @@ def test_the_single_run_path_equals_the_batched_one(steps, prior):
         for key in st1:
             np.testing.assert_allclose(st1[key], st2[key], rtol=1e-12, atol=1e-12)
         one, batched = (w1, st1), (w2, st2)
+
+
+def test_the_model_error_bound_covers_lambda_and_shrinks_with_data():
+    from scipy.stats import chi2
+
+    from estimators.evidence import model_error_bound
+
+    samples = np.array([1.0, 5.0, 30.0, 300.0, 3000.0])
+    bound = model_error_bound(np.ones(5), samples, 1.645)
+    assert bound[0] > 1e6  # one sample rules almost nothing out
+    assert np.all(np.diff(bound[1:]) < 0) and bound[-1] == pytest.approx(1.0, abs=0.07)
+    # Wilson-Hilferty against the exact chi-square quantile: lambda_up = N / chi2_0.05(N)
+    exact = samples[1:] / chi2.ppf(0.05, samples[1:])
+    np.testing.assert_allclose(bound[1:], exact, rtol=0.03)
+    np.testing.assert_array_equal(model_error_bound(np.ones(5), samples, 0.0), np.ones(5))
+
+
+def test_a_bounded_model_earns_its_weight_as_the_data_check_it():
+    # a consistent model (white unit innovations) with steady evidence for hypothesis 0
+    rng = np.random.default_rng(7)
+    n = 400
+    score = np.stack([rng.standard_normal(n), rng.standard_normal(n) + 0.5], axis=1)
+    log_lik = -0.5 * score**2
+    _, _, plain = _run(_rule(), log_lik, score)
+    _, _, bounded = _run(_rule(evidence_confidence=0.95), log_lik, score)
+    assert np.all(bounded >= plain - 1e-12)
+    assert bounded[5] > 5 * plain[5]  # the first samples count for little
+    assert bounded[-1] < 1.5 * plain[-1]  # 4 s of data: about the same weight

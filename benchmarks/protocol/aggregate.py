@@ -45,6 +45,7 @@ import pandas as pd
 from scipy import stats
 
 from benchmarks import paper_values
+from benchmarks.protocol.calibration import lane_calibration
 from benchmarks.protocol.config import BASELINES, BUILTIN_MODELS, ILLUSTRATIVE
 from benchmarks.protocol.gain import steering_free_gain
 from benchmarks.protocol.intervals import (
@@ -233,7 +234,7 @@ def _paper_steering(driver: str, model: str, track: str) -> dict[str, Any]:
 
 
 _DECISION_COLUMNS = ("time_to_decide", "decided_time_share", "lateral_rmse_after_decision",
-                     "steering_off_share")  # fmt: skip
+                     "steering_off_share", "steering_live_share")  # fmt: skip
 """The per-run decision metrics (:func:`benchmarks.protocol.tasks._decision_metrics`)."""
 
 
@@ -306,6 +307,7 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             never_decided_runs=("time_to_decide", _never),
             decided_time_share=("decided_time_share", _finite_mean),
             steering_off_share=("steering_off_share", _finite_mean),
+            steering_live_share=("steering_live_share", _finite_mean),
             lateral_rmse_after_decision=("lateral_rmse_after_decision", _finite_mean),
             nis_speed=("nis_speed", _finite_mean),
             nis_camera=("nis_camera", _finite_mean),
@@ -355,7 +357,8 @@ def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
 
 _SAFETY_COUNTS = ("wrong_lane_confident_runs", "wrong_lane_ever_runs", "undecided_runs",
                   "model_mismatch_runs", "never_decided_runs")  # fmt: skip
-_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision", "steering_off_share")
+_DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision", "steering_off_share",
+                   "steering_live_share")  # fmt: skip
 
 
 def summarize_seeds(
@@ -460,6 +463,7 @@ _VERDICT_KEYS = {
     "lateral_nees": ("estimation", "lateral_nees", False),
     "decided_time_share": ("estimation", "decided_time_share", False),
     "steering_off_share": ("estimation", "steering_off_share", False),
+    "steering_live_share": ("estimation", "steering_live_share", False),
     "lateral_rmse_after_decision": ("estimation", "lateral_rmse_after_decision", False),
 }
 """Verdict key -> (per-driver table, its column, the per-seed statistic is the median over
@@ -608,4 +612,5 @@ def verdict(
     rows, col = (by_driver[source], column) if driver_level else (seed_rows, "lateral_rmse")
     table = table.assign(**steering_free_gain(_seed_groups(rows, seeds, col, names), names))
     _decision_times(table, runs_estimation)
+    lane_calibration(table, runs_estimation)
     return _records(table)

@@ -25,6 +25,7 @@ from benchmarks.protocol.models import (
 )
 from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
+from estimators.calibration import lane_calibration_bins, steering_live_share
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
 from estimators.offline import run_estimator
@@ -400,7 +401,7 @@ def _estimate_model(
                 group[0].attrs["config"], **task.filter_settings
             )
             result = run_estimator(make(settings), group)
-            rows += _estimation_rows(task, indices, result, name, scratch)
+            rows += _estimation_rows(task, indices, result, name, scratch, kind)
     except ModelError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -419,8 +420,47 @@ def _estimate_model(
     _merge(out, scratch)
 
 
+def _channel_diagnostics(result: Any, kind: str) -> dict[str, np.ndarray]:
+    """(R,) per-run diagnostics of the steering channel, in the rows' order: the share of
+    the steps it was off (NaN: no such rule), the share it was live
+    (:func:`estimators.calibration.steering_live_share`; NaN for a steering-free
+    baseline), the median model-error ratio lambda and evidence scale tau (over the steps
+    it was on), and the mean NIS of each channel."""
+    n_runs = result.num_runs
+    nan = np.full(n_runs, np.nan)
+    off = result.low_speed
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
+        model_error = np.nanmedian(result.model_error, axis=1)
+        scale = result.evidence_scale
+        if scale is not None and off is not None:
+            scale = np.where(off, np.nan, scale)
+        scale = nan if scale is None else np.nanmedian(scale, axis=1)
+    nis = (
+        result.mean_channel_nis()
+        if result.channel_nis is not None
+        else np.full((n_runs, 3), np.nan)
+    )
+    return {
+        "steering_off_share": nan
+        if off is None
+        else (off & result.valid).sum(axis=1) / result.lengths,
+        "steering_live_share": nan if kind == "baseline" else steering_live_share(result),
+        "model_error_median": model_error,
+        "evidence_scale_median": scale,
+        "nis_speed": nis[:, 0],
+        "nis_camera": nis[:, 1],
+        "nis_steering": nis[:, 2],
+    }
+
+
 def _estimation_rows(
-    task: ChunkTask, indices: Sequence[int], result: Any, name: str, out: ChunkResult
+    task: ChunkTask,
+    indices: Sequence[int],
+    result: Any,
+    name: str,
+    out: ChunkResult,
+    kind: str = "builtin",
 ) -> list[dict[str, Any]]:
     refs = [task.runs[i] for i in indices]
     error = result.lateral_error()
@@ -438,19 +478,8 @@ def _estimation_rows(
     wrong_confident = result.wrong_lane_confident(task.weight_threshold)
     wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
     nees = result.lateral_nees()
-    off_share = (
-        np.full(len(refs), np.nan)
-        if result.low_speed is None
-        else (result.low_speed & result.valid).sum(axis=1) / result.lengths
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
-        model_error = np.nanmedian(result.model_error, axis=1)
-    nis = (
-        result.mean_channel_nis()
-        if result.channel_nis is not None
-        else np.full((len(refs), 3), np.nan)
-    )
+    channel = _channel_diagnostics(result, kind)
+    calibration = lane_calibration_bins(result)
     n_window = int(round(task.error_window / float(np.nanmedian(np.diff(result.time[0]))))) + 1
     rows = []
     for j, ref in enumerate(refs):
@@ -470,11 +499,10 @@ def _estimation_rows(
                 "wrong_lane_confident": bool(wrong_confident[j]),
                 "wrong_lane_confident_share": float(wrong_share[j]),
                 "lateral_nees": float(nees[j]),
-                "steering_off_share": float(off_share[j]),
-                "model_error_median": float(model_error[j]),
-                "nis_speed": float(nis[j, 0]),
-                "nis_camera": float(nis[j, 1]),
-                "nis_steering": float(nis[j, 2]),
+                **{key: float(values[j]) for key, values in channel.items()},
+                "calibration_count": calibration[j, 0].astype(int).tolist(),
+                "calibration_predicted": calibration[j, 1].round(6).tolist(),
+                "calibration_observed": calibration[j, 2].astype(int).tolist(),
                 "bias": float(bias0[j]),
             }
         )

@@ -108,6 +108,11 @@ def _typed(value: str, types: Any) -> Any:
     kinds = types if isinstance(types, list) else [types]
     if value == "":
         return None
+    if "array" in kinds and value.startswith("["):
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
     if "boolean" in kinds and value in ("True", "False"):
         return value == "True"
     if "integer" in kinds or "number" in kinds:

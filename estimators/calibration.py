@@ -1,0 +1,64 @@
+"""Is an estimator's output to be believed: calibration of its lane probabilities, and how
+much of the time the human's steering counted as lane evidence (docs/design.md §8.14)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from estimators.offline import EstimationResult
+
+__all__ = ["expected_calibration_error", "lane_calibration_bins", "steering_live_share"]
+
+
+def lane_calibration_bins(result: EstimationResult, n_bins: int = 10) -> np.ndarray:
+    """(R, 3, n_bins) what a reliability diagram of the lane probabilities needs, per run:
+    every (valid step, hypothesis) pair's weight ``w`` goes into the bin
+    ``min(floor(w n_bins), n_bins - 1)`` of equal width on [0, 1]; per bin the number of
+    pairs, the sum of their weights (predicted) and the number whose hypothesis is the true
+    lane (observed). Summed over runs, :func:`expected_calibration_error` reads it."""
+    truth = np.broadcast_to(result.true_lane_mask()[:, None, :], result.weights.shape)
+    w = np.clip(result.weights, 0.0, 1.0)
+    index = np.minimum((w * n_bins).astype(np.int64), n_bins - 1)
+    keep = np.broadcast_to(result.valid[:, :, None], w.shape) & np.isfinite(result.weights)
+    out = np.zeros((result.num_runs, 3, n_bins))
+    flat = (np.arange(result.num_runs)[:, None, None] * n_bins + index)[keep]
+    size = result.num_runs * n_bins
+    out[:, 0] = np.bincount(flat, minlength=size).reshape(result.num_runs, n_bins)
+    out[:, 1] = np.bincount(flat, weights=w[keep], minlength=size).reshape(-1, n_bins)
+    out[:, 2] = np.bincount(flat, weights=truth[keep], minlength=size).reshape(-1, n_bins)
+    return out
+
+
+def expected_calibration_error(bins: np.ndarray) -> float:
+    """Expected calibration error of lane probabilities from summed reliability bins (3, B)
+    (:func:`lane_calibration_bins` summed over runs)::
+
+        ECE = sum_b (n_b / N) |predicted_b / n_b - observed_b / n_b|
+            = sum_b |predicted_b - observed_b| / N
+
+    NaN without any pair. 0: the probabilities mean what they say (of the pairs given
+    probability p, a share p was the true lane)."""
+    bins = np.asarray(bins, dtype=np.float64)
+    total = bins[0].sum()
+    if total <= 0:
+        return math.nan
+    return float(np.abs(bins[1] - bins[2]).sum() / total)
+
+
+def steering_live_share(result: EstimationResult, max_scale: float = 2.0) -> np.ndarray:
+    """(R,) share of each run's valid steps at which the steering channel counted as lane
+    evidence at no less than ``1 / max_scale`` of its weight: the channel was used (on,
+    observed, not gated: a finite steering NIS), the run was not in ``model_mismatch``
+    and the evidence scale tau was at most ``max_scale`` (NaN for an estimator that
+    reports no steering channel)."""
+    if result.channel_nis is None or result.low_speed is None:
+        return np.full(result.num_runs, np.nan)
+    scale = np.ones_like(result.valid, dtype=np.float64)
+    if result.evidence_scale is not None:
+        scale = np.where(np.isnan(result.evidence_scale), np.inf, result.evidence_scale)
+    live = result.valid & np.isfinite(result.channel_nis[..., 2]) & (scale <= max_scale)
+    if result.decision is not None:
+        live &= result.decision != 2  # model_mismatch: the weights are frozen
+    return live.sum(axis=1) / np.maximum(result.lengths, 1)
