@@ -96,7 +96,7 @@ from hasa_env.sim.config import describe_config as env_describe_config
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.loading import default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
-from hasa_env.validation import Field, schema, validate
+from hasa_env.validation import Field, did_you_mean, schema, validate
 
 __all__ = [
     "ESTIMATORS",
@@ -396,7 +396,7 @@ def estimator_factory(
     if unknown:
         raise ConfigError(
             f"unknown config key 'estimator.settings.{unknown[0]}' (allowed keys here: "
-            f"{', '.join(sorted(names))})"
+            f"{', '.join(sorted(names))})" + did_you_mean(unknown[0], names)
         )
     overrides.setdefault("steering_ratio", ratio)
     if not est["outlier_gate"]:

@@ -6,7 +6,8 @@ only code that composes :mod:`hasa_env`, :mod:`estimators` and
 :mod:`benchmarks`. Every program follows the same conventions: ``--version``
 (:func:`add_version`), one error format on stderr, ``prog: error: message``
 (:func:`error`, the format argparse uses for usage errors too), no traceback
-for anything a user can cause (:func:`console_script`), and these exit codes:
+for anything a user can cause (:func:`console_script`), options spelt out in full with a
+"did you mean" for a misspelt one (:class:`ArgumentParser`), and these exit codes:
 
 ======  ==============================================================
 code    meaning
@@ -22,14 +23,16 @@ code    meaning
 from __future__ import annotations
 
 import argparse
+import difflib
 import functools
 import os
+import re
 import sys
-from collections.abc import Callable, Sequence
-
-from hasa_env import __version__
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, NoReturn
 
 __all__ = [
+    "ArgumentParser",
     "EXIT_ENVIRONMENT",
     "EXIT_INTERRUPTED",
     "EXIT_OK",
@@ -59,9 +62,59 @@ def warn(prog: str, message: str) -> None:
     print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """The parser of every program: no abbreviated options (``--stres`` is not ``--stress``)
+    and a usage error that suggests the closest option or choice (``did you mean
+    '--stress'?``). Its subcommands' parsers are of this class too."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        """Exit 2 with ``prog: error: message``, plus a suggestion for a misspelt word."""
+        super().error(message + self._suggestion(message))
+
+    def _suggestion(self, message: str) -> str:
+        unknown = re.match(r"unrecognized arguments: (.*)", message)
+        if unknown:
+            options = sorted({o for p in self._parsers() for o in p._option_string_actions})
+            for word in unknown.group(1).split():
+                if word.startswith("-"):
+                    close = difflib.get_close_matches(word.split("=")[0], options, n=1)
+                    if close:
+                        return f" (did you mean {close[0]!r}?)"
+            return ""
+        choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if choice:
+            choices = re.findall(r"'([^']*)'", choice.group(2)) or choice.group(2).split(", ")
+            close = difflib.get_close_matches(choice.group(1), choices, n=1)
+            if close:
+                return f" (did you mean {close[0]!r}?)"
+        return ""
+
+    def _parsers(self) -> Iterator[argparse.ArgumentParser]:
+        """This parser and those of its subcommands, recursively."""
+        yield self
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    yield from (sub._parsers() if isinstance(sub, ArgumentParser) else [sub])
+
+
+def _version() -> str:
+    """The installed hasa-env version (read from its metadata: importing hasa_env is slower)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("hasa-env")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "0.0.0+unknown"
+
+
 def add_version(parser: argparse.ArgumentParser) -> None:
     """Add ``--version`` (the installed hasa-env version) to a program's parser."""
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
 
 
 def console_script(

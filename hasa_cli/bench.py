@@ -37,31 +37,23 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
-from benchmarks.executor import SchedulerError, check_scheduler
-from benchmarks.output import output_problem, write_result_folder
-from benchmarks.perf import (
-    BENCHMARKS,
-    benchmark_names,
-    format_perf_table,
-    run_benchmarks,
-)
-from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
-from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
-from benchmarks.report import format_tables
-from benchmarks.scenario_suite import format_suite, suite_rows, write_suite
+from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
     EXIT_PARTIAL,
     EXIT_USAGE,
+    ArgumentParser,
     add_version,
     console_script,
     error,
     warn,
 )
 from hasa_env.scenarios import SCENARIOS
+
+# The protocol, its report and the performance benchmarks are imported where a command
+# runs: ``hasa-bench --help`` and a usage error stay fast (statsmodels and matplotlib alone
+# take seconds to import).
 
 __all__ = ["main", "build_parser"]
 
@@ -271,7 +263,7 @@ def _seed_list(text: str) -> tuple[int, ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-bench``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog=PROG,
         description="The human-as-advisor benchmark (Mai et al.): steering-model prediction "
         "and lane estimation on a synthetic population or recorded drives.",
@@ -312,6 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     perf.add_argument("--quick", action="store_true", help="seconds-long runs, rough numbers")
     perf.add_argument("--json", metavar="FILE", help="also write every number as JSON")
+    from benchmarks.perf import BENCHMARKS  # light: the benchmarks' names only
+
     perf.add_argument(
         "--only",
         metavar="NAMES",
@@ -323,6 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 # -------------------------------------------------------------------- paper/score
 def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
+    from benchmarks.protocol import ProtocolConfig
+
     noise = {
         key: value
         for key, value in (
@@ -362,6 +358,8 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
 
 def _filter_settings(items: list[str]) -> dict[str, Any]:
     """``["field=value", ...]`` as a dict (values parsed as JSON, else kept as text)."""
+    from benchmarks.protocol import BenchmarkError
+
     out: dict[str, Any] = {}
     for item in items:
         name, sep, text = item.partition("=")
@@ -387,6 +385,8 @@ class _Progress:
             return
         if phase == "runs":
             if self.bar is None:
+                from tqdm import tqdm
+
                 self.bar = tqdm(total=total, unit="run", desc="scoring runs", file=sys.stderr)
             self.bar.update(done - self.bar.n)
             return
@@ -400,6 +400,10 @@ class _Progress:
 
 
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
+    from benchmarks.executor import SchedulerError, check_scheduler
+    from benchmarks.output import output_problem
+    from benchmarks.scenario_suite import format_suite, suite_rows, write_suite
+
     if args.workers is not None and args.workers < 1:
         error(PROG, f"--workers must be >= 1, got {args.workers}")
         return EXIT_USAGE
@@ -458,6 +462,10 @@ def _run_scenario(
     scheduler: Any,
 ) -> tuple[int, Any]:
     """Run the protocol in one scenario and write its folder: (exit status, result or None)."""
+    from benchmarks.output import write_result_folder
+    from benchmarks.protocol import BenchmarkError, run_protocol
+    from benchmarks.report import format_tables
+
     started = time.perf_counter()
     progress = _Progress(args.quiet)
     try:
@@ -502,6 +510,8 @@ def _run_scenario(
 
 # -------------------------------------------------------------------------- perf
 def _perf(args: argparse.Namespace) -> int:
+    from benchmarks.perf import benchmark_names, format_perf_table, run_benchmarks
+
     try:
         names = benchmark_names(args.only)
     except ValueError as exc:

@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 import hasa_env
-from hasa_cli import EXIT_OK, EXIT_USAGE, add_version, console_script, error
+from hasa_cli import EXIT_OK, EXIT_USAGE, ArgumentParser, add_version, console_script, error
 from hasa_env.sim.config import ConfigError
 
 PROG = "hasa-demo"
@@ -76,7 +76,7 @@ def _seed(text: str) -> int:
 @console_script(PROG)
 def demo_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-demo``; returns the exit status (0 ok, 2 a bad argument)."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     add_version(parser)
     parser.add_argument("--seed", type=_seed, default=0, help="episode seed (default 0)")
     parser.add_argument(

@@ -307,6 +307,7 @@ def format_table(report: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     """``python -m benchmarks.perf.render [--quick] [--json FILE]``."""
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="python -m benchmarks.perf.render", description=__doc__.splitlines()[0]
     )
     parser.add_argument(
