@@ -167,14 +167,35 @@ def map_tasks(
             if progress:
                 progress(i)
         return out
-    with ProcessPoolExecutor(max_workers=min(n, len(tasks))) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(n, len(tasks)))
+    try:
         futures = [pool.submit(func, task) for task in tasks]
         results = []
         for i, fut in enumerate(futures, start=1):
             results.append(fut.result())
             if progress:
                 progress(i)
-        return results
+    except BaseException:
+        # Ctrl-C or a failed task: stop the workers now instead of letting them finish
+        # every queued task (the pool's own shutdown waits for them all)
+        _stop_pool(pool)
+        raise
+    pool.shutdown()
+    return results
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel ``pool``'s queued tasks and end its worker processes at once."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(2.0)
+        if process.is_alive():
+            process.kill()
+            process.join()
 
 
 def _map_dask(func: Callable[[Any], T], tasks: list[Any], scheduler: Any, progress: Any) -> list[T]:

@@ -231,6 +231,9 @@ def run_isolated(
                 f"its process ended without a result ({how}: os._exit, a crash or "
                 "the system's out-of-memory killer)",
             ) from None
+    except KeyboardInterrupt:
+        process.kill()  # Ctrl-C: at once, not after the join's grace time below
+        raise
     finally:
         receive.close()
         process.join(5.0)
