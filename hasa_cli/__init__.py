@@ -28,6 +28,7 @@ import functools
 import os
 import re
 import sys
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, NoReturn
 
@@ -117,12 +118,22 @@ def add_version(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
 
 
+def _one_line_warning(prog: str) -> Callable[..., None]:
+    """A :func:`warnings.showwarning` that prints ``prog: warning: message`` (no file or
+    source line: the programs' one style)."""
+
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        warn(prog, str(message))
+
+    return show
+
+
 def console_script(
     prog: str,
 ) -> Callable[[Callable[..., int]], Callable[..., int]]:
     """Decorate a program's ``main(argv)``: Ctrl-C and a closed output pipe end it quietly.
 
-    Ctrl-C prints ``prog: error: interrupted`` and returns :data:`EXIT_INTERRUPTED`
+    Warnings are shown as ``prog: warning: message`` lines. Ctrl-C prints ``prog: error: interrupted`` and returns :data:`EXIT_INTERRUPTED`
     (what has been written stays written: every writer in hasa_env flushes as
     it goes); a closed stdout (``hasa-rec info ... | head``) ends the program
     without a traceback. Everything else a user can cause is handled inside
@@ -132,6 +143,8 @@ def console_script(
     def decorate(main: Callable[..., int]) -> Callable[..., int]:
         @functools.wraps(main)
         def wrapped(argv: Sequence[str] | None = None) -> int:
+            shown = warnings.showwarning
+            warnings.showwarning = _one_line_warning(prog)
             try:
                 return main(argv)
             except KeyboardInterrupt:
@@ -142,6 +155,8 @@ def console_script(
                 devnull = os.open(os.devnull, os.O_WRONLY)
                 os.dup2(devnull, sys.stdout.fileno())
                 return EXIT_OK
+            finally:
+                warnings.showwarning = shown
 
         return wrapped
 

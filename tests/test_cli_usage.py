@@ -8,7 +8,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from _programs import program_env, run_program
+import pytest
+from _programs import ROOT, program_env, run_program
 
 
 def _error_lines(stderr: str, prog: str) -> list[str]:
@@ -93,3 +94,21 @@ def test_bench_help_imports_no_protocol_plotting_or_statistics(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+@pytest.mark.slow
+def test_a_fit_warning_is_one_warning_line_that_does_not_contradict_the_estimate(tmp_path):
+    """The two-point fit on the sample is not identifiable by the fit's own standard error,
+    yet the estimator then picks the true lane: the warning says how both hold, on one
+    ``prog: warning:`` line (no Python file, line or category)."""
+    sample = ROOT / "recordings" / "sample"
+    done = run_program(
+        "hasa-replay", str(sample), "--model", "two-point", "--fit", "--estimator", cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr
+    assert "true lane trusted" in done.stdout
+    lines = done.stderr.strip().splitlines()
+    assert lines and all(line.startswith("hasa-replay: warning: ") for line in lines), lines
+    (line,) = [ln for ln in lines if "static lane-offset gain" in ln]
+    assert "carries no information" not in line and "may still decide a lane" in line
+    assert "Warning:" not in done.stderr and ".py:" not in done.stderr

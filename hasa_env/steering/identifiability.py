@@ -198,7 +198,10 @@ def check_identifiability(
         )
         message = (
             f"static lane-offset gain sum(b)/near + sum(c)/far = {gain:.3g} rad/m is not clearly "
-            f"non-zero{detail}: the steering carries no information on the lane offset"
+            f"non-zero{detail}: the training run does not establish that the steering tells "
+            "the lanes apart, nor which way; an estimator may still decide a lane with it "
+            "(a small gain's evidence adds up over thousands of samples), but that decision rests on "
+            "a gain the fit cannot tell from zero: check it where the true lane is known"
         )
     elif not sign_consistent:
         message = (
