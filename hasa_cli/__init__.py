@@ -30,6 +30,7 @@ import re
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
+from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
 __all__ = [
@@ -105,8 +106,6 @@ class ArgumentParser(argparse.ArgumentParser):
 
 def _version() -> str:
     """The installed hasa-env version (read from its metadata: importing hasa_env is slower)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version("hasa-env")
     except PackageNotFoundError:  # pragma: no cover - running from a source tree

@@ -304,7 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     perf.add_argument("--quick", action="store_true", help="seconds-long runs, rough numbers")
     perf.add_argument("--json", metavar="FILE", help="also write every number as JSON")
-    from benchmarks.perf import BENCHMARKS  # light: the benchmarks' names only
+    from benchmarks.perf import BENCHMARKS  # start-up: only where needed
 
     perf.add_argument(
         "--only",
@@ -317,7 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # -------------------------------------------------------------------- paper/score
 def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
-    from benchmarks.protocol import ProtocolConfig
+    from benchmarks.protocol import ProtocolConfig  # start-up: only where needed
 
     noise = {
         key: value
@@ -358,7 +358,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
 
 def _filter_settings(items: list[str]) -> dict[str, Any]:
     """``["field=value", ...]`` as a dict (values parsed as JSON, else kept as text)."""
-    from benchmarks.protocol import BenchmarkError
+    from benchmarks.protocol import BenchmarkError  # start-up: only where needed
 
     out: dict[str, Any] = {}
     for item in items:
@@ -385,7 +385,7 @@ class _Progress:
             return
         if phase == "runs":
             if self.bar is None:
-                from tqdm import tqdm
+                from tqdm import tqdm  # start-up: only where needed
 
                 self.bar = tqdm(total=total, unit="run", desc="scoring runs", file=sys.stderr)
             self.bar.update(done - self.bar.n)
@@ -400,9 +400,13 @@ class _Progress:
 
 
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
-    from benchmarks.executor import SchedulerError, check_scheduler
-    from benchmarks.output import output_problem
-    from benchmarks.scenario_suite import format_suite, suite_rows, write_suite
+    from benchmarks.executor import SchedulerError, check_scheduler  # start-up: only where needed
+    from benchmarks.output import output_problem  # start-up: only where needed
+    from benchmarks.scenario_suite import (  # start-up: only where needed
+        format_suite,
+        suite_rows,
+        write_suite,
+    )
 
     if args.workers is not None and args.workers < 1:
         error(PROG, f"--workers must be >= 1, got {args.workers}")
@@ -462,9 +466,9 @@ def _run_scenario(
     scheduler: Any,
 ) -> tuple[int, Any]:
     """Run the protocol in one scenario and write its folder: (exit status, result or None)."""
-    from benchmarks.output import write_result_folder
-    from benchmarks.protocol import BenchmarkError, run_protocol
-    from benchmarks.report import format_tables
+    from benchmarks.output import write_result_folder  # start-up: only where needed
+    from benchmarks.protocol import BenchmarkError, run_protocol  # start-up: only where needed
+    from benchmarks.report import format_tables  # start-up: only where needed
 
     started = time.perf_counter()
     progress = _Progress(args.quiet)
@@ -510,7 +514,11 @@ def _run_scenario(
 
 # -------------------------------------------------------------------------- perf
 def _perf(args: argparse.Namespace) -> int:
-    from benchmarks.perf import benchmark_names, format_perf_table, run_benchmarks
+    from benchmarks.perf import (  # start-up: only where needed
+        benchmark_names,
+        format_perf_table,
+        run_benchmarks,
+    )
 
     try:
         names = benchmark_names(args.only)

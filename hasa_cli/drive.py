@@ -180,7 +180,7 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     previous = signal.signal(signal.SIGTERM, _raise_exit)
     try:
         if args.autocentre is not None:
-            from hasa_cli.inputs import start_autocentre
+            from hasa_cli.inputs import start_autocentre  # start-up: only where needed
 
             autocentre = start_autocentre(inputs, args.autocentre, log)
         results = session.run()
@@ -218,7 +218,7 @@ def _drive_setup(
     keyboard = load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
     if not isinstance(keyboard, KeyboardCalibration):
         raise CalibrationError(str(args.keyboard), "device", "must be 'keyboard' for --keyboard")
-    from hasa_cli.inputs import estimator_for, joystick_profiles
+    from hasa_cli.inputs import estimator_for, joystick_profiles  # start-up: only where needed
 
     profiles = joystick_profiles(args.calibration, log)
     env_wrapper = None
@@ -253,7 +253,7 @@ def _synthetic_driver(args: argparse.Namespace) -> tuple[Any, str]:
     preferred offset: :func:`hasa_env.scenarios.scenario_drivers`) and the participant id
     (``--participant``, default ``synthetic-<population>-<seed>-<driver>[-<scenario>]``,
     the scenario named unless ``paper``); raises ValueError for an unknown driver."""
-    from hasa_env.drivers import population
+    from hasa_env.drivers import population  # start-up: only where needed
 
     seed = args.population_seed
     drivers = {p.name: p for p in population(args.population, seed=seed, scenario=args.scenario)}
@@ -302,7 +302,7 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     assert isinstance(g29, JoystickCalibration)
     profile = JoystickCalibration(**{**_fields(g29), "match_names": (wheel.name,)})
     inputs = InputManager(shipped_calibration("keyboard"), [profile], pygame_module=pg)  # type: ignore[arg-type]
-    from hasa_env.drivers import SyntheticDriver
+    from hasa_env.drivers import SyntheticDriver  # start-up: only where needed
 
     hook = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
     metadata = {
@@ -434,7 +434,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     log = print
     if argv and argv[0] == "calibrate":
-        from hasa_env.devices.calibrator import calibrate
+        from hasa_env.devices.calibrator import calibrate  # start-up: only where needed
 
         args = _calibrate_parser().parse_args(argv[1:])
         return calibrate(
@@ -444,7 +444,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             timeout=args.timeout,
         )
     if argv and argv[0] == "study":
-        from hasa_cli.study import main as study_main
+        from hasa_cli.study import main as study_main  # start-up: only where needed
 
         return study_main(argv[1:])
     if argv and argv[0] == "synthetic":

@@ -254,7 +254,7 @@ def _setup(args: argparse.Namespace) -> _Setup:
     env_wrapper = None
     if args.estimator is not None:
         track = study.document["measured"]["track"]
-        from hasa_cli.inputs import estimator_for
+        from hasa_cli.inputs import estimator_for  # start-up: only where needed
 
         env_wrapper = estimator_for(args.estimator, LaneKeepingEnv(config=study.env_config(track)))
     # the input is checked first: a bad file is exit 2 with or without a screen
@@ -305,7 +305,7 @@ def _synthetic_participant(args: argparse.Namespace, scenario: str) -> _Particip
     through the screens, as it drives in the study's ``scenario`` (its preferred offset:
     :func:`hasa_env.scenarios.scenario_drivers`, from ``--population-seed``);
     :class:`_Exit` for an unknown driver (2) or no virtual wheel (3)."""
-    from hasa_env.drivers import SyntheticDriver, population
+    from hasa_env.drivers import SyntheticDriver, population  # start-up: only where needed
 
     drivers = {
         p.name: p for p in population(args.population, seed=args.population_seed, scenario=scenario)
@@ -381,7 +381,7 @@ def run(args: argparse.Namespace) -> int:
         return exit_.status
     if setup.headless:
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-    from hasa_cli.inputs import joystick_profiles
+    from hasa_cli.inputs import joystick_profiles  # start-up: only where needed
 
     pg = init_pygame_input()
     try:
@@ -438,7 +438,7 @@ def _drive_session(
     autocentre = None
     try:
         if args.autocentre is not None and args.synthetic is None:
-            from hasa_cli.inputs import start_autocentre
+            from hasa_cli.inputs import start_autocentre  # start-up: only where needed
 
             autocentre = start_autocentre(inputs, args.autocentre, status.log)
         outcome = session.run()

@@ -22,8 +22,7 @@ names (``describe(path)``: ``"config key 'noise.camera'"``, ``"field 'dt'"``):
   interval with two finite ends (``allowed [0, 10] m``, ``allowed integers [1, 1000]``);
 - ``<subject> = <value> is not allowed: one of 'a', 'b'`` (a choice);
 - ``<subject> is missing`` (a required key);
-- ``unknown <subject> (allowed keys here: a, b, c)``, with ``; did you mean 'b'?`` when
-  one of them is close (:func:`did_you_mean`);
+- ``unknown <subject> (allowed keys here: a, b, c)`` (``; did you mean 'b'?``: :func:`did_you_mean`);
 - ``<subject> has the entry <v> twice (...)`` (a list of distinct entries), and
   ``<subject> is nested more than N levels deep`` (free JSON).
 
@@ -44,6 +43,9 @@ newcomer can read", which found seven hand-written validators in four styles):
   of range (not an ``OverflowError``), a string is not a list, an array is
   not a choice, free JSON has a depth cap;
 - the core install gains no dependency.
+
+Why this module is long: it is the one walk over every kind of field and the messages of
+each; split, the one message format would be split too.
 
 This module sits in the bottom layer of :mod:`hasa_env` (docs/design.md §2.2)
 and imports nothing from the project.
