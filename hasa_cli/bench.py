@@ -373,25 +373,39 @@ def _filter_settings(items: list[str]) -> dict[str, Any]:
 
 
 class _Progress:
-    """tqdm progress over runs, phase messages on stderr (nothing when quiet)."""
+    """Progress on stderr (nothing when quiet): a bar with an estimate of the time left for
+    each long stage (the fits, seed by seed; the runs), a line with the elapsed time for the
+    others and for the messages within a stage."""
+
+    BARS = {"fits": ("fitting the models", "seed"), "runs": ("scoring runs", "run")}
 
     def __init__(self, quiet: bool) -> None:
         self.quiet = quiet
         self.bar: Any = None
+        self.phase = ""
         self.start = time.perf_counter()
 
     def __call__(self, phase: str, done: int, total: int) -> None:
         if self.quiet:
             return
-        if phase == "runs":
-            if self.bar is None:
+        if phase in self.BARS:
+            if self.bar is None or self.phase != phase:
                 from tqdm import tqdm  # start-up: only where needed
 
-                self.bar = tqdm(total=total, unit="run", desc="scoring runs", file=sys.stderr)
+                self.close()
+                desc, unit = self.BARS[phase]
+                self.bar = tqdm(total=total, unit=unit, desc=desc, file=sys.stderr)
+                self.phase = phase
             self.bar.update(done - self.bar.n)
+            if phase == "fits" and done == total:
+                self.close()
+            return
+        line = f"[{time.perf_counter() - self.start:5.1f} s] {phase}"
+        if self.bar is not None and self.phase == "fits":
+            self.bar.write(line, file=sys.stderr)  # a message within the stage, above its bar
             return
         self.close()
-        print(f"[{time.perf_counter() - self.start:5.1f} s] {phase}", file=sys.stderr, flush=True)
+        print(line, file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

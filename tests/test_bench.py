@@ -366,7 +366,14 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
 
 def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     config = ProtocolConfig(**(SMALL | {"seeds": (3, 4), "curved_runs": 0}))
-    result = run_protocol(config, [f"{user_module}:NearFarPD"], workers=1)
+    calls: list[tuple[str, int, int]] = []
+    result = run_protocol(
+        config, [f"{user_module}:NearFarPD"], workers=1, progress=lambda *c: calls.append(c)
+    )
+    # every long stage reports done/total, so the command line shows an estimate for each
+    assert [c for c in calls if c[0] == "fits"] == [("fits", 0, 2), ("fits", 1, 2), ("fits", 2, 2)]
+    runs = [c for c in calls if c[0] == "runs"]
+    assert runs[0][1] == 0 and runs[-1][1] == runs[-1][2] > 0
     doc = result.to_json_dict()
     assert doc["config"]["seeds"] == [3, 4]
     assert {r["seed"] for r in doc["steering"]} == {3, 4} == {r["seed"] for r in doc["estimation"]}
