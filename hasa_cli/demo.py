@@ -29,6 +29,7 @@ PROG = "hasa-demo"
 def _drive(env_id: str, seed: int, seconds: float) -> dict[str, float]:
     env = gym.make(env_id, config={"time_limit": seconds, "action": {"type": "physical"}})
     _, info = env.reset(seed=seed)
+    size = int(np.prod(env.action_space.shape or (2,)))
     errors, camera_errors, steps = [], [], 0
     start = time.perf_counter()
     done = False
@@ -39,7 +40,7 @@ def _drive(env_id: str, seed: int, seconds: float) -> dict[str, float]:
             - 0.04 * info["lateral_offset"]
             - 0.4 * info["heading"]
         )
-        action = np.array([steer, 0.0])[: env.action_space.shape[0]]  # advisor ids: steering
+        action = np.array([steer, 0.0])[:size]  # the advisor ids: steering only
         _, _, term, trunc, info = env.step(action)
         errors.append(info["lateral_offset"])
         camera_errors.append(info["sensor_camera_lateral"] - info["lateral_offset"])
