@@ -275,10 +275,10 @@ def test_view_options_choose_hud_items_and_refuse_unknown_ones():
     # 0.8 deg of steering wheel (15:1 unless the wheel's profile says otherwise)
     steering = {"time": 1.0, "speed": 15.0, "steering": math.radians(0.05)}
     assert Hud(pygame, 360, items=("steering",)).lines(steering) == [
-        "steering wheel   +0.8 deg  (road wheel +0.05 deg, 15:1)"
+        "wheel   +0.8 deg (road +0.05)"
     ]
     assert Hud(pygame, 360, steering_ratio=10.0, items=("steering",)).lines(steering) == [
-        "steering wheel   +0.5 deg  (road wheel +0.05 deg, 10:1)"
+        "wheel   +0.5 deg (road +0.05)"
     ]
     assert ViewOptions.from_dict({"hud": ["time", "weights"]}).hud == ("time", "weights")
     with pytest.raises(ValueError, match="unknown item 'clock'; allowed: time, speed"):

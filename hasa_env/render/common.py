@@ -180,10 +180,7 @@ class Hud:
             # the angle a person turns first: the road wheel's is 15 times smaller
             delta_deg = math.degrees(float(info["steering"]))
             ratio = self.steering_ratio or DEFAULT_STEERING_RATIO
-            out.append(
-                f"steering wheel {delta_deg * ratio:+6.1f} deg  "
-                f"(road wheel {delta_deg:+.2f} deg, {ratio:g}:1)"
-            )
+            out.append(f"wheel {delta_deg * ratio:+6.1f} deg (road {delta_deg:+.2f})")
         return out
 
     def _panel(self, width: int, height: int) -> Any:
