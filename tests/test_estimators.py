@@ -210,6 +210,7 @@ class SharedMemoryEKF(GaussianMixtureEKF):
         self.matrices.initial_state = shared
 
 
+@pytest.mark.slow
 def test_swapping_the_true_hypothesis_gives_the_same_statistics(runs):
     """The memory initialisation uses each hypothesis' own bearings, never a
     shared or true lane: with the same trajectories, which hypothesis is true
