@@ -132,7 +132,8 @@ def console_script(
 ) -> Callable[[Callable[..., int]], Callable[..., int]]:
     """Decorate a program's ``main(argv)``: Ctrl-C and a closed output pipe end it quietly.
 
-    Warnings are shown as ``prog: warning: message`` lines. Ctrl-C prints ``prog: error: interrupted`` and returns :data:`EXIT_INTERRUPTED`
+    Warnings are shown as ``prog: warning: message`` lines. Ctrl-C prints
+    ``prog: error: interrupted`` and returns :data:`EXIT_INTERRUPTED`
     (what has been written stays written: every writer in hasa_env flushes as
     it goes); a closed stdout (``hasa-rec info ... | head``) ends the program
     without a traceback. Everything else a user can cause is handled inside
