@@ -226,6 +226,7 @@ def test_intermittent_steering_comes_in_bursts():
         assert np.mean(np.abs(np.diff(f["steering"].to_numpy()[500:])) / 0.01 < 1e-4) < 0.2
 
 
+@pytest.mark.slow
 def test_applied_steering_is_on_the_wheel_grid_and_shows_the_tremor():
     # at the population's full remnant scale: the calibrated default ("paper", scale 0.1)
     # puts the tremor at about the wheel's own resolution, where quantization hides it

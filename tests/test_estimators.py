@@ -267,6 +267,7 @@ def test_single_hypothesis_and_oracle_baselines(runs):
         OracleEKF().reset(np.array([15.0, 0.0, 0.0]), HYPOTHESES)
 
 
+@pytest.mark.slow
 def test_any_number_of_hypotheses_floored_or_pruned(runs):
     hyps = [3.6, 1.8, 0.0, -1.8, -3.6]
     res = run_estimator(make_ekf(), runs[1], hypotheses=hyps)

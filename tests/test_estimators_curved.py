@@ -168,6 +168,7 @@ def test_the_road_geometry_makes_the_curved_track_work(curved_runs):
         np.testing.assert_array_equal(explicit.mean, with_geometry.mean)
 
 
+@pytest.mark.slow
 def test_synthetic_population_on_the_curved_track():
     """Synthetic drivers (not the model) with the paper's generalized model, ratio 15:
     mean lateral RMSE 0.060 m with the geometry, 0.075 m without; every lane picked."""
