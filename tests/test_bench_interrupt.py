@@ -57,6 +57,9 @@ def test_ctrl_c_while_scoring_exits_130_within_seconds_and_keeps_the_old_result(
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         start_new_session=True,  # its own process group, as a terminal's job
+        # as a shell starts it: Ctrl-C not ignored (a pytest-xdist worker ignores SIGINT,
+        # and an ignored signal stays ignored in the programs it starts)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     reader = _Reader(proc.stderr)
     reader.start()
