@@ -93,7 +93,7 @@ from hasa_env.sim.config import default_config as env_default_config
 from hasa_env.sim.config import describe_config as env_describe_config
 from hasa_env.steering.loading import default_steering_ratio, load_model
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
-from hasa_env.validation import Field, schema, validate
+from hasa_env.validation import Field, did_you_mean, schema, validate
 
 __all__ = [
     "ESTIMATORS",
@@ -392,7 +392,7 @@ def trusted_estimator(own: Mapping[str, Any], env_config: Mapping[str, Any]) -> 
     if unknown:
         raise ConfigError(
             f"unknown config key 'estimator.settings.{unknown[0]}' (allowed keys here: "
-            f"{', '.join(sorted(names))})"
+            f"{', '.join(sorted(names))})" + did_you_mean(unknown[0], names)
         )
     if not est["outlier_gate"]:
         overrides.setdefault("innovation_gate", math.inf)

@@ -105,7 +105,9 @@ def evidence_dispersion_table(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.evidence_dispersion")
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.evidence_dispersion", allow_abbrev=False
+    )
     parser.add_argument("--population", default="paper")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--runs", type=int, default=3, help="runs per driver")

@@ -19,6 +19,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
+from benchmarks.defaults import NO_WORKER_TIMEOUT
+
 __all__ = [
     "NO_WORKER_TIMEOUT",
     "SCHEDULER_TIMEOUT",
@@ -138,8 +140,6 @@ def check_scheduler(address: str, timeout: float = SCHEDULER_TIMEOUT) -> str:
 
 T = TypeVar("T")
 
-NO_WORKER_TIMEOUT = 60.0
-"""Seconds :func:`map_tasks` waits on a Dask cluster without a worker before it gives up."""
 HEARTBEAT = 1.0
 """Seconds between the checks of a Dask cluster while a task is awaited."""
 

@@ -312,7 +312,9 @@ def read_report(path: Path) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.population_tuning")
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.population_tuning", allow_abbrev=False
+    )
     parser.add_argument("--population", default="paper")
     parser.add_argument("--seeds", default="0,1,2,3,4", help="population seeds (comma-separated)")
     parser.add_argument("--grid", default="", help="command-noise factors, e.g. 0.5,1,2")

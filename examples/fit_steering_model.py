@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from hasa_env.drivers import population, run_population, save_runs
+from hasa_env.drivers import POPULATIONS, population, run_population, save_runs
 from hasa_env.sim.road import curved_road
 from hasa_env.steering import GeneralizedModel, TwoPointModel, score, select_order
 
@@ -37,13 +37,25 @@ def main() -> None:
     args = parser.parse_args()
 
     drivers = population("paper", seed=args.seed)
+    # the population's study conditions (crosswind, camber, the wheel's own steering reading),
+    # as hasa-bench drives it: without them the same drivers give other numbers
+    conditions = dict(POPULATIONS["paper"].env_config)
+    print(f"population 'paper', seed {args.seed}, in its study conditions {conditions}")
     start = time.perf_counter()
     straight = run_population(
-        drivers, runs=args.runs, seed=args.seed, runs_by_name={"Ill": args.runs + 4}
+        drivers,
+        runs=args.runs,
+        seed=args.seed,
+        runs_by_name={"Ill": args.runs + 4},
+        config=conditions,
     )
     middle = time.perf_counter()
     curved = run_population(
-        drivers[:1], runs=1, seed=args.seed, env_id="hasa_env/LaneKeepingCurved-v0"
+        drivers[:1],
+        runs=1,
+        seed=args.seed,
+        env_id="hasa_env/LaneKeepingCurved-v0",
+        config=conditions,
     )["Ill"]
     end = time.perf_counter()
     count = sum(len(v) for v in straight.values())

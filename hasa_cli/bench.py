@@ -37,26 +37,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
-from benchmarks.executor import NO_WORKER_TIMEOUT, ClusterLost, SchedulerError, check_scheduler
-from benchmarks.output import output_problem, write_result_folder
-from benchmarks.perf import (
-    BENCHMARKS,
-    benchmark_names,
-    format_perf_table,
-    run_benchmarks,
-)
-from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
-from benchmarks.protocol.config import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
-from benchmarks.report import format_tables
-from benchmarks.scenario_suite import format_suite, suite_rows, write_suite
-from benchmarks.schema import ResultsSchemaError
+from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS, NO_WORKER_TIMEOUT
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
     EXIT_PARTIAL,
     EXIT_USAGE,
+    ArgumentParser,
     add_version,
     console_script,
     error,
@@ -66,6 +53,10 @@ from hasa_cli import (
 )
 from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import ConfigError, make_config
+
+# The protocol, its report and the performance benchmarks are imported where a command
+# runs: ``hasa-bench --help`` and a usage error stay fast (statsmodels and matplotlib alone
+# take seconds to import).
 
 __all__ = ["main", "build_parser"]
 
@@ -339,7 +330,7 @@ def _seed_list(text: str) -> tuple[int, ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-bench``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog=PROG,
         description="The human-as-advisor benchmark (Mai et al.): steering-model prediction "
         "and lane estimation on a synthetic population or recorded drives.",
@@ -380,6 +371,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     perf.add_argument("--quick", action="store_true", help="seconds-long runs, rough numbers")
     perf.add_argument("--json", metavar="FILE", help="also write every number as JSON")
+    from benchmarks.perf import BENCHMARKS  # start-up: only where needed
+
     perf.add_argument(
         "--only",
         metavar="NAMES",
@@ -391,6 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 # -------------------------------------------------------------------- paper/score
 def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
+    from benchmarks.protocol import ProtocolConfig  # start-up: only where needed
+
     noise = {
         key: value
         for key, value in (
@@ -430,6 +425,8 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
 
 def _filter_settings(items: list[str]) -> dict[str, Any]:
     """``["field=value", ...]`` as a dict (values parsed as JSON, else kept as text)."""
+    from benchmarks.protocol import BenchmarkError  # start-up: only where needed
+
     out: dict[str, Any] = {}
     for item in items:
         name, sep, text = item.partition("=")
@@ -443,24 +440,39 @@ def _filter_settings(items: list[str]) -> dict[str, Any]:
 
 
 class _Progress:
-    """tqdm progress over runs, phase messages on stderr (nothing when quiet)."""
+    """Progress on stderr (nothing when quiet): a bar with an estimate of the time left for
+    each long stage (the fits, seed by seed; the runs), a line with the elapsed time for the
+    others and for the messages within a stage."""
+
+    BARS = {"fits": ("fitting the models", "seed"), "runs": ("scoring runs", "run")}
 
     def __init__(self, quiet: bool) -> None:
         self.quiet = quiet
         self.bar: Any = None
+        self.phase = ""
         self.start = time.perf_counter()
 
     def __call__(self, phase: str, done: int, total: int) -> None:
         if self.quiet:
             return
-        if phase == "runs":
-            if self.bar is None:
-                self.bar = tqdm(total=total, unit="run", desc="scoring runs", file=sys.stderr)
+        if phase in self.BARS:
+            if self.bar is None or self.phase != phase:
+                from tqdm import tqdm  # start-up: only where needed
+
+                self.close()
+                desc, unit = self.BARS[phase]
+                self.bar = tqdm(total=total, unit=unit, desc=desc, file=sys.stderr)
+                self.phase = phase
             self.bar.update(done - self.bar.n)
+            if phase == "fits" and done == total:
+                self.close()
+            return
+        line = f"[{time.perf_counter() - self.start:5.1f} s] {printable(phase)}"
+        if self.bar is not None and self.phase == "fits":
+            self.bar.write(line, file=sys.stderr)  # a message within the stage, above its bar
             return
         self.close()
-        elapsed = time.perf_counter() - self.start
-        print(f"[{elapsed:5.1f} s] {printable(phase)}", file=sys.stderr, flush=True)
+        print(line, file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:
@@ -469,6 +481,15 @@ class _Progress:
 
 
 def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
+    from benchmarks.executor import SchedulerError, check_scheduler  # start-up: only where needed
+    from benchmarks.output import output_problem  # start-up: only where needed
+    from benchmarks.scenario_suite import (  # start-up: only where needed
+        format_suite,
+        suite_rows,
+        write_suite,
+    )
+    from benchmarks.schema import ResultsSchemaError  # start-up: only where needed
+
     if args.workers is not None and args.workers < 1:
         error(PROG, f"--workers must be >= 1, got {args.workers}")
         return EXIT_USAGE
@@ -531,6 +552,12 @@ def _run_scenario(
     scheduler: Any,
 ) -> tuple[int, Any]:
     """Run the protocol in one scenario and write its folder: (exit status, result or None)."""
+    from benchmarks.executor import ClusterLost  # start-up: only where needed
+    from benchmarks.output import write_result_folder  # start-up: only where needed
+    from benchmarks.protocol import BenchmarkError, run_protocol  # start-up: only where needed
+    from benchmarks.report import format_tables  # start-up: only where needed
+    from benchmarks.schema import ResultsSchemaError  # start-up: only where needed
+
     started = time.perf_counter()
     progress = _Progress(args.quiet)
     try:
@@ -588,6 +615,12 @@ def _run_scenario(
 
 # -------------------------------------------------------------------------- perf
 def _perf(args: argparse.Namespace) -> int:
+    from benchmarks.perf import (  # start-up: only where needed
+        benchmark_names,
+        format_perf_table,
+        run_benchmarks,
+    )
+
     try:
         names = benchmark_names(args.only)
     except ValueError as exc:

@@ -44,15 +44,12 @@ from typing import Any
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_USAGE,
+    ArgumentParser,
     add_version,
     console_script,
     error,
     report_write_failure,
 )
-from hasa_cli.inputs import estimator_for as _estimator
-from hasa_cli.inputs import joystick_profiles as _joystick_profiles
-from hasa_cli.inputs import start_autocentre as _start_autocentre
-from hasa_cli.study import main as study_main
 from hasa_env.devices.calibration import (
     CalibrationError,
     JoystickCalibration,
@@ -61,10 +58,8 @@ from hasa_env.devices.calibration import (
     shipped_calibration,
     user_calibration_path,
 )
-from hasa_env.devices.calibrator import calibrate
 from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_reason
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
-from hasa_env.drivers import SyntheticDriver, population
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording import RecordingError
 from hasa_env.scenarios import scenario_names
@@ -74,6 +69,10 @@ from hasa_env.session import (
     VirtualWheelDriver,
 )
 from hasa_env.sim.config import ConfigError
+
+# The steering models, estimators and synthetic drivers (statsmodels, scipy.stats: seconds to
+# import) are imported where a command needs them, so that 'hasa-drive calibrate', a usage
+# error and --help start at once.
 
 __all__ = ["EXIT_NO_SCREEN", "main"]
 
@@ -144,11 +143,10 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     if reason is not None:
         error(
             "hasa-drive",
-            f"no screen to drive on: {reason}.\n"
-            "hasa-drive shows the road to a human driver and needs a display. Run it in a desktop "
-            "session (for a test without one: xvfb-run hasa-drive ...). Headless work: hasa-replay "
-            "replays and checks recordings, and 'hasa-drive synthetic' drives a synthetic driver "
-            "through a virtual wheel.",
+            f"no screen to drive on: {reason}; hasa-drive shows the road to a human driver and "
+            "needs a display: run it in a desktop session (for a test without one: xvfb-run "
+            "hasa-drive ...; headless work: hasa-replay replays and checks recordings, "
+            "'hasa-drive synthetic' drives a synthetic driver through a virtual wheel)",
         )
         return EXIT_NO_SCREEN
     try:
@@ -184,7 +182,9 @@ def _drive(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     previous = signal.signal(signal.SIGTERM, _raise_exit)
     try:
         if args.autocentre is not None:
-            autocentre = _start_autocentre(inputs, args.autocentre, log)
+            from hasa_cli.inputs import start_autocentre  # start-up: only where needed
+
+            autocentre = start_autocentre(inputs, args.autocentre, log)
         results = session.run()
     except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
         return _write_failed(exc, session, settings)
@@ -232,10 +232,12 @@ def _drive_setup(
     keyboard = load_calibration(args.keyboard) if args.keyboard else shipped_calibration("keyboard")
     if not isinstance(keyboard, KeyboardCalibration):
         raise CalibrationError(str(args.keyboard), "device", "must be 'keyboard' for --keyboard")
-    profiles = _joystick_profiles(args.calibration, log)
+    from hasa_cli.inputs import estimator_for, joystick_profiles  # start-up: only where needed
+
+    profiles = joystick_profiles(args.calibration, log)
     env_wrapper = None
     if args.estimator is not None:
-        env_wrapper = _estimator(
+        env_wrapper = estimator_for(
             args.estimator,
             _probe_env(settings),
             lane_check=not args.no_lane_check,
@@ -269,6 +271,8 @@ def _synthetic_driver(args: argparse.Namespace) -> tuple[Any, str]:
     preferred offset: :func:`hasa_env.scenarios.scenario_drivers`) and the participant id
     (``--participant``, default ``synthetic-<population>-<seed>-<driver>[-<scenario>]``,
     the scenario named unless ``paper``); raises ValueError for an unknown driver."""
+    from hasa_env.drivers import population  # start-up: only where needed
+
     seed = args.population_seed
     drivers = {p.name: p for p in population(args.population, seed=seed, scenario=args.scenario)}
     if args.driver not in drivers:
@@ -316,6 +320,8 @@ def _synthetic(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     assert isinstance(g29, JoystickCalibration)
     profile = JoystickCalibration(**{**_fields(g29), "match_names": (wheel.name,)})
     inputs = InputManager(shipped_calibration("keyboard"), [profile], pygame_module=pg)  # type: ignore[arg-type]
+    from hasa_env.drivers import SyntheticDriver  # start-up: only where needed
+
     hook = VirtualWheelDriver(wheel, SyntheticDriver(params), profile)
     metadata = {
         "synthetic": True,
@@ -351,7 +357,7 @@ def _fields(cal: JoystickCalibration) -> dict[str, Any]:
 
 def _calibrate_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-drive calibrate``."""
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="hasa-drive calibrate",
         description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
     )
@@ -365,7 +371,7 @@ def _calibrate_parser() -> argparse.ArgumentParser:
 
 def _synthetic_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-drive synthetic``."""
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="hasa-drive synthetic",
         description="Drive through hasa-drive's loop with a synthetic driver turning a "
         "virtual G29 "
@@ -382,7 +388,7 @@ def _synthetic_parser() -> argparse.ArgumentParser:
 
 def _drive_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-drive`` (a human drive)."""
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="hasa-drive",
         description="Drive the lane-keeping env with a wheel (G29), a joystick or the keyboard; "
         "record each run. "
@@ -455,6 +461,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     log = print
     if argv and argv[0] == "calibrate":
+        from hasa_env.devices.calibrator import calibrate  # start-up: only where needed
+
         args = _calibrate_parser().parse_args(argv[1:])
         return calibrate(
             args.output,
@@ -463,6 +471,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             timeout=args.timeout,
         )
     if argv and argv[0] == "study":
+        from hasa_cli.study import main as study_main  # start-up: only where needed
+
         return study_main(argv[1:])
     if argv and argv[0] == "synthetic":
         return _synthetic(_synthetic_parser().parse_args(argv[1:]), log)

@@ -25,6 +25,7 @@ from hasa_cli import (
     EXIT_OK,
     EXIT_PARTIAL,
     EXIT_USAGE,
+    ArgumentParser,
     add_version,
     console_script,
     error,
@@ -193,7 +194,7 @@ def _export(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-rec``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog=PROG,
         description="Inspect, convert and export hasa_env recordings.",
         epilog="Exit status: 0 ok, 1 some inputs failed (each named), 2 usage or input error, "

@@ -68,6 +68,7 @@ from hasa_cli import (
     EXIT_OK,
     EXIT_PARTIAL,
     EXIT_USAGE,
+    ArgumentParser,
     add_version,
     console_script,
     error,
@@ -115,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     Long because it is an argparse option list: one option per statement, each with its help.
     """
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog=PROG,
         description="Replay recordings headlessly, check that they reproduce, "
         "score a steering model "

@@ -32,8 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from hasa_cli import EXIT_ENVIRONMENT, EXIT_PARTIAL, error, report_write_failure
-from hasa_cli.inputs import estimator_for, joystick_profiles, start_autocentre
+from hasa_cli import (
+    EXIT_ENVIRONMENT,
+    EXIT_PARTIAL,
+    EXIT_USAGE,
+    ArgumentParser,
+    error,
+    report_write_failure,
+)
 from hasa_env.devices.calibration import (
     CalibrationError,
     JoystickCalibration,
@@ -43,7 +49,9 @@ from hasa_env.devices.calibration import (
 )
 from hasa_env.devices.sources import InputManager, init_pygame_input, no_screen_reason
 from hasa_env.devices.virtual import VirtualJoystick, VirtualJoystickUnavailable
-from hasa_env.drivers import SyntheticDriver, population
+
+# The steering models, estimators and synthetic drivers are imported where the session needs
+# them: '--check' and an error in the study file answer at once.
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.recording import RecordingError
 from hasa_env.scenarios import scenario_spec
@@ -59,6 +67,7 @@ from hasa_env.session import (
 from hasa_env.session.scripted import WheelButtonPresser
 from hasa_env.session.session_file import SESSION_FILE
 from hasa_env.sim.config import ConfigError
+from hasa_env.validation import did_you_mean
 
 __all__ = ["EXIT_NO_SCREEN", "StatusLine", "build_parser", "main"]
 
@@ -253,6 +262,8 @@ def _setup(args: argparse.Namespace) -> _Setup:
     env_wrapper = None
     if args.estimator is not None:
         track = study.document["measured"]["track"]
+        from hasa_cli.inputs import estimator_for  # start-up: only where needed
+
         env_wrapper = estimator_for(
             args.estimator,
             LaneKeepingEnv(config=study.env_config(track)),
@@ -262,12 +273,12 @@ def _setup(args: argparse.Namespace) -> _Setup:
     if not headless:
         reason = no_screen_reason()
         if reason is not None:
-            print(
-                f"{PROG}: no screen to drive on: {reason}.\n"
-                "A study session shows the road to its participant and needs a display "
-                "(for a test without one: xvfb-run hasa-drive study ...; a synthetic "
-                "participant can drive headless: --synthetic DRIVER without --realtime).",
-                file=sys.stderr,
+            error(
+                PROG,
+                f"no screen to drive on: {reason}; a study session shows the road to its "
+                "participant and needs a display (for a test without one: xvfb-run hasa-drive "
+                "study ...; a synthetic participant drives headless: --synthetic DRIVER "
+                "without --realtime)",
             )
             raise _Exit(EXIT_NO_SCREEN)
     folder = Path(args.output) / args.participant
@@ -284,8 +295,7 @@ def _open_window(pg: Any, args: argparse.Namespace, study: Study) -> Any:
         flags = pg.FULLSCREEN if args.fullscreen else 0
         display = pg.display.set_mode((args.width, args.height), flags)
     except Exception as exc:  # noqa: BLE001 - pygame.error and friends: no usable screen
-        print(f"{PROG}: no screen to drive on: pygame could not open a window ({exc})",
-              file=sys.stderr)  # fmt: skip
+        error(PROG, f"no screen to drive on: pygame could not open a window ({exc})")
         raise _Exit(EXIT_NO_SCREEN) from None
     pg.display.set_caption(study.document["study"]["title"] or f"hasa-drive: {study.name}")
     return display
@@ -307,17 +317,19 @@ def _synthetic_participant(args: argparse.Namespace, scenario: str) -> _Particip
     through the screens, as it drives in the study's ``scenario`` (its preferred offset:
     :func:`hasa_env.scenarios.scenario_drivers`, from ``--population-seed``);
     :class:`_Exit` for an unknown driver (2) or no virtual wheel (3)."""
+    from hasa_env.drivers import SyntheticDriver, population  # start-up: only where needed
+
     drivers = {
         p.name: p for p in population(args.population, seed=args.population_seed, scenario=scenario)
     }
     if args.synthetic not in drivers:
-        print(f"{PROG}: unknown driver {args.synthetic!r}; this population has "
-              f"{', '.join(drivers)}", file=sys.stderr)  # fmt: skip
-        raise _Exit(2)
+        error(PROG, f"unknown driver {args.synthetic!r}; this population has "
+                    f"{', '.join(drivers)}" + did_you_mean(args.synthetic, drivers))  # fmt: skip
+        raise _Exit(EXIT_USAGE)
     try:
         wheel = VirtualJoystick.g29()
     except VirtualJoystickUnavailable as exc:
-        print(f"{PROG}: cannot create the virtual wheel: {exc}", file=sys.stderr)
+        error(PROG, f"cannot create the virtual wheel: {exc}")
         raise _Exit(EXIT_ENVIRONMENT) from None
     try:
         g29 = shipped_calibration("g29")
@@ -376,11 +388,13 @@ def run(args: argparse.Namespace) -> int:
         setup = _setup(args)
     except (StudyError, SessionError, ValueError, ConfigError, ImportError, OSError) as exc:
         error(PROG, str(exc))
-        return 2
+        return EXIT_USAGE
     except _Exit as exit_:
         return exit_.status
     if setup.headless:
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    from hasa_cli.inputs import joystick_profiles  # start-up: only where needed
+
     pg = init_pygame_input()
     try:
         display = None if setup.headless else _open_window(pg, args, setup.study)
@@ -393,7 +407,7 @@ def run(args: argparse.Namespace) -> int:
         return exit_.status
     except (StudyError, SessionError, ValueError, OSError) as exc:
         error(PROG, str(exc))
-        return 2
+        return EXIT_USAGE
     try:
         inputs = InputManager(setup.keyboard, who.profiles, use_joystick=not args.keyboard_only,
                               pygame_module=pg)  # fmt: skip
@@ -418,7 +432,7 @@ def run(args: argparse.Namespace) -> int:
         error(PROG, str(exc))
         if who.wheel is not None:
             who.wheel.detach()
-        return 2
+        return EXIT_USAGE
     return _drive_session(args, session, inputs, status, who.wheel, display, pg)
 
 
@@ -436,12 +450,14 @@ def _drive_session(
     autocentre = None
     try:
         if args.autocentre is not None and args.synthetic is None:
+            from hasa_cli.inputs import start_autocentre  # start-up: only where needed
+
             autocentre = start_autocentre(inputs, args.autocentre, status.log)
         outcome = session.run()
     except (StudyError, SessionError) as exc:
         status.close()
         error(PROG, str(exc))
-        return 2
+        return EXIT_USAGE
     except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
         status.close()
         kept = (
@@ -468,7 +484,7 @@ def _drive_session(
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-drive study``."""
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="hasa-drive study",
         description="Run one participant's session of a study file (e.g. "
         "studies/paper.toml): instructions, practice and measured runs with the study's "

@@ -22,7 +22,7 @@ names (``describe(path)``: ``"config key 'noise.camera'"``, ``"field 'dt'"``):
   interval with two finite ends (``allowed [0, 10] m``, ``allowed integers [1, 1000]``);
 - ``<subject> = <value> is not allowed: one of 'a', 'b'`` (a choice);
 - ``<subject> is missing`` (a required key);
-- ``unknown <subject> (allowed keys here: a, b, c)``;
+- ``unknown <subject> (allowed keys here: a, b, c)`` (``; did you mean 'b'?``: :func:`did_you_mean`);
 - ``<subject> has the entry <v> twice (...)`` (a list of distinct entries), and
   ``<subject> is nested more than N levels deep`` (free JSON).
 
@@ -44,6 +44,9 @@ newcomer can read", which found seven hand-written validators in four styles):
   not a choice, free JSON has a depth cap;
 - the core install gains no dependency.
 
+Why this module is long: it is the one walk over every kind of field and the messages of
+each; split, the one message format would be split too.
+
 This module sits in the bottom layer of :mod:`hasa_env` (docs/design.md §2.2)
 and imports nothing from the project.
 """
@@ -52,12 +55,13 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import difflib
 import math
 import os
 import re
 import reprlib
 import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any
 
 import numpy as np
@@ -69,6 +73,7 @@ __all__ = [
     "REQUIRED",
     "Field",
     "schema",
+    "did_you_mean",
     "show",
     "validate",
     "validate_fields",
@@ -124,6 +129,13 @@ def show(value: Any) -> str:
         return _repr.repr(value)
     except Exception:  # a hostile __repr__, or one that recurses too deep
         return f"<{type(value).__name__} object>"
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """``"; did you mean 'x'?"`` for the choice closest to a misspelt ``word``, or ``""``
+    when none is close (:func:`difflib.get_close_matches`, cutoff 0.6)."""
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 def _number_text(x: float) -> str:
@@ -553,7 +565,7 @@ class _Walk:
                     raise self.error(
                         here,
                         f"unknown {self.describe(here)} (allowed keys here: "
-                        f"{', '.join(sorted(fields))})",
+                        f"{', '.join(sorted(fields))})" + did_you_mean(str(key), fields),
                     )
         return out
 

@@ -38,6 +38,7 @@ def _same_step(vector_out, single_out, i: int) -> None:
         np.testing.assert_array_equal(np.asarray(info[key][i]), np.asarray(value), err_msg=key)
 
 
+@pytest.mark.slow
 def test_registered_by_advisor_tasks_with_entry_point_strings():
     for env_id in advisor_tasks.ADVISOR_ENV_IDS:
         spec = gym.spec(env_id)
@@ -59,6 +60,7 @@ def test_registered_by_advisor_tasks_with_entry_point_strings():
     assert out.stdout.split("\n")[:3] == ["False False", "True False", "True"]
 
 
+@pytest.mark.slow
 def test_make_with_module_prefix_imports_the_task():
     import subprocess
 
@@ -268,6 +270,7 @@ def test_the_human_drives_and_the_action_is_ignored():
     assert abs(info["lateral_offset"]) < 1.0
 
 
+@pytest.mark.slow
 def test_the_advisors_keep_the_scenarios_preferred_offsets():
     from hasa_env.drivers import population
     from hasa_env.scenarios import scenario_drivers

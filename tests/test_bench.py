@@ -326,6 +326,7 @@ def test_a_model_that_cannot_be_used_stops_the_bench_before_any_run(
     assert (out / "results.json").read_text() == '{"format": "hasa_bench.results"}'
 
 
+@pytest.mark.slow
 def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: Path) -> None:
     specs = [
         f"{user_module}:NaNModel",
@@ -371,9 +372,17 @@ def test_broken_user_models_do_not_stop_the_others(user_module: str, tmp_path: P
     assert (tmp_path / "report.md").read_text().count("fit_raises") >= 1
 
 
+@pytest.mark.slow
 def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     config = ProtocolConfig(**(SMALL | {"seeds": (3, 4), "curved_runs": 0}))
-    result = run_protocol(config, [f"{user_module}:NearFarPD"], workers=1)
+    calls: list[tuple[str, int, int]] = []
+    result = run_protocol(
+        config, [f"{user_module}:NearFarPD"], workers=1, progress=lambda *c: calls.append(c)
+    )
+    # every long stage reports done/total, so the command line shows an estimate for each
+    assert [c for c in calls if c[0] == "fits"] == [("fits", 0, 2), ("fits", 1, 2), ("fits", 2, 2)]
+    runs = [c for c in calls if c[0] == "runs"]
+    assert runs[0][1] == 0 and runs[-1][1] == runs[-1][2] > 0
     doc = result.to_json_dict()
     assert doc["config"]["seeds"] == [3, 4]
     assert {r["seed"] for r in doc["steering"]} == {3, 4} == {r["seed"] for r in doc["estimation"]}
@@ -402,6 +411,7 @@ def test_several_seeds_give_a_verdict_with_intervals(user_module: str) -> None:
     assert "Verdict over 2 population seeds [3, 4]" in text and "95% CI" in text
 
 
+@pytest.mark.slow
 def test_stress_set_and_unchecked_estimators_are_scored(tmp_path: Path) -> None:
     config = ProtocolConfig(**(SMALL | {"curved_runs": 0}), stress=True, compare_checks=True)
     result = run_protocol(config, workers=1)
@@ -441,6 +451,7 @@ def test_stress_set_and_unchecked_estimators_are_scored(tmp_path: Path) -> None:
 
 
 # --------------------------------------------------------------- determinism
+@pytest.mark.slow
 def test_same_results_with_one_and_two_workers(outputs) -> None:
     config = ProtocolConfig(**SMALL, batch_size=2)
     one = run_protocol(config, ["bench_user_models:NearFarPD"], workers=1)

@@ -508,6 +508,7 @@ def test_hasa_rec_convert_converts_every_good_file(batch, tmp_path, capsys):
     assert written == set(batch["good"]) | csv_ok
 
 
+@pytest.mark.slow
 def test_hasa_bench_skips_and_names_every_bad_file_and_scores_the_rest(batch, tmp_path, capsys):
     out = tmp_path / "out"
     args = ["paper", "--recordings", str(batch["folder"]), "--min-duration", "0.5",

@@ -107,6 +107,7 @@ def test_every_params_type_survives_a_json_round_trip():
         IntermittentParams.from_dict(PreviewParams().to_dict())
 
 
+@pytest.mark.slow
 def test_each_archetype_acts_the_same_alone_or_in_any_batch():
     """Feeding the same true states, a mixed batch and each driver alone give the same bits."""
     params = population("paper", seed=1)
@@ -191,6 +192,7 @@ def test_the_preview_driver_anticipates_bends_more_than_the_pi_driver():
     assert np.mean(lead["preview"]) > np.mean(lead["two-point"]) + 0.1
 
 
+@pytest.mark.slow
 def test_intermittent_steering_comes_in_bursts():
     """In the clothoids (steadily rising steering demand) the intermittent drivers' steering
     rate is bursty: phases of hold (|rate| under 30 % of the demand's 3.4e-3 rad/s) and a
@@ -224,6 +226,7 @@ def test_intermittent_steering_comes_in_bursts():
         assert np.mean(np.abs(np.diff(f["steering"].to_numpy()[500:])) / 0.01 < 1e-4) < 0.2
 
 
+@pytest.mark.slow
 def test_applied_steering_is_on_the_wheel_grid_and_shows_the_tremor():
     # at the population's full remnant scale: the calibrated default ("paper", scale 0.1)
     # puts the tremor at about the wheel's own resolution, where quantization hides it

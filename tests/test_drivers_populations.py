@@ -91,6 +91,7 @@ def _increment_stats(frame):
     return increments.std(), np.sqrt(np.mean(extrapolation_error**2))
 
 
+@pytest.mark.slow
 def test_steering_moves_like_the_papers_participants():
     """Under the study's conditions the applied steering moves about as much per sample as
     the paper's participants' (Table 1 read at the road wheel: the two-point model's RMSE,

@@ -210,6 +210,7 @@ class SharedMemoryEKF(GaussianMixtureEKF):
         self.matrices.initial_state = shared
 
 
+@pytest.mark.slow
 def test_swapping_the_true_hypothesis_gives_the_same_statistics(runs):
     """The memory initialisation uses each hypothesis' own bearings, never a
     shared or true lane: with the same trajectories, which hypothesis is true
@@ -266,6 +267,7 @@ def test_single_hypothesis_and_oracle_baselines(runs):
         OracleEKF().reset(np.array([15.0, 0.0, 0.0]), HYPOTHESES)
 
 
+@pytest.mark.slow
 def test_any_number_of_hypotheses_floored_or_pruned(runs):
     hyps = [3.6, 1.8, 0.0, -1.8, -3.6]
     res = run_estimator(make_ekf(), runs[1], hypotheses=hyps)

@@ -168,6 +168,7 @@ def test_the_road_geometry_makes_the_curved_track_work(curved_runs):
         np.testing.assert_array_equal(explicit.mean, with_geometry.mean)
 
 
+@pytest.mark.slow
 def test_synthetic_population_on_the_curved_track():
     """Synthetic drivers (not the model) with the paper's generalized model, ratio 15:
     mean lateral RMSE 0.060 m with the geometry, 0.075 m without; every lane picked."""
@@ -218,6 +219,7 @@ def test_batched_curved_runs_equal_single_runs_and_subsets(curved_runs):
     np.testing.assert_allclose(est.mean, batch.mean[:, 199], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_straight_roads_are_unchanged():
     """On the straight track the filter gets no road points; explicit straight points
     (the generalized formula) give the same estimates within 1e-12."""
@@ -305,6 +307,7 @@ def test_the_curvature_limit_comes_from_the_training_data():
         FilterSettings(steering_curvature_limit=-1.0)
 
 
+@pytest.mark.slow
 def test_a_straight_road_model_leaves_the_lane_alone_on_bends():
     """The benchmark's case: the generalized model fitted on a straight run of a driver who
     later drives the curved track. With the limit the steering channel is off on the bends

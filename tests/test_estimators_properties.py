@@ -13,6 +13,7 @@ import functools
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -61,6 +62,7 @@ def corrupted(corruptions: list) -> tuple[np.ndarray, np.ndarray]:
     return data[:, :3], data[:, 3:]
 
 
+@pytest.mark.slow
 @given(corruptions=st.lists(corruption, max_size=12), hypotheses=st.sampled_from([2, 3]))
 @settings(max_examples=25, deadline=None)
 def test_corrupted_streams_keep_the_filter_sound(corruptions, hypotheses):

@@ -576,3 +576,38 @@ def test_loaded_frames_carry_the_config_for_downstream_code(tmp_path):
     rec = load_recording(env.paths[0])
     assert rec.data.attrs["track"] == "curved"
     assert hypotheses_of(rec.data) == (0.0, 1.8, -1.8)
+
+
+@pytest.mark.slow
+def test_the_sample_recording_is_what_its_documented_command_makes(tmp_path):
+    """recordings/sample/README.md's command, run as a user would in a fresh folder, makes
+    the shipped files: the CSV byte for byte, the raw inputs but for their wall-clock column,
+    the sidecar but for its timestamps and the installed versions."""
+    import shlex
+
+    from _programs import ROOT, run_program
+
+    sample = ROOT / "recordings" / "sample"
+    (command,) = [
+        line.strip() for line in (sample / "README.md").read_text().splitlines()
+        if line.strip().startswith("hasa-drive synthetic")
+    ]  # fmt: skip
+    words = shlex.split(command)
+    done = run_program(words[0], *words[1:], cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    made = tmp_path / "recordings" / "sample"
+    assert (made / "run_000.csv").read_bytes() == (sample / "run_000.csv").read_bytes()
+
+    def without_wall_clock(path):
+        rows = [line.split("\t") for line in path.read_text().splitlines()]
+        return [row[:2] + row[3:] for row in rows]
+
+    assert without_wall_clock(made / "run_000.inputs.tsv") == without_wall_clock(
+        sample / "run_000.inputs.tsv"
+    )
+
+    def sidecar(path):
+        doc = json.loads(path.read_text())
+        return {k: v for k, v in doc.items() if k not in ("created", "finished", "versions")}
+
+    assert sidecar(made / "run_000.json") == sidecar(sample / "run_000.json")

@@ -104,6 +104,7 @@ def _final_offsets(name, params, seconds=30.0):
     return frames
 
 
+@pytest.mark.slow
 def test_drivers_of_every_archetype_follow_a_lane_shift_and_a_lane_change():
     params = population("paper", 3, 6)  # two-point, preview and intermittent drivers
     assert len({type(p).__name__ for p in params}) == 3
@@ -138,6 +139,7 @@ def test_off_centre_drivers_keep_their_preferred_offset():
         TwoPointParams(preferred_offset=3.0)
 
 
+@pytest.mark.slow
 def test_hasa_bench_runs_every_scenario_and_writes_the_suite_table(tmp_path, capsys):
     out = tmp_path / "suite"
     code = bench_main(

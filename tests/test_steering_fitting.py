@@ -90,6 +90,7 @@ def test_two_point_fit_recovers_its_gains(gains, seed):
     assert np.all(np.abs(error) <= 4.0 * se), (error / se).round(2)
 
 
+@pytest.mark.slow
 def test_bic_selects_the_true_order_on_a_common_sample():
     arx = ARXForm(a=(1.1, -0.35), b=(0.6, -0.4, 0.25), c=(0.3,), d=(0.08, -0.06))
     rng = np.random.default_rng(7)

@@ -414,6 +414,7 @@ def _key_paths(document, prefix=""):
             yield from _key_paths(value, path + ".")
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(documents())
 def test_fuzzed_configs_are_accepted_and_stable_or_refused_naming_a_key(document):

@@ -271,6 +271,15 @@ def test_view_options_choose_hud_items_and_refuse_unknown_ones():
     assert hud.lines({"time": 1.0, "speed": 15.0, "steering": 0.01}) == [
         "speed 15.00 m/s  ( 54.0 km/h)"
     ]
+    # the steering line leads with the angle a person turns: 0.05 deg of road wheel is
+    # 0.8 deg of steering wheel (15:1 unless the wheel's profile says otherwise)
+    steering = {"time": 1.0, "speed": 15.0, "steering": math.radians(0.05)}
+    assert Hud(pygame, 360, items=("steering",)).lines(steering) == [
+        "wheel   +0.8 deg (road +0.05)"
+    ]
+    assert Hud(pygame, 360, steering_ratio=10.0, items=("steering",)).lines(steering) == [
+        "wheel   +0.5 deg (road +0.05)"
+    ]
     assert ViewOptions.from_dict({"hud": ["time", "weights"]}).hud == ("time", "weights")
     with pytest.raises(ValueError, match="unknown item 'clock'; allowed: time, speed"):
         ViewOptions(hud=("clock",))

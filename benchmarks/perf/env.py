@@ -319,6 +319,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns 0, or 1 with ``--strict`` when a measured target fails.
     """
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="python -m benchmarks.perf.env",
         description="Steps per second of hasa_env vs Pendulum-v1 and highway-env lane-keeping-v0, "
         "and of the native vector env at N = 1, 64, 1024.",

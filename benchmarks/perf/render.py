@@ -307,7 +307,9 @@ def format_table(report: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     """``python -m benchmarks.perf.render [--quick] [--json FILE]``."""
     parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.perf.render", description=__doc__.splitlines()[0]
+        allow_abbrev=False,
+        prog="python -m benchmarks.perf.render",
+        description=__doc__.splitlines()[0],
     )
     parser.add_argument(
         "--quick", action="store_true", help="fewer frames and repeats (rough numbers)"

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
 from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
 from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import ConfigError, deep_merge, make_config
-from hasa_env.validation import ABSENT, Field, schema, validate_fields
+from hasa_env.validation import ABSENT, Field, did_you_mean, schema, validate_fields
 
 __all__ = [
     "BASELINES",
@@ -50,10 +51,6 @@ UNCHECKED_SUFFIX = " (no checks)"
 (``compare_checks``; :mod:`estimators.evidence`)."""
 
 ILLUSTRATIVE = "Ill"
-DEFAULT_SEEDS = (0, 1, 2, 3, 4)
-"""Population seeds of the default protocol."""
-DEFAULT_MODEL_TIME_LIMIT = 600.0
-"""Default time limit (s) of one call into a user model: import, one fit, one batch scored."""
 TRACK_ENV_IDS = {"straight": "hasa_env/LaneKeeping-v0", "curved": "hasa_env/LaneKeepingCurved-v0"}
 """Gymnasium env id of each main track."""
 _NOISE_UNITS = {"speed": "m/s", "camera": "m", "camera_heading": "rad", "imu": "m/s^2",
@@ -242,6 +239,13 @@ class ProtocolConfig:
         )
         object.__setattr__(self, "seeds", tuple(self.seeds))
         object.__setattr__(self, "filter_settings", dict(self.filter_settings))
+        names = [f.name for f in fields(FilterSettings)]
+        for name in self.filter_settings:
+            if name not in names:
+                raise BenchmarkError(
+                    f"protocol setting 'filter_settings': unknown FilterSettings field "
+                    f"{name!r} (allowed: {', '.join(names)})" + did_you_mean(name, names)
+                )
         try:
             FilterSettings(**self.filter_settings)
         except (TypeError, ValueError) as exc:

@@ -128,7 +128,8 @@ __all__ = [
 ]
 
 Progress = Callable[[str, int, int], None]
-"""``progress(phase, done, total)``: phase "runs" with done/total runs, or a message (total 0)."""
+"""``progress(phase, done, total)``: phase "fits" with done/total seeds fitted, "runs" with
+done/total runs scored, or a message (total 0)."""
 
 
 def run_protocol(
@@ -184,11 +185,12 @@ def run_protocol(
             f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
             "run:\n" + "\n".join(f"  {e}" for e in errors)
         )
-    # 1.-2. per seed: the runs, the training run, the fits
-    fits = [
-        fit_and_check(config, make_plan(config, seed), candidates, errors, say)
-        for seed in config.run_seeds
-    ]
+    # 1.-2. per seed: the runs, the training run, the fits ("fits": seeds done of all)
+    fits: list[FittedPlan] = []
+    say("fits", 0, len(config.run_seeds))
+    for seed in config.run_seeds:
+        fits.append(fit_and_check(config, make_plan(config, seed), candidates, errors, say))
+        say("fits", len(fits), len(config.run_seeds))
     tasks = [task for i, fit in enumerate(fits) for task in chunk_tasks(config, fit, i == 0)]
     # 3. every seed's tasks at once
     done = schedule(

@@ -11,6 +11,7 @@ import contextlib
 import datetime as _dt
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -28,7 +29,10 @@ from hasa_env.devices.calibration import (
 )
 from hasa_env.devices.sources import init_pygame_input, no_screen_reason
 
-__all__ = ["CALIBRATION_STEPS", "Calibrator", "calibrate"]
+__all__ = ["CALIBRATION_STEPS", "NO_DEVICE", "Calibrator", "calibrate"]
+
+NO_DEVICE = 3
+"""Exit code when no joystick turns up within the timeout: the machine lacks something."""
 
 
 @dataclass
@@ -266,7 +270,8 @@ def calibrate(
 
     Every wait (for a joystick, for each step) ends on Escape, a QUIT event,
     Ctrl-C, SIGTERM, SIGHUP or SIGQUIT (nothing is written; exit code 1, or
-    128 + the signal's number), or after ``timeout`` s.
+    128 + the signal's number), or after ``timeout`` s (exit code 1; :data:`NO_DEVICE`,
+    3, when no joystick turned up at all).
     """
     if no_screen_reason() is not None:
         os.environ["SDL_VIDEODRIVER"] = (
@@ -307,11 +312,13 @@ def _dialogue(
                 break
         if joystick is None:
             if time.monotonic() > deadline:
-                log(
-                    "hasa-drive calibrate: no joystick found; is the wheel plugged in "
-                    "(and in PS3 mode for a G29)?"
+                print(
+                    f"hasa-drive calibrate: error: no joystick found in {timeout:g} s; is the "
+                    "wheel plugged in (and in PS3 mode for a G29)?",
+                    file=sys.stderr,
+                    flush=True,
                 )
-                return 1
+                return NO_DEVICE
             time.sleep(0.02)
     name = str(joystick.get_name())
     log(f"hasa-drive calibrate: {name} with {joystick.get_numaxes()} axes")

@@ -381,7 +381,11 @@ def population(
     Returns:
         The drivers' parameters (of their archetypes), in name order; drive
         them with :func:`~hasa_env.drivers.archetypes.make_driver` or
-        :class:`~hasa_env.drivers.archetypes.SyntheticDriver`.
+        :class:`~hasa_env.drivers.archetypes.SyntheticDriver`, in the population's
+        study conditions ``POPULATIONS[name].env_config`` (crosswind, camber, steering
+        sensor) as the benchmark does: pass them as ``config=`` to
+        :func:`~hasa_env.drivers.runner.run_driver` or ``run_population``, which
+        otherwise drive in the env's defaults (other numbers for the same drivers).
 
     Raises:
         ValueError: an unknown population or scenario, a bad seed or size.

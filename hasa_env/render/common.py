@@ -46,6 +46,7 @@ __all__ = [
     "DRIVEN_LANE_COLOUR",
     "DRIVEN_LANE_TOLERANCE",
     "driven_lane_runs",
+    "DEFAULT_STEERING_RATIO",
 ]
 
 GRASS_COLOUR = (46, 120, 52)
@@ -59,6 +60,9 @@ yellow of temporary construction-zone markings."""
 DRIVEN_LANE_TOLERANCE = 0.01
 """The driven lane's lines are drawn where its centre is more than this (m) off the marked
 lane's (:func:`driven_lane_runs`)."""
+DEFAULT_STEERING_RATIO = 15.0
+"""Steering-wheel / road-wheel angle the HUD assumes where no wheel profile gives one (the
+keyboard, an env's own render): a car's, the paper's and the shipped G29 profile's."""
 HUD_TEXT_COLOUR = (255, 255, 255)
 HYPOTHESIS_COLOURS = (
     (235, 235, 235),
@@ -139,8 +143,9 @@ class Hud:
         pygame_module: the imported ``pygame``.
         height: frame height (px); the font scales with it.
         time_limit: episode length (s) shown after the time, or None.
-        steering_ratio: steering-wheel angle / road-wheel angle; when given, the
-            steering line also shows the steering-wheel angle.
+        steering_ratio: steering-wheel angle / road-wheel angle of the steering line,
+            which shows the steering-wheel angle (what a person turns) and the road
+            wheel's; None: :data:`DEFAULT_STEERING_RATIO`.
         items: which items to show (:data:`hasa_env.render.options.HUD_ITEMS`: ``time``,
             ``speed``, ``steering``, ``weights``); empty: no panel, only messages.
     """
@@ -172,11 +177,10 @@ class Hud:
             v = float(info["speed"])
             out.append(f"speed {v:5.2f} m/s  ({v * 3.6:5.1f} km/h)")
         if "steering" in self.items:
+            # the angle a person turns first: the road wheel's is 15 times smaller
             delta_deg = math.degrees(float(info["steering"]))
-            steer = f"steering {delta_deg:+6.2f} deg (road wheel)"
-            if self.steering_ratio:
-                steer += f"  {delta_deg * self.steering_ratio:+6.1f} deg (wheel)"
-            out.append(steer)
+            ratio = self.steering_ratio or DEFAULT_STEERING_RATIO
+            out.append(f"wheel {delta_deg * ratio:+6.1f} deg (road {delta_deg:+.2f})")
         return out
 
     def _panel(self, width: int, height: int) -> Any:

@@ -128,6 +128,20 @@ def _standard_error(grad: np.ndarray | None, covariance: np.ndarray | None) -> f
     return float(math.sqrt(max(float(grad @ covariance @ grad), 0.0)))
 
 
+def _unidentifiable(gain: float, se: float, z: float, min_gain: float) -> str:
+    """The message of a gain not clearly non-zero: why an estimator may still decide with it."""
+    detail = (
+        f" (SE {se:.3g}, needs > {z:g} SE)" if math.isfinite(se) else f" (needs |G| > {min_gain:g})"
+    )
+    return (
+        f"static lane-offset gain sum(b)/near + sum(c)/far = {gain:.3g} rad/m is not clearly "
+        f"non-zero{detail}: the training run does not establish that the steering tells "
+        "the lanes apart, nor which way; an estimator may still decide a lane with it "
+        "(a small gain's evidence adds up over thousands of samples), but that decision rests "
+        "on a gain the fit cannot tell from zero: check it where the true lane is known"
+    )
+
+
 def check_identifiability(
     model: SteeringModel | ARXForm,
     covariance: np.ndarray | None = None,
@@ -191,15 +205,7 @@ def check_identifiability(
     identifiable = abs(gain) > z * se if math.isfinite(se) else abs(gain) > min_gain
     sign_consistent = gain > 0 if integrating else gain * memory > 0
     if not identifiable:
-        detail = (
-            f" (SE {se:.3g}, needs > {z:g} SE)"
-            if math.isfinite(se)
-            else f" (needs |G| > {min_gain:g})"
-        )
-        message = (
-            f"static lane-offset gain sum(b)/near + sum(c)/far = {gain:.3g} rad/m is not clearly "
-            f"non-zero{detail}: the steering carries no information on the lane offset"
-        )
+        message = _unidentifiable(gain, se, z, min_gain)
     elif not sign_consistent:
         message = (
             f"static lane-offset gain {gain:.3g} rad/m has the wrong sign for 1 - sum(a) = "

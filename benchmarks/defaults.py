@@ -1,0 +1,19 @@
+"""Defaults of the benchmark protocol that the command line shows in its help.
+
+They live apart from :mod:`benchmarks.protocol.config` so that ``hasa-bench --help``
+can show them without importing the protocol (statsmodels, matplotlib: seconds).
+"""
+
+from __future__ import annotations
+
+__all__ = ["DEFAULT_MODEL_TIME_LIMIT", "DEFAULT_SEEDS", "NO_WORKER_TIMEOUT"]
+
+DEFAULT_SEEDS = (0, 1, 2, 3, 4)
+"""Population seeds of ``hasa-bench paper`` (the verdict's intervals are over them)."""
+
+DEFAULT_MODEL_TIME_LIMIT = 600.0
+"""Time limit in s of one call into a user model (import, a fit, a batch of runs)."""
+
+NO_WORKER_TIMEOUT = 60.0
+"""Seconds :func:`benchmarks.executor.map_tasks` waits on a Dask cluster without a worker
+before it gives up."""
