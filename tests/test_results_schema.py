@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 from jsonschema import Draft202012Validator
 
+import benchmarks.protocol
 from benchmarks.figures import FIGURES
 from benchmarks.protocol import BenchmarkResult
 from benchmarks.report import CSV_TABLES, write_outputs
@@ -274,7 +275,8 @@ def test_a_result_that_breaks_the_schema_is_one_error_line_and_every_file_is_kep
     assert folder_problems(out) == []
     bad = _result_from(doc)
     bad.summary[0]["surprise"] = 1.0  # a column the schema does not know
-    monkeypatch.setattr(bench, "run_protocol", lambda *args, **kwargs: bad)
+    # hasa-bench imports run_protocol from benchmarks.protocol when a command runs
+    monkeypatch.setattr(benchmarks.protocol, "run_protocol", lambda *args, **kwargs: bad)
     code = bench.main(["paper", *TINY, "--no-plots", "--quiet", "--out", str(out), "--overwrite"])
     err = capsys.readouterr().err
     assert code == 1

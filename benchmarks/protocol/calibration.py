@@ -57,7 +57,7 @@ def lane_calibration(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> Non
             continue
         total = bins.sum(axis=0)
         table.at[i, "lane_ece"] = expected_calibration_error(total)
-        table.at[i, "reliability"] = [
+        table.at[i, "reliability"] = [  # type: ignore[assignment]  # a list in an object cell
             None if n == 0 else [round(p / n, 4), round(o / n, 4), int(n)]
             for n, p, o in zip(*total, strict=True)
         ]

@@ -120,7 +120,12 @@ def _limit_child(time_limit: float, memory_limit: int | None) -> None:
     group reaches no one else), death with the parent (Linux), and resource limits the model
     cannot raise again: address space (``memory_limit`` bytes more than now) and CPU time (a
     bound for a child whose parent died and could not stop it: ``time_limit`` per CPU + 1 s,
-    then SIGXCPU; SIGKILL 5 s later)."""
+    then SIGXCPU; SIGKILL 5 s later). SIGTERM and SIGHUP get their default action back: the
+    handlers the program installed to stop itself (``hasa_cli.stop_on_signals``) are not the
+    model's, whose process a signal ends."""
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
     os.setsid()
     with contextlib.suppress(OSError, AttributeError):  # Linux only: PR_SET_PDEATHSIG
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))

@@ -220,7 +220,7 @@ def _fast_frame(data: bytes, source: Path) -> pd.DataFrame | None:
     options = {"header": 0, "engine": "c", "quoting": csv.QUOTE_NONE, "na_filter": False,
                "skip_blank_lines": False, **_ROUND_TRIP}  # fmt: skip
     try:
-        raw = pd.read_csv(io.BytesIO(data), dtype=dtypes, **options)
+        raw = pd.read_csv(io.BytesIO(data), dtype=dtypes, **options)  # type: ignore[call-overload]
         if len(raw) != rows or list(raw.columns) != names or not _plain_integers(data, options):
             return None
     except (ValueError, OverflowError, TypeError):  # ParserError is a ValueError
