@@ -47,6 +47,7 @@ __all__ = [
     "EXIT_PARTIAL",
     "EXIT_USAGE",
     "Stopped",
+    "add_trust_model_option",
     "add_version",
     "console_script",
     "error",
@@ -177,6 +178,18 @@ def stop_on_signals() -> Iterator[None]:
     finally:
         for name, handler in previous.items():
             signal.signal(getattr(signal, name), handler)
+
+
+def add_trust_model_option(parser: argparse.ArgumentParser, subject: str) -> None:
+    """``--trust-model-module``: ``subject`` (e.g. "--estimator's model file") may import the
+    module its ``"class"`` field names when its type is not registered."""
+    parser.add_argument(
+        "--trust-model-module",
+        action="store_true",
+        help=f"let {subject} import the module its 'class' names when its type is not "
+        "registered (searched in the working directory, the file's folder and the installed "
+        "packages): a user model is code, importing it runs it; only for files you trust",
+    )
 
 
 class ArgumentParser(argparse.ArgumentParser):

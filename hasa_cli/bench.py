@@ -44,6 +44,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_trust_model_option,
     add_version,
     console_script,
     error,
@@ -67,7 +68,7 @@ def _add_protocol_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``paper`` and ``score``: runs, sensor noise, models, recordings,
     execution and output."""
     _add_run_options(parser)
-    _add_trust_option(parser)
+    add_trust_model_option(parser, "a --model file")
     _add_recording_options(parser)
     _add_execution_options(parser)
 
@@ -167,17 +168,6 @@ def _add_noise_options(parser: argparse.ArgumentParser) -> None:
         noise.add_argument(
             f"--{name}-noise", type=_config_value(f"noise.{name}"), metavar=metavar, help=default
         )
-
-
-def _add_trust_option(parser: argparse.ArgumentParser) -> None:
-    """``--trust-model-module``: a model file may import the module its class lives in."""
-    parser.add_argument(
-        "--trust-model-module",
-        action="store_true",
-        help="import the module a model file's 'class' field names when its type is not "
-        "registered (searched in the working directory, the file's folder and the installed "
-        "packages). A user model is code: importing it runs it; use only with files you trust",
-    )
 
 
 def _add_recording_options(parser: argparse.ArgumentParser) -> None:

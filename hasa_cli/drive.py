@@ -45,6 +45,7 @@ from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_USAGE,
     ArgumentParser,
+    add_trust_model_option,
     add_version,
     console_script,
     error,
@@ -432,13 +433,7 @@ def _drive_parser() -> argparse.ArgumentParser:
         "itself (checked by default: 4 cars, 30 s, the straight track; the paper's two-point "
         "preset does)",
     )
-    p.add_argument(
-        "--trust-model-module",
-        action="store_true",
-        help="let --estimator's model file import the module its 'class' names (from the "
-        "working directory, the file's folder, the installed packages): a user model is code, "
-        "importing it runs it; only for files you trust",
-    )
+    add_trust_model_option(p, "--estimator's model file")
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)
     p.add_argument(

@@ -69,6 +69,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_trust_model_option,
     add_version,
     console_script,
     error,
@@ -141,13 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
         "file, or 'package.module:ClassName' (a SteeringModel subclass; with --fit if it has "
         "no parameters)",
     )
-    p.add_argument(
-        "--trust-model-module",
-        action="store_true",
-        help="import the module a model file's 'class' field names when its type is not "
-        "registered (searched in the working directory, the file's folder and the installed "
-        "packages). A user model is code: importing it runs it; use only with files you trust",
-    )
+    add_trust_model_option(p, "a --model file")
     p.add_argument(
         "--fit", action="store_true", help="fit --model on the first recording, score on all"
     )

@@ -37,6 +37,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_trust_model_option,
     error,
     report_write_failure,
 )
@@ -531,13 +532,7 @@ def build_parser() -> argparse.ArgumentParser:
         "package.module:Class)",
     )
     p.add_argument("--no-status", action="store_true", help="no status line in the terminal")
-    p.add_argument(
-        "--trust-model-module",
-        action="store_true",
-        help="let --estimator's model file import the module its 'class' names (from the "
-        "working directory, the file's folder, the installed packages): a user model is code, "
-        "importing it runs it; only for files you trust",
-    )
+    add_trust_model_option(p, "--estimator's model file")
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=720)
     p.add_argument("--fps", type=int, default=60, help="frame-rate cap (physics: 100 Hz)")

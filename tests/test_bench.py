@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from _user_models import near_far_pd_module
 
 from benchmarks.figures import FIGURES
 from benchmarks.perf import format_perf_table, perf_rows
@@ -41,45 +42,13 @@ SMALL_ARGS = ["--seeds", "0", "--population", "paper-pi", "--drivers", "3", "--r
               "--ill-runs", "3", "--duration", "4"]  # fmt: skip
 TABLES = ("steering", "curved", "estimation", "runs_steering", "runs_estimation")
 
-USER_MODULE = '''
-"""Steering models for the hasa-bench tests: one good, several broken."""
-import numpy as np
-
-from hasa_env.steering import ARXForm, Design, Regressor, SteeringModel, lagged
-
-
-class NearFarPD(SteeringModel):
-    """delta(k) = m delta(k-1) + k_p phi(k) + k_d [phi(k) - phi(k-1)] + k_f Omega(k)."""
-
-    model_type = "bench_test_near_far_pd"
-
-    def __init__(self, **kwargs):
-        kwargs.setdefault("name", "near_far_pd")
-        super().__init__(**kwargs)
-
-    @property
-    def parameter_names(self):
-        return ("memory", "proportional", "derivative", "far")
-
-    @property
-    def regressors(self):
-        return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 1),
-                Regressor("omega", 0))
-
-    def design(self, features):
-        delta = features["delta"].to_numpy(dtype=float)
-        phi = features["phi"].to_numpy(dtype=float)
-        omega = features["omega"].to_numpy(dtype=float)
-        matrix = np.column_stack([lagged(delta, 1), phi, phi - lagged(phi, 1), omega])
-        return Design(target=delta, offset=np.zeros_like(delta), matrix=matrix)
-
-    def arx(self):
-        if not self.is_fitted:
-            return None
-        m, k_p, k_d, k_f = self.parameter_vector.tolist()
-        return ARXForm(a=(m,), b=(k_p + k_d, -k_d), c=(k_f,), near_distance=self.near_distance,
-                       far_distance=self.far_distance, dt=self.dt)
-
+USER_MODULE = (
+    near_far_pd_module(
+        "Steering models for the hasa-bench tests: one good, several broken.",
+        "bench_test_near_far_pd",
+        default_name="near_far_pd",
+    )
+    + '''
 
 class NaNModel(NearFarPD):
     """Fits fine, then predicts NaN."""
@@ -127,6 +96,7 @@ class NotAModel:
     def predict(self, run):
         return np.zeros(len(run))
 '''
+)
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ import sys
 import textwrap
 
 import pytest
+from _user_models import near_far_pd_module
 
 from hasa_cli.bench import main as bench_main
 from hasa_cli.drive import main as drive_main
@@ -20,41 +21,9 @@ from hasa_env.steering.base import ModelDefinitionError
 from hasa_env.steering.loading import ModelLoadError, load_model, load_model_file
 
 MODULE = "cli_user_models"
-SOURCE = '''
-"""A user's steering models (for the CLI tests)."""
-import numpy as np
-
-from hasa_env.steering import ARXForm, Design, Regressor, SteeringModel, lagged
-
-
-class NearFarPD(SteeringModel):
-    """delta(k) = m delta(k-1) + k_p phi(k) + k_d [phi(k) - phi(k-1)] + k_f Omega(k)."""
-
-    model_type = "cli_test_near_far_pd"
-
-    @property
-    def parameter_names(self):
-        return ("memory", "proportional", "derivative", "far")
-
-    @property
-    def regressors(self):
-        return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 1),
-                Regressor("omega", 0))
-
-    def design(self, features):
-        delta = features["delta"].to_numpy(dtype=float)
-        phi = features["phi"].to_numpy(dtype=float)
-        omega = features["omega"].to_numpy(dtype=float)
-        matrix = np.column_stack([lagged(delta, 1), phi, phi - lagged(phi, 1), omega])
-        return Design(target=delta, offset=np.zeros_like(delta), matrix=matrix)
-
-    def arx(self):
-        if not self.is_fitted:
-            return None
-        m, k_p, k_d, k_f = self.parameter_vector.tolist()
-        return ARXForm(a=(m,), b=(k_p + k_d, -k_d), c=(k_f,), near_distance=self.near_distance,
-                       far_distance=self.far_distance, dt=self.dt)
-
+SOURCE = (
+    near_far_pd_module("A user's steering models (for the CLI tests).", "cli_test_near_far_pd")
+    + '''
 
 class WrongRegressors(NearFarPD):
     """Says it uses phi(k-2) but its design uses phi(k-1) and Omega(k)."""
@@ -65,6 +34,7 @@ class WrongRegressors(NearFarPD):
     def regressors(self):
         return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 2))
 '''
+)
 
 
 @pytest.fixture(scope="module")

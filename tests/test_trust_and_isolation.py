@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
+from _user_models import near_far_pd_module
 
 from hasa_env.drivers import SyntheticDriver, population, run_driver, save_runs
 from hasa_env.session.study import Study, StudyError
@@ -26,39 +27,9 @@ from hasa_env.steering.loading import load_model_file
 
 ROOT = Path(__file__).resolve().parents[1]
 MODULE = "trust_user_models"
-SOURCE = '''
-"""A user's steering model (tests/test_trust_and_isolation.py)."""
-import numpy as np
-
-from hasa_env.steering import ARXForm, Design, Regressor, SteeringModel, lagged
-
-
-class NearFarPD(SteeringModel):
-    model_type = "trust_test_near_far_pd"
-
-    @property
-    def parameter_names(self):
-        return ("memory", "proportional", "derivative", "far")
-
-    @property
-    def regressors(self):
-        return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 1),
-                Regressor("omega", 0))
-
-    def design(self, features):
-        delta = features["delta"].to_numpy(dtype=float)
-        phi = features["phi"].to_numpy(dtype=float)
-        omega = features["omega"].to_numpy(dtype=float)
-        matrix = np.column_stack([lagged(delta, 1), phi, phi - lagged(phi, 1), omega])
-        return Design(target=delta, offset=np.zeros_like(delta), matrix=matrix)
-
-    def arx(self):
-        if not self.is_fitted:
-            return None
-        m, k_p, k_d, k_f = self.parameter_vector.tolist()
-        return ARXForm(a=(m,), b=(k_p + k_d, -k_d), c=(k_f,), near_distance=self.near_distance,
-                       far_distance=self.far_distance, dt=self.dt)
-'''
+SOURCE = near_far_pd_module(
+    "A user's steering model (tests/test_trust_and_isolation.py).", "trust_test_near_far_pd"
+)
 STUDY = '[study]\nname = "s"\nseed = 1\n[runs]\nseconds = 0.3\n[measured]\nruns = 1\n'
 
 
