@@ -82,11 +82,17 @@ def _source(cfg: dict[str, Any]) -> str:
     )
 
 
+def _training_runs(cfg: dict[str, Any]) -> str:
+    """ "run 0" or "runs 0-2": the illustrative driver's runs that trained the models."""
+    first, count = cfg["training_run"], int(cfg.get("training_runs") or 1)
+    return f"run {first}" if count == 1 or first is None else f"runs {first}-{first + count - 1}"
+
+
 def format_tables(result: BenchmarkResult) -> str:
     """The result's tables as plain text (ours beside the paper's published values)."""
     cfg = result.config
     parts = [
-        f"hasa-bench: {_source(cfg)}; models fitted on run {cfg['training_run']} of "
+        f"hasa-bench: {_source(cfg)}; models fitted on {_training_runs(cfg)} of "
         f"{cfg['illustrative']} (each seed's)"
     ]
     for _, title, rows, columns, group in report_sections(result):
@@ -232,7 +238,10 @@ _INTRO = (
 def _markdown_head(cfg: dict[str, Any]) -> list[str]:
     """The report's title, what it compares, the data and the configuration."""
     lines = [f"# {_TITLE}", "", _INTRO, ""]
-    lines.append(f"Data: {_source(cfg)}.")
+    lines.append(
+        f"Data: {_source(cfg)}; models fitted on {_training_runs(cfg)} of "
+        f"{cfg.get('illustrative')} (each seed's)."
+    )
     lines.append("")
     lines.append("## Configuration")
     lines.append("")
@@ -365,7 +374,8 @@ def _html_body(result: BenchmarkResult) -> list[str]:
     parts = [
         f"<h1>{_esc(_TITLE)}</h1>",
         f"<p>{_esc(_INTRO)}</p>",
-        f"<p>Data: {_esc(_source(cfg))}.</p>",
+        f"<p>Data: {_esc(_source(cfg))}; models fitted on {_esc(_training_runs(cfg))} of "
+        f"{_esc(str(cfg.get('illustrative')))} (each seed's).</p>",
     ]
     for key, title, rows, columns, _ in report_sections(result):
         parts.append(f'<h2 id="{_esc(key)}">{_esc(key.replace("_", " ").capitalize())}</h2>')

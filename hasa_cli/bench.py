@@ -194,6 +194,14 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
         help="which of its main-track runs trains the models (0)",
     )
     rec.add_argument(
+        "--training-runs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="how many of its main-track runs, from --training-run on, train the models (1: the "
+        "paper's one-run protocol; more: several runs and the speeds they reach)",
+    )
+    rec.add_argument(
         "--training-file",
         metavar="FILE",
         help="the recording that trains the models (instead of --illustrative/--training-run)",
@@ -402,6 +410,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
         recordings=args.recordings,
         illustrative=args.illustrative,
         training_run=args.training_run,
+        training_runs=args.training_runs,
         training_file=args.training_file,
         min_duration=args.min_duration,
         allow_incomplete=args.allow_incomplete,

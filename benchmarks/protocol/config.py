@@ -88,6 +88,7 @@ _SCHEMA = schema(
         "recordings": Field("string", doc="Directory of recordings.", optional=True),
         "illustrative": Field("string", doc="The training driver.", optional=True),
         "training_run": _count("Index of the training run.", 0),
+        "training_runs": _count("Runs of the illustrative driver that train the models.", 1),
         "batch_size": _count("Runs per task.", 1),
         "ljung_box_lags": _count("Lags of the Ljung-Box test.", 1),
         "acf_lags": _count("Lags of the autocorrelation plot.", 1),
@@ -161,6 +162,9 @@ class ProtocolConfig:
             default "Ill" if present, else the first driver by name).
         training_run: index of the training run among the illustrative
             driver's main-track runs.
+        training_runs: how many of its main-track runs, from ``training_run`` on, train the
+            models (1: the paper's one-run protocol; more: several runs and the speeds they
+            reach, each a separate run for the fit, so lags never cross between them).
         batch_size: runs per task, vectorized together (48: two tasks for the
             paper's 93 validation runs, one per core of a 2-core machine).
             Results do not depend on the executor or worker count; another
@@ -208,6 +212,7 @@ class ProtocolConfig:
     recordings: str | None = None
     illustrative: str | None = None
     training_run: int = 0
+    training_runs: int = 1
     batch_size: int = 48
     ljung_box_lags: int = 20
     acf_lags: int = 50
@@ -255,11 +260,17 @@ class ProtocolConfig:
                 make_config(self.env_config())
             except ConfigError as exc:
                 raise BenchmarkError(f"protocol setting: {exc}") from None
-        if self.recordings is None and self.training_run >= self.illustrative_runs:
+        last = self.training_run + self.training_runs - 1
+        if self.recordings is None and last >= self.illustrative_runs:
             raise BenchmarkError(
-                f"protocol setting 'training_run' = {self.training_run} needs at least "
-                f"{self.training_run + 1} runs of the illustrative driver, got 'ill_runs' = "
-                f"{self.illustrative_runs}"
+                f"protocol settings 'training_run' = {self.training_run} and 'training_runs' = "
+                f"{self.training_runs} need at least {last + 1} runs of the illustrative "
+                f"driver, got 'ill_runs' = {self.illustrative_runs}"
+            )
+        if self.training_file is not None and self.training_runs > 1:
+            raise BenchmarkError(
+                "protocol setting 'training_runs' > 1 takes the illustrative driver's runs; "
+                "with 'training_file' (one recording) it must be 1"
             )
 
     @property

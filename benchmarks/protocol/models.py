@@ -219,7 +219,7 @@ def load_models(
 
 
 def fit_models(
-    train: pd.DataFrame,
+    train: pd.DataFrame | Sequence[pd.DataFrame],
     candidates: Sequence[Candidate],
     errors: list[ModelError],
     *,
@@ -228,14 +228,16 @@ def fit_models(
     constant_speed_train: pd.DataFrame | None = None,
     time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
-    """Fit every candidate on one training run (a seed's); the fitted models and their
+    """Fit every candidate on the training run (a seed's; or several runs, each a run of its
+    own for the fit: lags never cross between them); the fitted models and their
     descriptions (parameters, training statistics, the fit's checks).
 
     A stress model that trains on a constant-speed run (``training =
     "constant_speed"``) gets ``constant_speed_train``; its filter's residual
     level still comes from ``train``. A user model gets its own copy of the
     training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`)."""
-    dt = steering_features(train).attrs.get("dt", 0.01)
+    runs = [train] if isinstance(train, pd.DataFrame) else list(train)
+    dt = steering_features(runs[0]).attrs.get("dt", 0.01)
     fitted: list[FittedModel] = []
     infos: list[dict[str, Any]] = []
     for candidate in candidates:
@@ -255,8 +257,13 @@ def fit_models(
                     name, model, own, sensor_std, candidate.fixed, residual_on=train
                 )
             else:
+                mine = (
+                    private_copy(train)
+                    if isinstance(train, pd.DataFrame)
+                    else [private_copy(r) for r in runs]
+                )
                 model_fitted, info_fit = run_isolated(
-                    _fit_one, (name, model, private_copy(train), sensor_std, candidate.fixed),
+                    _fit_one, (name, model, mine, sensor_std, candidate.fixed),
                     model=name, stage="fit", time_limit=time_limit,
                 )  # fmt: skip
         except ModelError as exc:
@@ -272,7 +279,11 @@ def fit_models(
         residual = None if kind == "baseline" else info_fit["filter_residual_std"]
         # trusted on roads and at speeds like those it was fitted on: its own record (fit,
         # model file), else the training run's for a model the benchmark fitted
-        training = TrainingRecord() if candidate.fixed else TrainingRecord.from_run(own)
+        training = (
+            TrainingRecord()
+            if candidate.fixed
+            else TrainingRecord.from_run(own if isinstance(own, pd.DataFrame) else pd.concat(own))
+        )
         limit, speeds = model_limits(model_fitted, training)
         info["steering_curvature_limit"] = limit
         info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
@@ -284,10 +295,10 @@ def fit_models(
 def _fit_one(
     name: str,
     model: Any,
-    train: pd.DataFrame,
+    train: pd.DataFrame | list[pd.DataFrame],
     sensor_std: float,
     fixed: bool = False,
-    residual_on: pd.DataFrame | None = None,
+    residual_on: pd.DataFrame | list[pd.DataFrame] | None = None,
 ) -> tuple[Any, dict[str, Any]]:
     """Fit one model on the training run (a ``fixed`` one keeps its parameters); its
     description; ModelError if it fails. The filter's residual level is measured on
@@ -365,7 +376,7 @@ def _fit_description(
 
 
 def _filter_residual(
-    name: str, fitted: SteeringModel, run: pd.DataFrame
+    name: str, fitted: SteeringModel, run: pd.DataFrame | list[pd.DataFrame]
 ) -> tuple[bool, float | None]:
     """Whether the model has an ARX form, and the filter's steering-residual level on ``run``
     (:func:`estimators.tuning.steering_residual_std`; None without ARX form); ModelError if

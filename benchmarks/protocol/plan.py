@@ -139,14 +139,37 @@ class Plan:
             )
         return found
 
-    def validation(self) -> list[RunRef]:
-        """The main-track runs the models are scored on: all but the training run.
+    def trainings(self, count: int = 1) -> list[RunRef]:
+        """The ``count`` runs that train the models: the illustrative driver's main-track runs
+        ``training_run`` .. ``training_run + count - 1``, in order.
+
+        Raises:
+            BenchmarkError: the illustrative driver has not that many runs from there.
+        """
+        first = self.training()
+        if count == 1:
+            return [first]
+        wanted = range(self.training_run, self.training_run + count)
+        runs = sorted(
+            (r for r in self.main if r.driver == self.illustrative and r.index in wanted),
+            key=lambda r: r.index,
+        )
+        if len(runs) < count:
+            raise BenchmarkError(
+                f"{count} training runs wanted from run {self.training_run} of the illustrative "
+                f"driver {self.illustrative!r} on the {self.track} track, found "
+                f"{len(runs)}{self._where()}"
+            )
+        return runs
+
+    def validation(self, count: int = 1) -> list[RunRef]:
+        """The main-track runs the models are scored on: all but the ``count`` training runs.
 
         Raises:
             BenchmarkError: there is no training run, or no other run.
         """
-        training = self.training()
-        validation = [r for r in self.main if r is not training]
+        trainings = self.trainings(count)
+        validation = [r for r in self.main if all(r is not t for t in trainings)]
         if not validation:
             raise BenchmarkError(
                 f"no validation runs: found only the training run ({len(self.main)} run(s) on "

@@ -249,12 +249,14 @@ def fit_and_check(
     appended to ``errors``; a built-in one that fails raises BenchmarkError, as does a plan
     without a training run or without validation runs."""
     seed = plan.seed
-    training = plan.training()
-    validation = plan.validation()
+    trainings = plan.trainings(config.training_runs)
+    training = trainings[0]
+    validation = plan.validation(config.training_runs)
     say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
         else "loading the training run and fitting the models", 0, 0)  # fmt: skip
     train_env = plan.training_env_config or plan.env_config
-    train_frame = load_frames([training], config.track, train_env, plan.params)[0]
+    train_frames = load_frames(trainings, config.track, train_env, plan.params)
+    train_frame = train_frames[0]
     t0 = time.perf_counter()
     sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
     constant_speed = (
@@ -263,7 +265,7 @@ def fit_and_check(
         else None
     )
     fitted, fit_info = fit_models(
-        train_frame,
+        train_frames if len(train_frames) > 1 else train_frame,
         candidates,
         errors,
         seed=seed,
@@ -283,7 +285,7 @@ def fit_and_check(
             time_limit=config.model_time_limit,
         )
         describe_trust(fitted, fit_info, config.filter_settings)
-    lane_centring, baseline_info = _fit_baselines(config, train_frame, seed)
+    lane_centring, baseline_info = _fit_baselines(config, train_frames, seed)
     seconds = time.perf_counter() - t0
     return FittedPlan(
         plan, training, validation, train_frame, fitted, fit_info, seconds, lane_centring,
@@ -292,15 +294,15 @@ def fit_and_check(
 
 
 def _fit_baselines(
-    config: ProtocolConfig, train_frame: pd.DataFrame, seed: int | None
+    config: ProtocolConfig, train_frames: Sequence[pd.DataFrame], seed: int | None
 ) -> tuple[LaneCentringParams | None, list[dict[str, Any]]]:
-    """The lane-centring prior fitted on the training run (when estimating) and its
-    description; a run it cannot be fitted on leaves that baseline out, with the reason."""
+    """The lane-centring prior fitted on the training runs (when estimating) and its
+    description; runs it cannot be fitted on leave that baseline out, with the reason."""
     if not config.estimate:
         return None, []
     info: dict[str, Any] = {"name": "lane_centring", "seed": seed}
     try:
-        params = fit_lane_centring(train_frame)
+        params = fit_lane_centring(list(train_frames))
     except ValueError as exc:
         return None, [info | {"params": None, "error": str(exc)}]
     return params, [info | {"params": params.to_dict(), "error": None}]
