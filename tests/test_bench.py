@@ -544,7 +544,9 @@ def test_cli_rejects_bad_arguments(args: list[str], tmp_path: Path) -> None:
 
 
 def test_protocol_config_validation() -> None:
-    with pytest.raises(BenchmarkError, match="'training_run' = 3 needs at least 4 runs"):
+    with pytest.raises(
+        BenchmarkError, match="'training_run' = 3 and 'training_runs' = 1 need at least 4 runs"
+    ):
         ProtocolConfig(ill_runs=3, training_run=3)
     with pytest.raises(
         BenchmarkError, match=r"unknown protocol setting 'noise.lidar' \(allowed keys here: camera,"

@@ -237,6 +237,7 @@ def fit_models(
     level still comes from ``train``. A user model gets its own copy of the
     training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`)."""
     runs = [train] if isinstance(train, pd.DataFrame) else list(train)
+    train = train if isinstance(train, pd.DataFrame) else runs  # a list: what the fit takes
     dt = steering_features(runs[0]).attrs.get("dt", 0.01)
     fitted: list[FittedModel] = []
     infos: list[dict[str, Any]] = []
@@ -246,7 +247,7 @@ def fit_models(
         model = copy.deepcopy(candidate.model)
         if kind in ("builtin", "baseline") and abs(model.dt - dt) > 1e-12:
             model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
-        own = train
+        own: pd.DataFrame | list[pd.DataFrame] = train
         if getattr(model, "training", "") == "constant_speed":
             if constant_speed_train is None:
                 raise BenchmarkError(f"stress model {name!r} needs a constant-speed training run")
