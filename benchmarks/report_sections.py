@@ -26,6 +26,7 @@ from benchmarks.tables import (
     scientific,
     text,
 )
+from estimators.calibration import CALIBRATION_BINS
 from hasa_env.steering.loading import PAPER_STEERING_RATIO
 
 __all__ = ["Section", "checks_rows", "decision_time", "pooled", "report_sections"]
@@ -311,10 +312,6 @@ def _verdict_sections(result: BenchmarkResult) -> list[Section]:
     ]
 
 
-RELIABILITY_BINS = 10
-"""Bins of equal width on [0, 1] of the reliability table (the ECE's bins)."""
-
-
 def _reliability_cell(index: int) -> Any:
     def cell(row: dict[str, Any]) -> str:
         bins = row.get("reliability") or []
@@ -327,8 +324,8 @@ def _reliability_cell(index: int) -> Any:
 _RELIABILITY_COLUMNS = [
     Column("model", "Estimator", left=True),
     *(
-        Column(_reliability_cell(b), f"{b / RELIABILITY_BINS:.1f}-{(b + 1) / RELIABILITY_BINS:.1f}")
-        for b in range(RELIABILITY_BINS)
+        Column(_reliability_cell(b), f"{b / CALIBRATION_BINS:.1f}-{(b + 1) / CALIBRATION_BINS:.1f}")
+        for b in range(CALIBRATION_BINS)
     ),
 ]
 

@@ -7,12 +7,21 @@ import math
 
 import numpy as np
 
+from estimators.evidence import MODEL_MISMATCH
 from estimators.offline import EstimationResult
 
-__all__ = ["expected_calibration_error", "lane_calibration_bins", "steering_live_share"]
+__all__ = [
+    "CALIBRATION_BINS",
+    "expected_calibration_error",
+    "lane_calibration_bins",
+    "steering_live_share",
+]
+
+CALIBRATION_BINS = 10
+"""Bins of equal width on [0, 1] of the reliability diagram and the ECE."""
 
 
-def lane_calibration_bins(result: EstimationResult, n_bins: int = 10) -> np.ndarray:
+def lane_calibration_bins(result: EstimationResult, n_bins: int = CALIBRATION_BINS) -> np.ndarray:
     """(R, 3, n_bins) what a reliability diagram of the lane probabilities needs, per run:
     every (valid step, hypothesis) pair's weight ``w`` goes into the bin
     ``min(floor(w n_bins), n_bins - 1)`` of equal width on [0, 1]; per bin the number of
@@ -60,5 +69,5 @@ def steering_live_share(result: EstimationResult, max_scale: float = 2.0) -> np.
         scale = np.where(np.isnan(result.evidence_scale), np.inf, result.evidence_scale)
     live = result.valid & np.isfinite(result.channel_nis[..., 2]) & (scale <= max_scale)
     if result.decision is not None:
-        live &= result.decision != 2  # model_mismatch: the weights are frozen
+        live &= result.decision != MODEL_MISMATCH  # the weights are frozen
     return live.sum(axis=1) / np.maximum(result.lengths, 1)

@@ -9,23 +9,25 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from benchmarks.protocol.intervals import (
+    BOOTSTRAP_RESAMPLES,
+    BOOTSTRAP_SEED,
+    percentile_interval,
+)
 from estimators.calibration import expected_calibration_error
 
-__all__ = ["CALIBRATION_REPLICATES", "lane_calibration"]
+__all__ = ["lane_calibration"]
 
 
-CALIBRATION_REPLICATES = 1000
-"""Bootstrap replicates of the expected calibration error's interval."""
-
-
-def _run_calibration_bins(frame: pd.DataFrame) -> np.ndarray | None:
-    """(R, 3, B) the per-run reliability bins of ``frame``'s rows (None: no row has them)."""
+def _run_calibration_bins(frame: pd.DataFrame) -> tuple[np.ndarray, list[np.ndarray]] | None:
+    """The per-run reliability bins of ``frame``'s rows, (R, 3, B), and the same runs grouped
+    by seed (recordings: one group); None when no row has them."""
     if "calibration_count" not in frame or not len(frame):
         return None
     rows = frame.dropna(subset=["calibration_count"])
     if not len(rows):
         return None
-    return np.stack(
+    bins = np.stack(
         [
             np.array([c, p, o], dtype=np.float64)
             for c, p, o in zip(
@@ -36,6 +38,22 @@ def _run_calibration_bins(frame: pd.DataFrame) -> np.ndarray | None:
             )
         ]
     )
+    seed_of = rows["seed"].astype(object).where(rows["seed"].notna(), "")  # recordings: one
+    groups = [bins[np.flatnonzero((seed_of == s).to_numpy())] for s in dict.fromkeys(seed_of)]
+    return bins, groups
+
+
+def _ece_replicates(groups: Sequence[np.ndarray]) -> np.ndarray:
+    """Bootstrap replicates of the ECE: seeds resampled, then runs within each seed, with the
+    verdict's number of resamples and generator seed (:mod:`benchmarks.protocol.intervals`)."""
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    replicates = np.empty(BOOTSTRAP_RESAMPLES)
+    for b in range(BOOTSTRAP_RESAMPLES):
+        picked = [groups[j] for j in rng.integers(len(groups), size=len(groups))]
+        replicates[b] = expected_calibration_error(
+            sum(g[rng.integers(len(g), size=len(g))].sum(axis=0) for g in picked)
+        )
+    return replicates
 
 
 def lane_calibration(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> None:
@@ -49,27 +67,18 @@ def lane_calibration(table: pd.DataFrame, runs: Sequence[dict[str, Any]]) -> Non
         table[key] = None
     if not len(frame) or "calibration_count" not in frame:
         return
-    rng = np.random.default_rng(20261202)
     for i, name in table["model"].items():
-        mine = frame[frame["model"] == name]
-        bins = _run_calibration_bins(mine)
-        if bins is None:
+        found = _run_calibration_bins(frame[frame["model"] == name])
+        if found is None:
             continue
+        bins, groups = found
         total = bins.sum(axis=0)
         table.at[i, "lane_ece"] = expected_calibration_error(total)
         table.at[i, "reliability"] = [  # type: ignore[assignment]  # a list in an object cell
             None if n == 0 else [round(p / n, 4), round(o / n, 4), int(n)]
             for n, p, o in zip(*total, strict=True)
         ]
-        rows = mine[mine["calibration_count"].notna()]
-        seed_of = rows["seed"].astype(object).where(rows["seed"].notna(), "")  # recordings: one
-        groups = [bins[np.flatnonzero((seed_of == s).to_numpy())] for s in dict.fromkeys(seed_of)]
-        replicates = np.empty(CALIBRATION_REPLICATES)
-        for b in range(CALIBRATION_REPLICATES):
-            picked = [groups[j] for j in rng.integers(len(groups), size=len(groups))]
-            replicates[b] = expected_calibration_error(
-                sum(g[rng.integers(len(g), size=len(g))].sum(axis=0) for g in picked)
-            )
         if len(bins) >= 2:
-            low, high = np.percentile(replicates, [2.5, 97.5])
-            table.at[i, "lane_ece_ci_low"], table.at[i, "lane_ece_ci_high"] = low, high
+            low, high = percentile_interval(_ece_replicates(groups)[:, None])
+            table.at[i, "lane_ece_ci_low"] = float(low[0])
+            table.at[i, "lane_ece_ci_high"] = float(high[0])
