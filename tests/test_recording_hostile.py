@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from _programs import run_program
 
 from hasa_env.drivers import population, run_population, save_runs
 from hasa_env.recording import RecordingError, load_recording
@@ -24,13 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_cli(module: str, *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    """``python -m hasa_cli.<module> ARGS`` as a user runs it (headless, this tree's code)."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "SDL_VIDEODRIVER": "dummy",
-           "SDL_AUDIODRIVER": "dummy", "MPLBACKEND": "Agg"}  # fmt: skip
-    return subprocess.run(
-        [sys.executable, "-m", f"hasa_cli.{module}", *args],
-        capture_output=True, text=True, timeout=120, cwd=cwd, env=env,
-    )  # fmt: skip
+    """``hasa-<module> ARGS`` as a user runs it (:func:`_programs.run_program`: headless,
+    this tree's code), in ``cwd`` (default: the repository)."""
+    return run_program(f"hasa-{module}", *args, cwd=cwd or ROOT)
 
 
 @pytest.fixture(scope="module")
