@@ -21,6 +21,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
+from _programs import run_program
 from jsonschema import Draft202012Validator
 
 import benchmarks.protocol
@@ -56,11 +57,7 @@ def run_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``hasa-bench paper`` with tiny inputs, run as a user would, in a fresh folder (about
     10 s of CPU: the tests that use it are marked slow)."""
     cwd = tmp_path_factory.mktemp("user")
-    env = os.environ | {"PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
-    done = subprocess.run(
-        [sys.executable, "-m", "hasa_cli.bench", "paper", *TINY, "--quiet"],
-        cwd=cwd, env=env, capture_output=True, text=True, timeout=300, check=False,
-    )  # fmt: skip
+    done = run_program("hasa-bench", "paper", *TINY, "--quiet", cwd=cwd, timeout=300)
     assert done.returncode == 0, done.stderr
     return cwd / "hasa-bench-results"
 

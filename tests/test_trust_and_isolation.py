@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
+from _programs import program_command, program_env
 from _user_models import near_far_pd_module
 
 from hasa_env.drivers import SyntheticDriver, population, run_driver, save_runs
@@ -37,17 +38,14 @@ def cli(program: str, *args: str, cwd: Path, timeout: float = 60.0) -> subproces
     """Run ``program`` (hasa-replay, ...) as its console script runs, from ``cwd``, this tree's
     code first; the child may use at most 3 GiB of address space (so that a regression to an
     unbounded read fails the test instead of filling the machine's memory)."""
-    module = {"hasa-replay": "replay", "hasa-bench": "bench", "hasa-drive": "drive",
-              "hasa-rec": "rec"}[program]  # fmt: skip
-    env = os.environ | {"PYTHONPATH": str(ROOT), "SDL_VIDEODRIVER": "dummy",
-                        "SDL_AUDIODRIVER": "dummy", "MPLBACKEND": "Agg"}  # fmt: skip
 
     def limit() -> None:
         resource.setrlimit(resource.RLIMIT_AS, (3 * 2**30, resource.RLIM_INFINITY))
 
     return subprocess.run(
-        [sys.executable, "-P", "-m", f"hasa_cli.{module}", *args],
-        cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout, preexec_fn=limit,
+        program_command(program, *args),
+        cwd=cwd, env=program_env(), capture_output=True, text=True, timeout=timeout,
+        preexec_fn=limit,
         start_new_session=True,  # a signal to the program's group must not reach pytest
     )  # fmt: skip
 
