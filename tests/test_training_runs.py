@@ -4,6 +4,7 @@ illustrative driver's runs ``training_run`` .. ``training_run + N - 1`` and scor
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -28,11 +29,11 @@ def test_the_training_runs_are_fitted_on_and_left_out_of_the_scores(tmp_path: Pa
     # the speed range the models are trusted at is that of all three runs
     config = ProtocolConfig(seeds=(0,), population="paper-pi", drivers=2, runs=1, ill_runs=4,
                             duration=4.0, curved_runs=0)  # fmt: skip
-    plan = make_plan(config, 0)
-    trainings = plan.trainings(3)
+    plan = make_plan(replace(config, training_runs=3), 0)
+    trainings = plan.trainings()
     assert [r.index for r in trainings] == [0, 1, 2]
     assert all(r.driver == "Ill" for r in trainings)
-    assert not {r.key for r in trainings} & {r.key for r in plan.validation(3)}
+    assert not {r.key for r in trainings} & {r.key for r in plan.validation()}
     generalized = next(m for m in doc["models"] if m["name"] == "generalized")
     low, high = generalized["steering_speed_limits"]
     assert low <= 14.1 and high >= 15.9  # 15 m/s held, +- the 1 m/s margin

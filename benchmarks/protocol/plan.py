@@ -80,6 +80,7 @@ class Plan:
         track: the main track (``"straight"`` or ``"curved"``).
         illustrative: the driver whose run ``training_run`` on the main track trains the models.
         training_run: index of that run among the illustrative driver's main-track runs.
+        training_runs: how many of its runs, from ``training_run`` on, train the models.
         main: every run on the main track (the training run among them).
         curved: the extra curved-track runs (empty when the main track is curved).
         params: driver name -> :class:`hasa_env.drivers.DriverParams` (synthetic only).
@@ -112,6 +113,7 @@ class Plan:
     skipped: list[dict[str, str]] = field(default_factory=list)
     training_env_config: dict[str, Any] = field(default_factory=dict)
     scenario: str = "paper"
+    training_runs: int = 1
 
     @property
     def recorded(self) -> bool:
@@ -139,14 +141,14 @@ class Plan:
             )
         return found
 
-    def trainings(self, count: int = 1) -> list[RunRef]:
-        """The ``count`` runs that train the models: the illustrative driver's main-track runs
-        ``training_run`` .. ``training_run + count - 1``, in order.
+    def trainings(self) -> list[RunRef]:
+        """The runs that train the models: the illustrative driver's main-track runs
+        ``training_run`` .. ``training_run + training_runs - 1``, in order.
 
         Raises:
             BenchmarkError: the illustrative driver has not that many runs from there.
         """
-        first = self.training()
+        first, count = self.training(), self.training_runs
         if count == 1:
             return [first]
         wanted = range(self.training_run, self.training_run + count)
@@ -162,13 +164,13 @@ class Plan:
             )
         return runs
 
-    def validation(self, count: int = 1) -> list[RunRef]:
-        """The main-track runs the models are scored on: all but the ``count`` training runs.
+    def validation(self) -> list[RunRef]:
+        """The main-track runs the models are scored on: all but the training runs.
 
         Raises:
             BenchmarkError: there is no training run, or no other run.
         """
-        trainings = self.trainings(count)
+        trainings = self.trainings()
         validation = [r for r in self.main if all(r is not t for t in trainings)]
         if not validation:
             raise BenchmarkError(
@@ -222,6 +224,7 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
         track=config.track,
         illustrative=ILLUSTRATIVE,
         training_run=config.training_run,
+        training_runs=config.training_runs,
         main=main,
         curved=curved,
         params=by_name,
@@ -516,6 +519,26 @@ def _training_choice(
     return illustrative, training_index
 
 
+def _training_notes(
+    trainings: Sequence[RunRef], illustrative: str, scenario: str, scan: _Scan
+) -> list[str]:
+    """What a recording plan's notes say of its training runs and its scenario."""
+    notes = [f"the models are trained on {r.path} (driver {illustrative!r})" for r in trainings]
+    if scenario != "paper":
+        notes.append(
+            f"the models and the lane-centring prior are fitted on a run of {scenario!r} "
+            "itself, not on one of ordinary lane keeping ('paper') as in the synthetic "
+            "protocol (docs/design.md section 14.4)"
+        )
+    others = sum(1 for s in scan.skipped if s["reason"].startswith("scenario "))
+    if others:
+        notes.append(
+            f"{others} recording(s) of other scenarios than {scenario!r} not scored "
+            "(listed as skipped)"
+        )
+    return notes
+
+
 def recording_plan(config: ProtocolConfig) -> Plan:
     """The runs of a folder of recordings (one recording per run).
 
@@ -590,28 +613,19 @@ def recording_plan(config: ProtocolConfig) -> Plan:
         )
     notes += scan.session_notes
     notes += [f"skipped {s['file']}: {s['reason']}" for s in scan.skipped]
-    train_ref = next(
-        (r for r in main if r.driver == illustrative and r.index == training_index), None
+    wanted = range(training_index, training_index + config.training_runs)
+    notes += _training_notes(
+        [r for r in main if r.driver == illustrative and r.index in wanted],
+        illustrative,
+        scenario,
+        scan,
     )
-    if train_ref is not None:
-        notes.append(f"the models are trained on {train_ref.path} (driver {illustrative!r})")
-    if scenario != "paper":
-        notes.append(
-            f"the models and the lane-centring prior are fitted on a run of {scenario!r} "
-            "itself, not on one of ordinary lane keeping ('paper') as in the synthetic "
-            "protocol (docs/design.md section 14.4)"
-        )
-    others = sum(1 for s in scan.skipped if s["reason"].startswith("scenario "))
-    if others:
-        notes.append(
-            f"{others} recording(s) of other scenarios than {scenario!r} not scored "
-            "(listed as skipped)"
-        )
     return Plan(
         seed=None,
         track=config.track,
         illustrative=illustrative,
         training_run=training_index,
+        training_runs=config.training_runs,
         main=main,
         curved=curved,
         params={},

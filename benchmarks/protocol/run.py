@@ -249,9 +249,9 @@ def fit_and_check(
     appended to ``errors``; a built-in one that fails raises BenchmarkError, as does a plan
     without a training run or without validation runs."""
     seed = plan.seed
-    trainings = plan.trainings(config.training_runs)
+    trainings = plan.trainings()
     training = trainings[0]
-    validation = plan.validation(config.training_runs)
+    validation = plan.validation()
     say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
         else "loading the training run and fitting the models", 0, 0)  # fmt: skip
     train_env = plan.training_env_config or plan.env_config
