@@ -158,6 +158,9 @@ def _finding_items(result: BenchmarkResult) -> list[str]:
         f"one-step steering RMSE / the paper's (median over drivers): two-point "
         f"{interval(fixed(2), 'rmse_over_paper_median')(tp)}, generalized "
         f"{interval(fixed(2), 'rmse_over_paper_median')(gen)}",
+        f"road information (1 - SSE / SSE of the road-blind AR(2) baseline; 0: the steering's "
+        f"own past predicts as well): two-point {interval(fixed(3), 'road_information')(tp)}, "
+        f"generalized {interval(fixed(3), 'road_information')(gen)}",
         f"lateral RMSE: generalized {interval(fixed(3), 'lateral_rmse')(gen)} m "
         f"(paper: under 0.25), two-point {interval(fixed(3), 'lateral_rmse')(tp)} m "
         "(paper: 0.93-1.0)",

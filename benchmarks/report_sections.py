@@ -76,6 +76,7 @@ _VERDICT_COLUMNS = [
     Column("kind", "kind", left=True),
     Column(interval(scientific, "rmse"), "steering RMSE (rad) [95% CI]"),
     Column(interval(fixed(3), "r2_increments"), "R^2 inc [95% CI]"),
+    Column(interval(fixed(3), "road_information"), "road info [95% CI]"),
     Column(interval(percent, "rmse_decrease_vs_two_point"), "RMSE dec. [95% CI]"),
     Column(interval(fixed(2), "rmse_over_paper_median"), "ours/paper [95% CI]"),
     Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
@@ -116,6 +117,7 @@ _SEED_COLUMNS = [
     Column("model", "Model", left=True),
     Column("rmse", "steering RMSE (rad)", scientific),
     Column("r2_increments", "R^2 inc", fixed(3)),
+    Column("road_information", "road info", fixed(3)),
     Column("rmse_over_paper_median", "ours/paper", _ratio),
     Column("lateral_rmse", "lat. RMSE (m)", fixed(3)),
     Column(_of("decided_runs", "estimated_runs"), "decided"),
@@ -154,6 +156,7 @@ _STEERING_COLUMNS = [
     Column("rmse", "RMSE (rad)", scientific),
     Column("r2", "R^2", fixed(4)),
     Column("r2_increments", "R^2 inc", fixed(3)),
+    Column("road_information", "road info", fixed(3)),
     Column("rmse_decrease_vs_two_point", "RMSE dec.", percent),
     Column("free_run_rmse", "free-run RMSE", scientific),
     Column(_of("white_runs", "n_runs"), "white (LB)"),
@@ -180,7 +183,8 @@ _ESTIMATION_COLUMNS = [
     Column("paper_lateral_rmse_std", "paper std (m)", _paper),
 ]
 
-_MEAN_KEYS = ("rmse", "r2", "r2_increments", "rmse_decrease_vs_two_point", "free_run_rmse",
+_MEAN_KEYS = ("rmse", "r2", "r2_increments", "road_information", "rmse_decrease_vs_two_point",
+              "free_run_rmse",
               "rmse_over_paper", "lateral_rmse_mean", "lateral_rmse_std", "lateral_rmse_max",
               "steps_to_decide_median", "final_true_lane_weight_mean", "lateral_nees",
               "nis_speed", "nis_camera", "nis_steering")  # fmt: skip
@@ -264,6 +268,13 @@ def _interval_note(cfg: dict[str, Any]) -> tuple[str, str]:
     )
 
 
+_ROAD_INFO = (
+    "road info = 1 - SSE / SSE of the road-blind AR(2) baseline on the same runs' one-step "
+    "prediction (the share of what the baseline misses that the model explains from the road; "
+    "0: no better than blind to it)"
+)
+
+
 def _verdict_sections(result: BenchmarkResult) -> list[Section]:
     """The verdict, the lane decisions and the per-seed table."""
     cfg = result.config
@@ -274,7 +285,7 @@ def _verdict_sections(result: BenchmarkResult) -> list[Section]:
             "summary",
             f"Verdict {over}: per model, the mean over seeds of the per-seed mean over drivers "
             f"({ci}); ours/paper = median over drivers of our one-step steering RMSE / the "
-            f"paper's converted to road-wheel rad (paper / {PAPER_STEERING_RATIO:g}); rank "
+            f"paper's converted to road-wheel rad (paper / {PAPER_STEERING_RATIO:g}); {_ROAD_INFO}; rank "
             "(kept) = overall rank among every built-in, user and baseline model (share of "
             f"bootstrap replicates on which it holds that rank); {shares}",
             result.summary,
@@ -367,7 +378,8 @@ def _steering_sections(result: BenchmarkResult) -> list[Section]:
             "Steering prediction (paper table 1), per driver, means over seeds of the mean over "
             "the driver's validation runs: one step ahead with the measured past steering, "
             "scored on the measured steering; R^2 inc = R^2 on delta(k) - delta(k-1) (compare "
-            "with the paper's 'R^2 Acc'); free-run RMSE over the runs whose free run stayed "
+            f"with the paper's 'R^2 Acc'); {_ROAD_INFO}; free-run RMSE over the runs whose free "
+            "run stayed "
             f"bounded; white (LB) = runs whose residuals pass Ljung-Box at 5 % "
             f"({cfg.get('ljung_box_lags', 20)} lags); paper RMSE (rw) = the paper's steering-"
             f"wheel value / {PAPER_STEERING_RATIO:g}",

@@ -226,6 +226,39 @@ def test_results_sanity(outputs) -> None:
     assert sorted(v for v in ranks.values() if v is not None) == [1, 2, 3, 4]
 
 
+def test_road_information_is_measured_against_the_road_blind_baseline(outputs) -> None:
+    """1 - SSE / SSE of road_blind per run, its means per driver, its interval over them."""
+    result, out, _ = outputs
+    runs = pd.DataFrame(result.runs_steering)
+    keys = ["seed", "driver", "track", "run"]
+    blind = runs[runs.model == "road_blind"]
+    assert (blind["road_information"] == 0.0).all()
+    both = runs.merge(blind[[*keys, "rmse", "n"]], on=keys, suffixes=("", "_blind"))
+    # on the samples both predict: the model's (its history is as long as the road-blind
+    # model's or longer), so against the baseline's whole SSE the ratio can only be smaller,
+    # and by little: a few samples of the start's transient out of ~400
+    sse_ratio = both["rmse"] ** 2 * both["n"] / (both["rmse_blind"] ** 2 * both["n_blind"])
+    ratio = 1.0 - both["road_information"].to_numpy()
+    assert np.all(ratio >= sse_ratio * (1 - 1e-9))
+    assert ratio == pytest.approx(sse_ratio, rel=0.05)
+    assert (both["road_information"] <= 1.0).all()
+    steer = {(r["driver"], r["model"]): r for r in result.steering}
+    generalized = runs[(runs.driver == "1") & (runs.model == "generalized")]
+    assert generalized["road_information"].mean() == pytest.approx(
+        steer[("1", "generalized")]["road_information"]
+    )
+    summary = {r["model"]: r for r in result.summary}
+    assert summary["road_blind"]["road_information"] == 0.0
+    for row in summary.values():
+        if row["road_information"] is None:
+            assert row["kind"] == "baseline" and row["model"] != "road_blind"
+            continue
+        low, high = row["road_information_ci_low"], row["road_information_ci_high"]
+        assert low <= row["road_information"] <= high <= 1.0
+    assert "road info [95% CI]" in (out / "report.md").read_text()
+    assert "road info" in (out / "report.html").read_text()
+
+
 def test_output_files(outputs) -> None:
     result, out, written = outputs
     for name in [

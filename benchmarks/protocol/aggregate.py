@@ -131,14 +131,14 @@ def _count(flags: pd.Series) -> int:
 
 
 def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) -> list[dict]:
-    """Per (seed, driver, model): means over runs, the RMSE decrease vs the two-point
-    model, whiteness, free runs, and the paper's values in road-wheel radians."""
+    """Per (seed, driver, model): means over runs (road information too), the RMSE decrease
+    vs the two-point model, whiteness, free runs, and the paper's values in road-wheel rad."""
     if not rows:
         return []
     frame = _frame(rows)
     frame = frame[frame["model"].isin(models)]
-    scored = ("n", "rmse", "r2", "r2_increments", "ljung_box_p", "free_run_rmse",
-              "free_run_diverged")  # fmt: skip
+    scored = ("n", "rmse", "r2", "r2_increments", "road_information", "ljung_box_p",
+              "free_run_rmse", "free_run_diverged")  # fmt: skip
     frame = _without_degenerate(frame, "rmse", scored)
     grouped = frame.groupby(_GROUP, sort=False, dropna=False)
     table = grouped.agg(
@@ -148,6 +148,7 @@ def aggregate_steering(rows: Sequence[dict[str, Any]], models: Sequence[str]) ->
         rmse_std=("rmse", _finite_std),
         r2=("r2", _finite_mean),
         r2_increments=("r2_increments", _finite_mean),
+        road_information=("road_information", _finite_mean),
         degenerate_runs=("_degenerate", _count),
         ljung_box_p_median=(
             "ljung_box_p",
@@ -396,6 +397,7 @@ def summarize_seeds(
                 "drivers": int((ss if len(ss) else ee)["driver"].nunique()),
                 "rmse": _finite_mean(ss["rmse"]) if len(ss) else None,
                 "r2_increments": _finite_mean(ss["r2_increments"]) if len(ss) else None,
+                "road_information": _finite_mean(ss["road_information"]) if len(ss) else None,
                 "rmse_decrease_vs_two_point": _finite_mean(ss["rmse_decrease_vs_two_point"])
                 if len(ss) and name != "two_point"
                 else None,
@@ -456,6 +458,7 @@ def confidence_interval(values: Sequence[float], level: float = 0.95) -> tuple[f
 _VERDICT_KEYS = {
     "rmse": ("steering", "rmse", False),
     "r2_increments": ("steering", "r2_increments", False),
+    "road_information": ("steering", "road_information", False),
     "rmse_decrease_vs_two_point": ("steering", "rmse_decrease_vs_two_point", False),
     "lateral_rmse": ("estimation", "lateral_rmse_mean", False),
     "rmse_over_paper_median": ("steering", "rmse_over_paper", True),

@@ -34,7 +34,13 @@ from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import steering_residual_std
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
-from hasa_env.steering import GeneralizedModel, SteeringFitWarning, SteeringModel, TwoPointModel
+from hasa_env.steering import (
+    GeneralizedModel,
+    RoadBlindModel,
+    SteeringFitWarning,
+    SteeringModel,
+    TwoPointModel,
+)
 from hasa_env.steering.features import steering_features
 from hasa_env.steering.loading import (
     ModelLoadError,
@@ -190,7 +196,7 @@ def load_models(
             STEERING_BASELINE,
             "baseline",
             None,
-            GeneralizedModel(2, 0, 0, 0, name=STEERING_BASELINE),
+            RoadBlindModel(name=STEERING_BASELINE),
         ),
     ]
     if stress:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from benchmarks.protocol.config import UNCHECKED_SUFFIX
+from benchmarks.protocol.config import STEERING_BASELINE, UNCHECKED_SUFFIX
 from benchmarks.protocol.models import (
     FittedModel,
     ModelError,
@@ -31,7 +31,7 @@ from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
 from estimators.offline import run_estimator
 from estimators.settings import FilterSettings
 from estimators.trust import trusted_filter
-from hasa_env.steering import residual_diagnostics, score_runs
+from hasa_env.steering import residual_diagnostics, road_information, score_runs
 
 __all__ = [
     "STANDSTILL_SPEED",
@@ -129,15 +129,16 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     frames = load_frames(task.runs, task.track, task.env_config, task.driver_params)
     out = ChunkResult()
     predictions: dict[str, dict[int, np.ndarray]] = {}
+    residuals: dict[str, list[np.ndarray]] = {}
     for fm in task.models:
         if fm.kind != "user":  # the project's own models run in-process
             try:
-                part, traced = _model_part(fm, task, frames)
+                part, traced, residuals[fm.name] = _model_part(fm, task, frames)
             except ModelError as exc:
                 raise RuntimeError(str(exc)) from None
         else:
             try:
-                part, traced = run_isolated(
+                part, traced, residuals[fm.name] = run_isolated(
                     _user_model_part, (fm, task, frames), model=fm.name, stage="score",
                     time_limit=task.time_limit,
                 )  # fmt: skip
@@ -146,6 +147,7 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
                 continue
         _merge(out, part)
         predictions[fm.name] = traced
+    _add_road_information(out.steering, residuals, task.runs)
     for i, (ref, frame) in enumerate(zip(task.runs, frames, strict=True)):
         if ref.key in task.trace_runs:
             trace = out.traces.setdefault(ref.key, {})
@@ -176,20 +178,38 @@ def _baseline_estimators(task: ChunkTask) -> list[tuple[str, Callable[[Any], Any
     return makers
 
 
+def _add_road_information(
+    rows: Sequence[dict[str, Any]],
+    residuals: Mapping[str, Sequence[np.ndarray]],
+    runs: Sequence[RunRef],
+) -> None:
+    """Each steering row's ``road_information`` (:func:`hasa_env.steering.road_information`:
+    1 - SSE / SSE of the road-blind baseline on the run's samples both predicted; None
+    without the baseline's residuals)."""
+    blind = residuals.get(STEERING_BASELINE)
+    index = {ref.key: i for i, ref in enumerate(runs)}
+    for row in rows:
+        i = index[(row["seed"], row["driver"], row["track"], row["run"])]
+        mine = residuals.get(row["model"])
+        value = None if blind is None or mine is None else road_information(mine[i], blind[i])
+        row["road_information"] = None if value is None or not math.isfinite(value) else value
+
+
 def _user_model_part(
     fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame]
-) -> tuple[ChunkResult, dict[int, np.ndarray]]:
+) -> tuple[ChunkResult, dict[int, np.ndarray], list[np.ndarray]]:
     """:func:`_model_part` on the model's own copy of the runs (whatever it does to them)."""
     return _model_part(fm, task, [private_copy(frame) for frame in frames])
 
 
 def _model_part(
     fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame]
-) -> tuple[ChunkResult, dict[int, np.ndarray]]:
+) -> tuple[ChunkResult, dict[int, np.ndarray], list[np.ndarray]]:
     """One model on a batch: its steering rows and, on the main track, its estimation rows;
-    plus its predictions of the runs whose traces are plotted (by run index)."""
+    plus its predictions of the runs whose traces are plotted (by run index) and its one-step
+    residuals of every run (rad, aligned with the run's rows: the road information)."""
     part = ChunkResult()
-    preds = _score_model(fm, task, frames, part)
+    preds, residuals = _score_model(fm, task, frames, part)
     residual_std = fm.residual_std
     if task.estimate and residual_std is not None:
         make = partial(model_estimator, fm, overrides=task.filter_settings)
@@ -204,7 +224,7 @@ def _model_part(
                 part,
             )
     traced = {i: preds[i] for i, ref in enumerate(task.runs) if ref.key in task.trace_runs}
-    return part, traced
+    return part, traced, residuals
 
 
 def model_estimator(
@@ -255,10 +275,12 @@ def _warm_mask(features: pd.DataFrame, model: Any) -> np.ndarray:
 
 def _score_model(
     fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame], out: ChunkResult
-) -> list[np.ndarray]:
-
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Score one model on every run of a batch (its steering rows go to ``out``); its
+    one-step predictions and residuals (measured minus predicted steering, rad) per run."""
     model = fm.model
     preds = []
+    residuals = []
     for ref, frame in zip(task.runs, frames, strict=True):
         where = f"driver {ref.driver!r} run {ref.index} ({ref.track})"
         try:
@@ -311,12 +333,13 @@ def _score_model(
                 "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
             }
         )
+        residual = features["delta"].to_numpy(dtype=np.float64) - prediction
         if task.estimate and ref.driver == task.detail_driver:
-            residual = features["delta"].to_numpy(dtype=np.float64) - prediction
             diag = residual_diagnostics(residual[np.isfinite(residual)], lags=task.acf_lags)
             out.acf.setdefault(fm.name, []).append(diag.autocorrelation)
         preds.append(prediction)
-    return preds
+        residuals.append(residual)
+    return preds, residuals
 
 
 def _filter_key(frame: pd.DataFrame) -> str:

@@ -7,13 +7,15 @@
 - :mod:`~hasa_env.steering.base`: the :class:`SteeringModel` interface every
   model implements (how to write your own is in its docstring).
 - :mod:`~hasa_env.steering.models`: :class:`TwoPointModel` and
-  :class:`GeneralizedModel` with the paper's presets.
+  :class:`GeneralizedModel` with the paper's presets, and :class:`RoadBlindModel`,
+  the road-blind AR baseline.
 - :mod:`~hasa_env.steering.fitting`: fitting a model, with the fit's checks;
 - :mod:`~hasa_env.steering.regression`: least squares and ridge regression
   with standard errors, the penalty by blocked cross-validation;
 - :mod:`~hasa_env.steering.identifiability`: can the model tell lanes apart,
   is it stable;
-- :mod:`~hasa_env.steering.scoring`: scores and residual diagnostics.
+- :mod:`~hasa_env.steering.scoring`: scores (road information among them) and residual
+  diagnostics.
 - :mod:`~hasa_env.steering.order`: BIC order selection.
 - :mod:`~hasa_env.steering.model_file`: the JSON model files.
 - :mod:`~hasa_env.steering.arx`: :class:`ARXForm`, what the estimator builds on.
@@ -34,6 +36,7 @@ __all__ = [
     "OrderSelection",
     "Regressor",
     "ResidualDiagnostics",
+    "RoadBlindModel",
     "StabilityWarning",
     "SteeringFitWarning",
     "SteeringModel",
@@ -44,6 +47,7 @@ __all__ = [
     "lagged",
     "near_far_bearings",
     "residual_diagnostics",
+    "road_information",
     "score",
     "score_runs",
     "select_order",
@@ -69,9 +73,15 @@ _SUBMODULES = {
         "check_identifiability",
         "fit_model",
     ),
-    "scoring": ("ResidualDiagnostics", "residual_diagnostics", "score", "score_runs"),
+    "scoring": (
+        "ResidualDiagnostics",
+        "residual_diagnostics",
+        "road_information",
+        "score",
+        "score_runs",
+    ),
     "order": ("OrderSelection", "select_order"),
-    "models": ("GeneralizedModel", "TwoPointModel"),
+    "models": ("GeneralizedModel", "RoadBlindModel", "TwoPointModel"),
 }
 __getattr__, __dir__ = lazy_attributes(
     __name__,

@@ -18,13 +18,33 @@ from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.base import SteeringModel
 from hasa_env.steering.design import Design, Regressor, lagged
 
-__all__ = ["TwoPointModel", "GeneralizedModel", "PAPER_ORDERS"]
+__all__ = [
+    "TwoPointModel",
+    "GeneralizedModel",
+    "RoadBlindModel",
+    "PAPER_ORDERS",
+    "ROAD_BLIND_ORDER",
+]
 
 PAPER_ORDERS = {"na": 2, "nb": 4, "nc": 1, "nd": 2}
 """Orders of the paper's generalized model (eq. (10)): 2 past steering values,
 phi(k..k-3), Omega(k), v_y(k..k-1)."""
 
+ROAD_BLIND_ORDER = 2
+"""Order of the road-blind baseline: the generalized model's na (2 past steering values)."""
+
 _MAX_ORDER = 50
+
+
+def _check_order(key: str, value: object) -> int:
+    """``value`` as an order in [0, 50]; ValueError naming ``key`` otherwise."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or not 0 <= value <= _MAX_ORDER
+    ):
+        raise ValueError(f"order {key} must be an integer in [0, {_MAX_ORDER}], got {value!r}")
+    return int(value)
 
 
 class TwoPointModel(SteeringModel):
@@ -140,16 +160,7 @@ class GeneralizedModel(SteeringModel):
         **kwargs: Any,
     ) -> None:
         orders = {"na": na, "nb": nb, "nc": nc, "nd": nd}
-        for key, value in orders.items():
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | np.integer)
-                or not 0 <= value <= _MAX_ORDER
-            ):
-                raise ValueError(
-                    f"order {key} must be an integer in [0, {_MAX_ORDER}], got {value!r}"
-                )
-        self.orders: dict[str, int] = {k: int(v) for k, v in orders.items()}
+        self.orders: dict[str, int] = {k: _check_order(k, v) for k, v in orders.items()}
         kwargs.setdefault("name", "generalized")
         super().__init__(**kwargs)
 
@@ -247,6 +258,59 @@ class GeneralizedModel(SteeringModel):
             b=coef["b"],
             c=coef["c"],
             d=coef["d"],
+            near_distance=self.near_distance,
+            far_distance=self.far_distance,
+            dt=self.dt,
+        )
+
+
+class RoadBlindModel(SteeringModel):
+    """The road-blind baseline: an AR model of the steering's own past, blind to the road.
+
+    ``delta(k) = sum_{i=1}^{na} a_i delta(k-i)`` (rad): no bearing, no lateral velocity.
+    It is fitted like every other model (ridge regression, the penalty by blocked
+    cross-validation on the training runs) and with the generalized model's autoregressive
+    order (``na`` = :data:`ROAD_BLIND_ORDER` = 2, the paper's), so what a model predicts
+    beyond it is what the road told it: the benchmark's road information
+    ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.4). Its ARX form has no lane
+    terms (``static_lane_gain`` 0): it cannot tell lanes apart, so it is a steering
+    reference, not an advisor for the estimator.
+
+    Args:
+        na: the order (0 .. 50); parameters ``a1`` .. ``a{na}`` (delta(k-1) ..).
+        **kwargs: :class:`~hasa_env.steering.base.SteeringModel` options.
+    """
+
+    model_type = "road_blind"
+
+    def __init__(self, na: int = ROAD_BLIND_ORDER, **kwargs: Any) -> None:
+        self.na = _check_order("na", na)
+        kwargs.setdefault("name", "road-blind")
+        super().__init__(**kwargs)
+
+    def structure(self) -> dict[str, Any]:
+        return {"na": self.na}
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(f"a{i}" for i in range(1, self.na + 1))
+
+    @property
+    def regressors(self) -> tuple[Regressor, ...]:
+        return tuple(Regressor("delta", i) for i in range(1, self.na + 1))
+
+    def design(self, features: pd.DataFrame) -> Design:
+        delta = features["delta"].to_numpy(dtype=np.float64)
+        columns = [lagged(delta, i) for i in range(1, self.na + 1)]
+        matrix = np.column_stack(columns) if columns else np.zeros((delta.size, 0))
+        return Design(target=delta, offset=np.zeros_like(delta), matrix=matrix)
+
+    def arx(self) -> ARXForm | None:
+        if not self.is_fitted:
+            return None
+        return ARXForm(
+            a=tuple(self.parameter_vector.tolist()),
+            b=(),
             near_distance=self.near_distance,
             far_distance=self.far_distance,
             dt=self.dt,

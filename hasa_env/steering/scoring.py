@@ -5,6 +5,8 @@
   residuals, for one-step prediction (measured past steering) and free-run
   simulation; a free run that diverges is reported as such
   (``free_run_diverged``), never as an infinite RMSE.
+- :func:`road_information`: the share of a road-blind baseline's one-step error
+  that a model explains, ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.3).
 - :func:`residual_diagnostics`: autocorrelation and Ljung-Box whiteness
   (statsmodels) of residuals.
 - :func:`simulate_arx`: free run of an ARX model over a run's bearings.
@@ -35,6 +37,7 @@ __all__ = [
     "DIVERGENCE_LIMIT",
     "ResidualDiagnostics",
     "residual_diagnostics",
+    "road_information",
     "score",
     "score_runs",
     "simulate_arx",
@@ -104,6 +107,36 @@ def residual_diagnostics(
 
 
 # ------------------------------------------------------------------ scoring
+def road_information(
+    residuals: np.ndarray, road_blind_residuals: np.ndarray, min_samples: int = 3
+) -> float:
+    """The share of the road-blind baseline's one-step steering error a model explains.
+
+    ``1 - SSE_model / SSE_road_blind`` over the samples where both one-step residuals
+    (measured minus predicted steering, rad, aligned with the run's rows) are finite: the
+    out-of-sample R^2 of a forecast against a benchmark forecast (Campbell & Thompson
+    2008), with :class:`~hasa_env.steering.models.RoadBlindModel` (an AR model of the
+    steering alone) as the benchmark, so it measures what the road told the model
+    (docs/design.md §6.3). 1: no error left; 0: no better than blind to the road;
+    negative: worse. NaN with fewer than ``min_samples`` common samples or a baseline
+    without error.
+    """
+    model = np.asarray(residuals, dtype=np.float64)
+    blind = np.asarray(road_blind_residuals, dtype=np.float64)
+    if model.shape != blind.shape:
+        raise ValueError(
+            f"the residuals have shape {model.shape}, the road-blind baseline's {blind.shape}: "
+            "both must be aligned with the same run's rows"
+        )
+    common = np.isfinite(model) & np.isfinite(blind)
+    if int(common.sum()) < min_samples:
+        return float("nan")
+    sse_blind = float(blind[common] @ blind[common])
+    if not sse_blind > 0.0:
+        return float("nan")
+    return 1.0 - float(model[common] @ model[common]) / sse_blind
+
+
 def simulate_arx(arx: ARXForm, features: pd.DataFrame, start: int) -> np.ndarray:
     """Free run of an ARX model over a features frame, from sample ``start`` on.
 
