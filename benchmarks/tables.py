@@ -22,6 +22,7 @@ __all__ = [
     "count_share",
     "fixed",
     "interval",
+    "markdown_cell",
     "missing",
     "percent",
     "render_html",
@@ -126,11 +127,19 @@ def render_text(
     return "\n".join(out)
 
 
+def markdown_cell(value: str) -> str:
+    """``value`` as the text of a pipe-table cell: ``|`` escaped as ``\\|`` (GitHub Flavored
+    Markdown's escape, so it stays in its cell), a line break as a space (it would end the row)."""
+    return " ".join(value.replace("|", "\\|").splitlines())
+
+
 def render_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[Column]) -> str:
-    """A Markdown (pipe) table."""
-    head = "| " + " | ".join(c.header for c in columns) + " |"
+    """A Markdown (pipe) table; every header and cell through :func:`markdown_cell`."""
+    head = "| " + " | ".join(markdown_cell(c.header) for c in columns) + " |"
     rule = "|" + "|".join(":---" if c.left else "---:" for c in columns) + "|"
-    body = ["| " + " | ".join(c.cell(r) or " " for c in columns) + " |" for r in rows]
+    body = [
+        "| " + " | ".join(markdown_cell(c.cell(r)) or " " for c in columns) + " |" for r in rows
+    ]
     return "\n".join([head, rule, *body])
 
 

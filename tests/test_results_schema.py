@@ -176,8 +176,9 @@ def _markdown_tables(text: str) -> list[list[list[str]]]:
     """The pipe tables of report.md as rows of cells (the rule line left out)."""
     tables, current = [], []
     for line in text.splitlines() + [""]:
-        if line.startswith("| "):
-            current.append([c.strip() for c in line.strip()[1:-1].split(" | ")])
+        if line.startswith("| "):  # cells split at the pipes not escaped as \|
+            cells = re.split(r"(?<!\\)\|", line.strip()[1:-1])
+            current.append([c.strip().replace("\\|", "|") for c in cells])
         elif line.startswith("|:---") or line.startswith("|---"):
             continue
         elif current:
@@ -298,6 +299,21 @@ def test_html_tables_have_the_markdown_tables_cells_escaped() -> None:
     ]
     assert _markdown_tables(render_markdown(rows, columns))[0][1:] == parsed.tables[0][1:]
     assert '<td class="num">0.50</td>' in page and "<td>a|b</td>" in page
+
+
+def test_markdown_tables_escape_a_pipe_inside_a_cell() -> None:
+    columns = [Column("model", "Model | name", left=True), Column("x", "x", fixed(2))]
+    rows = [{"model": "a|b||c", "x": 0.5}, {"model": "two\nlines", "x": None}]
+    text = render_markdown(rows, columns)
+    assert text.splitlines() == [
+        "| Model \\| name | x |",
+        "|:---|---:|",
+        "| a\\|b\\|\\|c | 0.50 |",
+        "| two lines | - |",
+    ]
+    assert _markdown_tables(text) == [
+        [["Model | name", "x"], ["a|b||c", "0.50"], ["two lines", "-"]]
+    ]
 
 
 def test_the_scenario_suite_page_links_each_scenarios_report() -> None:
