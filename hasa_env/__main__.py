@@ -3,12 +3,14 @@
 Prints the version, each registered environment id with its spaces and a check that it
 steps (one headless step each), and the command-line programs; ``--config`` prints every
 configuration key with its default and range (:func:`hasa_env.describe_config`).
-Exit status 0, or 1 if an id does not make or step.
+Exit status 0, or 1 if an id does not make or step. A reader that closes the output early
+(``python -m hasa_env | head -1``) ends it quietly (:func:`run`).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -71,5 +73,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0 if all(r.startswith("ok") for r in results.values()) else 1
 
 
+def run(argv: Sequence[str] | None = None) -> int:
+    """:func:`main`, ending quietly with status 0 when the reader closes stdout early
+    (``python -m hasa_env | head -1``), as the Python docs advise (the ``signal`` module's
+    note on SIGPIPE): the output is flushed inside the ``try``, and stdout then points at
+    the null device so that the flush at exit does not fail again. Status 0 as the other
+    ``hasa-*`` programs: the reader had what it wanted."""
+    try:
+        status = main(argv)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+    return status
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run())
