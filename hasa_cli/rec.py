@@ -9,7 +9,8 @@ Commands::
 Exit status (:mod:`hasa_cli`): 0 success; 1 partial: some input was invalid
 (each named on stderr by file, line and column) or a target existed, the
 valid ones were processed; 2 usage errors or nothing to do (no input is
-valid); 3 a missing optional dependency (pyarrow, minari).
+valid); 3 a missing optional dependency (pyarrow, minari) or an export that
+failed while reading or writing (a full disk; nothing is kept).
 """
 
 from __future__ import annotations
@@ -143,6 +144,12 @@ def _convert(args: argparse.Namespace) -> int:
     return EXIT_PARTIAL if written else EXIT_USAGE
 
 
+def _os_reason(exc: OSError) -> str:
+    """What an operating-system error says, with the file it concerns."""
+    where = f" ({exc.filename})" if exc.filename else ""
+    return f"{exc.strerror or exc}{where}"
+
+
 def _export(args: argparse.Namespace) -> int:
     root = Path(args.directory)
     if not root.is_dir():
@@ -164,9 +171,12 @@ def _export(args: argparse.Namespace) -> int:
     except ImportError as exc:
         _err(str(exc))
         return EXIT_ENVIRONMENT
-    except (ValueError, OSError) as exc:
+    except (ValueError, FileNotFoundError) as exc:  # no such input, nothing valid in it
         _err(str(exc))
         return EXIT_USAGE
+    except OSError as exc:  # an I/O failure (a full disk): the partly written dataset is gone
+        _err(f"cannot export {args.name!r}: {_os_reason(exc)}; nothing was kept")
+        return EXIT_ENVIRONMENT
     steps = result.dataset.total_steps
     print(
         f"exported {len(result.exported)} recording(s), {steps} steps, as Minari dataset "

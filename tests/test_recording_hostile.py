@@ -314,8 +314,11 @@ def test_deeply_nested_and_huge_study_files_are_one_line_errors(tmp_path):
 
 # ---------------------------------------------------------------- item 10
 @pytest.mark.parametrize("how", ["raises ENOSPC", "writes too little"])
-def test_an_export_cut_by_a_full_disk_leaves_no_dataset_behind(good, tmp_path, monkeypatch, how):
+def test_an_export_cut_by_a_full_disk_leaves_no_dataset_behind(
+    good, tmp_path, monkeypatch, capsys, how
+):
     minari = pytest.importorskip("minari")
+    from hasa_cli.rec import main as hasa_rec
     from hasa_env.recording.export import export_minari
 
     folder = tmp_path / "recs"
@@ -333,6 +336,16 @@ def test_an_export_cut_by_a_full_disk_leaves_no_dataset_behind(good, tmp_path, m
     with pytest.raises(OSError, match="No space left|a full disk"):
         export_minari(folder, "hasa/full-v0", data_path=tmp_path / "data")
     assert not (tmp_path / "data" / "hasa" / "full-v0").exists()  # was: a 1-episode dataset
+    # hasa-rec says so in one line and exits 3, as every program on a full disk (was: 2)
+    capsys.readouterr()
+    status = hasa_rec(["export-minari", str(folder), "hasa/full-v0", "--data-path",
+                       str(tmp_path / "data")])  # fmt: skip
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert status == 3, line
+    assert line.startswith("hasa-rec: error: cannot export 'hasa/full-v0': ")
+    assert ("No space left" if how == "raises ENOSPC" else "a full disk?") in line
+    assert line.endswith("nothing was kept")
+    assert not (tmp_path / "data" / "hasa" / "full-v0").exists()
     monkeypatch.setattr(minari, "create_dataset_from_buffers", real)
     result = export_minari(folder, "hasa/full-v0", data_path=tmp_path / "data")  # not blocked
     assert result.dataset.total_episodes == 2
