@@ -45,7 +45,7 @@ STEERING_BASELINE = "road_blind"
 """The steering baseline: an AR(2) model of the steering's own past, fitted like the others,
 blind to the road (:class:`hasa_env.steering.RoadBlindModel`, the generalized model's na = 2
 without bearing or v_y terms). A steering model's one-step score means something only beside
-it; its road information is ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.4)."""
+it; its road information is ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.3)."""
 
 UNCHECKED_SUFFIX = " (no checks)"
 """Appended to a model's name for its estimator without the evidence checks

@@ -272,7 +272,7 @@ class RoadBlindModel(SteeringModel):
     cross-validation on the training runs) and with the generalized model's autoregressive
     order (``na`` = :data:`ROAD_BLIND_ORDER` = 2, the paper's), so what a model predicts
     beyond it is what the road told it: the benchmark's road information
-    ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.4). Its ARX form has no lane
+    ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.3). Its ARX form has no lane
     terms (``static_lane_gain`` 0): it cannot tell lanes apart, so it is a steering
     reference, not an advisor for the estimator.
 
