@@ -274,7 +274,8 @@ class RoadBlindModel(SteeringModel):
     beyond it is what the road told it: the benchmark's road information
     ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.3). Its ARX form has no lane
     terms (``static_lane_gain`` 0): it cannot tell lanes apart, so it is a steering
-    reference, not an advisor for the estimator.
+    reference, not an advisor for the estimator (its fit says so with an
+    :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`, by design).
 
     Args:
         na: the order (0 .. 50); parameters ``a1`` .. ``a{na}`` (delta(k-1) ..).
