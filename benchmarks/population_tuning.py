@@ -21,7 +21,8 @@ visible. ``--pedal-grid`` does the same for the pedal remnant (the speed's
 wander, :class:`hasa_env.drivers.SpeedProfile`; 0 removes it), which is not
 calibrated but chosen as a plain human figure (docs/design.md §7.4): the grid
 shows what the numbers owe to it. ``--write`` writes the Markdown report with a JSON block of every
-number, which ``tests/test_population_tuning.py`` checks by rerunning one seed.
+number; ``tests/test_population_tuning.py`` reruns one seed and checks that the report has the
+structure :func:`write_report` writes (its command, sections and tables), not pasted numbers.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from benchmarks.protocol import ProtocolConfig, run_protocol
 from benchmarks.protocol.aggregate import confidence_interval
 from hasa_env.drivers import POPULATIONS
 
-__all__ = ["RANGE", "evaluate", "main", "write_report"]
+__all__ = ["RANGE", "command_parser", "evaluate", "main", "write_report"]
 
 RANGE = (1.0 / 3.0, 3.0)
 """The accepted range of the median ours / paper one-step RMSE (issue 10)."""
@@ -311,7 +312,9 @@ def read_report(path: Path) -> dict[str, Any]:
     return json.loads(text[start : text.index(JSON_END, start)])
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def command_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.population_tuning`` (the report's header
+    names one; tests parse it)."""
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.population_tuning", allow_abbrev=False
     )
@@ -323,7 +326,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--write", metavar="FILE", help="write the Markdown report here")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = command_parser().parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     chosen = evaluate(args.population, seeds, workers=args.workers)
     grid = [
