@@ -58,7 +58,9 @@ def test_population_is_reproducible_by_name_and_seed():
     assert any(0.2 <= p.noise_time_constant <= 0.4 for p in first)  # OU motor noise
     assert len(population("paper-pi", size=4)) == 4
     assert TwoPointParams.from_dict(first[3].to_dict()) == first[3]
-    with pytest.raises(ValueError, match="unknown population 'nope'; allowed: mixed, paper, paper-pi"):
+    with pytest.raises(
+        ValueError, match="unknown population 'nope'; allowed: mixed, paper, paper-pi"
+    ):
         population("nope")
 
 
