@@ -215,7 +215,7 @@ def test_intermittent_steering_comes_in_bursts():
     options = {"lateral_offset": 0.0, "speed": 15.0}
     curved = by_archetype(params, run_drivers(drivers, seeds, CURVED, options=options))
     straight = by_archetype(params, run_drivers(drivers, seeds, STRAIGHT))
-    for archetype in ARCHETYPES:
+    for archetype in POPULATIONS["paper"].archetypes:
         for f, g in zip(curved[archetype], straight[archetype], strict=True):
             rate = np.abs(np.diff(f["steering"].to_numpy())) / 0.01
             ramp = rate[np.abs(np.diff(f["road_curvature"].to_numpy())) > 0]
