@@ -62,7 +62,7 @@ def test_the_protocol_config_checks_the_env_ranges():
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
-        (["--population", "nope"], "unknown population 'nope'; allowed: paper, paper-pi"),
+        (["--population", "nope"], "unknown population 'nope'; allowed: mixed, paper, paper-pi"),
         (["--population-seed", "-1"], "population seed must be a non-negative integer, got -1"),
     ],
 )

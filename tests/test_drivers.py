@@ -58,7 +58,9 @@ def test_population_is_reproducible_by_name_and_seed():
     assert any(0.2 <= p.noise_time_constant <= 0.4 for p in first)  # OU motor noise
     assert len(population("paper-pi", size=4)) == 4
     assert TwoPointParams.from_dict(first[3].to_dict()) == first[3]
-    with pytest.raises(ValueError, match="unknown population 'nope'; allowed: paper, paper-pi"):
+    with pytest.raises(
+        ValueError, match="unknown population 'nope'; allowed: mixed, paper, paper-pi"
+    ):
         population("nope")
 
 
@@ -93,6 +95,7 @@ def test_runs_are_recordings_and_reproducible():
 
 @pytest.mark.parametrize("make_driver", [
     lambda: SyntheticDriver(population()[6]),
+    lambda: SyntheticDriver(population("mixed", 0)[3]),  # noisy corrections
     lambda: ModelDriver(GeneralizedModel.paper(), noise_std=1e-3, steering_ratio=15.0),
     lambda: ReplayDriver(np.column_stack([np.linspace(0, 0.01, 50), np.ones(50)])),
 ])  # fmt: skip

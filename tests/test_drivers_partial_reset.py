@@ -28,15 +28,18 @@ def _info(rng: np.random.Generator, n: int, k: int) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("track", ["straight", "curved"])
-def test_a_restarted_car_drives_as_a_driver_reset_alone(track):
+@pytest.mark.parametrize(("population_name", "restarted"), [("paper", [1, 4]), ("mixed", [2, 4])])
+def test_a_restarted_car_drives_as_a_driver_reset_alone(track, population_name, restarted):
     road = make_road(track)
-    params = population("paper", seed=2)[:6]  # two of each archetype: a composite batch
+    # paper: two of each archetype; mixed: two-point, intermittent, noisy corrections (two
+    # each, car 2 one of the latter): a composite batch
+    params = population(population_name, seed=2)[:6]
     n = len(params)
     batch = human_batch(params)
     batch.reset(list(range(100, 100 + n)), 0.01)
     rng = np.random.default_rng(0)
     infos = [_info(rng, n, k) for k in range(260)]
-    restart_at, cars, seeds = 37, np.array([1, 4]), [7, 9]
+    restart_at, cars, seeds = 37, np.array(restarted), [7, 9]
     alone = {int(c): human_batch([params[c]]) for c in cars}
     steering, accelerations = [], []
     for k, info in enumerate(infos):

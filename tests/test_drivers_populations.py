@@ -108,3 +108,46 @@ def test_steering_moves_like_the_papers_participants():
             assert 4.7e-5 / 3 < np.median(stats[:, 1]) < 3 * 4.7e-5, np.median(stats[:, 1])
         else:
             assert np.median(stats[:, 0]) < 3e-5 and np.median(stats[:, 1]) < 3e-6
+
+
+def test_the_mixed_population_adds_noisy_corrections_to_the_paper_archetypes():
+    for seed in SEEDS:
+        drivers = population("mixed", seed=seed, size=12)
+        assert population("mixed", seed=seed, size=12) == drivers
+        kinds: dict[str, list] = {}
+        for p in drivers:
+            kinds.setdefault(archetype_of(p).name, []).append(p)
+        assert sorted(kinds) == ["intermittent", "noisy-corrections", "preview", "two-point"]
+        for members in kinds.values():  # each archetype: hold, 25-38 m/s, 45 m/s
+            targets = [p.speed.target_speed for p in members]
+            assert len(targets) == 3 and targets.count(None) == 1 and targets.count(45.0) == 1
+        for p in kinds["noisy-corrections"]:
+            assert p.motor.command_std == 0.0 and p.motor.has_remnant  # remnant after the lag
+            assert 0.1 <= p.amplitude_noise <= 0.3 and 1e-4 <= p.amplitude_floor <= 3e-4
+        others = [p for k, ps in kinds.items() if k != "noisy-corrections" for p in ps]
+        assert all(p.motor.command_std > 0 for p in others)
+
+
+@pytest.mark.slow
+def test_noisy_corrections_drivers_keep_their_lane_like_people():
+    """The noisy-corrections drivers of three 'mixed' populations (hold 15 m/s, ramp to
+    25-38 and to 45 m/s), 30 s in the study's conditions: never off the road, SDLP (std of the
+    lateral offset) in the usual 0.2-0.4 m on the straight (median; each single 30 s run within
+    0.1-0.5 m)."""
+    drivers = [
+        dataclasses.replace(p, name=f"s{seed}-{p.name}")
+        for seed in range(3)
+        for p in population("mixed", seed=seed, size=12)
+        if archetype_of(p).name == "noisy-corrections"
+    ]
+    env = dict(POPULATIONS["mixed"].env_config) | {"time_limit": 30.0}
+    for env_id in ("hasa_env/LaneKeeping-v0", "hasa_env/LaneKeepingCurved-v0"):
+        runs = run_population(drivers, runs=1, seed=1, env_id=env_id, config=env)
+        sdlp = []
+        for p in drivers:
+            frame = runs[p.name][0]
+            assert len(frame) == 3001 and not frame["terminated"].any(), p.name
+            assert frame["lateral_offset"].abs().max() < 1.8, p.name
+            sdlp.append(frame["lateral_offset"].std())
+        if "Curved" not in env_id:
+            assert 0.2 <= np.median(sdlp) <= 0.4 and 0.1 <= min(sdlp) and max(sdlp) <= 0.5, sdlp

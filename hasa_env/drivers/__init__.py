@@ -3,11 +3,12 @@
 - :class:`Driver`: the protocol (``reset(seed, dt=...)``, ``act(info, road)``
   -> (road-wheel angle rad, acceleration m/s^2)), acting on the env's true
   ``info``, never the biased camera.
-- Synthetic humans of three archetypes (docs/design.md §7.2 and §7.7), all
+- Synthetic humans of four archetypes (docs/design.md §7.2 and §7.7), all
   with delay, neuromuscular lag, remnant after the lag and wheel
   quantization (:class:`MotorParams`): two-point PI (:class:`TwoPointParams`),
   preview optimal control (:class:`PreviewParams`), intermittent control
-  (:class:`IntermittentParams`). :func:`make_driver` makes the driver of
+  (:class:`IntermittentParams`), intermittent control whose remnant is the
+  noise on each correction (:class:`NoisyCorrectionsParams`). :func:`make_driver` makes the driver of
   any of them (:class:`SyntheticDriver` drives them all);
   :func:`population` draws a seeded population ("Ill", "1", ..., "8").
 - :class:`ModelDriver`: any steering model plus noise, with a steering ratio.
@@ -30,6 +31,7 @@ from hasa_env.drivers.closed_loop import (
 from hasa_env.drivers.intermittent import IntermittentDriver, IntermittentParams
 from hasa_env.drivers.model_driver import ModelDriver, ReplayDriver
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
+from hasa_env.drivers.noisy_corrections import NoisyCorrectionsDriver, NoisyCorrectionsParams
 from hasa_env.drivers.populations import POPULATIONS, population
 from hasa_env.drivers.preview import PreviewDriver, PreviewParams
 from hasa_env.drivers.runner import (
@@ -54,6 +56,8 @@ __all__ = [
     "G29_RESOLUTION",
     "IntermittentDriver",
     "IntermittentParams",
+    "NoisyCorrectionsDriver",
+    "NoisyCorrectionsParams",
     "ModelDriver",
     "MotorParams",
     "POPULATIONS",

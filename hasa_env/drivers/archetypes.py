@@ -6,6 +6,7 @@ archetype     parameters                                        driver
 two-point     :class:`~hasa_env.drivers.two_point.TwoPointParams`  :class:`~hasa_env.drivers.two_point.TwoPointDriver`
 preview       :class:`~hasa_env.drivers.preview.PreviewParams`   :class:`~hasa_env.drivers.preview.PreviewDriver`
 intermittent  :class:`~hasa_env.drivers.intermittent.IntermittentParams`  :class:`~hasa_env.drivers.intermittent.IntermittentDriver`
+noisy-corrections  :class:`~hasa_env.drivers.noisy_corrections.NoisyCorrectionsParams`  :class:`~hasa_env.drivers.noisy_corrections.NoisyCorrectionsDriver`
 ============  ================================================  =====================
 
 :func:`make_driver` turns parameters of any archetype into its driver,
@@ -22,7 +23,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from hasa_env.drivers import intermittent, preview, two_point
+from hasa_env.drivers import intermittent, noisy_corrections, preview, two_point
 from hasa_env.drivers.base import Driver
 from hasa_env.drivers.human import HumanBatch, HumanDriver, human_batch
 
@@ -37,7 +38,12 @@ __all__ = [
     "params_from_dict",
 ]
 
-HumanParams = two_point.TwoPointParams | preview.PreviewParams | intermittent.IntermittentParams
+HumanParams = (
+    two_point.TwoPointParams
+    | preview.PreviewParams
+    | intermittent.IntermittentParams
+    | noisy_corrections.NoisyCorrectionsParams
+)
 """Parameters of any synthetic driver archetype."""
 
 
@@ -69,9 +75,15 @@ ARCHETYPES: dict[str, Archetype] = {
             intermittent.IntermittentDriver,
             intermittent.IntermittentBatch,
         ),
+        Archetype(
+            noisy_corrections.ARCHETYPE,
+            noisy_corrections.NoisyCorrectionsParams,
+            noisy_corrections.NoisyCorrectionsDriver,
+            noisy_corrections.NoisyCorrectionsBatch,
+        ),
     )
 }
-"""The archetypes by name: "two-point", "preview", "intermittent"."""
+"""The archetypes by name: "two-point", "preview", "intermittent", "noisy-corrections"."""
 
 
 class SyntheticDriver(HumanDriver):
@@ -79,8 +91,9 @@ class SyntheticDriver(HumanDriver):
 
     ``SyntheticDriver(params)`` drives parameters of any archetype:
     :class:`~hasa_env.drivers.two_point.TwoPointParams` (two-point PI),
-    :class:`~hasa_env.drivers.preview.PreviewParams` or
-    :class:`~hasa_env.drivers.intermittent.IntermittentParams`, so every
+    :class:`~hasa_env.drivers.preview.PreviewParams`,
+    :class:`~hasa_env.drivers.intermittent.IntermittentParams` or
+    :class:`~hasa_env.drivers.noisy_corrections.NoisyCorrectionsParams`, so every
     member of a :func:`~hasa_env.drivers.populations.population` is a
     ``SyntheticDriver``. ``reset(seed, dt=0.01)`` then ``act(info, road)``
     each env step. Runs are identical whether the driver acts alone or
@@ -102,7 +115,8 @@ def archetype_of(params: Any) -> Archetype:
 
 
 def make_driver(params: HumanParams) -> Driver:
-    """The driver of ``params`` (any archetype): TwoPointDriver, PreviewDriver or IntermittentDriver."""
+    """The driver of ``params`` (any archetype): TwoPointDriver, PreviewDriver,
+    IntermittentDriver or NoisyCorrectionsDriver."""
     return archetype_of(params).driver(params)
 
 

@@ -179,6 +179,12 @@ class IntermittentBatch(HumanBatch):
         self._refractory = np.zeros(n, dtype=np.int64)
         self.launches = np.zeros(n, dtype=np.int64)
 
+    def _executed(self, error: np.ndarray) -> np.ndarray:
+        """The amplitude (rad) each car's correction would have if launched now, for the
+        prediction error ``error`` (rad): the error itself (no execution noise). Called
+        every step for every car (a subclass may draw noise here)."""
+        return error
+
     def _command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
         dt = self._dt
         assert dt is not None  # (act() checked)
@@ -206,10 +212,11 @@ class IntermittentBatch(HumanBatch):
         accumulator = np.where(waiting, 0.0, accumulator)
         self._refractory = np.where(waiting, self._refractory - 1, self._refractory)
         fire = np.abs(accumulator) >= 1.0
+        amplitude = self._executed(error)
         if fire.any():
             rows = np.flatnonzero(fire)
             free = np.argmin(self._active[rows], axis=1)  # first free slot
-            self._amplitude[rows, free] = error[rows]
+            self._amplitude[rows, free] = amplitude[rows]
             self._age[rows, free] = 0
             self._active[rows, free] = True
             accumulator = np.where(fire, 0.0, accumulator)

@@ -11,6 +11,10 @@
   no quantization. For comparison.
 - "paper-pi-human": the same PI drivers as "paper-pi" with the output stage
   of "paper".
+- "mixed": the archetypes of "paper" and a fourth, noisy corrections
+  (:mod:`hasa_env.drivers.noisy_corrections`: intermittent corrections whose
+  remnant is the execution noise on each correction, no command noise before
+  the lag), in the study conditions of "paper".
 
 :attr:`PopulationSpec.remnant_scale` multiplies every remnant standard
 deviation (and the signal-dependent gain) of a population; with
@@ -22,7 +26,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, TypedDict
 
 import numpy as np
@@ -32,12 +36,14 @@ from hasa_env.drivers.base import SpeedProfile
 from hasa_env.drivers.intermittent import IntermittentParams
 from hasa_env.drivers.lqr import PreviewCost
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
+from hasa_env.drivers.noisy_corrections import NoisyCorrectionsParams
 from hasa_env.drivers.preview import PreviewParams
 from hasa_env.drivers.two_point import TwoPointParams
 from hasa_env.scenarios import scenario_drivers
 
 __all__ = [
     "IntermittentRanges",
+    "NoisyCorrectionsRanges",
     "MotorRanges",
     "POPULATIONS",
     "PopulationSpec",
@@ -94,6 +100,15 @@ class IntermittentRanges:
     accumulator_noise: _Range
     correction_duration: _Range
     refractory_period: _Range
+
+
+@dataclass(frozen=True)
+class NoisyCorrectionsRanges(IntermittentRanges):
+    """Trait ranges of noisy-corrections drivers: those of intermittent drivers and the
+    execution noise of each correction (coefficient of variation, and rad)."""
+
+    amplitude_noise: _Range
+    amplitude_floor: _Range
 
 
 @dataclass(frozen=True)
@@ -179,7 +194,7 @@ class PopulationSpec:
         speed_behaviours: see above.
         delay, neuromuscular_frequency, neuromuscular_damping,
         max_lateral_acceleration: ranges of the traits every archetype has.
-        two_point, preview, intermittent: the archetypes' trait ranges.
+        two_point, preview, intermittent, noisy_corrections: the archetypes' trait ranges.
         motor: the output stage's ranges; None: no remnant, no quantization.
         pedal: the pedal remnant's ranges; None: every driver holds its speed
             profile exactly.
@@ -206,6 +221,7 @@ class PopulationSpec:
     two_point: TwoPointRanges
     preview: PreviewRanges | None = None
     intermittent: IntermittentRanges | None = None
+    noisy_corrections: NoisyCorrectionsRanges | None = None
     motor: MotorRanges | None = None
     pedal: PedalRanges | None = None
     remnant_scale: float = 1.0
@@ -221,9 +237,10 @@ class PopulationSpec:
                 f"PopulationSpec.archetypes must name archetypes of {', '.join(ARCHETYPES)}, "
                 f"got {list(self.archetypes)}"
             )
-        for name in ("preview", "intermittent"):
-            if name in self.archetypes and getattr(self, name) is None:
-                raise ValueError(f"PopulationSpec.{name} ranges are needed for {name} drivers")
+        for name in ("preview", "intermittent", "noisy-corrections"):
+            attribute = name.replace("-", "_")
+            if name in self.archetypes and getattr(self, attribute) is None:
+                raise ValueError(f"PopulationSpec.{attribute} ranges are needed for {name} drivers")
         if self.legacy and set(self.archetypes) != {"two-point"}:
             raise ValueError("PopulationSpec.legacy draws two-point drivers only")
         for name in ("remnant_scale", "command_scale"):
@@ -354,6 +371,26 @@ POPULATIONS: dict[str, PopulationSpec] = {
 }
 """Named population definitions (see :func:`population`)."""
 
+# ---- "mixed": the archetypes of "paper" and noisy corrections (issue 23, item 3) ----
+_PAPER = POPULATIONS["paper"]
+POPULATIONS["mixed"] = replace(
+    _PAPER,
+    description=(
+        "The three archetypes of 'paper' (same trait ranges, output stage and study "
+        "conditions) and a fourth, noisy corrections: intermittent control with no command "
+        "noise before the lag, each correction's amplitude carrying execution noise "
+        "(coefficient of variation 0.1-0.3, signal-independent std 1e-4-3e-4 rad). "
+        "Archetypes cycle two-point, preview, intermittent, noisy-corrections; 12 drivers "
+        "give each archetype each speed behaviour once."
+    ),
+    archetypes=(*_PAPER.archetypes, "noisy-corrections"),
+    noisy_corrections=NoisyCorrectionsRanges(
+        **{f.name: getattr(_PAPER.intermittent, f.name) for f in fields(IntermittentRanges)},
+        amplitude_noise=_Range(0.1, 0.3),
+        amplitude_floor=_Range(1e-4, 3e-4),
+    ),
+)
+
 
 def _driver_names(size: int) -> list[str]:
     return ["Ill", *(str(i) for i in range(1, size))]
@@ -370,7 +407,7 @@ def population(
     """A seeded population of synthetic drivers, regenerable anywhere by name and seed.
 
     Args:
-        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human").
+        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human", "mixed").
         seed: the seed; the same (name, seed, size) gives the same drivers.
         size: number of drivers; they are named "Ill", "1", ..., str(size - 1).
             Archetypes and speed behaviours cycle through the population's lists.
@@ -506,10 +543,26 @@ def _draw_intermittent(
     )
 
 
+def _draw_noisy_corrections(
+    spec: PopulationSpec, rng: np.random.Generator, common: dict
+) -> NoisyCorrectionsParams:
+    """An intermittent driver's traits, then the execution noise; no command noise."""
+    r = spec.noisy_corrections
+    assert r is not None  # checked by PopulationSpec
+    drawn = _draw_intermittent(replace(spec, intermittent=r), rng, common)
+    traits = {f.name: getattr(drawn, f.name) for f in fields(drawn)}
+    return NoisyCorrectionsParams(
+        **{**traits, "motor": replace(common["motor"], command_std=0.0)},
+        amplitude_noise=r.amplitude_noise.draw(rng),
+        amplitude_floor=r.amplitude_floor.draw(rng),
+    )
+
+
 _DRAW: dict[str, Callable[[PopulationSpec, np.random.Generator, dict], HumanParams]] = {
     "two-point": _draw_two_point,
     "preview": _draw_preview,
     "intermittent": _draw_intermittent,
+    "noisy-corrections": _draw_noisy_corrections,
 }
 
 
