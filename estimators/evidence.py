@@ -61,7 +61,7 @@ the absence of a mismatch: with a few samples the mismatch test cannot
 reject anything, and weights that moved then are not verified by it
 (found by tracing a run whose model mismatched its driver, lambda about 25:
 two steering innovations 0.04-0.05 s into the run, while lambda rested on
-four near-zero start-up innovations, moved the weights to 0.98 on the wrong
+four near-zero start-up innovations, moved the weights to 0.97 on the wrong
 lane; the mismatch test fired at 1 s and froze them there, so the run ended
 confidently wrong as ``model_mismatch``; docs/design.md §8.16). No hypothesis is ever pruned by default (its filter keeps
 running and its log weight stays finite), so any decision can be reversed
