@@ -48,12 +48,22 @@ filter's start-up transient).
     log w_i <- max(log w_i - logsumexp_j log w_j, log weight_floor)  then normalized again
 
 and on a mismatch the weights go back to the last *verified* weights, those
-of the last step at which the model was checked (at least
-``MIN_CHECKED_SAMPLES`` effective samples) and fitted (the prior before the
-first check), and stay there while the mismatch lasts: evidence gathered
-while the model fitted stays, evidence from a model that fits neither
-hypothesis never enters, and a model that never fits leaves the weights at
-the prior. No hypothesis is ever pruned by default (its filter keeps
+of the last step at which the data showed the model consistent (the prior
+before the first such step), and stay there while the mismatch lasts::
+
+    verified = N >= VERIFY_MIN_SAMPLES (10)  and  lambda_up <= mismatch_model_error
+    lambda_up = lambda / (1 - h - z sqrt(h))^3,  h = 2 / (9 N),  z = 1.645  (95 % bound)
+
+Evidence gathered while the model was shown to fit stays, evidence from a
+model that fits neither hypothesis never enters, and a model that is never
+shown to fit leaves the weights at the prior. "Shown to fit" is a bound, not
+the absence of a mismatch: with a few samples the mismatch test cannot
+reject anything, and weights that moved then are not verified by it
+(found by tracing a run whose model mismatched its driver, lambda about 25:
+two steering innovations 0.04-0.05 s into the run, while lambda rested on
+four near-zero start-up innovations, moved the weights to 0.97 on the wrong
+lane; the mismatch test fired at 1 s and froze them there, so the run ended
+confidently wrong as ``model_mismatch``; docs/design.md §8.16). No hypothesis is ever pruned by default (its filter keeps
 running and its log weight stays finite), so any decision can be reversed
 by later evidence. ``forgetting_time`` (off by default) makes the log-odds
 decay toward the prior as ``exp(-t / forgetting_time)`` without fresh
@@ -134,7 +144,18 @@ NOT_COMMITTED, CONTRADICTED = -1.0, -2.0
 """Codes of ``_committed`` besides a hypothesis index: no decision yet; a decision reversed."""
 
 MIN_CHECKED_SAMPLES = 2.0
-"""Effective samples lambda needs before weights count as verified."""
+"""Effective samples lambda needs before a step counts as checked (the reversal rule's commit)."""
+
+VERIFY_MIN_SAMPLES = 10.0
+"""Effective samples lambda needs before the verification below is tried: with fewer the
+Wilson-Hilferty bound is unreliable, and the first innovations after a (re)start are near zero
+by construction (the memory starts from the measured steering), so they show nothing."""
+
+VERIFY_QUANTILE_Z = 1.645
+"""Standard-normal quantile of the verification: weights count as verified only where the
+95 % upper confidence bound on lambda lies at or below ``mismatch_model_error`` (the data
+show the model consistent, not merely not yet inconsistent; the mismatch test's 0.999 is the
+other side's level, where a false alarm costs a refusal)."""
 
 
 MAX_EVIDENCE_SCALE = 1e12
@@ -159,6 +180,27 @@ def model_error_bound(model_error: np.ndarray, samples: np.ndarray, z: float) ->
         ratio = np.where(root > 0, root * root * root, 0.0)
         bound = np.where(ratio > 0, model_error / ratio, np.inf)
     return np.where(np.isnan(model_error), np.nan, bound)  # no data: no bound either
+
+
+def verified_steps(rule: EvidenceRule, model_error: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """(R,) bool: runs whose model the data so far show consistent (module docstring)::
+
+        N >= VERIFY_MIN_SAMPLES  and  lambda_up(N, z = 1.645) <= mismatch_model_error
+
+    (``lambda_up``: :func:`model_error_bound`; NaN lambda, no data: not verified)."""
+    bound = model_error_bound(model_error, samples, VERIFY_QUANTILE_Z)
+    return (samples >= VERIFY_MIN_SAMPLES) & (bound <= rule.mismatch_model_error)
+
+
+def _verified_one(rule: EvidenceRule, model_error: float, samples: float) -> bool:
+    """:func:`verified_steps` for one run, in floats (the same arithmetic)."""
+    if math.isnan(model_error) or samples < VERIFY_MIN_SAMPLES:
+        return False
+    h = 2.0 / (9.0 * samples)
+    root = 1.0 - h - VERIFY_QUANTILE_Z * math.sqrt(h)
+    if root <= 0:
+        return False
+    return model_error / (root * root * root) <= rule.mismatch_model_error
 
 
 def chi2_upper_ratio(samples: np.ndarray) -> np.ndarray:
@@ -392,6 +434,7 @@ def _weigh_one(
     new_state["_nis"] = np.array([nis])
     new_state["_lag_product"] = np.array([lag])
     new_state["_last_score"] = np.array([u])
+    verified = False
     if mismatch:
         new_log_w = state["_verified_log_w"]
     else:
@@ -401,7 +444,8 @@ def _weigh_one(
         if math.isfinite(rule.log_floor):
             floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
             new_log_w = normalize_log_weights(floored, new_log_w)
-        if samples >= MIN_CHECKED_SAMPLES:
+        verified = _verified_one(rule, model_error, samples)
+        if verified:
             new_state["_verified_log_w"] = new_log_w
     if mismatch:
         decision = MODEL_MISMATCH
@@ -448,7 +492,7 @@ def _weigh(
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
-        checked = samples >= MIN_CHECKED_SAMPLES
+        checked = verified_steps(rule, model_error, samples)
         if any_mismatch:
             checked &= ~mismatch
         if checked.all():

@@ -110,6 +110,33 @@ def test_a_model_mismatch_freezes_the_weights():
     assert raw[-1, 1] > 0.99  # teeth: eq. 19 follows the bad model to the wrong lane
 
 
+def test_weights_moved_before_the_model_was_shown_to_fit_are_not_kept_on_a_mismatch():
+    # the traced run in miniature (seed 851, driver 1): four near-zero start-up innovations
+    # (lambda about 0 on almost no data), three that favour one lane, then a model that fits
+    # neither hypothesis (lambda about 25); the mismatch test fires later
+    rng = np.random.default_rng(8)
+    n = 600
+    u = rng.standard_normal(n)
+    score = 5.0 * np.stack([u, u], axis=1)  # lambda about 25 on both hypotheses
+    score[:4] = 1e-3
+    score[4:7] = [6.0, 1.0]  # three innovations that favour hypothesis 1
+    log_lik = -0.5 * score * score
+    weights, decisions, _ = _run(_rule(), log_lik, score)
+    assert weights[10, 1] > 0.95  # the early innovations did move the weights
+    assert decisions[-1] == MODEL_MISMATCH
+    assert np.all(np.abs(weights[-1] - 0.5) < 1e-12)  # back to the prior, not frozen wrong
+    # teeth: verified at 2 effective samples (the rule before), the wrong weights were kept
+    import estimators.evidence as evidence
+
+    old = evidence.VERIFY_MIN_SAMPLES, evidence.VERIFY_QUANTILE_Z
+    try:
+        evidence.VERIFY_MIN_SAMPLES, evidence.VERIFY_QUANTILE_Z = 2.0, -1e3
+        before, _, _ = _run(_rule(), log_lik, score)
+    finally:
+        evidence.VERIFY_MIN_SAMPLES, evidence.VERIFY_QUANTILE_Z = old
+    assert before[-1, 1] > 0.95
+
+
 def test_a_model_that_never_fits_leaves_the_weights_at_the_prior():
     rng = np.random.default_rng(5)
     u = rng.standard_normal(2000)
