@@ -4,14 +4,15 @@
 [--train-seed 2500] [--test-seeds 2501-2510] [--duration 30]``
 
 For every driver of the population (each population seed): the road-blind AR(2) of the
-steering (``GeneralizedModel(2, 0, 0, 0)``, the benchmark's ``road_blind`` baseline) and the
+steering (:class:`~hasa_env.steering.RoadBlindModel`, the benchmark's ``road_blind`` baseline) and the
 generalized model (the paper's orders) are fitted on the driver's own run with
 ``--train-seed`` (``model.fit(run, sensor_std=0)``: the population's study conditions measure
 the wheel's own reading) and scored one step ahead on its runs with ``--test-seeds``
 (:func:`hasa_env.steering.scoring.score_runs`), on the straight track in the population's
 ``env_config``. Per archetype the table gives the mean R^2 on increments of both models, the
-road share (MSE_AR2 - MSE_gen) / MSE_AR2 = (R^2_gen - R^2_AR2) / (1 - R^2_AR2) on increments
-(per run, averaged per driver; median over drivers with a bootstrap interval over drivers),
+road share: the benchmark's road information (:func:`hasa_env.steering.road_information`,
+1 - SSE_gen / SSE_AR2 of the one-step residuals, per run, averaged per driver; median over
+drivers with a bootstrap interval over drivers),
 SDLP and runs off the road. docs/design.md §7.9 reports it for "mixed".
 """
 
@@ -28,6 +29,7 @@ import numpy as np
 from benchmarks.protocol.intervals import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, percentile_interval
 from hasa_env.drivers import POPULATIONS, population, run_population
 from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams, archetype_of
+from hasa_env.steering import RoadBlindModel, road_information
 from hasa_env.steering.models import GeneralizedModel
 from hasa_env.steering.scoring import score_runs
 
@@ -68,19 +70,33 @@ def driver_scores(
             "off_road": sum(bool(f["terminated"].any()) for f in test),
             "runs": len(test),
         }
-        for name, model in (
-            ("road_blind", GeneralizedModel(2, 0, 0, 0, name="road_blind")),
-            ("generalized", GeneralizedModel()),
-        ):
+        residuals = {}
+        for name, model in (("road_blind", RoadBlindModel()), ("generalized", GeneralizedModel())):
             with warnings.catch_warnings():  # a fit's warnings do not change its score
                 warnings.simplefilter("ignore")
                 fitted = model.fit(train, sensor_std=0.0)
             table = score_runs(fitted, test, free_run=False)
             row[name] = table["r2_increments"].to_numpy(dtype=np.float64)
-        blind, seeing = row["road_blind"], row["generalized"]
-        row["road_share"] = float(np.mean((seeing - blind) / (1.0 - blind)))
+            residuals[name] = [_one_step_residuals(fitted, f) for f in test]
+        row["road_share"] = float(
+            np.nanmean(
+                [
+                    road_information(mine, blind)
+                    for mine, blind in zip(
+                        residuals["generalized"], residuals["road_blind"], strict=True
+                    )
+                ]
+            )
+        )
         rows.append(row)
     return rows
+
+
+def _one_step_residuals(model: Any, run: Any) -> np.ndarray:
+    """Measured minus one-step predicted steering (rad), aligned with the run's rows."""
+    features = model.features(run)
+    prediction = np.asarray(model.predict_features(features), dtype=np.float64)
+    return features["delta"].to_numpy(dtype=np.float64) - prediction
 
 
 def _median_interval(values: np.ndarray) -> tuple[float, float]:
