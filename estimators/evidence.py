@@ -434,7 +434,7 @@ def _weigh_one(
     new_state["_nis"] = np.array([nis])
     new_state["_lag_product"] = np.array([lag])
     new_state["_last_score"] = np.array([u])
-    verified = False
+    verified = not mismatch and _verified_one(rule, model_error, samples)
     if mismatch:
         new_log_w = state["_verified_log_w"]
     else:
@@ -444,7 +444,6 @@ def _weigh_one(
         if math.isfinite(rule.log_floor):
             floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
             new_log_w = normalize_log_weights(floored, new_log_w)
-        verified = _verified_one(rule, model_error, samples)
         if verified:
             new_state["_verified_log_w"] = new_log_w
     if mismatch:
