@@ -381,7 +381,7 @@ def _seed_rows(
             "driver": p.name,
             "archetype": archetype_of(p).name,
             "speed": speed,
-            **per_run.mean().to_dict(),
+            **{str(k): v for k, v in per_run.mean().items()},
             **loop_response(ident[mine], injections[mine], window, dt),
         }
         rows.append(row)
@@ -441,7 +441,7 @@ def summarize(rows: pd.DataFrame) -> pd.DataFrame:
                 out.append(
                     {
                         "statistic": name,
-                        "speed": float(speed),
+                        "speed": float(speed),  # type: ignore[arg-type]
                         "group": group,
                         "value": float(point[j]),
                         "low": float(low[j]),
