@@ -63,8 +63,10 @@ reject anything, and weights that moved then are not verified by it
 two steering innovations 0.04-0.05 s into the run, while lambda rested on
 four near-zero start-up innovations, moved the weights to 0.97 on the wrong
 lane; the mismatch test fired at 1 s and froze them there, so the run ended
-confidently wrong as ``model_mismatch``; docs/design.md §8.16). No hypothesis is ever pruned by default (its filter keeps
-running and its log weight stays finite), so any decision can be reversed
+confidently wrong as ``model_mismatch``; docs/design.md §8.16).
+
+No hypothesis is ever pruned by default (its filter keeps running and its
+log weight stays finite), so any decision can be reversed
 by later evidence. ``forgetting_time`` (off by default) makes the log-odds
 decay toward the prior as ``exp(-t / forgetting_time)`` without fresh
 evidence, and ``weight_floor`` (off by default) caps them at
@@ -192,15 +194,18 @@ def verified_steps(rule: EvidenceRule, model_error: np.ndarray, samples: np.ndar
     return (samples >= VERIFY_MIN_SAMPLES) & (bound <= rule.mismatch_model_error)
 
 
+def _bound_one(model_error: float, samples: float, z: float) -> float:
+    """:func:`model_error_bound` for one run, in floats (the same arithmetic; samples > 0)."""
+    h = 2.0 / (9.0 * samples)
+    root = 1.0 - h - z * math.sqrt(h)
+    return model_error / (root * root * root) if root > 0 else math.inf
+
+
 def _verified_one(rule: EvidenceRule, model_error: float, samples: float) -> bool:
     """:func:`verified_steps` for one run, in floats (the same arithmetic)."""
     if math.isnan(model_error) or samples < VERIFY_MIN_SAMPLES:
         return False
-    h = 2.0 / (9.0 * samples)
-    root = 1.0 - h - VERIFY_QUANTILE_Z * math.sqrt(h)
-    if root <= 0:
-        return False
-    return model_error / (root * root * root) <= rule.mismatch_model_error
+    return _bound_one(model_error, samples, VERIFY_QUANTILE_Z) <= rule.mismatch_model_error
 
 
 def chi2_upper_ratio(samples: np.ndarray) -> np.ndarray:
@@ -424,9 +429,8 @@ def _weigh_one(
     else:
         mismatch = False
     bounded = model_error
-    if rule.bound_z and not math.isnan(model_error):  # model_error_bound in floats
-        root = 1.0 - 2.0 / (9.0 * samples) - rule.bound_z * math.sqrt(2.0 / (9.0 * samples))
-        bounded = model_error / (root * root * root) if root > 0 else math.inf
+    if rule.bound_z and not math.isnan(model_error):
+        bounded = _bound_one(model_error, samples, rule.bound_z)
     scale = min((1.0 if math.isnan(bounded) else max(bounded, 1.0)) * inflation, MAX_EVIDENCE_SCALE)
     new_state = dict(state)
     new_state["_evidence_weight"] = np.array([weight])
@@ -491,14 +495,14 @@ def _weigh(
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
-        checked = verified_steps(rule, model_error, samples)
+        verified = verified_steps(rule, model_error, samples)
         if any_mismatch:
-            checked &= ~mismatch
-        if checked.all():
+            verified &= ~mismatch
+        if verified.all():
             new_state["_verified_log_w"] = new_log_w
-        elif checked.any():
+        elif verified.any():
             new_state["_verified_log_w"] = np.where(
-                checked[:, None], new_log_w, state["_verified_log_w"]
+                verified[:, None], new_log_w, state["_verified_log_w"]
             )
     else:
         raw = log_w + log_lik
