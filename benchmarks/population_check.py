@@ -405,12 +405,7 @@ def check_population(
         duration: s of every run (> :data:`SETTLE` + 20).
         speeds: m/s held by every driver.
     """
-    if name not in POPULATIONS:
-        raise ValueError(f"unknown population {name!r}; allowed: {', '.join(sorted(POPULATIONS))}")
-    if not duration > SETTLE + 20.0:
-        raise ValueError(f"duration must be > {SETTLE + 20.0:g} s, got {duration}")
-    if runs < 1:
-        raise ValueError(f"runs must be >= 1, got {runs}")
+    check_arguments(name, runs, duration)
     rows = [
         row
         for seed in seeds
@@ -418,6 +413,16 @@ def check_population(
         for row in _seed_rows(name, int(seed), size, runs, duration, float(speed))
     ]
     return pd.DataFrame(rows)
+
+
+def check_arguments(name: str, runs: int, duration: float) -> None:
+    """Raise ValueError naming the first argument of :func:`check_population` out of range."""
+    if name not in POPULATIONS:
+        raise ValueError(f"unknown population {name!r}; allowed: {', '.join(sorted(POPULATIONS))}")
+    if not duration > SETTLE + 20.0:
+        raise ValueError(f"duration must be > {SETTLE + 20.0:g} s, got {duration}")
+    if runs < 1:
+        raise ValueError(f"runs must be >= 1, got {runs}")
 
 
 # ----------------------------------------------------------------------- summary
@@ -585,9 +590,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                   file=sys.stderr)  # fmt: skip
             return 2
     scales = LoopScales(**factors)
-    if args.population not in POPULATIONS:
-        print(f"--population: unknown {args.population!r}; allowed: "
-              f"{', '.join(sorted(POPULATIONS))}", file=sys.stderr)  # fmt: skip
+    try:  # before any run: a refused argument costs nothing
+        check_arguments(args.population, args.runs, args.duration)
+    except ValueError as error:
+        print(f"python -m benchmarks.population_check: {error}", file=sys.stderr)
         return 2
     with population_variant(args.population, scales) as name:
         rows = check_population(name, seeds, args.drivers, args.runs, args.duration, speeds)

@@ -133,11 +133,17 @@ def archetype_table(rows: Sequence[Mapping[str, Any]]) -> str:
 
 
 def _seeds(text: str) -> list[int]:
-    """ "2500,2501" or "2501-2510" (inclusive) as a list of seeds."""
+    """ "2500,2501" or "2501-2510" (inclusive) as a list of seeds (an argparse type: a bad
+    value is a usage error naming the option)."""
     out: list[int] = []
-    for part in text.split(","):
-        low, _, high = part.partition("-")
-        out += list(range(int(low), int(high) + 1)) if high else [int(low)]
+    try:
+        for part in text.split(","):
+            low, _, high = part.partition("-")
+            out += list(range(int(low), int(high) + 1)) if high else [int(low)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"comma-separated seeds or ranges A-B expected, got {text!r}"
+        ) from None
     return out
 
 
@@ -145,20 +151,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Print the table (see the module docstring)."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.road_share", description=__doc__)
     parser.add_argument("--population", default="mixed", choices=sorted(POPULATIONS))
-    parser.add_argument("--seeds", default="2500,2501,2502", help="population seeds")
+    parser.add_argument("--seeds", type=_seeds, default="2500,2501,2502", help="population seeds")
     parser.add_argument("--size", type=int, default=12, help="drivers per population seed")
     parser.add_argument("--train-seed", type=int, default=2500)
-    parser.add_argument("--test-seeds", default="2501-2510")
+    parser.add_argument("--test-seeds", type=_seeds, default="2501-2510")
     parser.add_argument("--duration", type=float, default=30.0, help="run length (s)")
     args = parser.parse_args(argv)
     config = dict(POPULATIONS[args.population].env_config) | {"time_limit": args.duration}
     rows = []
-    for seed in _seeds(args.seeds):
+    for seed in args.seeds:
         rows += driver_scores(
             population(args.population, seed, args.size),
             config,
             args.train_seed,
-            _seeds(args.test_seeds),
+            args.test_seeds,
         )
     print(archetype_table(rows))
     return 0

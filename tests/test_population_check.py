@@ -167,3 +167,8 @@ def test_a_variant_has_the_same_drivers_with_the_scaled_ranges_and_is_removed_af
     with pytest.raises(ValueError, match="bandwidth must be a finite factor > 0"):
         LoopScales(bandwidth=0.0)
     assert main(["--command-scale", "-1"]) == 2
+
+
+def test_a_too_short_duration_is_refused_before_any_run(capsys):
+    assert main(["--duration", "20"]) == 2
+    assert "duration must be > 40 s" in capsys.readouterr().err

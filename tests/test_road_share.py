@@ -37,3 +37,10 @@ def test_driver_scores_fit_and_score_every_driver_on_its_held_out_runs(capsys):
     assert main(["--seeds", "0", "--size", "4", "--train-seed", "0", "--test-seeds", "1",
                  "--duration", "4"]) == 0  # fmt: skip
     assert capsys.readouterr().out.count("\n") == 6
+
+
+def test_bad_seeds_are_a_usage_error_naming_the_option(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--seeds", "nope"])
+    assert exit_info.value.code == 2
+    assert "--seeds" in capsys.readouterr().err
