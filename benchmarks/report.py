@@ -85,7 +85,11 @@ def _source(cfg: dict[str, Any]) -> str:
 def _training_runs(cfg: dict[str, Any]) -> str:
     """ "run 0" or "runs 0-2": the illustrative driver's runs that trained the models."""
     first, count = cfg["training_run"], int(cfg.get("training_runs") or 1)
-    return f"run {first}" if count == 1 or first is None else f"runs {first}-{first + count - 1}"
+    text = f"run {first}" if count == 1 or first is None else f"runs {first}-{first + count - 1}"
+    speeds = cfg.get("training_speeds") or ()
+    if speeds:
+        text += f" and runs started at {', '.join(f'{v:g}' for v in speeds)} m/s"
+    return text
 
 
 def format_tables(result: BenchmarkResult) -> str:

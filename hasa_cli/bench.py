@@ -202,6 +202,15 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
         "paper's one-run protocol; more: several runs and the speeds they reach)",
     )
     rec.add_argument(
+        "--training-speeds",
+        type=_speed_list,
+        default=(),
+        metavar="V,V,...",
+        help="also train the models on one extra run of the illustrative driver per start "
+        "speed (m/s), scored nowhere (synthetic runs; the models are then trusted over those "
+        "speeds too; default: none, the paper's protocol)",
+    )
+    rec.add_argument(
         "--training-file",
         metavar="FILE",
         help="the recording that trains the models (instead of --illustrative/--training-run)",
@@ -326,6 +335,25 @@ def _seed_list(text: str) -> tuple[int, ...]:
     return seeds
 
 
+def _speed_list(text: str) -> tuple[float, ...]:
+    """``--training-speeds``: comma-separated finite speeds in m/s, each in [1, 150], no repeats
+    (the env's own limits, e.g. vehicle.max_speed, are checked with the protocol settings)."""
+    try:
+        speeds = tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        speeds = ()
+    if (
+        not speeds
+        or not all(math.isfinite(v) and 1.0 <= v <= 150.0 for v in speeds)
+        or len(set(speeds)) != len(speeds)
+    ):
+        raise argparse.ArgumentTypeError(
+            f"speeds must be comma-separated distinct numbers in m/s within [1, 150], e.g. "
+            f"15,25,35, got {printable(text)!r}"
+        )
+    return speeds
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hasa-bench``."""
     parser = ArgumentParser(
@@ -411,6 +439,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
         illustrative=args.illustrative,
         training_run=args.training_run,
         training_runs=args.training_runs,
+        training_speeds=args.training_speeds,
         training_file=args.training_file,
         min_duration=args.min_duration,
         allow_incomplete=args.allow_incomplete,

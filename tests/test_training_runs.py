@@ -59,3 +59,51 @@ def test_the_default_is_the_papers_one_run_protocol(tmp_path: Path) -> None:
     assert main(["paper", *TINY, "--out", str(out)]) == 0
     runs = pd.read_csv(out / "runs_estimation.csv")
     assert sorted(runs.loc[runs["driver"] == "Ill", "run"].unique()) == [1, 2, 3]
+
+
+@pytest.mark.slow
+def test_training_speeds_add_runs_at_those_speeds_and_widen_the_trusted_range(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "out"
+    assert main(["paper", *TINY, "--training-speeds", "25", "--out", str(out)]) == 0
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["config"]["training_speeds"] == [25.0]
+    runs = pd.read_csv(out / "runs_estimation.csv")
+    # the extra run is scored nowhere; Ill's main runs are scored as without it
+    assert sorted(runs.loc[runs["driver"] == "Ill", "run"].unique()) == [1, 2, 3]
+    generalized = next(m for m in doc["models"] if m["name"] == "generalized")
+    low, high = generalized["steering_speed_limits"]
+    assert low <= 14.1 and 25.9 <= high < 30.0  # 15 and 25 m/s, +- the 1 m/s margin
+    assert "runs started at 25 m/s" in (out / "report.md").read_text()
+    config = ProtocolConfig(seeds=(0,), population="paper-pi", drivers=2, runs=1, ill_runs=4,
+                            duration=4.0, curved_runs=0, training_speeds=(25.0, 35.0))  # fmt: skip
+    plan = make_plan(config, 0)
+    extra = plan.speed_trainings()
+    assert [(r.driver, r.index, v) for r, v in extra] == [("Ill", -1, 25.0), ("Ill", -2, 35.0)]
+    main_seeds = {(r.env_seed, r.driver_seed) for r in plan.main}
+    assert not {(r.env_seed, r.driver_seed) for r, _ in extra} & main_seeds
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"training_speeds": (0.5,)}, "training_speeds"),
+        ({"training_speeds": (25.0, 25.0)}, "training_speeds"),
+        ({"training_speeds": (70.0,)}, "'training_speeds': 70 m/s"),  # above vehicle.max_speed
+        ({"training_speeds": (25.0,), "recordings": "r"}, "must be empty"),
+    ],
+)
+def test_training_speeds_out_of_range_are_refused(settings: dict, message: str) -> None:
+    with pytest.raises(BenchmarkError, match=message):
+        ProtocolConfig(**settings)
+
+
+@pytest.mark.parametrize("value", ["0", "nan", "15,15", "fast", ""])
+def test_a_bad_training_speeds_option_is_a_usage_error(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main(["paper", *TINY, "--training-speeds", value])
+    assert stop.value.code == 2
+    assert "--training-speeds" in capsys.readouterr().err

@@ -90,6 +90,10 @@ _SCHEMA = schema(
         "illustrative": Field("string", doc="The training driver.", optional=True),
         "training_run": _count("Index of the training run.", 0),
         "training_runs": _count("Runs of the illustrative driver that train the models.", 1),
+        "training_speeds": Field(
+            "numbers", doc="Start speeds of extra training runs of the illustrative driver.",
+            unit="m/s", low=1.0, high=150.0, unique=True,
+        ),
         "batch_size": _count("Runs per task.", 1),
         "ljung_box_lags": _count("Lags of the Ljung-Box test.", 1),
         "acf_lags": _count("Lags of the autocorrelation plot.", 1),
@@ -166,6 +170,11 @@ class ProtocolConfig:
         training_runs: how many of its main-track runs, from ``training_run`` on, train the
             models (1: the paper's one-run protocol; more: several runs and the speeds they
             reach, each a separate run for the fit, so lags never cross between them).
+        training_speeds: start speeds (m/s) of extra runs of the illustrative driver that
+            also train the models, one run each, driven in the training scenario from its
+            own seeds and scored nowhere (synthetic runs only): a model fitted at the
+            speeds people drive is trusted there (the speed rule's range is that of every
+            training run, :mod:`estimators.trust`). Empty: the paper's protocol.
         batch_size: runs per task, vectorized together (48: two tasks for the
             paper's 93 validation runs, one per core of a 2-core machine).
             Results do not depend on the executor or worker count; another
@@ -214,6 +223,7 @@ class ProtocolConfig:
     illustrative: str | None = None
     training_run: int = 0
     training_runs: int = 1
+    training_speeds: tuple[float, ...] = ()
     batch_size: int = 48
     ljung_box_lags: int = 20
     acf_lags: int = 50
@@ -244,6 +254,7 @@ class ProtocolConfig:
             error=lambda path, message: BenchmarkError(message),
         )
         object.__setattr__(self, "seeds", tuple(self.seeds))
+        object.__setattr__(self, "training_speeds", tuple(float(v) for v in self.training_speeds))
         object.__setattr__(self, "filter_settings", dict(self.filter_settings))
         names = [f.name for f in fields(FilterSettings)]
         for name in self.filter_settings:
@@ -268,6 +279,18 @@ class ProtocolConfig:
                 f"{self.training_runs} need at least {last + 1} runs of the illustrative "
                 f"driver, got 'ill_runs' = {self.illustrative_runs}"
             )
+        if self.training_speeds and self.recordings is not None:
+            raise BenchmarkError(
+                "protocol setting 'training_speeds' drives extra synthetic training runs; "
+                "with 'recordings' it must be empty (record runs at those speeds instead)"
+            )
+        for speed in self.training_speeds if self.recordings is None else ():
+            try:
+                make_config(self.training_speed_config(speed))
+            except ConfigError as exc:
+                raise BenchmarkError(
+                    f"protocol setting 'training_speeds': {speed:g} m/s: {exc}"
+                ) from None
         if self.training_file is not None and self.training_runs > 1:
             raise BenchmarkError(
                 "protocol setting 'training_runs' > 1 takes the illustrative driver's runs; "
@@ -283,6 +306,11 @@ class ProtocolConfig:
     def run_seeds(self) -> tuple[int | None, ...]:
         """The seeds the protocol runs (recordings: one pass, seed None)."""
         return (None,) if self.recordings is not None else self.seeds
+
+    def training_speed_config(self, speed: float) -> dict[str, Any]:
+        """The env config of the extra training run that starts at ``speed`` (m/s): the
+        training run's (:meth:`env_config`) with ``initial_state.speed`` set."""
+        return deep_merge(self.env_config(training=True), {"initial_state": {"speed": speed}})
 
     def env_config(self, training: bool = False) -> dict[str, Any]:
         """The env configuration of the synthetic runs (deep-merged onto the defaults): the

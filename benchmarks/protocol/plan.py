@@ -97,6 +97,8 @@ class Plan:
         skipped: recordings left out, ``{"file", "reason"}`` each.
         scenario: the scenario of the scored runs (:data:`hasa_env.scenarios.SCENARIOS`):
             ``config.scenario`` for synthetic runs, the training recording's for recordings.
+        training_speeds: start speeds (m/s) of the extra training runs of the illustrative
+            driver (:meth:`speed_trainings`; synthetic only).
     """
 
     seed: int | None
@@ -114,6 +116,7 @@ class Plan:
     training_env_config: dict[str, Any] = field(default_factory=dict)
     scenario: str = "paper"
     training_runs: int = 1
+    training_speeds: tuple[float, ...] = ()
 
     @property
     def recorded(self) -> bool:
@@ -163,6 +166,21 @@ class Plan:
                 f"{len(runs)}{self._where()}"
             )
         return runs
+
+    def speed_trainings(self) -> list[tuple[RunRef, float]]:
+        """The extra training runs and their start speeds (m/s): one run of the illustrative
+        driver per ``training_speeds`` entry, its seeds drawn for that purpose
+        (``run_seeds(seed, n, "<driver>/<track>/training-speeds")``, so they are no main
+        run's), indexed -1, -2, ... (no main-track run has a negative index). Empty for
+        recordings."""
+        if self.seed is None or not self.training_speeds:
+            return []
+        key = f"{self.illustrative}/{self.track}/training-speeds"
+        pairs = run_seeds(self.seed, len(self.training_speeds), key)
+        return [
+            (RunRef(self.illustrative, self.track, -(i + 1), env, drv, seed=self.seed), speed)
+            for i, ((env, drv), speed) in enumerate(zip(pairs, self.training_speeds, strict=True))
+        ]
 
     def validation(self) -> list[RunRef]:
         """The main-track runs the models are scored on: all but the training runs.
@@ -230,6 +248,7 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
         params=by_name,
         env_config=config.env_config(),
         training_env_config=config.env_config(training=True),
+        training_speeds=config.training_speeds,
         drivers=drivers,
         driver_order=[p.name for p in params],
         scenario=config.scenario,
