@@ -161,14 +161,15 @@ def _yellow(frame: np.ndarray) -> np.ndarray:
     return np.all(frame == np.array(DRIVEN_LANE_COLOUR, dtype=frame.dtype), axis=-1)
 
 
+@pytest.mark.parametrize("scenario", ["lane_shift", "lane_change"])
 @pytest.mark.parametrize("bias_index, side", [(0, 1.0), (1, -1.0)])  # +1: right of centre
-def test_both_views_draw_the_episodes_driven_lane(bias_index, side):
+def test_both_views_draw_the_episodes_driven_lane(scenario, bias_index, side):
     env = gym.make(ENV_ID, render_mode="rgb_array",
-                   config={"scenario": "lane_shift", "render": {"width": 320, "height": 240}})  # fmt: skip
+                   config={"scenario": scenario, "render": {"width": 320, "height": 240}})  # fmt: skip
     _, info = env.reset(seed=0, options={"bias_index": bias_index, "lateral_offset": 0.0})
     setup = env.unwrapped.setup
-    # after the shift, the car still on the marked lane's centre: the driven lane's lines
-    # at y = 0 (straight ahead) and 3.6 m to the side of the other hypothesis
+    # after the (first) shift, the car still on the marked lane's centre: the driven lane's
+    # lines all on the side of the other hypothesis (lane_shift: one straight ahead)
     info = {**info, "station": 240.0}
     for renderer in (TopDownRenderer(setup, "rgb_array"), DriverViewRenderer(setup, "rgb_array")):
         frame = renderer.render(info)
