@@ -8,7 +8,9 @@ exists; what they need from the env:
 
 - ``road.lane_shifts``: the lane the human drives in moves sideways relative to the
   markings the camera reads (:meth:`hasa_env.sim.road.Road.driven_offset`); synthetic
-  drivers follow it, the camera and a lane estimate do not know it;
+  drivers follow it, the camera and a lane estimate do not know it. ``"toward":
+  "other_hypothesis"`` points a shift toward where the episode's nearest other
+  hypothesis puts the lane centre, so it is equally hard under every true bias;
 - ``markings.hypotheses``: the camera biases the estimator must choose between;
 - ``initial_state``: where the car starts;
 - drivers' ``preferred_offset`` (m, left positive): the offset from the driven lane's
@@ -18,16 +20,19 @@ exists; what they need from the env:
 scenario               what changes (everything else: the paper's protocol)
 =====================  ===================================================================
 paper                  nothing: hypotheses [0, -1.8] m, start 0.5 m right of the centre
-lane_shift             a construction-zone shift: the driven lane moves 1.8 m left over
-                       65 m from station 150 m; the old markings carry straight on
+lane_shift             a construction-zone shift: the driven lane moves 1.8 m over 65 m
+                       from station 150 m toward where the other hypothesis puts the
+                       lane centre (onto the ghost centre, under either true bias); the
+                       old markings carry straight on; a lane on either side
 late_ambiguity         the ambiguity starts at speed (25 m/s) with the car halfway
                        between the true centre and the ghost's
 close_hypotheses       hypotheses 0.3 m apart (worn paint, tar seams); start centred
                        +- 0.25 m (std)
 off_centre_drivers     each driver keeps a preferred offset of 0.2-0.5 m, left or right;
                        hypotheses [0, -0.8] m (a tar seam)
-lane_change            the driver moves to the left lane (3.6 m) over 80 m from station
-                       120 m and back over 80 m from station 300 m (an overtaking)
+lane_change            the driver moves to the neighbouring lane (3.6 m) on the other
+                       hypothesis's side over 80 m from station 120 m and back over 80 m
+                       from station 300 m (an overtaking); a lane on either side
 =====================  ===================================================================
 """
 
@@ -76,10 +81,25 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "lane_shift",
-            "construction zone: the driven lane moves 1.8 m left over 65 m from 150 m",
-            "after the shift the car sits where the other hypothesis puts the lane centre: "
-            "a prior that the car keeps to the marked lane's centre picks the wrong one.",
-            {"road": {"lane_shifts": [{"station": 150.0, "length": 65.0, "offset": 1.8}]}},
+            "construction zone: the driven lane moves 1.8 m over 65 m from 150 m, toward the "
+            "other hypothesis",
+            "after the shift the car sits where the other hypothesis puts the lane centre, "
+            "whichever hypothesis is true: a prior that the car keeps to the marked lane's "
+            "centre picks the wrong one. (Shifted 1.8 m left, as first designed, that held "
+            "only when the true bias was -1.8 m: half of the runs were easy.)",
+            {
+                "road": {
+                    "lanes_right": 1,
+                    "lane_shifts": [
+                        {
+                            "station": 150.0,
+                            "length": 65.0,
+                            "offset": 1.8,
+                            "toward": "other_hypothesis",
+                        }
+                    ],
+                }
+            },
         ),
         Scenario(
             "late_ambiguity",
@@ -114,15 +134,29 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "lane_change",
-            "overtaking: to the left lane (3.6 m) over 80 m from 120 m, back from 300 m",
+            "overtaking: to the lane on the other hypothesis's side (3.6 m) over 80 m from "
+            "120 m, back from 300 m",
             "during and after a deliberate lane change the car is far from the marked "
-            "lane's centre under every hypothesis.",
+            "lane's centre under every hypothesis, and it moves toward where the other "
+            "hypothesis puts the lane whichever is true (to the left lane only, as first "
+            "designed, it moved away from the ghost lane when the true bias was 0 m).",
             {
                 "road": {
+                    "lanes_right": 1,
                     "lane_shifts": [
-                        {"station": 120.0, "length": 80.0, "offset": 3.6},
-                        {"station": 300.0, "length": 80.0, "offset": -3.6},
-                    ]
+                        {
+                            "station": 120.0,
+                            "length": 80.0,
+                            "offset": 3.6,
+                            "toward": "other_hypothesis",
+                        },
+                        {
+                            "station": 300.0,
+                            "length": 80.0,
+                            "offset": -3.6,
+                            "toward": "other_hypothesis",
+                        },
+                    ],
                 }
             },
         ),

@@ -401,12 +401,18 @@ def _synthetic_recording(tmp_path, *args):
 def test_synthetic_drive_in_a_lane_shift_follows_the_driven_lane(tmp_path):
     rec = _synthetic_recording(tmp_path, "--scenario", "lane_shift", "--seconds", "25")
     assert rec.config["scenario"] == "lane_shift"
-    assert rec.config["road"]["lane_shifts"] == [{"station": 150.0, "length": 65.0, "offset": 1.8}]
+    assert rec.config["road"]["lane_shifts"] == [
+        {"station": 150.0, "length": 65.0, "offset": 1.8, "toward": "other_hypothesis"}
+    ]
     assert rec.path.parent.name == "synthetic-paper-0-Ill-lane_shift"
     d = rec.data
     after = d["station"] > 260.0  # well after the shift's end at 215 m
     assert after.sum() > 500
-    assert abs(d["lateral_offset"][after].mean() - 1.8) < 0.3
+    # the recording's road moves the lane toward the other hypothesis of the recorded bias
+    bias = float(d["bias"].iloc[0])
+    shifted = float(rec.road.driven_offset(300.0, bias))
+    assert abs(shifted) == 1.8 and np.sign(shifted) == (1.0 if bias == -1.8 else -1.0)
+    assert abs(d["lateral_offset"][after].mean() - shifted) < 0.3
     assert abs(d["lateral_offset"][d["station"] < 140.0].mean()) < 0.6  # before: the old lane
 
 

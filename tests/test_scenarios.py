@@ -108,18 +108,21 @@ def _final_offsets(name, params, seconds=30.0):
 def test_drivers_of_every_archetype_follow_a_lane_shift_and_a_lane_change():
     params = population("paper", 3, 6)  # two-point, preview and intermittent drivers
     assert len({type(p).__name__ for p in params}) == 3
+    # hypotheses [0, -1.8]: the shifts go toward the other one, right when b = 0, else left
     for frame in _final_offsets("lane_shift", params):
         assert len(frame) == 3001  # nobody left the road
+        sign = 1.0 if frame["bias"].iloc[0] == -1.8 else -1.0
         station = frame["station"].to_numpy()
         after = station > 150.0 + 65.0 + 100.0  # well after the shift
         assert after.any()
-        assert abs(frame["lateral_offset"].to_numpy()[after].mean() - 1.8) < 0.4
+        assert abs(frame["lateral_offset"].to_numpy()[after].mean() - sign * 1.8) < 0.4
     for frame in _final_offsets("lane_change", params):
         y, station = frame["lateral_offset"].to_numpy(), frame["station"].to_numpy()
+        sign = 1.0 if frame["bias"].iloc[0] == -1.8 else -1.0
         assert len(frame) == 3001
-        in_left_lane = (station > 230.0) & (station < 290.0)
-        if in_left_lane.any():
-            assert abs(y[in_left_lane].mean() - 3.6) < 0.6
+        in_other_lane = (station > 230.0) & (station < 290.0)
+        if in_other_lane.any():
+            assert abs(y[in_other_lane].mean() - sign * 3.6) < 0.6
 
 
 def test_off_centre_drivers_keep_their_preferred_offset():

@@ -209,7 +209,10 @@ def test_study_check_shows_the_scenario_and_what_the_file_overrides(tmp_path, ca
     assert drive_main(["study", str(shipped), "--participant", "P01", "--check"]) == 0
     shown = capsys.readouterr().out
     assert "scenario 'lane_shift': construction zone" in shown
-    assert "the driven lane moves: [{'station': 150.0, 'length': 65.0, 'offset': 1.8}]" in shown
+    assert (
+        "the driven lane moves: [{'station': 150.0, 'length': 65.0, 'offset': 1.8, "
+        "'toward': 'other_hypothesis'}]" in shown
+    )
     assert "drawn in yellow over the white markings" in shown
     assert "overrides" not in shown  # lane_shift.toml keeps every key of the scenario
     late = tmp_path / "late.toml"

@@ -296,9 +296,12 @@ def test_view_options_choose_hud_items_and_refuse_unknown_ones():
     assert _mask(shown, GHOST_COLOUR, 0).sum() > 0 and _mask(hidden, GHOST_COLOUR, 0).sum() == 0
 
 
-def _frame_at_station(scenario: str, view: str, station: float) -> tuple[np.ndarray, dict, object]:
+def _frame_at_station(
+    scenario: str, view: str, station: float, bias_index: int = 1
+) -> tuple[np.ndarray, dict, object]:
     """A ``render_mode="rgb_array"`` frame of ``scenario`` with the car driven straight,
-    on the marked lane's centre, to ``station`` (m)."""
+    on the marked lane's centre, to ``station`` (m); true bias ``hypotheses[bias_index]``
+    (1: -1.8 m, under which a shift toward the other hypothesis goes left)."""
     import gymnasium as gym
 
     env = gym.make(
@@ -307,7 +310,7 @@ def _frame_at_station(scenario: str, view: str, station: float) -> tuple[np.ndar
         config={"scenario": scenario, "render": {"view": view, "width": 640, "height": 360}},
     )
     options = {"lateral_offset": 0.0, "heading": 0.0, "steering": 0.0, "speed": 30.0}
-    _, info = env.reset(seed=0, options=options)
+    _, info = env.reset(seed=0, options={**options, "bias_index": bias_index})
     while info["station"] < station:
         _, _, terminated, _, info = env.step(np.zeros(2, np.float32))
         assert not terminated
@@ -341,7 +344,7 @@ def test_the_driven_lane_of_a_lane_shift_is_drawn_in_yellow_in_both_views():
     horizon = 0.4 * height
     row = int(round(horizon + focal * rc["eye_height"] / 10.0))
     ahead = focal * rc["eye_height"] / (row + 0.5 - horizon)  # m ahead of the eye at the row
-    centre = float(setup.road.driven_offset(info["station"] + 1.2 + ahead))
+    centre = float(setup.road.driven_offset(info["station"] + 1.2 + ahead, info["bias"]))
     assert 0.8 < centre < 1.4  # mid-shift: the driven lane is well off the marked one
     expected = [0.5 * width - focal * (centre + side) / ahead for side in (-1.8, 1.8)]
     _columns_near(yellow[row], expected, tol=3.0)
@@ -355,7 +358,7 @@ def test_the_driven_lane_of_a_lane_shift_is_drawn_in_yellow_in_both_views():
     assert _mask(plain, DRIVEN_LANE_COLOUR, tol=0).sum() == 0
     ppm = setup.config["render"]["pixels_per_metre"]
     row = int(round(0.7 * height - 10.0 * ppm))
-    centre = float(setup.road.driven_offset(info["station"] + 10.0))
+    centre = float(setup.road.driven_offset(info["station"] + 10.0, info["bias"]))
     _columns_near(yellow[row], [0.5 * width - (centre + s) * ppm for s in (-1.8, 1.8)], 2.0)
     # before the shift's start (150 m) the driven lane is the marked one: no yellow there
     early = TopDownRenderer(setup, "rgb_array").render({**info, "station": 156.0})
@@ -367,13 +370,13 @@ def test_the_driven_lane_of_a_lane_shift_is_drawn_in_yellow_in_both_views():
 def test_the_filled_near_and_far_points_sit_on_the_driven_lane():
     setup = build_setup({"scenario": "lane_shift", "render": {"width": 640, "height": 360}})
     info = {"time": 6.0, "station": 180.0, "lateral_offset": 0.0, "heading": 0.0,
-            "speed": 30.0, "steering": 0.0}  # fmt: skip
+            "speed": 30.0, "steering": 0.0, "bias": -1.8}  # fmt: skip
     from hasa_env.render import ViewOptions
 
     options = ViewOptions(ghosts=False)  # no ghost rings: the filled point alone
     view = DriverViewRenderer(setup, "rgb_array", show_points=True, options=options)
     near = _mask(view.render(info), NEAR_POINT_COLOUR)
     ahead = 6.2 - 1.2  # the near point is 6.2 m ahead of the station, the eye 1.2 m
-    expected = 320.0 - view.focal * float(setup.road.driven_offset(186.2)) / ahead
+    expected = 320.0 - view.focal * float(setup.road.driven_offset(186.2, -1.8)) / ahead
     assert expected < 260.0  # well left of the marked lane's centre (320 px)
     assert abs(np.nonzero(near)[1].mean() - expected) < 3.0

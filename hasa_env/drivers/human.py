@@ -47,6 +47,7 @@ __all__ = [
     "check_common",
     "check_range",
     "human_batch",
+    "info_keys",
     "lane_bearings",
     "params_from_dict",
     "params_to_dict",
@@ -56,7 +57,16 @@ MIN_SPEED = 1.0
 """m/s; below it speed-scaled gains and look-ahead distances stop scaling."""
 
 INFO_NEEDED = ("time", "station", "lateral_offset", "heading", "speed", "steering")
-"""The ``info`` keys a synthetic driver reads."""
+"""The ``info`` keys a synthetic driver reads; it also reads ``bias`` (the episode's true
+camera bias, m) where given: a road whose lane shift moves toward the other hypothesis
+needs it (:meth:`hasa_env.sim.road.Road.driven_offset`)."""
+
+
+def info_keys(info: Mapping[str, Any]) -> tuple[str, ...]:
+    """The keys of ``info`` a synthetic driver reads: :data:`INFO_NEEDED`, and ``bias``
+    where ``info`` has it."""
+    return (*INFO_NEEDED, "bias") if "bias" in info else INFO_NEEDED
+
 
 MOTOR_STREAM, OWN_STREAM, PEDAL_STREAM = 0, 1, 2
 """Spawn keys of a car's SeedSequence: the output stage's and the archetype's noise."""
@@ -83,8 +93,8 @@ def lane_bearings(
     """Bearings (rad) of the driven lane's centre at ``near`` and ``far`` m ahead of N cars.
 
     The point d m ahead lies ``l(d) = offset(s + d) + preferred_offset`` left of the road's
-    centre line (``road.lane_shifts``, :meth:`~hasa_env.sim.road.Road.driven_offset`; 0
-    without them). Straight road: phi = -(theta + atan((y - l(near)) / near)), omega =
+    centre line (``road.lane_shifts``, :meth:`~hasa_env.sim.road.Road.driven_offset` for
+    each car's episode bias ``info["bias"]``; 0 without them). Straight road: phi = -(theta + atan((y - l(near)) / near)), omega =
     -(theta + atan((y - l(far)) / far)); curved road:
     :func:`hasa_env.sim.road.lane_centre_bearing` (exact).
     """
@@ -93,8 +103,9 @@ def lane_bearings(
     near_offset: Any = preferred_offset
     far_offset: Any = preferred_offset
     if road.lane_shifts:
-        near_offset = near_offset + road.driven_offset(s + near)
-        far_offset = far_offset + road.driven_offset(s + far)
+        bias = info.get("bias")
+        near_offset = near_offset + road.driven_offset(s + near, bias)
+        far_offset = far_offset + road.driven_offset(s + far, bias)
     if road.is_straight:
         return (
             -(theta + np.arctan((y - near_offset) / near)),
@@ -299,9 +310,10 @@ class HumanBatch(ABC):
         target = self.preferred_offset
         out = dict(info)
         if road.lane_shifts:
-            target = target + road.driven_offset(station)
+            bias = info.get("bias")  # the episode's; a shift may move toward its other hypothesis
+            target = target + road.driven_offset(station, bias)
             out["heading"] = np.asarray(info["heading"], dtype=np.float64) - road.driven_slope(
-                station
+                station, bias
             )
         out["lateral_offset"] = np.asarray(info["lateral_offset"], dtype=np.float64) - target
         return out
@@ -366,7 +378,7 @@ class HumanDriver:
     def act(self, info: Mapping[str, Any], road: Road) -> tuple[float, float]:
         if self._batch is None:
             raise RuntimeError("call reset() before act()")
-        steering, acceleration = self._batch.act(info_arrays(info, INFO_NEEDED), road)
+        steering, acceleration = self._batch.act(info_arrays(info, info_keys(info)), road)
         return float(steering[0]), float(acceleration[0])
 
     def __repr__(self) -> str:

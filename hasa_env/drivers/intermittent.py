@@ -198,7 +198,7 @@ class IntermittentBatch(HumanBatch):
         # the road ahead is previewed from where the car is now (the station seen a delay
         # ago plus v * delay: a longitudinal prediction); the lateral state is the delayed one
         now = seen[:, 2] + v * self.delay
-        f = self.feedback(seen[:, 0], seen[:, 1], now, v, road)
+        f = self.feedback(seen[:, 0], seen[:, 1], now, v, road, info.get("bias"))
         desired = -self.wheelbase * f / (self.feedback.acceleration_gain * v2)
         target = self._base
         for m in range(self.slots):  # fixed order: the same bits alone or in a batch

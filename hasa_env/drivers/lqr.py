@@ -180,13 +180,20 @@ class PreviewFeedback:
         self.acceleration_gain = self.gains[:, 2]
 
     def __call__(
-        self, y: np.ndarray, theta: np.ndarray, station: np.ndarray, v: np.ndarray, road: Road
+        self,
+        y: np.ndarray,
+        theta: np.ndarray,
+        station: np.ndarray,
+        v: np.ndarray,
+        road: Road,
+        bias: np.ndarray | None = None,
     ) -> np.ndarray:
         """f = k_y y + k_v v theta + sum_j k_j v^2 kappa(s + v t_j) (m/s^3), arrays of N cars.
 
         kappa is the driven lane's curvature: the road's plus that of its lane shifts
         (:meth:`~hasa_env.sim.road.Road.driven_curvature`; y and theta are then relative
-        to the driven lane, :meth:`~hasa_env.drivers.human.HumanBatch.perceived`).
+        to the driven lane, :meth:`~hasa_env.drivers.human.HumanBatch.perceived`); ``bias``
+        is each car's episode bias (m), needed by a shift toward the other hypothesis.
         """
         k = self.gains
         out = k[:, 0] * y + k[:, 1] * (v * theta)
@@ -195,7 +202,7 @@ class PreviewFeedback:
             stations = station[:, None] + v[:, None] * self.preview_times
             kappa = curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations)
             if road.lane_shifts:
-                kappa = kappa + road.driven_curvature(stations)
+                kappa = kappa + road.driven_curvature(stations, bias)
             for j in range(kappa.shape[1]):
                 out = out + k[:, 3 + j] * (v2 * kappa[:, j])
         return out

@@ -162,7 +162,7 @@ class PreviewBatch(HumanBatch):
         # the road ahead is previewed from where the car is now (the station seen a delay
         # ago plus v * delay: a longitudinal prediction); the lateral state is the delayed one
         now = seen[:, 2] + v * self.delay
-        f = self.feedback(seen[:, 0], seen[:, 1], now, v, road)
+        f = self.feedback(seen[:, 0], seen[:, 1], now, v, road, info.get("bias"))
         jerk = -(f + self.feedback.acceleration_gain * (v2 * delta / length))
         limit = self.max_steering
         self._command_state = np.clip(delta + self._dt * length * jerk / v2, -limit, limit)

@@ -188,12 +188,14 @@ class Recording:
 
     @property
     def road(self) -> Road:
-        """The road the recording was made on (its config's track and lane width)."""
+        """The road the recording was made on (its config's track, lane width, lane shifts
+        and hypotheses: a shift toward the other hypothesis is signed by the recorded bias)."""
         road = self.config["road"]
         return make_road(
             self.config["track"],
             lane_width=road["lane_width"],
             lane_shifts=road.get("lane_shifts", ()),
+            hypotheses=self.config.get("markings", {}).get("hypotheses", ()),
         )
 
 

@@ -271,7 +271,8 @@ class Hud:
 def driven_lane_runs(offsets: np.ndarray) -> list[slice]:
     """The stretches of samples at which the driven lane's lines are drawn.
 
-    ``offsets`` (m) are the driven lane's centre (:meth:`hasa_env.sim.road.Road.driven_offset`)
+    ``offsets`` (m) are the episode's driven lane's centre
+    (:meth:`hasa_env.sim.road.Road.driven_offset` with ``info["bias"]``)
     at increasing stations; a run is a contiguous stretch where ``|offset|`` exceeds
     :data:`DRIVEN_LANE_TOLERANCE`, widened by one sample at each end so the lines leave
     the white markings where the shift starts and rejoin them where it ends. Runs of

@@ -13,7 +13,9 @@ steering angle and, when an estimator runs alongside, the hypothesis weights.
 
 With ``road.lane_shifts`` (a construction-zone shift, a planned lane change) the lane
 the driver follows leaves the marked one: its two lines, at ``driven_offset(s) +-
-lane_width / 2`` (:meth:`hasa_env.sim.road.Road.driven_offset`), are drawn solid in
+lane_width / 2`` (:meth:`hasa_env.sim.road.Road.driven_offset`, the episode's: a shift
+toward the other hypothesis moves to the side of ``info["bias"]``'s nearest other
+hypothesis), are drawn solid in
 construction-zone yellow (:data:`~hasa_env.render.common.DRIVEN_LANE_COLOUR`) along the
 visible stretch wherever its centre is off the marked lane's
 (:func:`~hasa_env.render.common.driven_lane_runs`), over the white markings, which stay:
@@ -346,20 +348,25 @@ class DriverViewRenderer(SceneRenderer):
             if band is not None:
                 pg.draw.polygon(surf, MARKING_COLOUR, band)
         self._dashes(station, DASH_PERIOD, self.dividers, MARKING_COLOUR, MARKING_WIDTH, camera)
-        self._draw_driven_lane(station, camera)
+        bias = info.get("bias")  # the episode's: a lane shift may move toward its other hypothesis
+        bias = None if bias is None else float(bias)
+        self._draw_driven_lane(station, camera, bias)
         self._draw_posts(station, camera)
         if self.show_points:
-            self._draw_points(station, camera)
+            self._draw_points(station, camera, bias)
         if self._bonnet is not None:
             surf.blit(self._bonnet, (0, self.height - self._bonnet.get_height()))
 
-    def _draw_driven_lane(self, station: float, camera: tuple[float, float, float, float]) -> None:
-        """The driven lane's lines (yellow, solid) where it is off the marked lane."""
+    def _draw_driven_lane(
+        self, station: float, camera: tuple[float, float, float, float], bias: float | None
+    ) -> None:
+        """The episode's driven lane's lines (yellow, solid) where it is off the marked lane
+        (``bias``: the episode's true bias, m, for a shift toward the other hypothesis)."""
         road = self.setup.road
         if not road.lane_shifts:
             return
         stations = station + self._driven_distances
-        offsets = road.driven_offset(stations)
+        offsets = road.driven_offset(stations, bias)
         poses = self._poses(stations)
         half, w = 0.5 * road.lane_width, 0.5 * MARKING_WIDTH
         for run in driven_lane_runs(offsets):
@@ -416,12 +423,14 @@ class DriverViewRenderer(SceneRenderer):
                     self._target, POST_TOP_COLOUR, (rect.x, rect.y, rect.w, max(1, rect.h // 5))
                 )
 
-    def _draw_points(self, station: float, camera: tuple[float, float, float, float]) -> None:
+    def _draw_points(
+        self, station: float, camera: tuple[float, float, float, float], bias: float | None = None
+    ) -> None:
         distances = np.array([NEAR_POINT_DISTANCE, FAR_POINT_DISTANCE])
         X, Y, sn, cs = self._poses(station + distances)
         pg = self._pg
         colours = (NEAR_POINT_COLOUR, FAR_POINT_COLOUR)
-        driven = self.setup.road.driven_offset(station + distances)  # 0 without lane shifts
+        driven = self.setup.road.driven_offset(station + distances, bias)  # 0 without shifts
         for centre, ring in [(driven, False)] + [(c, True) for c in self.ghost_centres]:
             px, py = self._offset_points(X, Y, sn, cs, centre)
             sx, sy, forward = self.project(px, py, camera)

@@ -7,7 +7,8 @@ lane-centre hypothesis would put the lane, the car, and the shared HUD
 
 With ``road.lane_shifts`` (a construction-zone shift, a planned lane change) the lane
 the driver follows leaves the marked one: its two lines, at ``driven_offset(s) +-
-lane_width / 2``, are drawn solid in construction-zone yellow
+lane_width / 2`` (the episode's: a shift toward the other hypothesis moves to the side
+of ``info["bias"]``'s nearest other hypothesis), are drawn solid in construction-zone yellow
 (:data:`~hasa_env.render.common.DRIVEN_LANE_COLOUR`) wherever its centre is off the
 marked lane's (:func:`~hasa_env.render.common.driven_lane_runs`), over the white
 markings, which stay: the camera keeps reading them. For a lane change the yellow
@@ -136,17 +137,18 @@ class TopDownRenderer(SceneRenderer):
             for side in (-0.5, 0.5):
                 pts = self._line_points(poses, -b + side * width, origin)
                 self._dashed(pts, stations, GHOST_COLOUR, max(1, line_w // 2), period=6.0)
-        self._draw_driven_lane(stations, poses, origin, line_w)
+        self._draw_driven_lane(stations, poses, origin, line_w, info.get("bias"))
         self._draw_car(info, origin)
 
     def _draw_driven_lane(
-        self, stations: np.ndarray, poses: tuple, origin: tuple, line_w: int
+        self, stations: np.ndarray, poses: tuple, origin: tuple, line_w: int, bias: Any
     ) -> None:
-        """The driven lane's lines (yellow, solid) where it is off the marked lane."""
+        """The episode's driven lane's lines (yellow, solid) where it is off the marked lane
+        (``bias``: the episode's true bias, m, for a shift toward the other hypothesis)."""
         road = self.setup.road
         if not road.lane_shifts:
             return
-        offsets = road.driven_offset(stations)
+        offsets = road.driven_offset(stations, None if bias is None else float(bias))
         half = 0.5 * road.lane_width
         for run in driven_lane_runs(offsets):
             stretch = tuple(p[run] for p in poses)

@@ -27,7 +27,7 @@ import numpy as np
 
 from hasa_env.drivers.archetypes import HumanParams, archetype_of
 from hasa_env.drivers.base import PartialBatchDriver
-from hasa_env.drivers.human import INFO_NEEDED, human_batch
+from hasa_env.drivers.human import human_batch, info_keys
 from hasa_env.sim.road import Road
 
 __all__ = ["HumanPool"]
@@ -63,7 +63,8 @@ class HumanPool:
 
     ``assign(cars, drivers, seeds)`` starts new runs; ``steer(info, road)`` (or ``act``
     for the speed command too) returns every car's road-wheel angle (rad) for the
-    cars' true ``info`` arrays (the keys of :data:`hasa_env.drivers.human.INFO_NEEDED`).
+    cars' true ``info`` arrays (the keys of :data:`hasa_env.drivers.human.INFO_NEEDED`, and
+    ``bias``: :func:`hasa_env.drivers.human.info_keys`).
     A car without a human yet gets NaN.
     """
 
@@ -172,7 +173,7 @@ class HumanPool:
     ) -> tuple[np.ndarray, np.ndarray]:
         steering = np.full(self.num_cars, np.nan)
         acceleration = np.full(self.num_cars, np.nan)
-        arrays = {key: np.asarray(info[key], dtype=np.float64) for key in INFO_NEEDED}
+        arrays = {key: np.asarray(info[key], dtype=np.float64) for key in info_keys(info)}
         for batch in self._batches:
             if not batch.live.any():
                 continue

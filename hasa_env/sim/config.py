@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from hasa_env.scenarios import SCENARIOS
+from hasa_env.sim.road import SHIFT_TOWARD
 from hasa_env.validation import Field, schema, validate
 
 __all__ = ["ConfigError", "default_config", "make_config", "deep_merge", "describe_config"]
@@ -77,8 +78,10 @@ _SCHEMA: Field = schema(
                 "json",
                 [],
                 "Sideways moves of the lane the human drives in, relative to the markings "
-                "the camera reads: a list of {station (m, >= 0), length (m, > 0), offset (m)}, "
-                "each a half-cosine ramp (hasa_env.sim.road.Road.driven_offset).",
+                "the camera reads: a list of {station (m, >= 0), length (m, > 0), offset (m), "
+                "optional toward ('left': offset as given, the default; 'other_hypothesis': "
+                "offset toward where the nearest other hypothesis puts the lane centre, per "
+                "episode)}, each a half-cosine ramp (hasa_env.sim.road.Road.driven_offset).",
                 max_depth=2,
                 max_length=200,
             ),
@@ -266,7 +269,8 @@ def default_config() -> dict[str, Any]:
     road.lanes_left/right       extra lanes beside the ego lane (1 / 0)
     road.offroad_margin         m past the edge before termination (0.5)
     road.lane_shifts            sideways moves of the driven lane ([]): list of
-                                {station, length, offset} (m)
+                                {station, length, offset} (m), optional toward
+                                ('left' | 'other_hypothesis')
     initial_state.*             y (m, -0.5), heading (rad), speed (m/s, 15),
                                 steering (rad), and *_std randomisation;
                                 between_hypotheses (false)
@@ -325,10 +329,13 @@ def _under(keys: Mapping[str, Any], config: Mapping[str, Any]) -> dict[str, Any]
 
 
 _SHIFT_RANGES = {"station": (0.0, 1e6), "length": (0.1, 1e4), "offset": (-20.0, 20.0)}
+_SHIFT_KEYS = {*_SHIFT_RANGES, "toward"}
 
 
-def _check_lane_shifts(shifts: Any) -> None:
-    """Each entry of ``road.lane_shifts`` is {station, length, offset} with numbers in range."""
+def _check_lane_shifts(shifts: Any, hypotheses: list[float]) -> None:
+    """Each entry of ``road.lane_shifts`` is {station, length, offset} with numbers in range
+    and optionally ``toward``, one of :data:`hasa_env.sim.road.SHIFT_TOWARD`;
+    ``"other_hypothesis"`` needs at least two ``markings.hypotheses``."""
     if not isinstance(shifts, list):
         raise ConfigError(
             f"config key 'road.lane_shifts' must be a list of {{station, length, offset}}, "
@@ -336,10 +343,11 @@ def _check_lane_shifts(shifts: Any) -> None:
         )
     for i, shift in enumerate(shifts):
         where = f"config key 'road.lane_shifts[{i}]"
-        if not isinstance(shift, dict) or set(shift) != set(_SHIFT_RANGES):
+        keys = set(shift) if isinstance(shift, dict) else set()
+        if not isinstance(shift, dict) or not set(_SHIFT_RANGES) <= keys <= _SHIFT_KEYS:
             raise ConfigError(
                 f"{where}' must be an object with exactly the keys station, length, offset "
-                f"(m), got {shift!r}"
+                f"(m) and optionally toward, got {shift!r}"
             )
         for key, (low, high) in _SHIFT_RANGES.items():
             value = shift[key]
@@ -349,6 +357,16 @@ def _check_lane_shifts(shifts: Any) -> None:
                     f"{where}.{key}' must be a number in [{low:g}, {high:g}] m, got {value!r}"
                 )
             shift[key] = float(value)
+        if "toward" not in shift:
+            continue
+        if shift["toward"] not in SHIFT_TOWARD:
+            allowed = ", ".join(repr(t) for t in SHIFT_TOWARD)
+            raise ConfigError(f"{where}.toward' must be one of {allowed}, got {shift['toward']!r}")
+        if shift["toward"] == "other_hypothesis" and len(hypotheses) < 2:
+            raise ConfigError(
+                f"{where}.toward' = 'other_hypothesis' needs at least two "
+                f"'markings.hypotheses', got {len(hypotheses)}"
+            )
 
 
 def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -369,7 +387,7 @@ def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     if isinstance(name, str) and name in SCENARIOS:
         config = _under(SCENARIOS[name].config, config)
     cfg: dict[str, Any] = validate(config, _SCHEMA, describe=_describe, error=_error)
-    _check_lane_shifts(cfg["road"]["lane_shifts"])
+    _check_lane_shifts(cfg["road"]["lane_shifts"], cfg["markings"]["hypotheses"])
     probs = cfg["markings"]["probabilities"]
     hyps = cfg["markings"]["hypotheses"]
     if probs is not None:

@@ -17,10 +17,25 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
-__all__ = ["Road", "straight_road", "curved_road", "make_road", "TRACKS", "lane_centre_bearing"]
+__all__ = [
+    "Road",
+    "straight_road",
+    "curved_road",
+    "make_road",
+    "TRACKS",
+    "lane_centre_bearing",
+    "SHIFT_TOWARD",
+    "nearest_other_hypothesis",
+]
+
+SHIFT_TOWARD = ("left", "other_hypothesis")
+"""Allowed values of a lane shift's ``toward`` (config ``road.lane_shifts[i].toward``):
+``"left"`` (the sign of ``offset`` as given, the default) or ``"other_hypothesis"``
+(``offset`` points toward the nearest other hypothesis's lane centre, per episode)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +53,13 @@ class Road:
             ``[station, station + length]`` (a construction-zone shift, a planned lane
             change); they add up. :meth:`driven_offset` and :meth:`driven_slope` give
             the driven lane's centre; the car's dynamics and the camera ignore it.
+        shifts_toward_other: one flag per entry of ``lane_shifts`` (empty: all False).
+            True: the shift's ``offset`` is a size toward the other hypothesis, signed
+            per episode by its true bias b (:meth:`shift_signs`); False: ``offset``
+            as given (positive = left).
+        hypotheses: the episode hypotheses (camera biases b_j, m; config
+            ``markings.hypotheses``), needed (at least two) when a shift is toward the
+            other hypothesis.
     """
 
     name: str
@@ -45,6 +67,8 @@ class Road:
     curvature: np.ndarray
     lane_width: float = 3.6
     lane_shifts: tuple[tuple[float, float, float], ...] = ()
+    shifts_toward_other: tuple[bool, ...] = ()
+    hypotheses: tuple[float, ...] = ()
     x: np.ndarray = field(init=False, repr=False)
     y: np.ndarray = field(init=False, repr=False)
     psi: np.ndarray = field(init=False, repr=False)
@@ -72,6 +96,20 @@ class Road:
         object.__setattr__(self, "_grid", np.arange(kappa.size) * ds)
         for arr in (self.curvature, self.psi, self.x, self.y):
             arr.setflags(write=False)
+        toward = tuple(bool(t) for t in self.shifts_toward_other)
+        if toward and len(toward) != len(self.lane_shifts):
+            raise ValueError(
+                f"Road.shifts_toward_other has {len(toward)} flags for {len(self.lane_shifts)} "
+                "lane shifts; give one per shift (or none)"
+            )
+        hyps = tuple(float(h) for h in self.hypotheses)
+        if any(toward) and len(set(hyps)) < 2:
+            raise ValueError(
+                "a lane shift toward the other hypothesis needs at least two distinct "
+                f"Road.hypotheses, got {list(hyps)}"
+            )
+        object.__setattr__(self, "shifts_toward_other", toward)
+        object.__setattr__(self, "hypotheses", hyps)
 
     @property
     def length(self) -> float:
@@ -82,40 +120,92 @@ class Road:
     def is_straight(self) -> bool:
         return not np.any(self.curvature)
 
-    def driven_offset(self, s: np.ndarray | float) -> np.ndarray:
+    def shift_signs(self, bias: np.ndarray | float) -> np.ndarray:
+        """sign(h_near - b) (+1.0 or -1.0, the shape of ``bias``): the direction from the
+        true lane's centre toward the centre the nearest other hypothesis puts it at.
+
+        h_near is the hypothesis other than b nearest to b; of two equally near, the
+        lower (:func:`nearest_other_hypothesis`, the rule of ``initial_state.between_hypotheses``).
+        """
+        b = np.asarray(bias, dtype=np.float64)
+        hyps = np.sort(np.asarray(self.hypotheses, dtype=np.float64))
+        if hyps.size == 0:
+            raise ValueError("Road.shift_signs needs Road.hypotheses")
+        gap = hyps - b[..., None]
+        distance = np.where(gap == 0.0, np.inf, np.abs(gap))
+        if not np.all(np.isfinite(distance.min(axis=-1))):
+            raise ValueError(f"no hypothesis other than the bias among {list(self.hypotheses)}")
+        nearest = np.argmin(distance, axis=-1)  # the first of equals: the lower hypothesis
+        return np.sign(np.take_along_axis(gap, nearest[..., None], axis=-1)[..., 0])
+
+    def _signed_shifts(
+        self, s: np.ndarray, bias: np.ndarray | float | None
+    ) -> list[tuple[float, float, Any]]:
+        """(station, length, signed offset) of each shift for the episode with true bias
+        ``bias`` (scalar, or one per car along s's leading axis)."""
+        if not any(self.shifts_toward_other):
+            return list(self.lane_shifts)
+        if bias is None:
+            raise ValueError(
+                "this road's lane shifts move toward the other hypothesis: give the "
+                "episode's true bias (bias=info['bias'])"
+            )
+        signs = self.shift_signs(bias)
+        extra = s.ndim - signs.ndim
+        if extra > 0:
+            signs = signs.reshape(signs.shape + (1,) * extra)
+        return [
+            (start, length, offset * signs if toward else offset)
+            for (start, length, offset), toward in zip(
+                self.lane_shifts, self.shifts_toward_other, strict=True
+            )
+        ]
+
+    def driven_offset(
+        self, s: np.ndarray | float, bias: np.ndarray | float | None = None
+    ) -> np.ndarray:
         """Lateral offset (m, left positive) of the driven lane's centre at station s::
 
-        offset(s) = sum_j offset_j (1 - cos(pi u_j)) / 2,  u_j = clip((s - s_j) / l_j, 0, 1)
+        offset(s) = sum_j o_j (1 - cos(pi u_j)) / 2,  u_j = clip((s - s_j) / l_j, 0, 1)
+
+        o_j is shift j's ``offset``, or ``offset * sign(h_near - b)`` for a shift toward
+        the other hypothesis (:meth:`shift_signs`), b the episode's true bias ``bias``
+        (m; a scalar, or an array with one per car that broadcasts along s's leading
+        axis; needed only then).
         """
         s = np.asarray(s, dtype=np.float64)
         out = np.zeros(s.shape)
-        for start, length, offset in self.lane_shifts:
+        for start, length, offset in self._signed_shifts(s, bias):
             u = np.clip((s - start) / length, 0.0, 1.0)
             out = out + offset * 0.5 * (1.0 - np.cos(np.pi * u))
         return out
 
-    def driven_slope(self, s: np.ndarray | float) -> np.ndarray:
+    def driven_slope(
+        self, s: np.ndarray | float, bias: np.ndarray | float | None = None
+    ) -> np.ndarray:
         """d offset / ds of :meth:`driven_offset` (rad, small-angle: the driven lane's
-        heading relative to the centre line)::
+        heading relative to the centre line; ``bias`` as there)::
 
-            slope(s) = sum_j offset_j pi / (2 l_j) sin(pi u_j)
+            slope(s) = sum_j o_j pi / (2 l_j) sin(pi u_j)
         """
         s = np.asarray(s, dtype=np.float64)
         out = np.zeros(s.shape)
-        for start, length, offset in self.lane_shifts:
+        for start, length, offset in self._signed_shifts(s, bias):
             u = np.clip((s - start) / length, 0.0, 1.0)
             out = out + offset * np.pi / (2.0 * length) * np.sin(np.pi * u)
         return out
 
-    def driven_curvature(self, s: np.ndarray | float) -> np.ndarray:
+    def driven_curvature(
+        self, s: np.ndarray | float, bias: np.ndarray | float | None = None
+    ) -> np.ndarray:
         """d^2 offset / ds^2 of :meth:`driven_offset` (1/m): the curvature the driven lane
-        adds to the road's (small angles)::
+        adds to the road's (small angles; ``bias`` as there)::
 
-            curvature(s) = sum_j offset_j (pi / l_j)^2 / 2 cos(pi u_j),  0 < u_j < 1 (else 0)
+            curvature(s) = sum_j o_j (pi / l_j)^2 / 2 cos(pi u_j),  0 < u_j < 1 (else 0)
         """
         s = np.asarray(s, dtype=np.float64)
         out = np.zeros(s.shape)
-        for start, length, offset in self.lane_shifts:
+        for start, length, offset in self._signed_shifts(s, bias):
             u = (s - start) / length
             inside = (u > 0.0) & (u < 1.0)
             out = out + np.where(
@@ -258,10 +348,15 @@ TRACKS: dict[str, Callable[..., Road]] = {"straight": straight_road, "curved": c
 
 
 def make_road(
-    track: str, lane_width: float = 3.6, lane_shifts: Sequence[Mapping[str, float]] = ()
+    track: str,
+    lane_width: float = 3.6,
+    lane_shifts: Sequence[Mapping[str, Any]] = (),
+    hypotheses: Sequence[float] = (),
 ) -> Road:
     """Build a named track ('straight' or 'curved'), with the driven lane's shifts
-    (``{"station", "length", "offset"}`` each, m: config ``road.lane_shifts``)."""
+    (``{"station", "length", "offset"}`` each, m, and optionally ``"toward"``, one of
+    :data:`SHIFT_TOWARD`: config ``road.lane_shifts``) and the episode hypotheses
+    (m, config ``markings.hypotheses``; needed by a shift toward the other hypothesis)."""
     try:
         factory = TRACKS[track]
     except KeyError:
@@ -271,8 +366,29 @@ def make_road(
         shifts = tuple(
             (float(m["station"]), float(m["length"]), float(m["offset"])) for m in lane_shifts
         )
-        road = replace(road, lane_shifts=shifts)
+        toward = []
+        for i, m in enumerate(lane_shifts):
+            value = m.get("toward", SHIFT_TOWARD[0])
+            if value not in SHIFT_TOWARD:
+                allowed = ", ".join(repr(t) for t in SHIFT_TOWARD)
+                raise ValueError(f"lane_shifts[{i}].toward must be one of {allowed}, got {value!r}")
+            toward.append(value == "other_hypothesis")
+        road = replace(
+            road,
+            lane_shifts=shifts,
+            shifts_toward_other=tuple(toward) if any(toward) else (),
+            hypotheses=tuple(float(h) for h in hypotheses),
+        )
     return road
+
+
+def nearest_other_hypothesis(bias: float, hypotheses: Sequence[float]) -> float | None:
+    """The hypothesis other than ``bias`` nearest to it (m), the lower of two equally near;
+    None when there is none."""
+    others = [h for h in hypotheses if h != bias]
+    if not others:
+        return None
+    return min(others, key=lambda h: (abs(h - bias), h))
 
 
 def curvature_lookup_scalar(curvature: list[float], inv_spacing: float, station: float) -> float:

@@ -21,7 +21,13 @@ from gymnasium import spaces
 from hasa_env.sim.config import make_config
 from hasa_env.sim.disturbance import Disturbance
 from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, VehicleParams, VehicleState
-from hasa_env.sim.road import Road, curvature_lookup_array, curvature_lookup_scalar, make_road
+from hasa_env.sim.road import (
+    Road,
+    curvature_lookup_array,
+    curvature_lookup_scalar,
+    make_road,
+    nearest_other_hypothesis,
+)
 from hasa_env.sim.sensors import SENSOR_NAMES, SENSOR_NOISE_KEYS, Sensors, sensor_bounds
 from hasa_env.validation import ABSENT, Field, schema, validate
 
@@ -182,10 +188,12 @@ def build_setup(config: Mapping[str, Any] | None, track: str | None = None) -> E
     cfg = make_config(config)  # a config that is not a mapping is a ConfigError there
     road_cfg = cfg["road"]
     width = road_cfg["lane_width"]
-    road = make_road(cfg["track"], lane_width=width, lane_shifts=road_cfg["lane_shifts"])
+    hyps = tuple(cfg["markings"]["hypotheses"])
+    road = make_road(
+        cfg["track"], lane_width=width, lane_shifts=road_cfg["lane_shifts"], hypotheses=hyps
+    )
     dt = 1.0 / cfg["sim_frequency"]
     params = VehicleParams(cfg["vehicle"]["wheelbase"], cfg["vehicle"]["max_speed"], dt)
-    hyps = tuple(cfg["markings"]["hypotheses"])
     probs = cfg["markings"]["probabilities"] or [1.0 / len(hyps)] * len(hyps)
     cum = tuple(float(c) for c in np.cumsum(probs))
     noise = cfg["noise"]
@@ -314,10 +322,9 @@ def _halfway_to_nearest(bias: float, hypotheses: Sequence[float], otherwise: flo
     """The offset halfway between the true lane's centre (y = 0) and the centre the nearest
     other hypothesis b_j puts it at (y = b_j - b): (b_j - b) / 2 (m); ``otherwise`` when
     there is no other hypothesis."""
-    others = [h for h in hypotheses if h != bias]
-    if not others:
+    nearest = nearest_other_hypothesis(bias, hypotheses)
+    if nearest is None:
         return otherwise
-    nearest = min(others, key=lambda h: (abs(h - bias), h))
     return 0.5 * (nearest - bias)
 
 
