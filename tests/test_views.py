@@ -65,12 +65,20 @@ def test_no_ghost_markings_without_a_wrong_hypothesis():
     assert _mask(frame, MARKING_COLOUR, tol=3).sum() > 1000
 
 
-def test_ghost_markings_sit_at_minus_b_plus_minus_half_a_lane():
-    setup, info = _info({"markings": {"hypotheses": [0.0, -1.8]}}, lateral_offset=0.0)
+@pytest.mark.parametrize(("bias_index", "lines"), [(1, [0.0, 3.6]), (0, [-3.6, 0.0])])
+def test_ghost_markings_sit_where_the_other_hypothesis_puts_the_lane(
+    bias_index: int, lines: list[float]
+) -> None:
+    # camera reads y + b: hypothesis b_i puts the centre at y = b_i - b; with b = -1.8 the
+    # ghost (b_i = 0) is 1.8 m left, with b = 0 the ghost (b_i = -1.8) is 1.8 m right
+    setup, info = _info(
+        {"markings": {"hypotheses": [0.0, -1.8]}}, lateral_offset=0.0, bias_index=bias_index
+    )
     view = DriverViewRenderer(setup, "rgb_array")
-    assert sorted(view.ghost_lines) == pytest.approx([0.0, 3.6])
-    # with the car centred in its lane, the ghost line at y = 0 runs straight ahead (screen centre)
     frame = view.render(info)
+    assert sorted(view.ghost_lines) == pytest.approx(lines)
+    assert view.ghost_centres == pytest.approx([sum(lines) / 2])
+    # with the car centred in its lane, the ghost line at y = 0 runs straight ahead (screen centre)
     ghost = _mask(frame, GHOST_FADED_COLOUR)
     cols = np.flatnonzero(ghost[int(0.75 * view.height)])
     if cols.size:  # a dash may be in a gap at that row; check where there is one

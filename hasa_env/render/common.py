@@ -46,6 +46,7 @@ __all__ = [
     "DRIVEN_LANE_COLOUR",
     "DRIVEN_LANE_TOLERANCE",
     "driven_lane_runs",
+    "ghost_centres",
     "DEFAULT_STEERING_RATIO",
 ]
 
@@ -289,6 +290,19 @@ def driven_lane_runs(offsets: np.ndarray) -> list[slice]:
         if run.stop - run.start >= 2:
             runs.append(run)
     return runs
+
+
+def ghost_centres(hypotheses: Sequence[float], bias: Any) -> list[float]:
+    """Where each wrong hypothesis puts the lane centre, in true-lane coordinates (m, left
+    positive), for an episode whose true camera bias is ``bias`` (``info["bias"]``).
+
+    The camera reads ``y + bias``; under hypothesis ``b_i`` the car's offset is read as
+    ``y + bias - b_i``, so that hypothesis's lane centre lies at ``y = b_i - bias``
+    (docs/design.md §3.5). Every hypothesis but the true one is a ghost. ``bias`` None (an
+    ``info`` without it) is taken as 0.
+    """
+    true = 0.0 if bias is None else float(bias)
+    return [float(h) - true for h in hypotheses if abs(float(h) - true) > 1e-9]
 
 
 def _hypothesis_index(bias: float, hypotheses: Sequence[float]) -> int:

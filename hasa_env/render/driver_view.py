@@ -3,9 +3,10 @@
 What a participant sees in ``hasa-drive`` (and what ``render.view = "driver"``
 renders): sky, grass, the grey road, the true lane markings in white (solid
 road edges, dashed lane dividers), roadside posts every 50 m for a sense of
-speed, the *ghost* markings of every wrong lane hypothesis (b != 0: the
-camera reads y + b, so that hypothesis puts the lane centre at y = -b and its
-markings at y = -b +- lane_width / 2), drawn dashed and faded, and
+speed, the *ghost* markings of every wrong lane hypothesis b_i (the
+camera reads y + b, b the episode's true bias ``info["bias"]``, so b_i puts the lane
+centre at y = b_i - b and its markings at y = b_i - b +- lane_width / 2), drawn dashed
+and faded, and
 optionally the near (6.2 m) and far (20 m) lane-centre points of the
 two-point steering model (filled for the lane the driver follows, rings for the
 ghost lanes). The HUD (:class:`hasa_env.render.common.Hud`) shows time, speed,
@@ -57,6 +58,7 @@ from hasa_env.render.common import (
     SceneRenderer,
     WeightSource,
     driven_lane_runs,
+    ghost_centres,
 )
 from hasa_env.render.options import ViewOptions
 from hasa_env.sim.setup import EnvSetup
@@ -173,12 +175,7 @@ class DriverViewRenderer(SceneRenderer):
         self.left_edge = lane / 2 + road_cfg["lanes_left"] * lane
         n_lanes = road_cfg["lanes_left"] + road_cfg["lanes_right"] + 1
         self.dividers = [self.right_edge + i * lane for i in range(1, n_lanes)]
-        self.ghost_lines = [
-            -b + side * lane for b in setup.hypotheses if b != 0.0 for side in (-0.5, 0.5)
-        ]
-        self.ghost_centres = [-b for b in setup.hypotheses if b != 0.0]
-        if not self.options.ghosts:
-            self.ghost_lines, self.ghost_centres = [], []
+        self._set_ghosts(None)
         self._road_centre = 0.5 * (self.right_edge + self.left_edge)
         # distances ahead of the car's station at which the continuous lines are sampled:
         # dense near the car, where perspective magnifies
@@ -314,8 +311,18 @@ class DriverViewRenderer(SceneRenderer):
                 pg.draw.polygon(self._target, colour, pts)
 
     # ----------------------------------------------------------- drawing
+    def _set_ghosts(self, bias: Any) -> None:
+        """``ghost_centres`` and ``ghost_lines`` (m, true-lane coordinates) of the episode whose
+        true bias is ``bias`` (:func:`~hasa_env.render.common.ghost_centres`; none when the
+        options hide the ghosts)."""
+        centres = ghost_centres(self.setup.hypotheses, bias) if self.options.ghosts else []
+        lane = self.setup.road.lane_width
+        self.ghost_centres = centres
+        self.ghost_lines = [c + side * lane for c in centres for side in (-0.5, 0.5)]
+
     def _draw_scene(self, surf: Any, info: Mapping[str, Any]) -> None:
         """The road ahead from the driver's eye: sky, grass, road, markings, posts, bonnet."""
+        self._set_ghosts(info.get("bias"))
         pg = self._pg
         w, h = self.width, self.height
         horizon = int(round(self.horizon))

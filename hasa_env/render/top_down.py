@@ -33,6 +33,7 @@ from hasa_env.render.common import (
     SceneRenderer,
     WeightSource,
     driven_lane_runs,
+    ghost_centres,
 )
 from hasa_env.render.options import ViewOptions
 from hasa_env.sim.setup import EnvSetup
@@ -130,12 +131,11 @@ class TopDownRenderer(SceneRenderer):
                 pg.draw.lines(surf, MARKING_COLOUR, False, pts, line_w)
             else:
                 self._dashed(pts, stations, MARKING_COLOUR, line_w)
-        # ghost markings where each non-zero hypothesis puts the lane (camera reads y + b)
-        for b in setup.hypotheses if self.options.ghosts else ():
-            if b == 0.0:
-                continue
+        # ghost markings where each wrong hypothesis puts the lane (camera reads y + b)
+        ghosts = ghost_centres(setup.hypotheses, info.get("bias"))
+        for centre in ghosts if self.options.ghosts else ():
             for side in (-0.5, 0.5):
-                pts = self._line_points(poses, -b + side * width, origin)
+                pts = self._line_points(poses, centre + side * width, origin)
                 self._dashed(pts, stations, GHOST_COLOUR, max(1, line_w // 2), period=6.0)
         self._draw_driven_lane(stations, poses, origin, line_w, info.get("bias"))
         self._draw_car(info, origin)
