@@ -7,6 +7,14 @@ and estimator, the lateral RMSE and the gain over the best steering-free baselin
 their 95 % hierarchical-bootstrap intervals, the time to decide, the share of the time the
 steering channel was off (speed or curvature rule), and the runs that end
 (or are at any step) confidently in a wrong lane, with exact binomial intervals.
+
+Above it, one row per scenario says whether the scenario needs the steering at all
+(:func:`difficulty_rows`): how the lane-centring baseline, the steering-free estimator that
+solves the paper's scenario, fares there, against the suite's bar (issue 24): a scenario is
+*hard* for it when it is confidently in a wrong lane at some step of at least 5 % of its
+runs (``HARD_WRONG_SHARE``) or needs a median of at least 3 s to decide
+(``HARD_DECIDE_TIME``; a median run that never decides counts). The runs it ends without
+the true lane (wrong, undecided or refused) are shown beside it, not counted by the bar.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ from typing import Any
 
 import pandas as pd
 
+from benchmarks.protocol.intervals import clopper_pearson
 from benchmarks.protocol.results import BenchmarkResult
 from benchmarks.report_sections import decision_time
 from benchmarks.schema import ResultsSchemaError, table_problems
@@ -26,12 +35,31 @@ from benchmarks.tables import (
     count_share,
     fixed,
     interval,
+    missing,
     percent,
     render_html,
     render_markdown,
 )
 
-__all__ = ["SUITE_COLUMNS", "format_suite", "html_suite", "suite_rows", "write_suite"]
+__all__ = [
+    "HARD_DECIDE_TIME",
+    "HARD_WRONG_SHARE",
+    "SUITE_COLUMNS",
+    "difficulty_rows",
+    "format_suite",
+    "html_suite",
+    "suite_rows",
+    "write_suite",
+]
+
+HARD_WRONG_SHARE = 0.05
+"""The bar's share of runs confidently in a wrong lane at some step (issue 24)."""
+
+HARD_DECIDE_TIME = 3.0
+"""The bar's median time to decide (s; issue 24)."""
+
+DIFFICULTY_BASELINE = "lane_centring"
+"""The steering-free estimator the bar is measured on."""
 
 SUITE_COLUMNS = (
     "scenario", "model", "kind", "estimated_runs",
@@ -46,6 +74,8 @@ SUITE_COLUMNS = (
     "wrong_lane_confident_runs_share_ci_high",
     "wrong_lane_ever_runs", "wrong_lane_ever_runs_share_ci_low",
     "wrong_lane_ever_runs_share_ci_high",
+    "undecided_runs", "undecided_runs_share_ci_low", "undecided_runs_share_ci_high",
+    "model_mismatch_runs", "model_mismatch_runs_share_ci_low", "model_mismatch_runs_share_ci_high",
 )  # fmt: skip
 """The columns of ``scenarios.csv`` (the verdict's keys, :mod:`benchmarks.protocol.aggregate`)."""
 
@@ -79,9 +109,67 @@ _TABLE = [
 """The Markdown table's columns (the cells of the report's tables, :mod:`benchmarks.tables`)."""
 
 
+def difficulty_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per scenario, the lane-centring baseline's row of :func:`suite_rows` judged by the bar.
+
+    Returns one dict per scenario where that baseline estimated: ``scenario``, ``runs``,
+    ``wrong_ever`` (runs confidently in a wrong lane at some step), its Clopper-Pearson
+    interval, ``decide_median`` (s; None: the median run never decided), how its runs end
+    (``ends_wrong``, ``ends_undecided``, ``ends_refused``: confidently wrong, undecided, a
+    model mismatch) and ``hard``: the share of ``wrong_ever`` is at least
+    :data:`HARD_WRONG_SHARE` or the median at least :data:`HARD_DECIDE_TIME` (or never).
+    """
+    out = []
+    for row in rows:
+        n = row.get("estimated_runs")
+        if row.get("model") != DIFFICULTY_BASELINE or missing(n) or not n:
+            continue
+        n = int(n)
+        wrong = int(row.get("wrong_lane_ever_runs") or 0)
+        value: Any = row.get("time_to_decide_median")
+        median = None if missing(value) else float(value)
+        low, high = clopper_pearson(wrong, n)
+        hard = wrong / n >= HARD_WRONG_SHARE or median is None or median >= HARD_DECIDE_TIME
+        out.append({
+            "scenario": row["scenario"], "runs": n, "wrong_ever": wrong,
+            "wrong_ever_share_ci_low": low, "wrong_ever_share_ci_high": high,
+            "decide_median": median,
+            "ends_wrong": int(row.get("wrong_lane_confident_runs") or 0),
+            "ends_undecided": int(row.get("undecided_runs") or 0),
+            "ends_refused": int(row.get("model_mismatch_runs") or 0), "hard": hard,
+        })  # fmt: skip
+    return out
+
+
+_DIFFICULTY = [
+    Column("scenario", "scenario", left=True),
+    Column(count_share("wrong_ever", "runs"), "conf. wrong at some step"),
+    Column(
+        lambda r: "never" if r["decide_median"] is None else f"{r['decide_median']:.2f}",
+        "decides in (s), median",
+    ),  # fmt: skip
+    Column(
+        lambda r: f"{r['ends_wrong']} / {r['ends_undecided']} / {r['ends_refused']}",
+        "ends wrong / undecided / refused",
+    ),  # fmt: skip
+    Column(lambda r: "yes" if r["hard"] else "no", "hard for it (the bar)"),
+]
+_DIFFICULTY_TITLE = (
+    f"The {DIFFICULTY_BASELINE} baseline (steering-free) "
+    f"per scenario; hard = confidently in a wrong lane at some step of at least "
+    f"{HARD_WRONG_SHARE:.0%} of its runs, or a median of at least {HARD_DECIDE_TIME:g} s to "
+    "decide (never counts); how its runs end is shown, not counted by the bar; k/n [95 % "
+    "Clopper-Pearson interval]"
+)
+
+
 def format_suite(rows: list[dict[str, Any]]) -> str:
-    """The table as Markdown, one block per scenario."""
+    """The table as Markdown: the difficulty table, then one block per scenario."""
     lines = []
+    hard = difficulty_rows(rows)
+    if hard:
+        lines += ["### Does each scenario need the steering?", "", _DIFFICULTY_TITLE, "",
+                  render_markdown(hard, _DIFFICULTY), ""]  # fmt: skip
     for scenario in dict.fromkeys(row["scenario"] for row in rows):
         part = [row for row in rows if row["scenario"] == scenario]
         lines += [f"### {scenario}", "", render_markdown(part, _TABLE), ""]
@@ -100,6 +188,11 @@ def html_suite(rows: list[dict[str, Any]]) -> str:
         "0.5em; text-align: left; } th { background: #eee; } .num { text-align: right; }</style>",
         f"</head>\n<body>\n<h1>{title}</h1>",
     ]
+    hard = difficulty_rows(rows)
+    if hard:
+        parts.append("<h2>Does each scenario need the steering?</h2>")
+        parts.append(f"<p>{html.escape(_DIFFICULTY_TITLE)}</p>")
+        parts.append(render_html(hard, _DIFFICULTY))
     for scenario in dict.fromkeys(row["scenario"] for row in rows):
         part = [row for row in rows if row["scenario"] == scenario]
         name = html.escape(str(scenario))

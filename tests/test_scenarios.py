@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from benchmarks.scenario_suite import difficulty_rows, format_suite
 from benchmarks.schema import folder_problems, read_table, table_problems
 from hasa_cli.bench import main as bench_main
 from hasa_env import ConfigError, make_config
@@ -160,6 +161,8 @@ def test_hasa_bench_runs_every_scenario_and_writes_the_suite_table(tmp_path, cap
         assert {"generalized", "two_point", "lane_centring", "no_steering"} <= set(part["model"])
         assert (part["estimated_runs"] > 0).all()
     assert "### lane_shift" in (out / "scenarios.md").read_text()
+    assert "Does each scenario need the steering?" in (out / "scenarios.md").read_text()
+    assert {"undecided_runs", "model_mismatch_runs"} <= set(table.columns)
     # the suite's page and every scenario's report.html; scenarios.csv follows its schema
     page = (out / "scenarios.html").read_text()
     for name in SCENARIOS:
@@ -177,3 +180,31 @@ def test_hasa_bench_runs_every_scenario_and_writes_the_suite_table(tmp_path, cap
     )  # fmt: skip
     assert code == 2
     assert "--scenario applies to synthetic runs" in capsys.readouterr().err
+
+
+def _lane_centring_row(scenario: str, **values: float | None) -> dict:
+    base = {"scenario": scenario, "model": "lane_centring", "kind": "baseline",
+            "estimated_runs": 40, "wrong_lane_ever_runs": 0, "time_to_decide_median": 0.01,
+            "wrong_lane_confident_runs": 0, "undecided_runs": 0, "model_mismatch_runs": 0}  # fmt: skip
+    return base | values
+
+
+def test_the_suite_says_which_scenarios_a_lane_centring_prior_cannot_solve() -> None:
+    rows = [
+        _lane_centring_row("paper"),
+        _lane_centring_row("wrong", wrong_lane_ever_runs=2),  # 5 % of 40: hard
+        _lane_centring_row("almost", wrong_lane_ever_runs=1),  # 2.5 %: not
+        _lane_centring_row("slow", time_to_decide_median=3.0),
+        _lane_centring_row("never", time_to_decide_median=None, undecided_runs=30),
+        _lane_centring_row("refuses", model_mismatch_runs=12, undecided_runs=3),
+        {"scenario": "paper", "model": "generalized", "estimated_runs": 40},
+    ]
+    hard = {r["scenario"]: r for r in difficulty_rows(rows)}
+    assert set(hard) == {"paper", "wrong", "almost", "slow", "never", "refuses"}
+    assert [k for k, r in hard.items() if r["hard"]] == ["wrong", "slow", "never"]
+    assert hard["refuses"]["ends_refused"] == 12 and hard["refuses"]["ends_undecided"] == 3
+    low, high = hard["wrong"]["wrong_ever_share_ci_low"], hard["wrong"]["wrong_ever_share_ci_high"]
+    assert 0.0 < low < 0.05 < high < 1.0
+    text = format_suite(rows)
+    assert "| never | 0/40 [0.0%, 8.8%] | never | 0 / 30 / 0 | yes |" in text
+    assert "| refuses | 0/40 [0.0%, 8.8%] | 0.01 | 0 / 3 / 12 | no |" in text
