@@ -11,6 +11,11 @@
   no quantization. For comparison.
 - "paper-pi-human": the same PI drivers as "paper-pi" with the output stage
   of "paper".
+- "paper-with-delay": the drivers of "paper" (same draws: delays, lags, look-ahead
+  times, noise, speeds) with gains designed with their own delay and
+  neuromuscular lag (:mod:`hasa_env.drivers.loop_design`, docs/design.md
+  §7.10): two-point drivers for a target crossover and phase margin, preview
+  and intermittent drivers for a target phase margin. An experiment (issue 23).
 - "mixed": the archetypes of "paper" and a fourth, noisy corrections
   (:mod:`hasa_env.drivers.noisy_corrections`: intermittent corrections whose
   remnant is the execution noise on each correction, no command noise before
@@ -34,6 +39,7 @@ import numpy as np
 from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams
 from hasa_env.drivers.base import SpeedProfile
 from hasa_env.drivers.intermittent import IntermittentParams
+from hasa_env.drivers.loop_design import preview_cost_for_margin, two_point_for_crossover
 from hasa_env.drivers.lqr import PreviewCost
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
 from hasa_env.drivers.noisy_corrections import NoisyCorrectionsParams
@@ -43,6 +49,7 @@ from hasa_env.scenarios import scenario_drivers
 
 __all__ = [
     "IntermittentRanges",
+    "LoopTargets",
     "NoisyCorrectionsRanges",
     "MotorRanges",
     "POPULATIONS",
@@ -160,6 +167,28 @@ _SpeedBehaviour = tuple[_Range | None, _Range, _Range]
 
 
 @dataclass(frozen=True)
+class LoopTargets:
+    """Targets of gains designed with the driver's delay and lag (docs/design.md §7.10).
+
+    Attributes:
+        crossover: two-point drivers' target crossover w_c (rad/s).
+        phase_margin: two-point drivers' target phase margin (deg).
+        integral_share: two-point drivers' low zeros, product (share w_c)^2.
+        preview_phase_margin: preview and intermittent drivers' target phase margin (deg).
+        preview_velocity_weight: their LQR velocity weight (:meth:`PreviewCost.from_bandwidth`).
+    """
+
+    crossover: _Range
+    phase_margin: _Range
+    integral_share: _Range
+    preview_phase_margin: _Range
+    preview_velocity_weight: _Range
+
+    def draw(self, rng: np.random.Generator) -> dict[str, float]:
+        return {f.name: getattr(self, f.name).draw(rng) for f in fields(self)}
+
+
+@dataclass(frozen=True)
 class PedalRanges:
     """Ranges of the pedal remnant (:class:`~hasa_env.drivers.base.SpeedProfile`
     ``pedal_noise`` m/s^2, ``pedal_time_constant`` s)."""
@@ -209,6 +238,9 @@ class PopulationSpec:
             key has the same drivers.
         legacy: draw two-point drivers in the original population's order
             (the drivers of "paper" before the archetypes existed).
+        loop_targets: None (gains from the delay-free designs), or the targets of gains
+            designed with each driver's own delay and lag, drawn from a stream of their
+            own after the driver (:func:`_redesign`), so every other draw is as without.
     """
 
     description: str
@@ -229,6 +261,7 @@ class PopulationSpec:
     env_config: Mapping[str, Any] = field(default_factory=dict)
     seed_key: str | None = None
     legacy: bool = False
+    loop_targets: LoopTargets | None = None
 
     def __post_init__(self) -> None:
         unknown = [a for a in self.archetypes if a not in ARCHETYPES]
@@ -392,6 +425,28 @@ POPULATIONS["mixed"] = replace(
 )
 
 
+# ---- "paper-with-delay": the drivers of "paper", gains designed with delay and lag (§7.10) ----
+POPULATIONS["paper-with-delay"] = replace(
+    _PAPER,
+    description=(
+        "The drivers of 'paper' (same draws, seed key 'paper') with gains designed with each "
+        "driver's own delay and neuromuscular lag: two-point drivers for a crossover of 1.8-2.4 "
+        "rad/s (lowered where the lag and delay do not allow the margin) with a phase margin "
+        "of 35-45 deg and speed exponent 1; preview and intermittent drivers' LQR bandwidth "
+        "chosen for a phase margin of 25-30 deg at velocity weight 20-40."
+    ),
+    two_point=replace(_TWO_POINT, speed_exponent=_Range(1.0, 1.0)),
+    seed_key="paper",
+    loop_targets=LoopTargets(
+        crossover=_Range(1.8, 2.4),
+        phase_margin=_Range(35.0, 45.0),
+        integral_share=_Range(0.1, 0.2),
+        preview_phase_margin=_Range(25.0, 30.0),
+        preview_velocity_weight=_Range(20.0, 40.0),
+    ),
+)
+
+
 def _driver_names(size: int) -> list[str]:
     return ["Ill", *(str(i) for i in range(1, size))]
 
@@ -407,7 +462,7 @@ def population(
     """A seeded population of synthetic drivers, regenerable anywhere by name and seed.
 
     Args:
-        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human", "mixed").
+        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human", "paper-with-delay", "mixed").
         seed: the seed; the same (name, seed, size) gives the same drivers.
         size: number of drivers; they are named "Ill", "1", ..., str(size - 1).
             Archetypes and speed behaviours cycle through the population's lists.
@@ -470,8 +525,60 @@ def _population(name: str, seed: int, size: int) -> list[HumanParams]:
             if spec.motor is None
             else spec.motor.draw(own, spec.remnant_scale, spec.command_scale, command),
         }
-        drivers.append(_DRAW[archetype](spec, own, common))
+        driver = _DRAW[archetype](spec, own, common)
+        if spec.loop_targets is not None:
+            targets_rng = np.random.default_rng(
+                np.random.SeedSequence([int(seed), key, 1 + index, 4])
+            )
+            driver = _redesign(driver, spec.loop_targets.draw(targets_rng))
+        drivers.append(driver)
     return drivers
+
+
+def _redesign(driver: HumanParams, targets: Mapping[str, float]) -> HumanParams:
+    """The driver with gains designed with its own delay and lag (docs/design.md §7.10).
+
+    Two-point: :func:`~hasa_env.drivers.loop_design.two_point_for_crossover` at the target
+    crossover and margin; where the delay and lag do not allow that margin there, the
+    crossover is lowered in steps of 5 % until they do. Preview, intermittent and noisy
+    corrections: :func:`~hasa_env.drivers.loop_design.preview_cost_for_margin` (same preview
+    time and persistence).
+    """
+    if isinstance(driver, TwoPointParams):
+        keep = {
+            f.name: getattr(driver, f.name)
+            for f in fields(driver)
+            if f.name not in ("near_gain", "far_gain", "integral_gain", "near_time", "far_time",
+                              "delay", "neuromuscular_frequency", "neuromuscular_damping")
+        }  # fmt: skip
+        crossover = targets["crossover"]
+        for _ in range(40):
+            try:
+                return two_point_for_crossover(
+                    crossover,
+                    targets["phase_margin"],
+                    targets["integral_share"],
+                    driver.near_time,
+                    driver.far_time,
+                    driver.delay,
+                    driver.neuromuscular_frequency,
+                    driver.neuromuscular_damping,
+                    **keep,
+                )
+            except ValueError:
+                crossover *= 0.95
+        raise ValueError(f"no two-point design reaches the margin {targets['phase_margin']:g} deg")
+    cost = preview_cost_for_margin(
+        targets["preview_phase_margin"],
+        targets["preview_velocity_weight"],
+        driver.delay,
+        driver.neuromuscular_frequency,
+        driver.neuromuscular_damping,
+        preview_time=driver.cost.preview_time,
+        preview_step=driver.cost.preview_step,
+        persistence=driver.cost.persistence,
+    )
+    return replace(driver, cost=cost)
 
 
 def _draw_speed(
