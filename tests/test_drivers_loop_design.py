@@ -32,10 +32,15 @@ def test_loop_margins_of_a_crossover_model():
     [(2.0, 40.0, 0.15, (14.0, 0.6)), (2.2, 35.0, 0.2, (10.0, 0.7)), (1.8, 30.0, 0.25, (8.0, 0.85))],
 )
 def test_the_two_point_design_has_its_crossover_and_margin(crossover, margin, delay, lag):
-    params = two_point_for_crossover(crossover, margin, 0.15, 0.4, 1.2, delay, *lag, name="x")
+    params = two_point_for_crossover(crossover, margin, 0.4, 1.2, delay, *lag, name="x")
     measured = loop_margins(FREQUENCIES, two_point_loop(params))
     assert measured[0] == pytest.approx(crossover, rel=2e-3)
     assert measured[1] == pytest.approx(margin, abs=0.3)
+    # N(s) = A1 (s + w_z)^2: a double real zero, A0^2 = 4 A1 AI
+    a1 = params.near_gain + params.far_gain
+    a0 = params.near_gain / 0.4 + params.far_gain / 1.2 + params.integral_gain
+    ai = params.integral_gain / 0.4
+    assert a0**2 == pytest.approx(4.0 * a1 * ai, rel=1e-9) and a0 > 0 and ai > 0
     # the delay-free design of "paper" at the same loop speed has far less margin
     old = TwoPointParams.from_loop(1.1, 0.6, 0.3, 0.4, 1.2, delay=delay,
                                    neuromuscular_frequency=lag[0], neuromuscular_damping=lag[1])  # fmt: skip
@@ -44,9 +49,9 @@ def test_the_two_point_design_has_its_crossover_and_margin(crossover, margin, de
 
 def test_an_unreachable_margin_is_refused_with_the_bound():
     with pytest.raises(ValueError, match="phase_margin 45 deg .* not reachable .* allowed: below"):
-        two_point_for_crossover(2.5, 45.0, 0.15, 0.4, 1.2, 0.25, 8.0, 0.85)
+        two_point_for_crossover(2.5, 45.0, 0.4, 1.2, 0.25, 8.0, 0.85)
     with pytest.raises(ValueError, match="crossover must be"):
-        two_point_for_crossover(10.0, 45.0, 0.15, 0.4, 1.2, 0.2, 10.0, 0.7)
+        two_point_for_crossover(10.0, 45.0, 0.4, 1.2, 0.2, 10.0, 0.7)
 
 
 def test_feedback_gains_are_those_of_the_full_preview_design():

@@ -18,15 +18,17 @@ Two-point PI (velocity form, §7.2; phi ~ -(y' + y / t_n) / v, Omega ~ -(y' + y 
     N(s) = A1 s^2 + A0 s + AI,  A1 = k_n + k_f,  A0 = k_n / t_n + k_f / t_f + k_I,  AI = k_I / t_n
 
 :func:`two_point_for_crossover` sets |L(j w_c)| = 1 and arg L(j w_c) = -180 deg + PM at a
-target crossover w_c. With N(s) = A1 (s^2 + a s + b) and b = (share w_c)^2 (the integral
-share places the low zeros), the phase N needs at w_c is::
+target crossover w_c, with a double real zero, N(s) = A1 (s + w_z)^2 (well-damped zeros: lightly
+damped ones give the closed loop slow, lightly damped poles near them, a driver who lets the
+car drift). The phase N needs at w_c gives w_z, the magnitude A1::
 
     phi_N = 90 deg + PM + w_c tau_e - arg H(j w_c)          (in (90, 180) deg)
-    a     = (w_c^2 - b) tan(180 deg - phi_N) / w_c
-    A1    = w_c^3 / (c |N(j w_c) / A1| |H(j w_c)|)
+    w_z   = w_c / tan(phi_N / 2)
+    A1    = w_c^3 / (c (w_c^2 + w_z^2) |H(j w_c)|)
+    k_I = A1 w_z^2 t_n,  k_n + k_f = A1,  k_n / t_n + k_f / t_f = 2 A1 w_z - k_I
 
-then k_I = A1 b t_n / c... as in ``from_loop`` (k_n + k_f = A1, k_n / t_n + k_f / t_f = A0 - k_I).
-phi_N < 180 deg bounds the margin: PM < 90 deg - w_c tau_e + arg H(j w_c).
+phi_N < 180 deg bounds the margin: PM < 90 deg - w_c tau_e + arg H(j w_c); the nearer the
+margin to that bound, the lower w_z and the slacker the control of the offset itself.
 
 Preview LQR (:mod:`hasa_env.drivers.lqr`, j = -(k_y y + k_v y' + k_a a), speed-normalised)::
 
@@ -177,7 +179,6 @@ def loop_margins(frequencies: np.ndarray, response: np.ndarray) -> tuple[float, 
 def two_point_for_crossover(
     crossover: float,
     phase_margin: float,
-    integral_share: float,
     near_time: float,
     far_time: float,
     delay: float,
@@ -194,7 +195,6 @@ def two_point_for_crossover(
     Args:
         crossover: w_c (rad/s), in [0.3, 6].
         phase_margin: PM (deg), in [5, 80]; must be below 90 deg - w_c tau_e + arg H(j w_c).
-        integral_share: the zeros' product is (share w_c)^2, share in [0.01, 0.7].
         near_time, far_time, delay, neuromuscular_frequency, neuromuscular_damping,
             reference_speed, **kwargs: the :class:`TwoPointParams` fields.
         sample_time: Ts (s) of the driver's steps.
@@ -206,7 +206,6 @@ def two_point_for_crossover(
     owner = "two_point_for_crossover"
     check_range(owner, "crossover", crossover, 0.3, 6.0)
     check_range(owner, "phase_margin", phase_margin, 5.0, 80.0)
-    check_range(owner, "integral_share", integral_share, 0.01, 0.7)
     w = crossover
     tau = effective_delay(delay, sample_time)
     lag = complex(neuromuscular_response(np.array([w]), neuromuscular_frequency,
@@ -218,11 +217,10 @@ def two_point_for_crossover(
             f"{owner}: phase_margin {phase_margin:g} deg at crossover {w:g} rad/s is not "
             f"reachable with delay {delay:g} s and this lag; allowed: below {allowed:.1f} deg"
         )
-    b = (integral_share * w) ** 2
-    a = (w * w - b) * math.tan(math.pi - needed) / w
+    zero = w / math.tan(needed / 2.0)
     c = reference_speed / wheelbase
-    a1 = w**3 / (c * abs(complex(b - w * w, a * w)) * abs(lag))
-    a0, ai = a1 * a, a1 * b
+    a1 = w**3 / (c * (w * w + zero * zero) * abs(lag))
+    a0, ai = 2.0 * a1 * zero, a1 * zero * zero
     integral = ai * near_time
     near = (a0 - integral - a1 / far_time) / (1.0 / near_time - 1.0 / far_time)
     return TwoPointParams(

@@ -173,14 +173,12 @@ class LoopTargets:
     Attributes:
         crossover: two-point drivers' target crossover w_c (rad/s).
         phase_margin: two-point drivers' target phase margin (deg).
-        integral_share: two-point drivers' low zeros, product (share w_c)^2.
         preview_phase_margin: preview and intermittent drivers' target phase margin (deg).
         preview_velocity_weight: their LQR velocity weight (:meth:`PreviewCost.from_bandwidth`).
     """
 
     crossover: _Range
     phase_margin: _Range
-    integral_share: _Range
     preview_phase_margin: _Range
     preview_velocity_weight: _Range
 
@@ -430,17 +428,16 @@ POPULATIONS["paper-with-delay"] = replace(
     _PAPER,
     description=(
         "The drivers of 'paper' (same draws, seed key 'paper') with gains designed with each "
-        "driver's own delay and neuromuscular lag: two-point drivers for a crossover of 1.8-2.4 "
+        "driver's own delay and neuromuscular lag: two-point drivers for a crossover of 1.8-2.2 "
         "rad/s (lowered where the lag and delay do not allow the margin) with a phase margin "
-        "of 35-45 deg and speed exponent 1; preview and intermittent drivers' LQR bandwidth "
+        "of 30-38 deg (a double real zero) and speed exponent 1; preview and intermittent drivers' LQR bandwidth "
         "chosen for a phase margin of 25-30 deg at velocity weight 20-40."
     ),
     two_point=replace(_TWO_POINT, speed_exponent=_Range(1.0, 1.0)),
     seed_key="paper",
     loop_targets=LoopTargets(
-        crossover=_Range(1.8, 2.4),
-        phase_margin=_Range(35.0, 45.0),
-        integral_share=_Range(0.1, 0.2),
+        crossover=_Range(1.8, 2.2),
+        phase_margin=_Range(30.0, 38.0),
         preview_phase_margin=_Range(25.0, 30.0),
         preview_velocity_weight=_Range(20.0, 40.0),
     ),
@@ -557,7 +554,6 @@ def _redesign(driver: HumanParams, targets: Mapping[str, float]) -> HumanParams:
                 return two_point_for_crossover(
                     crossover,
                     targets["phase_margin"],
-                    targets["integral_share"],
                     driver.near_time,
                     driver.far_time,
                     driver.delay,
