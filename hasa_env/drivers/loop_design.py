@@ -41,6 +41,8 @@ so that this delayed, lagged loop has a target phase margin; its crossover follo
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import fields, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +59,7 @@ __all__ = [
     "neuromuscular_response",
     "preview_cost_for_margin",
     "preview_loop",
+    "redesign",
     "two_point_for_crossover",
     "two_point_loop",
 ]
@@ -274,3 +277,52 @@ def preview_cost_for_margin(
         middle = 0.5 * (low + high)
         low, high = (middle, high) if margin(middle) >= phase_margin else (low, middle)
     return PreviewCost.from_bandwidth(low, velocity_weight, **kwargs)
+
+
+def redesign(driver: Any, targets: Mapping[str, float]) -> Any:
+    """The driver (parameters of any archetype) with gains designed with its own delay and lag.
+
+    ``targets``: "crossover" (rad/s), "phase_margin" (deg), "preview_phase_margin" (deg),
+    "preview_velocity_weight" (the keys of
+    :class:`~hasa_env.drivers.populations.LoopTargets`).
+
+    Two-point: :func:`two_point_for_crossover` at the target
+    crossover and margin; where the delay and lag do not allow that margin there, the
+    crossover is lowered in steps of 5 % until they do. Preview, intermittent and noisy
+    corrections: :func:`preview_cost_for_margin` (same preview
+    time and persistence).
+    """
+    if isinstance(driver, TwoPointParams):
+        keep = {
+            f.name: getattr(driver, f.name)
+            for f in fields(driver)
+            if f.name not in ("near_gain", "far_gain", "integral_gain", "near_time", "far_time",
+                              "delay", "neuromuscular_frequency", "neuromuscular_damping")
+        }  # fmt: skip
+        crossover = targets["crossover"]
+        for _ in range(40):
+            try:
+                return two_point_for_crossover(
+                    crossover,
+                    targets["phase_margin"],
+                    driver.near_time,
+                    driver.far_time,
+                    driver.delay,
+                    driver.neuromuscular_frequency,
+                    driver.neuromuscular_damping,
+                    **keep,
+                )
+            except ValueError:
+                crossover *= 0.95
+        raise ValueError(f"no two-point design reaches the margin {targets['phase_margin']:g} deg")
+    cost = preview_cost_for_margin(
+        targets["preview_phase_margin"],
+        targets["preview_velocity_weight"],
+        driver.delay,
+        driver.neuromuscular_frequency,
+        driver.neuromuscular_damping,
+        preview_time=driver.cost.preview_time,
+        preview_step=driver.cost.preview_step,
+        persistence=driver.cost.persistence,
+    )
+    return replace(driver, cost=cost)

@@ -25,6 +25,10 @@
 deviation (and the signal-dependent gain) of a population; with
 ``seed_key`` a recalibrated copy keeps the drivers of the population it
 copies: ``replace(POPULATIONS["paper"], remnant_scale=2.0, seed_key="paper")``.
+
+Why this module is long: every population's trait ranges and the one drawing order that keeps
+each existing population's drivers bit for bit the same live together, so that a new
+population is a new entry here and cannot shift another's draws unnoticed.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import numpy as np
 from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams
 from hasa_env.drivers.base import SpeedProfile
 from hasa_env.drivers.intermittent import IntermittentParams
-from hasa_env.drivers.loop_design import preview_cost_for_margin, two_point_for_crossover
+from hasa_env.drivers.loop_design import redesign
 from hasa_env.drivers.lqr import PreviewCost
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
 from hasa_env.drivers.noisy_corrections import NoisyCorrectionsParams
@@ -238,7 +242,7 @@ class PopulationSpec:
             (the drivers of "paper" before the archetypes existed).
         loop_targets: None (gains from the delay-free designs), or the targets of gains
             designed with each driver's own delay and lag, drawn from a stream of their
-            own after the driver (:func:`_redesign`), so every other draw is as without.
+            own after the driver (:func:`~hasa_env.drivers.loop_design.redesign`), so every other draw is as without.
     """
 
     description: str
@@ -527,54 +531,9 @@ def _population(name: str, seed: int, size: int) -> list[HumanParams]:
             targets_rng = np.random.default_rng(
                 np.random.SeedSequence([int(seed), key, 1 + index, 4])
             )
-            driver = _redesign(driver, spec.loop_targets.draw(targets_rng))
+            driver = redesign(driver, spec.loop_targets.draw(targets_rng))
         drivers.append(driver)
     return drivers
-
-
-def _redesign(driver: HumanParams, targets: Mapping[str, float]) -> HumanParams:
-    """The driver with gains designed with its own delay and lag (docs/design.md §7.10).
-
-    Two-point: :func:`~hasa_env.drivers.loop_design.two_point_for_crossover` at the target
-    crossover and margin; where the delay and lag do not allow that margin there, the
-    crossover is lowered in steps of 5 % until they do. Preview, intermittent and noisy
-    corrections: :func:`~hasa_env.drivers.loop_design.preview_cost_for_margin` (same preview
-    time and persistence).
-    """
-    if isinstance(driver, TwoPointParams):
-        keep = {
-            f.name: getattr(driver, f.name)
-            for f in fields(driver)
-            if f.name not in ("near_gain", "far_gain", "integral_gain", "near_time", "far_time",
-                              "delay", "neuromuscular_frequency", "neuromuscular_damping")
-        }  # fmt: skip
-        crossover = targets["crossover"]
-        for _ in range(40):
-            try:
-                return two_point_for_crossover(
-                    crossover,
-                    targets["phase_margin"],
-                    driver.near_time,
-                    driver.far_time,
-                    driver.delay,
-                    driver.neuromuscular_frequency,
-                    driver.neuromuscular_damping,
-                    **keep,
-                )
-            except ValueError:
-                crossover *= 0.95
-        raise ValueError(f"no two-point design reaches the margin {targets['phase_margin']:g} deg")
-    cost = preview_cost_for_margin(
-        targets["preview_phase_margin"],
-        targets["preview_velocity_weight"],
-        driver.delay,
-        driver.neuromuscular_frequency,
-        driver.neuromuscular_damping,
-        preview_time=driver.cost.preview_time,
-        preview_step=driver.cost.preview_step,
-        persistence=driver.cost.persistence,
-    )
-    return replace(driver, cost=cost)
 
 
 def _draw_speed(
