@@ -11,6 +11,11 @@
   no quantization. For comparison.
 - "paper-pi-human": the same PI drivers as "paper-pi" with the output stage
   of "paper".
+- "paper-with-delay": the drivers of "paper" (same draws: delays, lags, look-ahead
+  times, noise, speeds) with gains designed with their own delay and
+  neuromuscular lag (:mod:`hasa_env.drivers.loop_design`, docs/design.md
+  §7.10): two-point drivers for a target crossover and phase margin, preview
+  and intermittent drivers for a target phase margin. An experiment (issue 23).
 - "mixed": the archetypes of "paper" and a fourth, noisy corrections
   (:mod:`hasa_env.drivers.noisy_corrections`: intermittent corrections whose
   remnant is the execution noise on each correction, no command noise before
@@ -20,6 +25,10 @@
 deviation (and the signal-dependent gain) of a population; with
 ``seed_key`` a recalibrated copy keeps the drivers of the population it
 copies: ``replace(POPULATIONS["paper"], remnant_scale=2.0, seed_key="paper")``.
+
+Why this module is long: every population's trait ranges and the one drawing order that keeps
+each existing population's drivers bit for bit the same live together, so that a new
+population is a new entry here and cannot shift another's draws unnoticed.
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ import numpy as np
 from hasa_env.drivers.archetypes import ARCHETYPES, HumanParams
 from hasa_env.drivers.base import SpeedProfile
 from hasa_env.drivers.intermittent import IntermittentParams
+from hasa_env.drivers.loop_design import redesign
 from hasa_env.drivers.lqr import PreviewCost
 from hasa_env.drivers.motor import G29_RESOLUTION, MotorParams
 from hasa_env.drivers.noisy_corrections import NoisyCorrectionsParams
@@ -43,6 +53,7 @@ from hasa_env.scenarios import scenario_drivers
 
 __all__ = [
     "IntermittentRanges",
+    "LoopTargets",
     "NoisyCorrectionsRanges",
     "MotorRanges",
     "POPULATIONS",
@@ -160,6 +171,26 @@ _SpeedBehaviour = tuple[_Range | None, _Range, _Range]
 
 
 @dataclass(frozen=True)
+class LoopTargets:
+    """Targets of gains designed with the driver's delay and lag (docs/design.md §7.10).
+
+    Attributes:
+        crossover: two-point drivers' target crossover w_c (rad/s).
+        phase_margin: two-point drivers' target phase margin (deg).
+        preview_phase_margin: preview and intermittent drivers' target phase margin (deg).
+        preview_velocity_weight: their LQR velocity weight (:meth:`PreviewCost.from_bandwidth`).
+    """
+
+    crossover: _Range
+    phase_margin: _Range
+    preview_phase_margin: _Range
+    preview_velocity_weight: _Range
+
+    def draw(self, rng: np.random.Generator) -> dict[str, float]:
+        return {f.name: getattr(self, f.name).draw(rng) for f in fields(self)}
+
+
+@dataclass(frozen=True)
 class PedalRanges:
     """Ranges of the pedal remnant (:class:`~hasa_env.drivers.base.SpeedProfile`
     ``pedal_noise`` m/s^2, ``pedal_time_constant`` s)."""
@@ -209,6 +240,9 @@ class PopulationSpec:
             key has the same drivers.
         legacy: draw two-point drivers in the original population's order
             (the drivers of "paper" before the archetypes existed).
+        loop_targets: None (gains from the delay-free designs), or the targets of gains
+            designed with each driver's own delay and lag, drawn from a stream of their
+            own after the driver (:func:`~hasa_env.drivers.loop_design.redesign`), so every other draw is as without.
     """
 
     description: str
@@ -229,6 +263,7 @@ class PopulationSpec:
     env_config: Mapping[str, Any] = field(default_factory=dict)
     seed_key: str | None = None
     legacy: bool = False
+    loop_targets: LoopTargets | None = None
 
     def __post_init__(self) -> None:
         unknown = [a for a in self.archetypes if a not in ARCHETYPES]
@@ -392,6 +427,27 @@ POPULATIONS["mixed"] = replace(
 )
 
 
+# ---- "paper-with-delay": the drivers of "paper", gains designed with delay and lag (§7.10) ----
+POPULATIONS["paper-with-delay"] = replace(
+    _PAPER,
+    description=(
+        "The drivers of 'paper' (same draws, seed key 'paper') with gains designed with each "
+        "driver's own delay and neuromuscular lag: two-point drivers for a crossover of 1.8-2.2 "
+        "rad/s (lowered where the lag and delay do not allow the margin) with a phase margin "
+        "of 30-38 deg (a double real zero) and speed exponent 1; preview and intermittent drivers' LQR bandwidth "
+        "chosen for a phase margin of 25-30 deg at velocity weight 20-40."
+    ),
+    two_point=replace(_TWO_POINT, speed_exponent=_Range(1.0, 1.0)),
+    seed_key="paper",
+    loop_targets=LoopTargets(
+        crossover=_Range(1.8, 2.2),
+        phase_margin=_Range(30.0, 38.0),
+        preview_phase_margin=_Range(25.0, 30.0),
+        preview_velocity_weight=_Range(20.0, 40.0),
+    ),
+)
+
+
 def _driver_names(size: int) -> list[str]:
     return ["Ill", *(str(i) for i in range(1, size))]
 
@@ -407,7 +463,7 @@ def population(
     """A seeded population of synthetic drivers, regenerable anywhere by name and seed.
 
     Args:
-        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human", "mixed").
+        name: a key of :data:`POPULATIONS` ("paper", "paper-pi", "paper-pi-human", "paper-with-delay", "mixed").
         seed: the seed; the same (name, seed, size) gives the same drivers.
         size: number of drivers; they are named "Ill", "1", ..., str(size - 1).
             Archetypes and speed behaviours cycle through the population's lists.
@@ -470,7 +526,13 @@ def _population(name: str, seed: int, size: int) -> list[HumanParams]:
             if spec.motor is None
             else spec.motor.draw(own, spec.remnant_scale, spec.command_scale, command),
         }
-        drivers.append(_DRAW[archetype](spec, own, common))
+        driver = _DRAW[archetype](spec, own, common)
+        if spec.loop_targets is not None:
+            targets_rng = np.random.default_rng(
+                np.random.SeedSequence([int(seed), key, 1 + index, 4])
+            )
+            driver = redesign(driver, spec.loop_targets.draw(targets_rng))
+        drivers.append(driver)
     return drivers
 
 
