@@ -270,10 +270,11 @@ def fit_seeds(
     no_worker_timeout: float = NO_WORKER_TIMEOUT,
 ) -> list[FittedPlan]:
     """Every seed's plan (:func:`~benchmarks.protocol.plan.make_plan`) fitted and checked
-    (:func:`fit_and_check`), in ``config.run_seeds`` order; the seeds are independent, so
-    several run in parallel on the executor of the tasks (:func:`benchmarks.executor.
-    map_tasks`; one seed or ``workers=1``: in this process, with its messages). The model
-    errors are appended to ``errors`` seed after seed, as one after another would.
+    (:func:`fit_and_check`), in ``config.run_seeds`` order. The first seed is fitted in this
+    process (with its messages); the seeds are independent, so with more than two the others
+    run in parallel on the executor of the tasks (:func:`benchmarks.executor.map_tasks`;
+    ``workers=1``: in this process too). The model errors are appended to ``errors`` seed
+    after seed, as one after another would.
 
     Raises:
         BenchmarkError: as :func:`fit_and_check`, or the Dask scheduler fails.
@@ -281,20 +282,24 @@ def fit_seeds(
     """
     seeds = config.run_seeds
     say("fits", 0, len(seeds))
-    if len(seeds) == 1 or (workers is not None and int(workers) <= 1 and scheduler is None):
-        fits: list[FittedPlan] = []
-        for seed in seeds:
+    serial = workers is not None and int(workers) <= 1 and scheduler is None
+    # the first seed in this process: it imports what the fits and the tasks use, which the
+    # worker processes (forked from this one) then inherit instead of importing it each
+    fits = [fit_and_check(config, make_plan(config, seeds[0]), candidates, errors, say)]
+    say("fits", 1, len(seeds))
+    if serial or len(seeds) <= 2:
+        for seed in seeds[1:]:
             fits.append(fit_and_check(config, make_plan(config, seed), candidates, errors, say))
             say("fits", len(fits), len(seeds))
         return fits
-    jobs = [_FitJob(config, seed, tuple(candidates)) for seed in seeds]
+    jobs = [_FitJob(config, seed, tuple(candidates)) for seed in seeds[1:]]
     try:
         done = map_tasks(
             _fit_seed,
             jobs,
             workers=workers,
             scheduler=scheduler,
-            progress=lambda count: say("fits", count, len(seeds)),
+            progress=lambda count: say("fits", 1 + count, len(seeds)),
             no_worker_timeout=no_worker_timeout,
         )
     except ClusterLost:
@@ -307,7 +312,7 @@ def fit_seeds(
         ) from None
     for _, seed_errors in done:
         errors += seed_errors
-    return [fit for fit, _ in done]
+    return fits + [fit for fit, _ in done]
 
 
 def fit_and_check(
