@@ -62,6 +62,10 @@ the models on the plan's training run and check that they keep a lane),
 :func:`aggregate_result` (tables, verdict, figures: the
 :class:`~benchmarks.protocol.results.BenchmarkResult`).
 
+Why this module is long: it is the protocol's four stages end to end, each with its typed
+result (the per-seed fits, serial or on the executor, beside the fit they run), and the
+assembly of the result from them.
+
 A user model that cannot be imported, does not implement
 :class:`hasa_env.steering.SteeringModel`, raises while fitting, predicting
 or filtering, or predicts NaN is reported in ``errors`` (naming the model
