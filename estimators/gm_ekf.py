@@ -356,6 +356,14 @@ class GaussianMixtureEKF:
         return nis[0] if self._single else nis
 
     @property
+    def decision_codes(self) -> np.ndarray:
+        """The decision state of each run as its code, ``DECISIONS[code]`` the name in the
+        estimate (:data:`estimators.evidence.DECISIONS`: 0 undecided, 1 decided, 2
+        model_mismatch): (R,) int (a single run: one int). Offline runs store these codes
+        without turning the names back into codes at every step."""
+        return self._run_view(self._checked_state().decision)
+
+    @property
     def low_speed(self) -> np.ndarray:
         """Runs whose steering channel is off (speed estimate below ``min_speed``, or the
         road ahead more curved than ``steering_curvature_limit``): (R,) bool (a single run:

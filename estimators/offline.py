@@ -326,7 +326,8 @@ def _stacked_recordings(
     truth = {
         key: np.full((n_runs, n_steps), -1 if key == "bias_index" else np.nan) for key in truth_keys
     }
-    for r, frame in enumerate(frames):
+    for r, recording in enumerate(frames):
+        frame = pd.DataFrame(recording, copy=False)  # no attrs (deep-copied per column read)
         length = lengths[r]
         z[r, :length] = frame[list(MEASUREMENT_KEYS)].to_numpy(dtype=np.float64)
         acc[r, :length] = frame[list(ACCELERATION_KEYS)].to_numpy(dtype=np.float64)
@@ -380,6 +381,7 @@ class _Trace:
         self.gating = estimator if isinstance(estimator, _Gating) else None
         self.slowing = estimator if isinstance(estimator, _LowSpeed) else None
         self.checking = estimator if isinstance(estimator, _ChannelNIS) else None
+        self.coding = estimator if hasattr(estimator, "decision_codes") else None
         self.gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if self.gating is not None else None
         self.low_speed = (
             np.zeros((n_runs, n_steps), dtype=bool) if self.slowing is not None else None
@@ -409,10 +411,12 @@ class _Trace:
             self.gated[:, k] = self.gating.last_gated
         if self.low_speed is not None and self.slowing is not None:
             self.low_speed[:, k] = self.slowing.low_speed
-        names = np.asarray(e.decision)
-        self.decision[:, k] = np.select(
-            [names == name for name in DECISIONS], range(len(DECISIONS)), -1
-        )
+        if self.coding is None:
+            names = np.asarray(e.decision)
+            codes = np.select([names == name for name in DECISIONS], range(len(DECISIONS)), -1)
+        else:  # the filter's own codes of the names in the estimate
+            codes = self.coding.decision_codes
+        self.decision[:, k] = codes
         self.model_error[:, k] = e.model_error
         self.evidence_scale[:, k] = e.evidence_scale
         if self.channel_nis is not None and self.checking is not None and k:

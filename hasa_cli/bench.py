@@ -252,9 +252,10 @@ def _add_execution_options(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--batch-size",
         type=int,
-        default=48,
+        default=100,
         metavar="N",
-        help="runs per task, vectorized together (48); results are the same on any executor "
+        help="most runs per task, vectorized together (100: one task per seed; a seed's "
+        "runs are cut into the fewest near-equal tasks); results are the same on any executor "
         "and worker count, another batch size can change them in the last digits",
     )
     run.add_argument(

@@ -175,10 +175,13 @@ class ProtocolConfig:
             own seeds and scored nowhere (synthetic runs only): a model fitted at the
             speeds people drive is trusted there (the speed rule's range is that of every
             training run, :mod:`estimators.trust`). Empty: the paper's protocol.
-        batch_size: runs per task, vectorized together (48: two tasks for the
-            paper's 93 validation runs, one per core of a 2-core machine).
-            Results do not depend on the executor or worker count; another
-            batch size can change them in the last digits.
+        batch_size: most runs per task, vectorized together; a seed's curved and
+            validation runs are each cut into the fewest near-equal tasks (100: one task
+            of the paper's 93 validation runs and one of the 4 curved runs per seed. A
+            filter step costs about as much for 4 runs as for 93, so fewer, larger batches
+            cost less in all; the tasks run largest first, which balances 2 workers:
+            docs/design.md §9.5). Results do not depend on the executor or worker count;
+            another batch size can change them in the last digits.
         ljung_box_lags: lags of the Ljung-Box whiteness test.
         acf_lags: lags of the residual autocorrelation plot.
         weight_threshold: the true-lane weight that counts as "decided".
@@ -224,7 +227,7 @@ class ProtocolConfig:
     training_run: int = 0
     training_runs: int = 1
     training_speeds: tuple[float, ...] = ()
-    batch_size: int = 48
+    batch_size: int = 100
     ljung_box_lags: int = 20
     acf_lags: int = 50
     weight_threshold: float = 0.95

@@ -42,13 +42,13 @@
    model's estimator also runs without the evidence checks
    (:mod:`estimators.evidence`) and without the lane-keeping check.
 
-Runs are grouped into tasks of ``batch_size`` consecutive runs (the
-vectorized driver runner and the estimator batched over the task's runs;
-measured on a 2-core machine, 48 runs in one vector env take 1.1-1.7 s
-against about 1 s per run one after another, and one filter over 48 runs
-1.0-1.5 s against about 0.5 s per run) and mapped
-over local processes or a Dask cluster
-(:func:`benchmarks.executor.map_tasks`). Every run is seeded on its own and
+Runs are grouped into tasks of at most ``batch_size`` consecutive runs of one
+track, the fewest near-equal ones (the vectorized driver runner and the estimator
+batched over the task's runs; measured on a 2-core machine, a task of 4 runs
+takes about 9 s of CPU, one of 48 runs 20 s and one of 93 runs 28 s: each filter
+step has a fixed cost) and mapped, the largest first, over local processes or a
+Dask cluster (:func:`benchmarks.executor.map_tasks`); the seeds' fits before
+them run on the same executor (:func:`fit_seeds`). Every run is seeded on its own and
 the tasks depend only on the protocol (never on the executor or the number
 of workers), so results are identical on any executor and worker count. A
 different ``batch_size`` can change per-run numbers by floating-point
@@ -61,6 +61,10 @@ the models on the plan's training run and check that they keep a lane),
 :func:`schedule` (the plans' runs in tasks, mapped over the executor) and
 :func:`aggregate_result` (tables, verdict, figures: the
 :class:`~benchmarks.protocol.results.BenchmarkResult`).
+
+Why this module is long: it is the protocol's four stages end to end, each with its typed
+result (the per-seed fits, serial or on the executor, beside the fit they run), and the
+assembly of the result from them.
 
 A user model that cannot be imported, does not implement
 :class:`hasa_env.steering.SteeringModel`, raises while fitting, predicting
@@ -124,6 +128,7 @@ __all__ = [
     "aggregate_result",
     "chunk_tasks",
     "fit_and_check",
+    "fit_seeds",
     "run_protocol",
     "schedule",
 ]
@@ -187,11 +192,15 @@ def run_protocol(
             "run:\n" + "\n".join(f"  {e}" for e in errors)
         )
     # 1.-2. per seed: the runs, the training run, the fits ("fits": seeds done of all)
-    fits: list[FittedPlan] = []
-    say("fits", 0, len(config.run_seeds))
-    for seed in config.run_seeds:
-        fits.append(fit_and_check(config, make_plan(config, seed), candidates, errors, say))
-        say("fits", len(fits), len(config.run_seeds))
+    fits = fit_seeds(
+        config,
+        candidates,
+        errors,
+        say,
+        workers=workers,
+        scheduler=scheduler,
+        no_worker_timeout=no_worker_timeout,
+    )
     tasks = [task for i, fit in enumerate(fits) for task in chunk_tasks(config, fit, i == 0)]
     # 3. every seed's tasks at once
     done = schedule(
@@ -236,6 +245,79 @@ class FittedPlan:
         """The run of the figures: the illustrative driver's first validation run."""
         illustrative = self.plan.illustrative
         return next((r for r in self.validation if r.driver == illustrative), self.validation[0])
+
+
+@dataclass(frozen=True)
+class _FitJob:
+    """The fits of one seed, as a task of the executor (:func:`fit_seeds`)."""
+
+    config: ProtocolConfig
+    seed: int | None
+    candidates: tuple[Candidate, ...]
+
+
+def _fit_seed(job: _FitJob) -> tuple[FittedPlan, list[ModelError]]:
+    """One seed's plan fitted and checked (:func:`fit_and_check`) and its model errors."""
+    errors: list[ModelError] = []
+    plan = make_plan(job.config, job.seed)
+    fit = fit_and_check(job.config, plan, job.candidates, errors, lambda *_: None)
+    return fit, errors
+
+
+def fit_seeds(
+    config: ProtocolConfig,
+    candidates: Sequence[Candidate],
+    errors: list[ModelError],
+    say: Progress,
+    *,
+    workers: int | None = None,
+    scheduler: Any = None,
+    no_worker_timeout: float = NO_WORKER_TIMEOUT,
+) -> list[FittedPlan]:
+    """Every seed's plan (:func:`~benchmarks.protocol.plan.make_plan`) fitted and checked
+    (:func:`fit_and_check`), in ``config.run_seeds`` order. The first seed is fitted in this
+    process (with its messages); the seeds are independent, so with more than two the others
+    run in parallel on the executor of the tasks (:func:`benchmarks.executor.map_tasks`;
+    ``workers=1``: in this process too). The model errors are appended to ``errors`` seed
+    after seed, as one after another would.
+
+    Raises:
+        BenchmarkError: as :func:`fit_and_check`, or the Dask scheduler fails.
+        ClusterLost: the scheduler, or every worker, went away mid-run.
+    """
+    seeds = config.run_seeds
+    say("fits", 0, len(seeds))
+    serial = workers is not None and int(workers) <= 1 and scheduler is None
+    # the first seed in this process: it imports what the fits and the tasks use, which the
+    # worker processes (forked from this one) then inherit instead of importing it each
+    fits = [fit_and_check(config, make_plan(config, seeds[0]), candidates, errors, say)]
+    say("fits", 1, len(seeds))
+    if serial or len(seeds) <= 2:
+        for seed in seeds[1:]:
+            fits.append(fit_and_check(config, make_plan(config, seed), candidates, errors, say))
+            say("fits", len(fits), len(seeds))
+        return fits
+    jobs = [_FitJob(config, seed, tuple(candidates)) for seed in seeds[1:]]
+    try:
+        done = map_tasks(
+            _fit_seed,
+            jobs,
+            workers=workers,
+            scheduler=scheduler,
+            progress=lambda count: say("fits", 1 + count, len(seeds)),
+            no_worker_timeout=no_worker_timeout,
+        )
+    except ClusterLost:
+        raise
+    except (OSError, TimeoutError) as exc:
+        if scheduler is None:
+            raise
+        raise BenchmarkError(
+            f"cannot fit the models on the Dask scheduler {scheduler!r}: {describe(exc)}"
+        ) from None
+    for _, seed_errors in done:
+        errors += seed_errors
+    return fits + [fit for fit, _ in done]
 
 
 def fit_and_check(
@@ -313,8 +395,9 @@ def _fit_baselines(
 
 
 def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list[ChunkTask]:
-    """The tasks of one fitted plan: its curved runs, then its validation runs, in chunks of
-    ``config.batch_size``. A ``detailed`` plan (the first seed's) also records the figures'
+    """The tasks of one fitted plan: its curved runs, then its validation runs, each in the
+    fewest near-equal chunks of at most ``config.batch_size`` runs (:func:`~benchmarks.
+    protocol.plan.chunks`). A ``detailed`` plan (the first seed's) also records the figures'
     traces (of its plot run and first curved run) and the illustrative driver's details."""
     plan = fit.plan
     trace_runs = {fit.plot_run.key} | ({plan.curved[0].key} if plan.curved else set())
@@ -370,15 +453,18 @@ def schedule(
     no_worker_timeout: float = NO_WORKER_TIMEOUT,
 ) -> Schedule:
     """Run every task (:func:`run_chunk`) on local processes or the Dask ``scheduler``,
-    reporting the runs done to ``say``.
+    the largest first, reporting the runs done to ``say``; the results in the tasks' order.
 
     Raises:
         BenchmarkError: the Dask scheduler fails (an OSError or a timeout on it).
         ClusterLost: the scheduler, or every worker, went away mid-run.
     """
     n_workers = default_workers() if workers is None else max(1, int(workers))
+    # the largest tasks first: the small ones (a seed's few curved runs) fill the workers'
+    # last gaps instead of one worker running a large task alone at the end
+    order = sorted(range(len(tasks)), key=lambda i: -len(tasks[i].runs))
     total_runs = sum(len(t.runs) for t in tasks)
-    done_runs = np.cumsum([len(t.runs) for t in tasks])
+    done_runs = np.cumsum([len(tasks[i].runs) for i in order])
     say("runs", 0, total_runs)
 
     def on_task(done: int) -> None:
@@ -386,9 +472,9 @@ def schedule(
 
     t_tasks = time.perf_counter()
     try:
-        results: list[ChunkResult] = map_tasks(
+        ordered: list[ChunkResult] = map_tasks(
             run_chunk,
-            list(tasks),
+            [tasks[i] for i in order],
             workers=workers,
             scheduler=scheduler,
             progress=on_task,
@@ -402,6 +488,8 @@ def schedule(
         raise BenchmarkError(
             f"cannot run the tasks on the Dask scheduler {scheduler!r}: {describe(exc)}"
         ) from None
+    by_task = dict(zip(order, ordered, strict=True))
+    results = [by_task[i] for i in range(len(tasks))]
     timing = {
         "tasks": time.perf_counter() - t_tasks,
         "task_cpu_seconds": float(sum(c.seconds for c in results)),

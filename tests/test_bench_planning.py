@@ -1,0 +1,83 @@
+"""The benchmark's task planning (near-equal chunks, the largest task first, the seeds' fits
+in parallel) and the filter's decision codes that the offline runner stores."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.protocol.config import ProtocolConfig
+from benchmarks.protocol.models import load_models
+from benchmarks.protocol.plan import RunRef, chunks
+from benchmarks.protocol.run import chunk_tasks, fit_seeds
+from estimators import FilterSettings, GaussianMixtureEKF
+from estimators.evidence import DECISIONS
+from hasa_env.steering.models import GeneralizedModel
+
+
+def _runs(count: int) -> list[RunRef]:
+    return [RunRef("1", "straight", i) for i in range(count)]
+
+
+@pytest.mark.parametrize(
+    ("count", "size", "lengths"),
+    [(97, 48, [33, 32, 32]), (93, 100, [93]), (93, 48, [47, 46]), (4, 100, [4]), (0, 5, []),
+     (6, 2, [2, 2, 2]), (7, 3, [3, 2, 2])],
+)  # fmt: skip
+def test_chunks_are_the_fewest_near_equal_ones_in_order(count, size, lengths) -> None:
+    runs = _runs(count)
+    cut = chunks(runs, size)
+    assert [len(c) for c in cut] == lengths
+    assert [r for c in cut for r in c] == runs  # every run once, in order
+
+
+def test_chunks_refuse_a_size_below_one() -> None:
+    with pytest.raises(ValueError, match="chunk size"):
+        chunks(_runs(3), 0)
+
+
+SMALL = {"seeds": (3100, 3101, 3102), "drivers": 3, "runs": 2, "ill_runs": 3, "duration": 4.0,
+         "curved_runs": 1, "population": "paper-pi"}  # fmt: skip
+
+
+@pytest.mark.slow
+def test_fits_in_parallel_equal_the_fits_one_after_another() -> None:
+    config = ProtocolConfig(**SMALL)
+    errors: list = []
+    candidates = load_models([], errors, time_limit=config.model_time_limit)
+    calls: list[tuple] = []
+    serial = fit_seeds(config, candidates, errors, lambda *c: None, workers=1)
+    parallel = fit_seeds(config, candidates, errors, lambda *c: calls.append(c), workers=2)
+    assert not errors
+    assert [c for c in calls if c[0] == "fits"][-1] == ("fits", 3, 3)
+    assert [f.plan.seed for f in parallel] == [3100, 3101, 3102]
+    for one, two in zip(serial, parallel, strict=True):
+        assert one.infos == two.infos  # the same fitted coefficients and checks, seed by seed
+        assert one.lane_centring == two.lane_centring
+        # one task of the validation runs (6) and one of the curved run per seed
+        sizes = [len(t.runs) for t in chunk_tasks(config, two, False)]
+        assert sizes == [1, 6]
+
+
+def test_decision_codes_name_the_estimate_decision() -> None:
+    rng = np.random.default_rng(5)
+    runs, steps = 4, 200
+    ekf = GaussianMixtureEKF(GeneralizedModel.paper().arx(), FilterSettings(steering_ratio=15.0))
+    z = np.stack(
+        [
+            15.0 + 0.05 * rng.standard_normal((steps, runs)),
+            -0.5 + 0.05 * rng.standard_normal((steps, runs)),
+            0.002 * rng.standard_normal((steps, runs)),
+        ],
+        axis=-1,
+    )
+    z[:, 1, 2] += 0.05  # one run's steering explains one lane far better: it decides
+    est = ekf.reset(z[0], [0.0, -1.8])
+    seen = set()
+    for k in range(1, steps):
+        est = ekf.step(z[k], 0.05 * rng.standard_normal((runs, 2)))
+        codes = ekf.decision_codes
+        assert codes.shape == (runs,)
+        assert list(np.asarray(DECISIONS)[codes]) == list(est.decision)
+        seen |= set(est.decision)
+    assert len(seen) > 1, "every step undecided: the test checks one code only"
