@@ -264,6 +264,37 @@ def _fit_seed(job: _FitJob) -> tuple[FittedPlan, list[ModelError]]:
     return fit, errors
 
 
+def _map_on_executor(
+    function: Callable[[Any], Any],
+    items: Sequence[Any],
+    what: str,
+    workers: int | None,
+    scheduler: Any,
+    progress: Callable[[int], None],
+    no_worker_timeout: float,
+) -> list[Any]:
+    """:func:`benchmarks.executor.map_tasks`, a Dask scheduler's OSError or timeout as a
+    BenchmarkError saying what could not be done (``what``: "fit the models", ...);
+    ClusterLost passes."""
+    try:
+        return map_tasks(
+            function,
+            items,
+            workers=workers,
+            scheduler=scheduler,
+            progress=progress,
+            no_worker_timeout=no_worker_timeout,
+        )
+    except ClusterLost:
+        raise
+    except (OSError, TimeoutError) as exc:
+        if scheduler is None:
+            raise
+        raise BenchmarkError(
+            f"cannot {what} on the Dask scheduler {scheduler!r}: {describe(exc)}"
+        ) from None
+
+
 def fit_seeds(
     config: ProtocolConfig,
     candidates: Sequence[Candidate],
@@ -298,23 +329,10 @@ def fit_seeds(
             say("fits", len(fits), len(seeds))
         return fits
     jobs = [_FitJob(config, seed, tuple(candidates)) for seed in seeds[1:]]
-    try:
-        done = map_tasks(
-            _fit_seed,
-            jobs,
-            workers=workers,
-            scheduler=scheduler,
-            progress=lambda count: say("fits", 1 + count, len(seeds)),
-            no_worker_timeout=no_worker_timeout,
-        )
-    except ClusterLost:
-        raise
-    except (OSError, TimeoutError) as exc:
-        if scheduler is None:
-            raise
-        raise BenchmarkError(
-            f"cannot fit the models on the Dask scheduler {scheduler!r}: {describe(exc)}"
-        ) from None
+    done = _map_on_executor(
+        _fit_seed, jobs, "fit the models", workers, scheduler,
+        lambda count: say("fits", 1 + count, len(seeds)), no_worker_timeout,
+    )  # fmt: skip
     for _, seed_errors in done:
         errors += seed_errors
     return fits + [fit for fit, _ in done]
@@ -471,23 +489,10 @@ def schedule(
         say("runs", int(done_runs[done - 1]), total_runs)
 
     t_tasks = time.perf_counter()
-    try:
-        ordered: list[ChunkResult] = map_tasks(
-            run_chunk,
-            [tasks[i] for i in order],
-            workers=workers,
-            scheduler=scheduler,
-            progress=on_task,
-            no_worker_timeout=no_worker_timeout,
-        )
-    except ClusterLost:
-        raise
-    except (OSError, TimeoutError) as exc:
-        if scheduler is None:
-            raise
-        raise BenchmarkError(
-            f"cannot run the tasks on the Dask scheduler {scheduler!r}: {describe(exc)}"
-        ) from None
+    ordered: list[ChunkResult] = _map_on_executor(
+        run_chunk, [tasks[i] for i in order], "run the tasks", workers, scheduler, on_task,
+        no_worker_timeout,
+    )  # fmt: skip
     by_task = dict(zip(order, ordered, strict=True))
     results = [by_task[i] for i in range(len(tasks))]
     timing = {
