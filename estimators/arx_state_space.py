@@ -17,6 +17,20 @@ lateral offset from the lane centre of this hypothesis (m), ``b`` camera bias
 canonical form. With no steering model (``arx=None``) the state is the first
 four entries (paper eq. 4).
 
+Driver's preferred offset (``preferred_offset=True``; docs/design.md §8.18). People keep
+the car off the lane centre by a lateral offset p of their own (a few tenths of a metre);
+a model that assumes they aim at the centre reads a sustained offset as lane evidence,
+without bound. With the option the state gains p after the bias::
+
+    x = [v_x, y, v_y, b, p, m_1, ..., m_n],     p(k+1) = p(k)  (+ a slow random walk)
+
+and the driver's features are taken from the offset to the point they aim at, y - p, in
+place of y (every ``y`` in the bearings below reads ``y - p``; d/dp = -d/dy). The camera
+still measures y + b. On a straight road a hypothesis off by d then explains the steering
+as well as the true one with p off by d: what tells the lanes apart is p's prior
+N(0, sigma_p^2), transients and the road's curvature, so the evidence of a sustained offset
+is bounded by the prior instead of growing with time.
+
 Visual features of a state (docs/design.md §5.1 and §5.2). With the road points
 ``p = (dx_near, dy_near, dx_far, dy_far)`` (m) of the lane centre ahead in
 the road-tangent frame at the car (:mod:`estimators.road_geometry`; a known
@@ -97,6 +111,8 @@ MEASUREMENT_NAMES = ("speed", "camera_lateral", "steering")
 
 VX, Y, VY, BIAS = 0, 1, 2, 3
 N_PHYSICAL = 4
+PREFERRED_OFFSET = 4
+"""Index of the driver's preferred offset p when the model has it (``preferred_offset=True``)."""
 _MIN_SPEED_SQ = 1e-12  # floor of v_x^2 + v_y^2 (m^2/s^2) against division by zero
 
 
@@ -150,13 +166,16 @@ class ARXStateSpace:
             decided from row k-1 (:mod:`hasa_env.steering.features`, default
             ``decision_lag=1``). The lag shifts beta by that many samples
             (beta'_{j+lag} = beta_j), adding ``decision_lag`` memory states.
+        preferred_offset: add the driver's preferred offset p as a state (after the
+            bias; module docstring); the bearings are taken from y - p.
 
     Attributes:
         lagged_arx: the ARX description with the decision lag applied (the
             model the memory states realise).
         n_memory: number of memory states n = ``lagged_arx.memory_order``
             (0 without a model); the paper's order with lag 0 gives 3.
-        n_states: 4 + n_memory (paper order: 7).
+        n_physical: 4, or 5 with the preferred offset: the memory states start here.
+        n_states: n_physical + n_memory (paper order: 7).
         feedback: (n_memory,) vector ``[a_n, ..., a_1]``: memory state m_i receives
             a_{n-i+1} delta(k).
         bearing_gain: (n_memory, 3) matrix; row i is ``beta_{n-i+1} + a_{n-i+1} beta_0``,
@@ -168,6 +187,7 @@ class ARXStateSpace:
     arx: ARXForm | None
     dt: float
     decision_lag: int = 0
+    preferred_offset: bool = False
     lagged_arx: ARXForm | None = field(init=False, repr=False)
     n_memory: int = field(init=False)
     feedback: np.ndarray = field(init=False, repr=False)
@@ -177,7 +197,13 @@ class ARXStateSpace:
     near_distance: float = field(init=False)
     far_distance: float = field(init=False)
 
-    def __init__(self, arx: ARXForm | None, dt: float | None = None, decision_lag: int = 0) -> None:
+    def __init__(
+        self,
+        arx: ARXForm | None,
+        dt: float | None = None,
+        decision_lag: int = 0,
+        preferred_offset: bool = False,
+    ) -> None:
         if dt is None:
             dt = arx.dt if arx is not None else 0.01
         if not (np.isfinite(dt) and dt > 0):
@@ -185,6 +211,7 @@ class ARXStateSpace:
         object.__setattr__(self, "arx", arx)
         object.__setattr__(self, "dt", float(dt))
         object.__setattr__(self, "decision_lag", decision_lag)
+        object.__setattr__(self, "preferred_offset", bool(preferred_offset))
         lag = decision_lag
         if isinstance(lag, bool) or not isinstance(lag, int | np.integer) or lag < 0:
             raise ValueError(f"decision_lag must be a non-negative integer, got {lag!r}")
@@ -230,9 +257,14 @@ class ARXStateSpace:
 
     # ------------------------------------------------------------ structure
     @property
+    def n_physical(self) -> int:
+        """States before the memory: 4, or 5 with the preferred offset."""
+        return N_PHYSICAL + int(self.preferred_offset)
+
+    @property
     def n_states(self) -> int:
-        """Length of the state vector, 4 + n_memory."""
-        return N_PHYSICAL + self.n_memory
+        """Length of the state vector, n_physical + n_memory."""
+        return self.n_physical + self.n_memory
 
     @property
     def has_steering(self) -> bool:
@@ -241,15 +273,19 @@ class ARXStateSpace:
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        """Names of the states: the four physical ones, then ``memory_1`` .. ``memory_n``."""
-        return PHYSICAL_STATE_NAMES + tuple(f"memory_{i}" for i in range(1, self.n_memory + 1))
+        """Names of the states: the four physical ones, ``preferred_offset`` when the model
+        has it, then ``memory_1`` .. ``memory_n``."""
+        extra = ("preferred_offset",) if self.preferred_offset else ()
+        memory = tuple(f"memory_{i}" for i in range(1, self.n_memory + 1))
+        return PHYSICAL_STATE_NAMES + extra + memory
 
     def transition_matrix_template(self) -> np.ndarray:
         """The state-independent part of dF/dx (paper eq. 13) as an (n, n) array."""
         n = self.n_states
         out = np.eye(n)
         out[Y, VY] = self.dt
-        out[N_PHYSICAL:, N_PHYSICAL:] = self.memory_matrix
+        mem = slice(self.n_physical, n)
+        out[mem, mem] = self.memory_matrix
         return out
 
     def held_memory_transition_matrix(self) -> np.ndarray:
@@ -259,7 +295,8 @@ class ARXStateSpace:
         the identity on the memory block: ``m(k+1) = m(k)``, no bearing terms.
         """
         out = self.transition_matrix_template()
-        out[N_PHYSICAL:, N_PHYSICAL:] = np.eye(self.n_memory)
+        mem = slice(self.n_physical, self.n_states)
+        out[mem, mem] = np.eye(self.n_memory)
         return out
 
     def input_matrix(self) -> np.ndarray:
@@ -287,9 +324,12 @@ class ARXStateSpace:
                 dy_far) (m) at the states' sample; None: a straight road.
 
         Returns u with shape (..., 3) and, with ``with_jacobian``, du/d(v_x, y, v_y)
-        with shape (..., 3, 3) (rows: phi, Omega, v_y; columns: v_x, y, v_y).
+        with shape (..., 3, 3) (rows: phi, Omega, v_y; columns: v_x, y, v_y). With the
+        preferred offset, y is read as y - p (and du/dp = -du/dy).
         """
         vx, y, vy = x[..., VX], x[..., Y], x[..., VY]
+        if self.preferred_offset:
+            y = y - x[..., PREFERRED_OFFSET]
         theta = np.arctan2(vy, vx)
         u = np.empty(x.shape[:-1] + (3,))
         if road_points is None:
@@ -346,10 +386,12 @@ class ARXStateSpace:
         out[..., Y] = x[..., Y] + dt * vy + (0.5 * dt * dt) * ay
         out[..., VY] = vy + dt * ay
         out[..., BIAS] = x[..., BIAS]
+        if self.preferred_offset:
+            out[..., PREFERRED_OFFSET] = x[..., PREFERRED_OFFSET]
         if self.n_memory:
             u = self.bearings(x, road_points=road_points)
-            memory = x[..., N_PHYSICAL:]
-            out[..., N_PHYSICAL:] = memory @ self.memory_matrix.T + u @ self.bearing_gain.T
+            mem = slice(self.n_physical, self.n_states)
+            out[..., mem] = x[..., mem] @ self.memory_matrix.T + u @ self.bearing_gain.T
         return out
 
     def transition_jacobian(
@@ -364,7 +406,10 @@ class ARXStateSpace:
         ).copy()
         if self.n_memory:
             _, du = self.bearings(x, with_jacobian=True, road_points=road_points)
-            out[..., N_PHYSICAL:, :3] = self.bearing_gain @ du
+            mem = slice(self.n_physical, self.n_states)
+            out[..., mem, :3] = self.bearing_gain @ du
+            if self.preferred_offset:
+                out[..., mem, PREFERRED_OFFSET] = -out[..., mem, Y]
         return out
 
     # ----------------------------------------------------------- measurement
@@ -408,11 +453,27 @@ class ARXStateSpace:
         if self.has_steering:
             _, du = self.bearings(x, with_jacobian=True, road_points=road_points)
             out[..., 2, :3] = self.output_gain @ du
+            if self.preferred_offset:
+                out[..., 2, PREFERRED_OFFSET] = -out[..., 2, Y]
             if self.n_memory:
                 out[..., 2, -1] = 1.0
         return out
 
     # --------------------------------------------------------------- memory
+    def memory_offset_sensitivity(self) -> np.ndarray:
+        """d m / d p (n_memory,) of :meth:`steady_memory` on a straight road at y - p = 0: how
+        the constant-past memory moves with the driver's preferred offset p::
+
+            d u / d p = (1 / near, 1 / far, 0),   d m_i / d p = sum_{lags of m_i} beta_j . du/dp
+
+        (zeros without the preferred offset). The filters carry the memory's covariance
+        with p through it at reset and at a memory restart."""
+        if not (self.preferred_offset and self.n_memory):
+            return np.zeros(self.n_memory)
+        beta_lagged = self.bearing_gain - self.feedback[:, None] * self.output_gain
+        du_dp = np.array([1.0 / self.near_distance, 1.0 / self.far_distance, 0.0])
+        return np.cumsum(beta_lagged @ du_dp)
+
     def steady_memory(
         self, steering: np.ndarray, x: np.ndarray, road_points: np.ndarray | None = None
     ) -> np.ndarray:

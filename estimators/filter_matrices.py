@@ -1,7 +1,13 @@
 """The model and noise matrices of the mixture filter and its batched predict/update.
 
 Shared by the fast filter (:class:`estimators.gm_ekf.GaussianMixtureEKF`) and
-the filterpy reference (:mod:`estimators.filterpy_ekf`); docs/design.md §8.5-8.7.
+the filterpy reference (:mod:`estimators.filterpy_ekf`); docs/design.md §8.5-8.7 and §8.18
+(the driver's preferred offset).
+
+Why this module is long: the batched predict and update are unrolled into constant tables
+(transition and measurement Jacobians as sums of per-feature maps, a 3x3 inverse by the
+adjugate) for speed, and each table's docstring states the equation it tabulates; the
+reference filter shares every matrix, so they stay in one place.
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ import numpy as np
 
 from estimators.arx_state_space import (
     BIAS,
-    N_PHYSICAL,
+    PREFERRED_OFFSET,
     VX,
     VY,
     ARXStateSpace,
@@ -21,10 +27,24 @@ from estimators.arx_state_space import (
 )
 from estimators.settings import FilterSettings
 
-__all__ = ["FilterMatrices"]
+__all__ = ["FilterMatrices", "filter_model"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 _VARIANTS = ("full", "decorrelated", "held")  # transition tables, by code 0, 1, 2
+
+
+def filter_model(
+    steering_model: Any, settings: FilterSettings, dt: float | None, decision_lag: int
+) -> ARXStateSpace:
+    """The filters' state-space model of ``steering_model`` (an ARXForm, or None): with the
+    driver's preferred offset as a state when the model steers and
+    ``settings.preferred_offset_std > 0``."""
+    return ARXStateSpace(
+        steering_model,
+        dt,
+        decision_lag,
+        preferred_offset=steering_model is not None and settings.preferred_offset_std > 0,
+    )
 
 
 class FilterMatrices:
@@ -79,13 +99,15 @@ class FilterMatrices:
         self.model = model
         self.settings = settings
         n = model.n_states
-        mem = slice(N_PHYSICAL, n)
+        mem = slice(model.n_physical, n)
         s = settings
         input_matrix = model.input_matrix()
         input_outer = input_matrix @ input_matrix.T
         accel_var = s.acceleration_noise_std**2
         q_vehicle = accel_var * input_outer
         q_vehicle[BIAS, BIAS] += s.bias_drift_std**2
+        if model.preferred_offset:
+            q_vehicle[PREFERRED_OFFSET, PREFERRED_OFFSET] += s.preferred_offset_drift_std**2
         self.process_noise_missing_acceleration = (
             s.missing_acceleration_std**2 - accel_var
         ) * input_outer
@@ -113,8 +135,11 @@ class FilterMatrices:
         p0[VY, VY] = s.initial_lateral_velocity_std**2
         p0[BIAS, BIAS] = s.bias_std**2
         p0[Y, BIAS] = p0[BIAS, Y] = -(s.bias_std**2)  # y_i = camera - b_i
-        p0[mem, mem] = s.memory_std**2 * np.eye(model.n_memory)
-        self.initial_covariance = p0
+        if model.preferred_offset:
+            p0[PREFERRED_OFFSET, PREFERRED_OFFSET] = s.preferred_offset_std**2
+        self._memory = mem
+        self._offset_sensitivity = model.memory_offset_sensitivity()
+        self.initial_covariance = self.restart_memory_covariance(p0[None])[0]
         self._build_fast_path(input_matrix)
         for arr in (
             self.process_noise,
@@ -127,6 +152,29 @@ class FilterMatrices:
             self.initial_covariance,
         ):
             arr.setflags(write=False)
+
+    def restart_memory_covariance(self, cov: np.ndarray) -> np.ndarray:
+        """The covariances (B, n, n) of states whose memory restarts at the constant-past
+        memory of their own state (at reset and after the steering channel was off)::
+
+            P_mm = memory_std^2 I + S S^T P_pp,   P_m,x = S P_p,x,   S = d m / d p
+
+        with S of :meth:`ARXStateSpace.memory_offset_sensitivity` (0 without the driver's
+        preferred offset p: the memory is then uncorrelated with the vehicle states). The
+        memory moves with p as each hypothesis' bearings do, so a hypothesis' start memory
+        is explained by its p, not read as lane evidence."""
+        mem = self._memory
+        out = np.array(cov, dtype=np.float64, copy=True)
+        out[:, mem, :] = 0.0
+        out[:, :, mem] = 0.0
+        if self.model.preferred_offset and self.model.n_memory:
+            sens = self._offset_sensitivity
+            row = out[:, PREFERRED_OFFSET, :]  # (B, n), memory columns 0
+            out[:, mem, :] = sens[None, :, None] * row[:, None, :]
+            out[:, :, mem] = out[:, mem, :].transpose(0, 2, 1)
+            out[:, mem, mem] = np.outer(sens, sens) * row[:, PREFERRED_OFFSET, None, None]
+        out[:, mem, mem] += self.settings.memory_std**2 * np.eye(self.model.n_memory)
+        return out
 
     # --------------------------------------------------------------- prior
     def initial_state(
@@ -155,7 +203,7 @@ class FilterMatrices:
         x[..., BIAS] = hypotheses
         if model.n_memory:
             points = None if road_points is None else road_points[:, None, :]
-            x[..., N_PHYSICAL:] = model.steady_memory(
+            x[..., model.n_physical :] = model.steady_memory(
                 np.broadcast_to(steering[:, None], hypotheses.shape), x, points
             )
         return x
@@ -166,7 +214,8 @@ class FilterMatrices:
 
         With ``w = [theta + atan(y/near), theta + atan(y/far), v_y]`` (so
         u = [-w_0, -w_1, w_2]; with road points ``atan((y - dy_near) / dx_near)``
-        and ``atan((y - dy_far) / dx_far)``) the transition is ``x' = x A^T +
+        and ``atan((y - dy_far) / dx_far)``; with the driver's preferred offset p every y
+        here reads y - p) the transition is ``x' = x A^T +
         w G^T + a B_D^T [+ J z_3]`` and, with ``D = [dtheta/dv_x, dtheta/dv_y,
         d atan(.)/dy (near), d atan(.)/dy (far)]``, its Jacobian is
         ``F = F_0 + sum_k D_k T_k``; likewise ``H = H_0 + sum_k D_k U_k`` plus
@@ -175,7 +224,7 @@ class FilterMatrices:
         """
         model = self.model
         n = model.n_states
-        mem = slice(N_PHYSICAL, n)
+        mem = slice(model.n_physical, n)
         self.input_matrix_t = np.ascontiguousarray(input_matrix.T)
         sign = np.array([-1.0, -1.0, 1.0])
         base_a = model.transition_matrix_template()
@@ -201,6 +250,9 @@ class FilterMatrices:
             maps[1, :, VY] = both
             maps[2, :, Y] = g_mat[:, 0]
             maps[3, :, Y] = g_mat[:, 1]
+            if model.preferred_offset:  # the features read y - p
+                maps[2, :, PREFERRED_OFFSET] = -g_mat[:, 0]
+                maps[3, :, PREFERRED_OFFSET] = -g_mat[:, 1]
             self._tables[name] = (
                 np.ascontiguousarray(a_mat.T),
                 np.ascontiguousarray(g_mat.T),
@@ -225,6 +277,9 @@ class FilterMatrices:
             h_maps[1, 2, VY] = both
             h_maps[2, 2, Y] = beta0[0]
             h_maps[3, 2, Y] = beta0[1]
+            if model.preferred_offset:
+                h_maps[2, 2, PREFERRED_OFFSET] = -beta0[0]
+                h_maps[3, 2, PREFERRED_OFFSET] = -beta0[1]
         self._measurement_linear_t = np.ascontiguousarray(linear.T)
         self._steering_bearing_gain = beta0[:2].copy()
         self._steering_uses_bearings = bool(model.has_steering and np.any(beta0[:2] != 0))
@@ -248,14 +303,18 @@ class FilterMatrices:
         D = [dtheta/dv_x, dtheta/dv_y, d atan(y/near)/dy, d atan(y/far)/dy] (B, 4).
 
         With ``points`` (B, 4) road points: ``atan((y - dy) / dx)`` and its
-        derivative ``(1 / dx) / (1 + ((y - dy) / dx)^2)`` for near and far."""
+        derivative ``(1 / dx) / (1 + ((y - dy) / dx)^2)`` for near and far; y reads y - p
+        with the driver's preferred offset p."""
         vx, vy = x[:, VX], x[:, VY]
+        lateral = x[:, Y, None]
+        if self.model.preferred_offset:
+            lateral = lateral - x[:, PREFERRED_OFFSET, None]
         if points is None:
             inverse = self._inverse_distance
-            ratio = x[:, Y, None] * inverse
+            ratio = lateral * inverse
         else:
             inverse = 1.0 / points[:, 0::2]
-            ratio = (x[:, Y, None] - points[:, 1::2]) * inverse
+            ratio = (lateral - points[:, 1::2]) * inverse
         w = np.empty((x.shape[0], 3))
         np.add(np.arctan(ratio), np.arctan2(vy, vx)[:, None], out=w[:, :2])
         w[:, 2] = vy

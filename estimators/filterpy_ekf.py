@@ -18,7 +18,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.special import logsumexp
 
-from estimators.arx_state_space import ARXStateSpace, road_point_rows
+from estimators.arx_state_space import road_point_rows
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     DECIDED,
@@ -29,7 +29,7 @@ from estimators.evidence import (
     initial_evidence_state,
     weigh_evidence,
 )
-from estimators.filter_matrices import FilterMatrices
+from estimators.filter_matrices import FilterMatrices, filter_model
 from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
 
@@ -117,7 +117,7 @@ class FilterpyGMEKF:
     ) -> None:
         self.settings = settings = FilterSettings.with_overrides(settings, overrides)
         self.steering_model = steering_model
-        self.model = ARXStateSpace(steering_model, dt, decision_lag)
+        self.model = filter_model(steering_model, settings, dt, decision_lag)
         self.matrices = FilterMatrices(self.model, settings)
         self.state_names = self.model.state_names
         self._filters: list[list[ARXExtendedKalmanFilter | None]] | None = None
@@ -442,14 +442,12 @@ class FilterpyGMEKF:
         ``P_mm = memory_std^2 I``, uncorrelated with the vehicle states."""
         model = self.model
         if model.n_memory:
-            mem = slice(4, model.n_states)
+            mem = slice(model.n_physical, model.n_states)
             for ekf in bank:
                 if ekf is not None:
                     x = ekf.x[:, 0]
                     ekf.x[mem, 0] = model.steady_memory(np.array(steering), x, points)
-                    ekf.P[mem, :] = 0.0
-                    ekf.P[:, mem] = 0.0
-                    ekf.P[mem, mem] = self.matrices.initial_covariance[mem, mem]
+                    ekf.P = self.matrices.restart_memory_covariance(ekf.P[None])[0]
         for c, ekf in enumerate(bank):
             if ekf is not None:
                 self._last_x[r, c] = ekf.x[:, 0]

@@ -29,10 +29,8 @@ from typing import Any
 import numpy as np
 
 from estimators.arx_state_space import (
-    N_PHYSICAL,
     VX,
     VY,
-    ARXStateSpace,
     road_point_rows,
 )
 from estimators.base import Estimate, reset_inputs
@@ -45,7 +43,7 @@ from estimators.evidence import (
     normalize_log_weights,
     weigh_evidence,
 )
-from estimators.filter_matrices import FilterMatrices
+from estimators.filter_matrices import FilterMatrices, filter_model
 from estimators.road_geometry import straight_road_points
 from estimators.settings import FilterSettings
 from hasa_env.steering.arx import ARXForm
@@ -297,7 +295,7 @@ class GaussianMixtureEKF:
         self.settings = settings = FilterSettings.with_overrides(settings, overrides)
         self.steering_model = steering_model
         self.decision_lag = decision_lag
-        self.model = ARXStateSpace(steering_model, dt, decision_lag)
+        self.model = filter_model(steering_model, settings, dt, decision_lag)
         self.matrices = FilterMatrices(self.model, settings)
         self.state_names = self.model.state_names
         threshold = settings.prune_threshold
@@ -803,7 +801,8 @@ class GaussianMixtureEKF:
             m_i = steady_memory(z_3(k), x_i(k|k)),  P_mm = memory_std^2 I,  P_m,phys = 0
 
         the constant-past memory of the measured ``steering`` (R,) and each hypothesis'
-        own bearings, uncorrelated with the vehicle states."""
+        own bearings, uncorrelated with the vehicle states (with the driver's preferred
+        offset p: correlated through p, :meth:`FilterMatrices.restart_memory_covariance`)."""
         model = self.model
         if not model.n_memory:
             return
@@ -812,13 +811,11 @@ class GaussianMixtureEKF:
         if not flat.size:
             return
         run_of = flat // active.shape[1]
-        mem = slice(N_PHYSICAL, model.n_states)
+        mem = slice(model.n_physical, model.n_states)
         x[flat, mem] = model.steady_memory(
             steering[run_of], x[flat], None if points is None else points[run_of]
         )
-        cov[flat, mem, :] = 0.0
-        cov[flat, :, mem] = 0.0
-        cov[flat, mem, mem] = self.matrices.initial_covariance[mem, mem]
+        cov[flat] = self.matrices.restart_memory_covariance(cov[flat])
 
 
 def _without_steering(z: np.ndarray, off: np.ndarray) -> np.ndarray:

@@ -60,6 +60,8 @@ _SCHEMA = schema(
         "decision_threshold": Field("number", low=0.5, high=1.0, high_open=True),
         "commit_time": _positive("s", infinite=True),
         "weight_floor": Field("number", low=0.0, high=1e-3),
+        "preferred_offset_std": Field("number", unit="m", low=0.0, high=2.0),
+        "preferred_offset_drift_std": _non_negative("m"),
     }
 )
 """What every field of :class:`FilterSettings` allows."""
@@ -190,6 +192,11 @@ class FilterSettings:
             counts as a contradiction (:mod:`estimators.evidence`, the reversal rule;
             ``math.inf``: never, the rule is off).
         weight_floor: no weight falls below this (0: no floor).
+        preferred_offset_std: prior std sigma_p (m) of the driver's preferred lateral
+            offset p, a state of every hypothesis when > 0 (a steering model's features
+            are then taken from y - p; :mod:`estimators.arx_state_space`, docs/design.md
+            §8.18). 0: no such state, the driver is assumed to aim at the lane centre.
+        preferred_offset_drift_std: random-walk std of p per sample (m).
     """
 
     speed_noise_std: float = 0.05
@@ -221,6 +228,8 @@ class FilterSettings:
     decision_threshold: float = 0.95
     commit_time: float = 1.0
     weight_floor: float = 0.0
+    preferred_offset_std: float = 0.0
+    preferred_offset_drift_std: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and

@@ -87,10 +87,15 @@ points_strategy = st.tuples(
 )
 
 
-@given(points=points_strategy, seed=st.integers(0, 2**31 - 1), lag=st.integers(0, 1))
+@given(
+    points=points_strategy,
+    seed=st.integers(0, 2**31 - 1),
+    lag=st.integers(0, 1),
+    offset=st.booleans(),
+)
 @settings(max_examples=40, deadline=None)
-def test_jacobians_with_road_points_match_finite_differences(points, seed, lag):
-    model = ARXStateSpace(PAPER, decision_lag=lag)
+def test_jacobians_with_road_points_match_finite_differences(points, seed, lag, offset):
+    model = ARXStateSpace(PAPER, decision_lag=lag, preferred_offset=offset)
     rng = np.random.default_rng(seed)
     x = rng.normal(size=model.n_states) * 0.3
     x[:3] = rng.uniform(5.0, 40.0), rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)
@@ -115,9 +120,10 @@ def test_jacobians_with_road_points_match_finite_differences(points, seed, lag):
     np.testing.assert_allclose(
         hjac, numeric(lambda s: model.measurement(s, p)), rtol=1e-5, atol=1e-6
     )
-    # d phi / d y = -dx_near / (dx_near^2 + (dy_near - y)^2)
+    # d phi / d y = -dx_near / (dx_near^2 + (dy_near - y)^2), y read as y - p with the offset
     _, du = model.bearings(x, True, p)
-    assert du[0, 1] == pytest.approx(-p[0] / (p[0] ** 2 + (p[1] - x[1]) ** 2), rel=1e-12)
+    aim = x[1] - (x[4] if offset else 0.0)
+    assert du[0, 1] == pytest.approx(-p[0] / (p[0] ** 2 + (p[1] - aim) ** 2), rel=1e-12)
 
 
 def test_straight_road_points_reproduce_the_straight_formula():
@@ -187,11 +193,17 @@ def test_synthetic_population_on_the_curved_track():
     assert with_geometry.gated[..., 2].sum() < 0.5 * straight.gated[..., 2].sum()
 
 
-def test_fast_filter_equals_filterpy_on_the_curved_track(curved_runs):
+@pytest.mark.parametrize("offset_std", [0.0, 0.3])
+def test_fast_filter_equals_filterpy_on_the_curved_track(curved_runs, offset_std):
     frame = curved_runs[1][0].iloc[:600].copy()
     frame.loc[100:150, "sensor_camera_lateral"] = np.nan
     frame.loc[300, "sensor_steering"] += 0.2
-    settings = FilterSettings(steering_ratio=15.0, steering_residual_std=1e-3)
+    settings = FilterSettings(
+        steering_ratio=15.0,
+        steering_residual_std=1e-3,
+        preferred_offset_std=offset_std,
+        preferred_offset_drift_std=1e-3,
+    )
     fast = run_estimator(GaussianMixtureEKF(PAPER, settings), frame, store_components=True)
     ref = run_estimator(FilterpyGMEKF(PAPER, settings), frame, store_components=True)
     np.testing.assert_allclose(fast.component_means, ref.component_means, rtol=0, atol=1e-9)

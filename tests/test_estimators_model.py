@@ -99,10 +99,15 @@ def test_paper_order_matches_design_corrected_recursion():
         assert model.measurement(x)[1] == pytest.approx(y + x[3])
 
 
-@given(arx=arx_forms(), lag=st.integers(0, 2), seed=st.integers(0, 2**31 - 1))
+@given(
+    arx=arx_forms(),
+    lag=st.integers(0, 2),
+    seed=st.integers(0, 2**31 - 1),
+    offset=st.booleans(),
+)
 @settings(max_examples=60, deadline=None)
-def test_jacobians_match_finite_differences(arx, lag, seed):
-    model = ARXStateSpace(arx, decision_lag=lag)
+def test_jacobians_match_finite_differences(arx, lag, seed, offset):
+    model = ARXStateSpace(arx, decision_lag=lag, preferred_offset=offset)
     rng = np.random.default_rng(seed)
     x = random_state(rng, model.n_states)
     acc = rng.normal(size=2)

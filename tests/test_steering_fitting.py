@@ -225,3 +225,31 @@ def test_fit_needs_enough_varied_data():
         GeneralizedModel(1, 1, 1, 0).fit(flat)
     with pytest.raises(ValueError, match="no runs"):
         GeneralizedModel().fit([])
+
+
+def test_aim_offsets_are_fitted_per_run_and_left_out_of_the_model():
+    """A driver who holds the car off the lane centre steers toward that offset: in the ARX
+    equation a constant per run. With ``aim_offset`` the fit takes one intercept per run
+    and recovers the model's coefficients; without it they are biased."""
+    arx = ARXForm(a=(0.6,), b=(0.5, -0.2), c=(0.3,), d=(0.1,))
+    rng = np.random.default_rng(5)
+    runs = []
+    for constant in (0.02, -0.03):
+        frame = arx_data(arx, 2000, rng)
+        delta = frame["delta"].to_numpy().copy()
+        for k in range(1, delta.size):  # the same ARX recursion with the run's constant
+            delta[k] += 0.6 * (delta[k - 1] - frame["delta"].iloc[k - 1]) + constant
+        frame["delta"] = delta
+        runs.append(frame)
+    truth = GeneralizedModel.from_arx(arx)
+    model = GeneralizedModel(*truth.orders.values())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        with_offsets = model.fit(runs, aim_offset=True, ridge=0)
+        without = model.fit(runs, ridge=0)
+    se = np.array(list(with_offsets.standard_errors.values()))
+    error = with_offsets.parameter_vector - truth.parameter_vector
+    assert with_offsets.parameter_vector.size == truth.parameter_vector.size
+    assert np.all(np.abs(error) <= 4.0 * se), (error / se).round(2)
+    assert np.abs(without.parameter_vector - truth.parameter_vector).max() > 10 * se.max()
+    assert with_offsets.fit_result.rss < without.fit_result.rss

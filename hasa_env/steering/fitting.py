@@ -356,6 +356,7 @@ def fit_model(
     rule: str = "min",
     stable: bool = True,
     sensor_std: float = 0.0,
+    aim_offset: bool = False,
 ) -> SteeringModel:
     """Fit a model that is linear in its parameters (``model.fit`` calls this).
 
@@ -377,6 +378,12 @@ def fit_model(
         sensor_std: steering-sensor noise std (rad, model units) the
             identifiability check adds to the residual (see
             :func:`check_identifiability`).
+        aim_offset: fit each run's aim offset as a nuisance intercept, one per run
+            (:func:`_regression_solution`), left out of the model: a driver who keeps
+            the car off the lane centre steers toward that offset, not toward the centre
+            the features are measured from, and without the intercept the fit reads the
+            held offset as "no position feedback" (docs/design.md §8.18). False: no
+            intercept (the paper's eq. 10 as written).
 
     Returns:
         A new model of the same class with the estimates, their standard
@@ -392,8 +399,16 @@ def fit_model(
             f"{model.name}: design has {X.shape[1]} columns for {len(names)} parameters"
         )
     check_regression_shapes(X, y)
+    nuisance = len(blocks) if aim_offset and X.shape[1] else 0
     solution, cross_validation, cv_lambda = _regression_solution(
-        model, blocks, X, y, ridge=ridge, folds=folds, lambdas=lambdas, rule=rule, stable=stable
+        model,
+        _with_aim_offsets(blocks) if nuisance else blocks,
+        ridge=ridge,
+        folds=folds,
+        lambdas=lambdas,
+        rule=rule,
+        stable=stable,
+        nuisance=nuisance,
     )
     condition = _condition_number(X, names, solution)
     result = _fit_result(model, blocks, X.shape, solution, cross_validation)
@@ -421,22 +436,56 @@ def fit_model(
     return fitted
 
 
+def _with_aim_offsets(blocks: Sequence[Mapping[str, np.ndarray]]) -> list[dict[str, np.ndarray]]:
+    """``blocks`` with one indicator column per run appended to every run's matrix (1 in
+    the run's own column): the runs' aim offsets, as intercepts."""
+    out = []
+    for r, block in enumerate(blocks):
+        matrix = block["matrix"]
+        ones = np.zeros((matrix.shape[0], len(blocks)))
+        ones[:, r] = 1.0
+        out.append({**block, "matrix": np.hstack([matrix, ones])})
+    return out
+
+
+def _without_nuisance(solution: LinearSolution, nuisance: int) -> LinearSolution:
+    """``solution`` with its last ``nuisance`` parameters (the aim offsets) left out of the
+    parameters, their covariance and standard errors (the residuals and their statistics are
+    the fit's with them)."""
+    if not nuisance:
+        return solution
+    keep = slice(0, solution.parameters.size - nuisance)
+    return replace(
+        solution,
+        parameters=solution.parameters[keep],
+        covariance=solution.covariance[keep, keep],
+        standard_errors=solution.standard_errors[keep],
+    )
+
+
 def _regression_solution(
     model: SteeringModel,
     blocks: Sequence[Mapping[str, np.ndarray]],
-    X: np.ndarray,
-    y: np.ndarray,
     *,
     ridge: str | float,
     folds: int,
     lambdas: Sequence[float],
     rule: str,
     stable: bool,
+    nuisance: int = 0,
 ) -> tuple[LinearSolution, CrossValidation | None, float]:
     """The regression of :func:`fit_model` (its arguments of the same names): (solution, the
     cross-validation or None, the penalty cross-validation chose, before any raise for
-    stability)."""
-    names = model.parameter_names
+    stability). The last ``nuisance`` columns of the blocks' matrices (the runs' aim
+    offsets) are fitted with the model's and left out of the solution::
+
+        delta(k) = theta . x(k) + c_r + e(k),       c_r: run r's intercept
+
+    (c_r = -sum_j beta_j . u_r: the features the driver holds still at, on a straight
+    road those of their preferred offset)."""
+    X = np.vstack([b["matrix"] for b in blocks])
+    y = np.concatenate([b["target"] for b in blocks])
+    names = list(model.parameter_names) + [f"aim_offset_{r}" for r in range(nuisance)]
     cross_validation = None
     if isinstance(ridge, str):
         if ridge != "cv":
@@ -451,10 +500,10 @@ def _regression_solution(
             ridge_lambda = cross_validation.ridge_lambda
     else:
         ridge_lambda = float(ridge)
-    solution = ridge_regression(X, y, ridge_lambda, names)
+    solution = _without_nuisance(ridge_regression(X, y, ridge_lambda, names), nuisance)
     if cross_validation is not None and stable and not _stable(model, solution):
         for candidate in sorted(v for v in lambdas if v > ridge_lambda):
-            trial = ridge_regression(X, y, candidate, names)
+            trial = _without_nuisance(ridge_regression(X, y, candidate, names), nuisance)
             if _stable(model, trial):
                 solution = trial
                 break
