@@ -262,6 +262,11 @@ class ARXStateSpace:
         return N_PHYSICAL + int(self.preferred_offset)
 
     @property
+    def memory_slice(self) -> slice:
+        """Where the memory states lie in the state vector: ``n_physical:n_states``."""
+        return slice(self.n_physical, self.n_states)
+
+    @property
     def n_states(self) -> int:
         """Length of the state vector, n_physical + n_memory."""
         return self.n_physical + self.n_memory
@@ -284,7 +289,7 @@ class ARXStateSpace:
         n = self.n_states
         out = np.eye(n)
         out[Y, VY] = self.dt
-        mem = slice(self.n_physical, n)
+        mem = self.memory_slice
         out[mem, mem] = self.memory_matrix
         return out
 
@@ -295,7 +300,7 @@ class ARXStateSpace:
         the identity on the memory block: ``m(k+1) = m(k)``, no bearing terms.
         """
         out = self.transition_matrix_template()
-        mem = slice(self.n_physical, self.n_states)
+        mem = self.memory_slice
         out[mem, mem] = np.eye(self.n_memory)
         return out
 
@@ -390,7 +395,7 @@ class ARXStateSpace:
             out[..., PREFERRED_OFFSET] = x[..., PREFERRED_OFFSET]
         if self.n_memory:
             u = self.bearings(x, road_points=road_points)
-            mem = slice(self.n_physical, self.n_states)
+            mem = self.memory_slice
             out[..., mem] = x[..., mem] @ self.memory_matrix.T + u @ self.bearing_gain.T
         return out
 
@@ -406,7 +411,7 @@ class ARXStateSpace:
         ).copy()
         if self.n_memory:
             _, du = self.bearings(x, with_jacobian=True, road_points=road_points)
-            mem = slice(self.n_physical, self.n_states)
+            mem = self.memory_slice
             out[..., mem, :3] = self.bearing_gain @ du
             if self.preferred_offset:
                 out[..., mem, PREFERRED_OFFSET] = -out[..., mem, Y]

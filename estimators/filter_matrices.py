@@ -99,7 +99,7 @@ class FilterMatrices:
         self.model = model
         self.settings = settings
         n = model.n_states
-        mem = slice(model.n_physical, n)
+        mem = model.memory_slice
         s = settings
         input_matrix = model.input_matrix()
         input_outer = input_matrix @ input_matrix.T
@@ -137,7 +137,6 @@ class FilterMatrices:
         p0[Y, BIAS] = p0[BIAS, Y] = -(s.bias_std**2)  # y_i = camera - b_i
         if model.preferred_offset:
             p0[PREFERRED_OFFSET, PREFERRED_OFFSET] = s.preferred_offset_std**2
-        self._memory = mem
         self._offset_sensitivity = model.memory_offset_sensitivity()
         self.initial_covariance = self.restart_memory_covariance(p0[None])[0]
         self._build_fast_path(input_matrix)
@@ -163,7 +162,7 @@ class FilterMatrices:
         preferred offset p: the memory is then uncorrelated with the vehicle states). The
         memory moves with p as each hypothesis' bearings do, so a hypothesis' start memory
         is explained by its p, not read as lane evidence."""
-        mem = self._memory
+        mem = self.model.memory_slice
         out = np.array(cov, dtype=np.float64, copy=True)
         out[:, mem, :] = 0.0
         out[:, :, mem] = 0.0
@@ -203,7 +202,7 @@ class FilterMatrices:
         x[..., BIAS] = hypotheses
         if model.n_memory:
             points = None if road_points is None else road_points[:, None, :]
-            x[..., model.n_physical :] = model.steady_memory(
+            x[..., model.memory_slice] = model.steady_memory(
                 np.broadcast_to(steering[:, None], hypotheses.shape), x, points
             )
         return x
@@ -224,7 +223,7 @@ class FilterMatrices:
         """
         model = self.model
         n = model.n_states
-        mem = slice(model.n_physical, n)
+        mem = model.memory_slice
         self.input_matrix_t = np.ascontiguousarray(input_matrix.T)
         sign = np.array([-1.0, -1.0, 1.0])
         base_a = model.transition_matrix_template()

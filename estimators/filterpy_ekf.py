@@ -442,7 +442,7 @@ class FilterpyGMEKF:
         ``P_mm = memory_std^2 I``, uncorrelated with the vehicle states."""
         model = self.model
         if model.n_memory:
-            mem = slice(model.n_physical, model.n_states)
+            mem = model.memory_slice
             for ekf in bank:
                 if ekf is not None:
                     x = ekf.x[:, 0]

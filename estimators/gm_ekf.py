@@ -811,7 +811,7 @@ class GaussianMixtureEKF:
         if not flat.size:
             return
         run_of = flat // active.shape[1]
-        mem = slice(model.n_physical, model.n_states)
+        mem = model.memory_slice
         x[flat, mem] = model.steady_memory(
             steering[run_of], x[flat], None if points is None else points[run_of]
         )
