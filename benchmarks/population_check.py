@@ -2,7 +2,8 @@
 
 ``python -m benchmarks.population_check [--population paper] [--seeds 2000,2001]
 [--drivers 9] [--runs 2] [--duration 120] [--speeds 15,25,45] [--rows rows.csv]
-[--write docs/population.md]``; ``--bandwidth-scale``, ``--damping-scale``,
+[--write docs/population.md]``; ``--from-rows rows.csv --write FILE`` writes the document
+from rows saved with ``--rows`` without simulating (:func:`read_rows`); ``--bandwidth-scale``, ``--damping-scale``,
 ``--velocity-weight-scale`` and ``--command-scale`` check a variant of the population with
 those ranges scaled (:class:`LoopScales`; the same drivers otherwise), for trying a
 recalibration without changing the population.
@@ -74,6 +75,8 @@ __all__ = [
     "HUMAN_REFERENCES",
     "SPEEDS",
     "STATISTICS",
+    "ROW_COLUMNS",
+    "RUN_COLUMNS",
     "Injection",
     "InjectedDriver",
     "LoopScales",
@@ -82,6 +85,7 @@ __all__ = [
     "loop_response",
     "main",
     "population_variant",
+    "read_rows",
     "reversal_rate",
     "run_statistics",
     "summarize",
@@ -548,6 +552,12 @@ def command_parser() -> argparse.ArgumentParser:
             f"--{option}-scale", type=float, default=1.0, help=f"factor on {what} (a variant)"
         )
     parser.add_argument("--rows", metavar="CSV", help="also save the per-driver rows here")
+    parser.add_argument(
+        "--from-rows",
+        metavar="CSV",
+        help="write the document from rows saved with --rows (no runs; the other run "
+        "options are taken from the file)",
+    )
     parser.add_argument("--write", metavar="FILE", help="write the Markdown document here")
     return parser
 
@@ -567,13 +577,82 @@ def _command(args: argparse.Namespace) -> str:
         factor = getattr(args, f"{option}_scale")
         if factor != 1.0:
             parts.append(f"--{option.replace('_', '-')}-scale {factor:g}")
+    if args.rows:
+        parts.append(f"--rows {args.rows}")
     if args.write:
         parts.append(f"--write {args.write}")
     return " ".join(parts)
 
 
+RUN_COLUMNS = (
+    "population",
+    "runs",
+    "duration",
+    "bandwidth_scale",
+    "damping_scale",
+    "velocity_weight_scale",
+    "command_scale",
+)
+"""Columns of the saved rows that hold the run settings (one value in every row)."""
+ROW_COLUMNS = ("seed", "driver", "archetype", "speed", *STATISTICS, *RUN_COLUMNS)
+"""Columns a rows file needs for :func:`read_rows` (what ``--rows`` saves)."""
+
+
+def read_rows(path: Path) -> tuple[pd.DataFrame, argparse.Namespace]:
+    """The rows saved with ``--rows`` and the arguments of the command that made them.
+
+    Raises ValueError naming the file and what is wrong with it: unreadable, a missing
+    column of :data:`ROW_COLUMNS`, a run setting that differs between rows, or a different
+    number of drivers per (seed, speed).
+    """
+    try:
+        rows = pd.read_csv(path)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as error:
+        raise ValueError(f"rows file {path}: cannot be read as CSV ({error})") from error
+    missing = [c for c in ROW_COLUMNS if c not in rows.columns]
+    if missing:
+        raise ValueError(
+            f"rows file {path}: missing column(s) {', '.join(missing)} "
+            "(save the rows with --rows of this version)"
+        )
+    if rows.empty:
+        raise ValueError(f"rows file {path}: no rows")
+    settings = {}
+    for column in RUN_COLUMNS:
+        values = rows[column].unique()
+        if len(values) != 1:
+            raise ValueError(f"rows file {path}: column {column} differs between rows")
+        settings[column] = values[0]
+    drivers = rows.groupby(["seed", "speed"]).size().unique()
+    if len(drivers) != 1:
+        raise ValueError(f"rows file {path}: the number of drivers differs between seeds/speeds")
+    args = argparse.Namespace(
+        population=str(settings["population"]),
+        seeds=",".join(str(int(s)) for s in dict.fromkeys(rows["seed"])),
+        drivers=int(drivers[0]),
+        runs=int(settings["runs"]),
+        duration=float(settings["duration"]),
+        speeds=",".join(f"{v:g}" for v in dict.fromkeys(rows["speed"])),
+        rows=str(path),
+        **{c: float(settings[c]) for c in RUN_COLUMNS[3:]},
+    )
+    return rows, args
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = command_parser().parse_args(argv)
+    if args.from_rows:
+        if args.rows:
+            print("python -m benchmarks.population_check: --rows and --from-rows: give one",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        try:
+            rows, made_by = read_rows(Path(args.from_rows))
+        except ValueError as error:
+            print(f"python -m benchmarks.population_check: {error}", file=sys.stderr)
+            return 2
+        made_by.write = args.write
+        return _report(rows, made_by)
     try:
         seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
         speeds = [float(s) for s in args.speeds.split(",") if s.strip()]
@@ -597,12 +676,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     with population_variant(args.population, scales) as name:
         rows = check_population(name, seeds, args.drivers, args.runs, args.duration, speeds)
+    rows = rows.assign(
+        population=args.population,
+        runs=args.runs,
+        duration=args.duration,
+        **{f"{o}_scale": f for o, f in factors.items()},
+    )
     if args.rows:
         rows.to_csv(args.rows, index=False)
+    return _report(rows, args)
+
+
+def _report(rows: pd.DataFrame, args: argparse.Namespace) -> int:
+    """Print the mix's summary of ``rows`` and write the document if ``args.write``."""
     summary = summarize(rows)
     print(summary[summary["group"] == "mix"].round(3).to_string(index=False))
     if args.write:
-        write_document(rows, summary, Path(args.write), _command(args), args.duration)
+        rewrite = (
+            f"python -m benchmarks.population_check --from-rows {args.rows} --write {args.write}"
+            if args.rows
+            else None
+        )
+        write_document(
+            rows, summary, Path(args.write), _command(args), args.duration, rewrite=rewrite
+        )
         print(f"wrote {args.write}", file=sys.stderr)
     return 0
 

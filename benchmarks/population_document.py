@@ -81,8 +81,21 @@ class Reference:
 
 
 _NOT_FOUND = (
-    "no published number found: the project's search tool (corpora pages, docs, code) returned "
-    "titles and abstracts but no text with a value"
+    "No published number found: two searches with the project's search tool (corpora pages, "
+    "docs, issues and code, and exact-string search of public repositories; the second on "
+    "2026-12-03, its queries in docs/design.md §7.8.1) reached titles, abstracts and the first "
+    "pages of papers, none of which gives this value for human drivers; the tool returns the "
+    "opening of each page, and the values sit in the papers' results sections."
+)
+_REVERSAL_METHOD = (
+    "Method: Markkula & Engstrom (2006), 13th ITS World Congress; SAE J2944 (2015); the "
+    "authors' reference code (github.com/gmarkkula/SteeringWheelReversalRate) recommends 0.6 Hz "
+    "with a 3 deg gap (large reversals) and 2 Hz with 0.1 deg (small ones). Macdonald & Hoffmann "
+    "(1980), Human Factors 22(6):733-739 and McLean & Hoffmann (1975), Human Factors "
+    "17(3):248-256: the rate rises with task demand and reflects control frequency "
+    "(qualitative); He & McCarley (2011), HFES 55:1894-1898 and Wang et al. (2019), Accid. Anal. "
+    "Prev. 125:98-105: cognitive load or visual distraction raise it (abstracts without "
+    "baseline values). "
 )
 HUMAN_REFERENCES: tuple[Reference, ...] = (
     Reference(
@@ -93,7 +106,12 @@ HUMAN_REFERENCES: tuple[Reference, ...] = (
         "Weir & Wojcik (1971), 'The measurement of driver describing functions in simulated "
         "steering control tasks', 7th Annual Conference on Manual Control, pp. 209-218; "
         "Weir & McRuer, 'A theory for driver steering control of motor vehicles' (Highway "
-        "Research Record 247, 1968). " + _NOT_FOUND,
+        "Research Record 247, 1968); Weir & McRuer (1973), SAE 730098 (crosswind-gust simulator "
+        "describing functions); McRuer & Klein (1976), SAE 760778 (gust regulation in a "
+        "variable-stability car: drivers keep bandwidth and damping about constant); Delp, "
+        "Crossman & Szostak (1972), 7th Annual Conference on Manual Control (highway describing "
+        "functions of 3 drivers through a double steering wheel, ntrs.nasa.gov 19730001405); "
+        "all reached as abstracts or first pages only. " + _NOT_FOUND,
     ),
     Reference(
         "phase_margin",
@@ -108,14 +126,21 @@ HUMAN_REFERENCES: tuple[Reference, ...] = (
         None,
         None,
         "McRuer & Jex (1967), 'A review of quasi-linear pilot models', IEEE Trans. Human "
-        "Factors in Electronics HFE-8(3) (the model used here). " + _NOT_FOUND,
+        "Factors in Electronics HFE-8(3) (the model used here); McRuer, 'Man-Machine Systems', "
+        "The Electrical Engineering Handbook ch. 105 (CRC 2000; crossover frequency and remnant "
+        "of full-attention operations: first page only). Not used: simulation-software "
+        "documentation of pilot models (a default 'pilot time delay' of aircraft pilots, not a "
+        "measured effective delay of drivers). " + _NOT_FOUND,
     ),
     Reference(
         "remnant_share",
         "share of the operator's output not linearly coherent with the forcing function",
         None,
         None,
-        "McRuer & Jex (1967) define the remnant. " + _NOT_FOUND,
+        "McRuer & Jex (1967) define the remnant; van der El et al. (2019), IFAC HMS "
+        "(remnant relative to the linear output in compensatory, pursuit and preview tracking) "
+        "and Allen, Jex, McRuer & DiMarco (1975) (driver remnant rises under alcohol in a "
+        "simulator): abstracts without values. " + _NOT_FOUND,
     ),
     Reference(
         "sdlp",
@@ -125,10 +150,23 @@ HUMAN_REFERENCES: tuple[Reference, ...] = (
         "Verster & Roth (2011), 'Standard operation procedures for conducting the on-the-road "
         "driving test, and measurement of the standard deviation of lateral position (SDLP)', "
         "Int. J. Gen. Med. 4:359-371 (method; 268 placebo drives pooled); Zhou, Peng & Gordon "
-        "(2008), SAE 2008-01-0561 (naturalistic highway driving, norms per speed range). "
+        "(2008), SAE 2008-01-0561 (naturalistic highway driving, norms per speed range); Brown et "
+        "al. (2023), pooled NADS simulator baselines (SDLP rises with speed limit, traffic, lane "
+        "count). Abstracts of the on-road studies give only changes from placebo, e.g. +2.5 cm "
+        "(95 % CI 2.0-2.9) at a blood alcohol concentration of 0.5 g/L over 182 drivers in nine "
+        "studies, against a 2.4 cm criterion of clinical relevance (Jongen et al. 2017, "
+        "Psychopharmacology 234:837-844, cris.maastrichtuniversity.nl), not the placebo level. "
         + _NOT_FOUND,
     ),
-    Reference("wheel_sd", "straight-road lane keeping", None, None, _NOT_FOUND),
+    Reference(
+        "wheel_sd",
+        "straight-road lane keeping",
+        None,
+        None,
+        "Xu et al. (2021), FISITA APAC-21-190 (SD of steering angle and SDLP over a 1 h "
+        "monotonous simulator drive); Green et al. (2009), UMTRI-2006-35 (steering-wheel angle "
+        "distributions in the ACAS naturalistic study); abstracts without values. " + _NOT_FOUND,
+    ),
     Reference(
         "wheel_rate_rms",
         "straight-road lane keeping",
@@ -144,11 +182,7 @@ HUMAN_REFERENCES: tuple[Reference, ...] = (
             f"reversal rate at a {g:g} deg gap, 0.6 Hz low-pass",
             None,
             None,
-            "Method: Markkula & Engstrom (2006), 13th ITS World Congress; SAE J2944 (2015); "
-            "the authors' reference code recommends 0.6 Hz with a 3 deg gap (large reversals) "
-            "and 2 Hz with 0.1 deg (small ones). Macdonald & Hoffmann (1980), Human Factors "
-            "22(6):733-739 and McLean & Hoffmann (1975), Human Factors 17(3):248-256: the rate "
-            "rises with task demand and reflects control frequency (qualitative). " + _NOT_FOUND,
+            _REVERSAL_METHOD + _NOT_FOUND,
         )
         for g in GAPS
     ),
@@ -159,7 +193,9 @@ HUMAN_REFERENCES: tuple[Reference, ...] = (
         None,
         "van Winsum, Brookhuis & de Waard (2000), Accid. Anal. Prev. 32(1):47-56: the "
         "first-order approximation used here fits TLC minima poorly while in lane; Zhou, Peng "
-        "& Gordon (2008), SAE 2008-01-0561 (TLC norms per speed range). " + _NOT_FOUND,
+        "& Gordon (2008), SAE 2008-01-0561 (TLC norms per speed range); Godthelp, Milgram & "
+        "Blaauw (1984), Human Factors 26(3) (TLC on a straight road against self-chosen "
+        "occlusion times): abstracts without values. " + _NOT_FOUND,
     ),
     Reference("tlc_p15", "as for the median", None, None, "as for the median. " + _NOT_FOUND),
     Reference("left_road", "lane keeping on a straight road", 0.0, 0.0, "none are expected"),
@@ -224,16 +260,24 @@ def _outside(summary: pd.DataFrame) -> list[str]:
             if not ref.low <= r["value"] <= ref.high:
                 outside.append(f"{statistic} at {r['speed']:g} m/s ({r['value']:.3g})")
     ranked = [s for s in dict.fromkeys(mix["statistic"]) if s not in unranked]
-    return [
+    lines = [
         f"Outside their cited ranges (mix, median over drivers), of the {len(ranked)} statistics "
         f"that have one ({', '.join(ranked)}): "
         + (", ".join(outside) if outside else "none")
         + ".",
-        "",
-        "Without a published range to compare with: " + ", ".join(unranked) + ". What was tried "
-        "to bring the loop closer to people's, and why the population was left as it is: "
-        "docs/design.md §7.8.",
     ]
+    if unranked:
+        lines += [
+            "",
+            f"Without a published range to compare with ({len(unranked)} of "
+            f"{len(ranked) + len(unranked)}): " + ", ".join(unranked) + ". Two searches found no "
+            "published human value for these (what was searched: the sources below and "
+            "docs/design.md §7.8.1), so this document does not say whether they are human-like: "
+            "the comparison with people covers only staying on the road. What was tried to bring "
+            "the loop closer to people's, and why the population was left as it is: "
+            "docs/design.md §7.8.",
+        ]
+    return lines
 
 
 _METHOD = """**How it is measured.** Every driver of the population (each seed draws its own nine)
@@ -266,15 +310,27 @@ statistic over the archetype's drivers (three per seed)."""
 
 
 def write_document(
-    rows: pd.DataFrame, summary: pd.DataFrame, path: Path, command: str, duration: float = 120.0
+    rows: pd.DataFrame,
+    summary: pd.DataFrame,
+    path: Path,
+    command: str,
+    duration: float = 120.0,
+    rewrite: str | None = None,
 ) -> None:
-    """The Markdown document (header: the command that wrote it; runs of ``duration`` s)."""
+    """The Markdown document (header: the command that wrote it, and ``rewrite``, the command
+    that writes it again from the saved rows without simulating; runs of ``duration`` s)."""
     spec_seeds = ", ".join(str(s) for s in sorted(rows["seed"].unique()))
     window = INJECTION_HARMONICS
     lines = [
         TITLE,
         "",
-        f"Written by `{command}`; rerun it to check every number here.",
+        f"Written by `{command}`; rerun it to check every number here."
+        + (
+            f" `{rewrite}` writes this document again from the rows that command saved, "
+            "without simulating (after a change to the references or the layout)."
+            if rewrite
+            else ""
+        ),
         "",
         f"Population seeds {spec_seeds}; {rows['driver'].nunique()} drivers per seed; "
         f"{len(rows)} (seed, driver, speed) rows.",

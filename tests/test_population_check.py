@@ -13,6 +13,8 @@ import pandas as pd
 import pytest
 
 from benchmarks.population_check import (
+    ROW_COLUMNS,
+    RUN_COLUMNS,
     Injection,
     LoopScales,
     check_population,
@@ -20,6 +22,7 @@ from benchmarks.population_check import (
     loop_response,
     main,
     population_variant,
+    read_rows,
     reversal_rate,
     summarize,
     time_to_line_crossing,
@@ -32,7 +35,8 @@ from benchmarks.population_document import (
 )
 from hasa_env.drivers import POPULATIONS, population
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "population.md"
+ROOT = Path(__file__).resolve().parent.parent
+DOC = ROOT / "docs" / "population.md"
 DT = 0.01
 
 
@@ -113,11 +117,15 @@ def test_a_reduced_check_writes_the_document_with_its_command(tmp_path, capsys):
         "Written by `python -m benchmarks.population_check --population paper --seeds 2990" in text
     )
     frame = pd.read_csv(rows)
-    assert len(frame) == 3 and set(STATISTICS) <= set(frame.columns)
+    assert len(frame) == 3 and set(ROW_COLUMNS) <= set(frame.columns)
     # 25 s windows: the multisine starts at 1.26 rad/s, a slower crossover is not found (NaN)
     assert frame["crossover"].notna().any()
     summary = summarize(frame)
     assert set(summary["group"]) >= {"mix"}
+    # the saved rows write the same document again, without simulating
+    again = tmp_path / "again.md"
+    assert main(["--from-rows", str(rows), "--write", str(again)]) == 0
+    assert again.read_text(encoding="utf-8") == text.replace(str(out), str(again))
 
 
 def _command(text: str) -> list[str]:
@@ -147,6 +155,77 @@ def test_the_document_has_a_table_row_per_statistic_and_speed_column():
         )
     for ref in HUMAN_REFERENCES:
         assert f'<a id="{ref.statistic}"></a>' in text  # every statistic names its source
+
+
+def test_the_document_is_what_the_code_writes_from_its_saved_rows(tmp_path, monkeypatch):
+    """docs/population.md's header names the rows file its command saved; writing the document
+    from those rows (no simulation) gives the committed document, so a change to the human
+    references or the layout cannot leave it stale."""
+    args = command_parser().parse_args(_command(DOC.read_text(encoding="utf-8")))
+    assert args.rows, "the documented command saves no rows (--rows)"
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "population.md"
+    assert main(["--from-rows", args.rows, "--write", str(out)]) == 0
+    written = out.read_text(encoding="utf-8").replace(str(out), args.write)
+    assert written == DOC.read_text(encoding="utf-8")
+
+
+def _rows(seeds=(3100, 3101), drivers=3, speeds=(15.0, 25.0)) -> pd.DataFrame:
+    """Per-driver rows as ``--rows`` saves them, with made-up statistics."""
+    rng = np.random.default_rng(0)
+    records = []
+    for seed in seeds:
+        for speed in speeds:
+            for d in range(drivers):
+                record = {
+                    "seed": seed,
+                    "driver": f"d{d}",
+                    "archetype": ("two-point", "preview", "intermittent")[d % 3],
+                    "speed": speed,
+                }
+                record.update({name: float(rng.uniform(0.1, 2.0)) for name in STATISTICS})
+                record.update(population="paper", runs=1, duration=60.0)
+                record.update({c: 1.0 for c in RUN_COLUMNS[3:]})
+                records.append(record)
+    return pd.DataFrame(records)
+
+
+def test_rows_name_the_command_that_made_them(tmp_path):
+    path = tmp_path / "rows.csv"
+    _rows().to_csv(path, index=False)
+    rows, made_by = read_rows(path)
+    assert len(rows) == 12
+    assert (made_by.seeds, made_by.speeds, made_by.drivers) == ("3100,3101", "15,25", 3)
+    assert (made_by.runs, made_by.duration, made_by.population) == (1, 60.0, "paper")
+    out = tmp_path / "population.md"
+    assert main(["--from-rows", str(path), "--write", str(out)]) == 0
+    header = out.read_text(encoding="utf-8").splitlines()[2]
+    assert (
+        "`python -m benchmarks.population_check --population paper --seeds 3100,3101 "
+        f"--drivers 3 --runs 1 --duration 60 --speeds 15,25 --rows {path} --write {out}`"
+    ) in header
+    assert f"--from-rows {path} --write {out}" in header
+
+
+def test_a_rows_file_without_a_column_is_refused_naming_the_file_and_the_column(tmp_path, capsys):
+    path = tmp_path / "rows.csv"
+    _rows().drop(columns=["srr_2", "duration"]).to_csv(path, index=False)
+    with pytest.raises(ValueError, match=r"rows\.csv: missing column\(s\) srr_2, duration"):
+        read_rows(path)
+    assert main(["--from-rows", str(path), "--write", str(tmp_path / "out.md")]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "srr_2" in err and "duration" in err
+    assert not (tmp_path / "out.md").exists()
+    (tmp_path / "empty.csv").write_text("", encoding="utf-8")
+    with pytest.raises(ValueError, match="empty.csv: cannot be read"):
+        read_rows(tmp_path / "empty.csv")
+    with pytest.raises(ValueError, match="nowhere.csv: cannot be read"):
+        read_rows(tmp_path / "nowhere.csv")
+    mixed = _rows()
+    mixed.loc[0, "duration"] = 120.0
+    mixed.to_csv(path, index=False)
+    with pytest.raises(ValueError, match="column duration differs between rows"):
+        read_rows(path)
 
 
 def test_the_harmonics_are_distinct_and_increasing():
