@@ -3,10 +3,11 @@
 ``python -m benchmarks.population_check [--population paper] [--seeds 2000,2001]
 [--drivers 9] [--runs 2] [--duration 120] [--speeds 15,25,45] [--rows rows.csv]
 [--write docs/population.md]``; ``--from-rows rows.csv --write FILE`` writes the document
-from rows saved with ``--rows`` without simulating (:func:`read_rows`); ``--bandwidth-scale``, ``--damping-scale``,
-``--velocity-weight-scale`` and ``--command-scale`` check a variant of the population with
-those ranges scaled (:class:`LoopScales`; the same drivers otherwise), for trying a
-recalibration without changing the population.
+from rows saved with ``--rows`` without simulating
+(:func:`benchmarks.population_document.read_rows`); ``--bandwidth-scale``,
+``--damping-scale``, ``--velocity-weight-scale`` and ``--command-scale`` check a variant of
+the population with those ranges scaled (:class:`benchmarks.population_variants.LoopScales`;
+the same drivers otherwise), for trying a recalibration without changing the population.
 
 Every driver of the population (each seed draws its own drivers) drives a straight road
 at each of the study's speeds (:data:`SPEEDS`: 15, 25 and 45 m/s, held, with the driver's
@@ -36,11 +37,10 @@ was found); nothing is fitted here. ``--write`` writes the Markdown document
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
 import sys
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -58,11 +58,15 @@ from benchmarks.population_document import (
     INJECTION_HARMONICS,
     RATE_CUTOFF,
     REVERSAL_CUTOFF,
+    ROW_COLUMNS,
+    RUN_COLUMNS,
     SETTLE,
     STATISTICS,
     STEERING_RATIO,
+    read_rows,
     write_document,
 )
+from benchmarks.population_variants import LoopScales, population_variant
 from benchmarks.protocol.intervals import hierarchical_bootstrap, percentile_interval
 from hasa_env.drivers import POPULATIONS, make_driver, population
 from hasa_env.drivers.archetypes import archetype_of
@@ -461,74 +465,6 @@ def summarize(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-# ----------------------------------------------------------------------- variants
-@dataclass(frozen=True)
-class LoopScales:
-    """Factors on a population's ranges, for trying a recalibration without changing it.
-
-    Attributes:
-        bandwidth: the lateral-loop bandwidth of every archetype.
-        damping: the two-point drivers' loop damping.
-        velocity_weight: the preview and intermittent drivers' LQR velocity weight.
-        command: the command noise before the neuromuscular lag (``command_scale``).
-    """
-
-    bandwidth: float = 1.0
-    damping: float = 1.0
-    velocity_weight: float = 1.0
-    command: float = 1.0
-
-    def __post_init__(self) -> None:
-        for name in ("bandwidth", "damping", "velocity_weight", "command"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"LoopScales.{name} must be a finite factor > 0, got {value!r}")
-
-    @property
-    def is_identity(self) -> bool:
-        return self == LoopScales()
-
-
-def _scaled(bounds: Any, factor: float) -> Any:
-    return replace(bounds, low=bounds.low * factor, high=bounds.high * factor)
-
-
-@contextlib.contextmanager
-def population_variant(name: str, scales: LoopScales) -> Iterator[str]:
-    """The name of a copy of population ``name`` with its ranges scaled (the same drivers
-    otherwise: same seed key), registered in ``POPULATIONS`` while in use."""
-    if scales.is_identity:
-        yield name
-        return
-    spec = POPULATIONS[name]
-    variant = (
-        f"{name}@bandwidth={scales.bandwidth:g},damping={scales.damping:g},"
-        f"velocity_weight={scales.velocity_weight:g},command={scales.command:g}"
-    )
-    changes: dict[str, Any] = {
-        "two_point": replace(
-            spec.two_point,
-            bandwidth=_scaled(spec.two_point.bandwidth, scales.bandwidth),
-            damping=_scaled(spec.two_point.damping, scales.damping),
-        ),
-        "command_scale": spec.command_scale * scales.command,
-        "seed_key": spec.seed_key or name,
-    }
-    for archetype in ("preview", "intermittent"):
-        ranges = getattr(spec, archetype)
-        if ranges is not None:
-            changes[archetype] = replace(
-                ranges,
-                bandwidth=_scaled(ranges.bandwidth, scales.bandwidth),
-                velocity_weight=_scaled(ranges.velocity_weight, scales.velocity_weight),
-            )
-    POPULATIONS[variant] = replace(spec, **changes)
-    try:
-        yield variant
-    finally:
-        del POPULATIONS[variant]
-
-
 # ----------------------------------------------------------------------- command line
 def command_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.population_check`` (the document's header
@@ -582,61 +518,6 @@ def _command(args: argparse.Namespace) -> str:
     if args.write:
         parts.append(f"--write {args.write}")
     return " ".join(parts)
-
-
-RUN_COLUMNS = (
-    "population",
-    "runs",
-    "duration",
-    "bandwidth_scale",
-    "damping_scale",
-    "velocity_weight_scale",
-    "command_scale",
-)
-"""Columns of the saved rows that hold the run settings (one value in every row)."""
-ROW_COLUMNS = ("seed", "driver", "archetype", "speed", *STATISTICS, *RUN_COLUMNS)
-"""Columns a rows file needs for :func:`read_rows` (what ``--rows`` saves)."""
-
-
-def read_rows(path: Path) -> tuple[pd.DataFrame, argparse.Namespace]:
-    """The rows saved with ``--rows`` and the arguments of the command that made them.
-
-    Raises ValueError naming the file and what is wrong with it: unreadable, a missing
-    column of :data:`ROW_COLUMNS`, a run setting that differs between rows, or a different
-    number of drivers per (seed, speed).
-    """
-    try:
-        rows = pd.read_csv(path)
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as error:
-        raise ValueError(f"rows file {path}: cannot be read as CSV ({error})") from error
-    missing = [c for c in ROW_COLUMNS if c not in rows.columns]
-    if missing:
-        raise ValueError(
-            f"rows file {path}: missing column(s) {', '.join(missing)} "
-            "(save the rows with --rows of this version)"
-        )
-    if rows.empty:
-        raise ValueError(f"rows file {path}: no rows")
-    settings = {}
-    for column in RUN_COLUMNS:
-        values = rows[column].unique()
-        if len(values) != 1:
-            raise ValueError(f"rows file {path}: column {column} differs between rows")
-        settings[column] = values[0]
-    drivers = rows.groupby(["seed", "speed"]).size().unique()
-    if len(drivers) != 1:
-        raise ValueError(f"rows file {path}: the number of drivers differs between seeds/speeds")
-    args = argparse.Namespace(
-        population=str(settings["population"]),
-        seeds=",".join(str(int(s)) for s in dict.fromkeys(rows["seed"])),
-        drivers=int(drivers[0]),
-        runs=int(settings["runs"]),
-        duration=float(settings["duration"]),
-        speeds=",".join(f"{v:g}" for v in dict.fromkeys(rows["speed"])),
-        rows=str(path),
-        **{c: float(settings[c]) for c in RUN_COLUMNS[3:]},
-    )
-    return rows, args
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -8,6 +8,7 @@ Markdown document ``python -m benchmarks.population_check --write`` writes).
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,10 +21,13 @@ __all__ = [
     "HUMAN_REFERENCES",
     "INJECTION_ACCELERATION",
     "INJECTION_HARMONICS",
+    "ROW_COLUMNS",
+    "RUN_COLUMNS",
     "STATISTICS",
     "TABLE_HEADER",
     "TITLE",
     "Reference",
+    "read_rows",
     "write_document",
 ]
 
@@ -202,6 +206,62 @@ HUMAN_REFERENCES: tuple[Reference, ...] = (
     Reference("ident_left_road", "lane keeping on a straight road", 0.0, 0.0, "none are expected"),
 )
 """Published human values of each statistic of :data:`STATISTICS` (None: none found)."""
+
+
+# ----------------------------------------------------------------------- saved rows
+RUN_COLUMNS = (
+    "population",
+    "runs",
+    "duration",
+    "bandwidth_scale",
+    "damping_scale",
+    "velocity_weight_scale",
+    "command_scale",
+)
+"""Columns of the saved rows that hold the run settings (one value in every row)."""
+ROW_COLUMNS = ("seed", "driver", "archetype", "speed", *STATISTICS, *RUN_COLUMNS)
+"""Columns a rows file needs for :func:`read_rows` (what ``--rows`` saves)."""
+
+
+def read_rows(path: Path) -> tuple[pd.DataFrame, argparse.Namespace]:
+    """The rows saved with ``--rows`` and the arguments of the command that made them.
+
+    Raises ValueError naming the file and what is wrong with it: unreadable, a missing
+    column of :data:`ROW_COLUMNS`, a run setting that differs between rows, or a different
+    number of drivers per (seed, speed).
+    """
+    try:
+        rows = pd.read_csv(path)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as error:
+        raise ValueError(f"rows file {path}: cannot be read as CSV ({error})") from error
+    missing = [c for c in ROW_COLUMNS if c not in rows.columns]
+    if missing:
+        raise ValueError(
+            f"rows file {path}: missing column(s) {', '.join(missing)} "
+            "(save the rows with --rows of this version)"
+        )
+    if rows.empty:
+        raise ValueError(f"rows file {path}: no rows")
+    settings = {}
+    for column in RUN_COLUMNS:
+        values = rows[column].unique()
+        if len(values) != 1:
+            raise ValueError(f"rows file {path}: column {column} differs between rows")
+        settings[column] = values[0]
+    drivers = rows.groupby(["seed", "speed"]).size().unique()
+    if len(drivers) != 1:
+        raise ValueError(f"rows file {path}: the number of drivers differs between seeds/speeds")
+    args = argparse.Namespace(
+        population=str(settings["population"]),
+        seeds=",".join(str(int(s)) for s in dict.fromkeys(rows["seed"])),
+        drivers=int(drivers[0]),
+        runs=int(settings["runs"]),
+        duration=float(settings["duration"]),
+        speeds=",".join(f"{v:g}" for v in dict.fromkeys(rows["speed"])),
+        rows=str(path),
+        **{c: float(settings[c]) for c in RUN_COLUMNS[3:]},
+    )
+    return rows, args
 
 
 # ----------------------------------------------------------------------- document
