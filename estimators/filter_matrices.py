@@ -137,7 +137,6 @@ class FilterMatrices:
         p0[Y, BIAS] = p0[BIAS, Y] = -(s.bias_std**2)  # y_i = camera - b_i
         if model.preferred_offset:
             p0[PREFERRED_OFFSET, PREFERRED_OFFSET] = s.preferred_offset_std**2
-        self._offset_sensitivity = model.memory_offset_sensitivity()
         self.initial_covariance = self.restart_memory_covariance(p0[None])[0]
         self._build_fast_path(input_matrix)
         for arr in (
@@ -167,7 +166,7 @@ class FilterMatrices:
         out[:, mem, :] = 0.0
         out[:, :, mem] = 0.0
         if self.model.preferred_offset and self.model.n_memory:
-            sens = self._offset_sensitivity
+            sens = self.model.memory_offset_sensitivity()
             row = out[:, PREFERRED_OFFSET, :]  # (B, n), memory columns 0
             out[:, mem, :] = sens[None, :, None] * row[:, None, :]
             out[:, :, mem] = out[:, mem, :].transpose(0, 2, 1)

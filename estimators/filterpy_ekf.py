@@ -438,8 +438,10 @@ class FilterpyGMEKF:
         steering: float,
         points: np.ndarray | None,
     ) -> None:
-        """The memory restart after low speed: ``m_i = steady_memory(z_3, x_i)``,
-        ``P_mm = memory_std^2 I``, uncorrelated with the vehicle states."""
+        """The memory restart after low speed: ``m_i = steady_memory(z_3, x_i)`` and the
+        covariance of :meth:`FilterMatrices.restart_memory_covariance` (``P_mm = memory_std^2
+        I``, uncorrelated with the vehicle states; with the driver's preferred offset p,
+        correlated through p)."""
         model = self.model
         if model.n_memory:
             mem = model.memory_slice

@@ -400,9 +400,12 @@ def fit_model(
         )
     check_regression_shapes(X, y)
     nuisance = len(blocks) if aim_offset and X.shape[1] else 0
+    fit_blocks = _with_aim_offsets(blocks) if nuisance else blocks
     solution, cross_validation, cv_lambda = _regression_solution(
         model,
-        _with_aim_offsets(blocks) if nuisance else blocks,
+        fit_blocks,
+        np.vstack([b["matrix"] for b in fit_blocks]) if nuisance else X,
+        y,
         ridge=ridge,
         folds=folds,
         lambdas=lambdas,
@@ -466,6 +469,8 @@ def _without_nuisance(solution: LinearSolution, nuisance: int) -> LinearSolution
 def _regression_solution(
     model: SteeringModel,
     blocks: Sequence[Mapping[str, np.ndarray]],
+    X: np.ndarray,
+    y: np.ndarray,
     *,
     ridge: str | float,
     folds: int,
@@ -476,15 +481,13 @@ def _regression_solution(
 ) -> tuple[LinearSolution, CrossValidation | None, float]:
     """The regression of :func:`fit_model` (its arguments of the same names): (solution, the
     cross-validation or None, the penalty cross-validation chose, before any raise for
-    stability). The last ``nuisance`` columns of the blocks' matrices (the runs' aim
-    offsets) are fitted with the model's and left out of the solution::
+    stability). ``X``, ``y``: the blocks' matrices and targets stacked. The last ``nuisance``
+    columns of the matrices (the runs' aim offsets) are fitted with the model's and left out of the solution::
 
         delta(k) = theta . x(k) + c_r + e(k),       c_r: run r's intercept
 
     (c_r = -sum_j beta_j . u_r: the features the driver holds still at, on a straight
     road those of their preferred offset)."""
-    X = np.vstack([b["matrix"] for b in blocks])
-    y = np.concatenate([b["target"] for b in blocks])
     names = list(model.parameter_names) + [f"aim_offset_{r}" for r in range(nuisance)]
     cross_validation = None
     if isinstance(ridge, str):
