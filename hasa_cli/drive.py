@@ -123,7 +123,7 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
         type=float,
         default=None,
         help="initial y in m (default: the scenario's; paper -0.5, late_ambiguity halfway "
-        "between the hypotheses)",
+        "between the hypotheses, turned 0.02 rad toward the other one's centre)",
     )
     p.add_argument(
         "--output",

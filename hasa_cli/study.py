@@ -189,9 +189,15 @@ def _scenario_lines(study: Study) -> list[str]:
     )
     if init["lateral_offset_std"] > 0.0:
         where += f" (+ a Gaussian of std {init['lateral_offset_std']:g} m)"
+    heading = f"heading {init['heading']:g} rad"
+    if init["heading_toward_other"]:
+        heading += (
+            f" + {init['heading_toward_other']:g} rad toward the other hypothesis's centre "
+            "(initial_state.heading_toward_other)"
+        )
     lines = [
         f"scenario {spec.name!r}: {spec.summary}",
-        f"  start: {init['speed']:g} m/s, {where}, heading {init['heading']:g} rad; lane "
+        f"  start: {init['speed']:g} m/s, {where}, {heading}; lane "
         f"hypotheses {config['markings']['hypotheses']} m",
     ]
     if config["road"]["lane_shifts"]:

@@ -25,7 +25,8 @@ lane_shift             a construction-zone shift: the driven lane moves 1.8 m ov
                        lane centre (onto the ghost centre, under either true bias); the
                        old markings carry straight on; a lane on either side
 late_ambiguity         the ambiguity starts at speed (25 m/s) with the car halfway
-                       between the true centre and the ghost's
+                       between the true centre and the ghost's, drifting toward the
+                       ghost at 0.02 rad
 close_hypotheses       hypotheses 0.3 m apart (worn paint, tar seams); start centred
                        +- 0.25 m (std)
 off_centre_drivers     each driver keeps a preferred offset of 0.2-0.5 m, left or right;
@@ -48,6 +49,11 @@ import numpy as np
 __all__ = ["SCENARIOS", "Scenario", "scenario_drivers", "scenario_names", "scenario_spec"]
 
 P = TypeVar("P")
+
+LATE_AMBIGUITY_DRIFT = 0.02
+"""Heading (rad) toward the ghost centre at the start of ``late_ambiguity``: 0.5 m/s of
+lateral drift at 25 m/s, the lateral speed of an unintended lane departure (docs/design.md
+§14.8)."""
 
 
 @dataclass(frozen=True)
@@ -103,13 +109,21 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "late_ambiguity",
-            "the ambiguity starts at 25 m/s, the car halfway between the true and the ghost centre",
-            "the ghost markings appear as the car is halfway between its lane's centre "
-            "and the ghost's (0.9 m from each): where the car sits says nothing until it has moved; "
-            "the driver's correction says at once which centre they steer to. (Started "
-            "centred, as first designed, a lane-centring prior decided every run right at "
-            "once: docs/design.md §14.)",
-            {"initial_state": {"between_hypotheses": True, "speed": 25.0}},
+            "the ambiguity starts at 25 m/s, the car halfway between the true and the ghost "
+            "centre and drifting toward the ghost (0.02 rad)",
+            "the ghost markings appear as the car, halfway between its lane's centre and the "
+            "ghost's (0.9 m from each), drifts toward the ghost: where the car sits first "
+            "points to the ghost until the driver's correction, which the steering shows "
+            "before the position, turns it. (Started centred, as first designed, a "
+            "lane-centring prior decided every run right at once; started halfway without the "
+            "drift, in a median 2.5 s: docs/design.md §14.8.)",
+            {
+                "initial_state": {
+                    "between_hypotheses": True,
+                    "speed": 25.0,
+                    "heading_toward_other": LATE_AMBIGUITY_DRIFT,
+                }
+            },
         ),
         Scenario(
             "close_hypotheses",

@@ -422,11 +422,13 @@ def test_synthetic_late_ambiguity_starts_between_the_hypotheses_unless_told(tmp_
         rec = _synthetic_recording(tmp_path, *common, bias)
         first = rec.data.iloc[0]
         assert first["lateral_offset"] == pytest.approx(halfway) and first["speed"] == 25.0
+        assert first["heading"] == pytest.approx(0.02 * (1 if halfway > 0 else -1))  # to the ghost
         assert rec.config["scenario"] == "late_ambiguity"
     rec = _synthetic_recording(tmp_path, *common, "0", "--lateral-offset", "0.2", "--speed", "12")
     first = rec.data.iloc[0]
     assert first["lateral_offset"] == 0.2 and first["speed"] == 12.0
     assert rec.meta["metadata"]["protocol"]["between_hypotheses"] is False
+    assert rec.meta["metadata"]["protocol"]["heading_toward_other"] == 0.02
 
 
 def test_synthetic_driver_keeps_the_scenarios_preferred_offset(tmp_path):

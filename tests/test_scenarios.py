@@ -13,7 +13,12 @@ from hasa_cli.bench import main as bench_main
 from hasa_env import ConfigError, make_config
 from hasa_env.drivers import SyntheticDriver, population, run_drivers
 from hasa_env.drivers.two_point import TwoPointParams
-from hasa_env.scenarios import SCENARIOS, scenario_drivers, scenario_names
+from hasa_env.scenarios import (
+    LATE_AMBIGUITY_DRIFT,
+    SCENARIOS,
+    scenario_drivers,
+    scenario_names,
+)
 from hasa_env.sim.road import make_road
 from hasa_env.sim.setup import INFO_KEYS
 
@@ -93,6 +98,29 @@ def test_late_ambiguity_starts_halfway_to_the_other_hypothesis():
         assert info["bias"] == hypotheses[index]
         assert info["lateral_offset"] == pytest.approx(expected)
         assert info["speed"] == 25.0
+        # turned toward the ghost centre (b_j - b): right when b = 0, left when b = -1.8
+        assert info["heading"] == pytest.approx(np.sign(expected) * LATE_AMBIGUITY_DRIFT)
+    _, info = env.reset(seed=0, options={"bias_index": 0, "heading": 0.0})
+    assert info["heading"] == 0.0  # a reset option's heading is the user's
+
+
+def test_heading_toward_other_is_checked_and_signed_per_episode():
+    with pytest.raises(ConfigError, match=r"heading_toward_other' turns .* got 1"):
+        make_config(
+            {"initial_state": {"heading_toward_other": 0.02}, "markings": {"hypotheses": [0.0]}}
+        )
+    with pytest.raises(ConfigError, match=r"heading_toward_other"):
+        make_config({"initial_state": {"heading_toward_other": 0.6}})
+    config = {
+        "markings": {"hypotheses": [0.0, 0.5, -1.8]},
+        "initial_state": {"heading_toward_other": 0.01, "heading": 0.002},
+    }
+    env = gym.make("hasa_env/LaneKeeping-v0", config=config)
+    for index, side in ((0, 1.0), (1, -1.0), (2, 1.0)):  # nearest other: 0.5, 0.0, 0.0
+        _, info = env.reset(seed=1, options={"bias_index": index})
+        assert info["heading"] == pytest.approx(0.002 + side * 0.01)
+    cfg = make_config({"scenario": "paper"})
+    assert cfg["initial_state"]["heading_toward_other"] == 0.0
 
 
 def _final_offsets(name, params, seconds=30.0):

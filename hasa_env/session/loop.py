@@ -413,7 +413,7 @@ class DriveSession:
                 "scenario": s.scenario,
                 "speed": start["speed"],
                 "lateral_offset": start["lateral_offset"],
-                "between_hypotheses": start["between_hypotheses"],
+                **{key: start[key] for key in ("between_hypotheses", "heading_toward_other")},
                 "bias": "random" if s.bias is None else s.bias,
                 "speed_control": s.speed_control,
                 "min_speed": s.min_speed,

@@ -90,7 +90,8 @@ study file gives wins (``[env]``, and ``[runs]`` ``speed``, ``lateral_offset``,
 ``studies/paper.toml`` with ``scenario = "late_ambiguity"`` starts at the file's
 15 m/s but halfway between the hypotheses' centres (the scenario's
 ``initial_state.between_hypotheses``, which places the car whatever
-``lateral_offset`` says), and with ``scenario = "close_hypotheses"`` it keeps
+``lateral_offset`` says, and its ``heading_toward_other``, added to the file's
+``heading``), and with ``scenario = "close_hypotheses"`` it keeps
 its own ``markings.hypotheses`` ([0, -1.8] m), so the scenario changes only the
 start: ``hasa-drive study FILE --check`` lists such overridden keys
 (:meth:`Study.scenario_overrides`). A scenario's drivers' preferred offset

@@ -110,6 +110,15 @@ _SCHEMA: Field = schema(
                 "Start halfway between the true lane's centre and the centre the nearest "
                 "other hypothesis puts it at ((b_j - b) / 2, m) instead of at lateral_offset.",
             ),
+            "heading_toward_other": _number(
+                0.0,
+                "Heading (rad) added to the initial heading toward the centre the nearest "
+                "other hypothesis puts the lane at: sign(b_j - b) times this (a car drifting "
+                "toward the ghost lane); needs two hypotheses when not 0.",
+                0.0,
+                0.5,
+                "rad",
+            ),
             "lateral_offset_std": _number(
                 0.0, "Std of a Gaussian added to the initial offset (m).", 0.0, 5.0, "m"
             ),
@@ -273,7 +282,8 @@ def default_config() -> dict[str, Any]:
                                 ('left' | 'other_hypothesis')
     initial_state.*             y (m, -0.5), heading (rad), speed (m/s, 15),
                                 steering (rad), and *_std randomisation;
-                                between_hypotheses (false)
+                                between_hypotheses (false), heading_toward_other
+                                (rad, 0: turned toward the ghost centre)
     markings.hypotheses         camera biases b (m, [0, -1.8]), distinct
     markings.probabilities      prior of each (uniform)
     noise.*                     sensor noise std: speed, camera, camera_heading,
@@ -390,6 +400,11 @@ def make_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     _check_lane_shifts(cfg["road"]["lane_shifts"], cfg["markings"]["hypotheses"])
     probs = cfg["markings"]["probabilities"]
     hyps = cfg["markings"]["hypotheses"]
+    if cfg["initial_state"]["heading_toward_other"] and len(hyps) < 2:
+        raise ConfigError(
+            "config key 'initial_state.heading_toward_other' turns the car toward the other "
+            f"hypothesis's centre and needs at least two 'markings.hypotheses', got {len(hyps)}"
+        )
     if probs is not None:
         if len(probs) != len(hyps):
             raise ConfigError(

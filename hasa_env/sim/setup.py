@@ -305,6 +305,8 @@ def draw_episode(
         y = _halfway_to_nearest(bias, setup.hypotheses, y)
     y = y + init["lateral_offset_std"] * float(jitter[0])
     th = init["heading"] + init["heading_std"] * float(jitter[1])
+    if init["heading_toward_other"]:
+        th += math.copysign(init["heading_toward_other"], _toward_nearest(bias, setup.hypotheses))
     v = init["speed"] + init["speed_std"] * float(jitter[2])
     v = min(max(v, 0.0), setup.params.max_speed)
     delta = init["steering"]
@@ -326,6 +328,14 @@ def _halfway_to_nearest(bias: float, hypotheses: Sequence[float], otherwise: flo
     if nearest is None:
         return otherwise
     return 0.5 * (nearest - bias)
+
+
+def _toward_nearest(bias: float, hypotheses: Sequence[float]) -> float:
+    """Where the nearest other hypothesis b_j puts the lane's centre relative to the true
+    one, ``b_j - b`` (m; its sign is the side ``initial_state.heading_toward_other`` turns
+    the car to). The config check guarantees another hypothesis exists."""
+    nearest = nearest_other_hypothesis(bias, hypotheses)
+    return 0.0 if nearest is None else nearest - bias
 
 
 def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:
