@@ -283,7 +283,7 @@ def default_config() -> dict[str, Any]:
     initial_state.*             y (m, -0.5), heading (rad), speed (m/s, 15),
                                 steering (rad), and *_std randomisation;
                                 between_hypotheses (false), heading_toward_other
-                                (rad, 0: turned toward the ghost centre)
+                                (rad, 0; added toward the ghost centre)
     markings.hypotheses         camera biases b (m, [0, -1.8]), distinct
     markings.probabilities      prior of each (uniform)
     noise.*                     sensor noise std: speed, camera, camera_heading,
