@@ -11,7 +11,7 @@ from hasa_env.render.common import DRIVEN_LANE_COLOUR
 from hasa_env.render.driver_view import DriverViewRenderer
 from hasa_env.render.top_down import TopDownRenderer
 from hasa_env.sim.road import make_road, nearest_other_hypothesis
-from hasa_env.sim.setup import _halfway_to_nearest, build_setup
+from hasa_env.sim.setup import _ghost_centre, build_setup
 
 SHIFT = {"station": 100.0, "length": 60.0, "offset": 1.8}
 TOWARD = {**SHIFT, "toward": "other_hypothesis"}
@@ -87,7 +87,7 @@ def test_the_nearest_other_hypothesis_follows_the_between_hypotheses_rule(hypoth
     for bias in [*hypotheses, 0.7]:
         near = nearest_other_hypothesis(bias, hypotheses)
         assert road.shift_signs(bias) == np.sign(near - bias)
-        assert _halfway_to_nearest(bias, hypotheses, 9.0) == 0.5 * (near - bias)
+        assert _ghost_centre(bias, hypotheses) == near - bias  # halfway start: half of it
     np.testing.assert_array_equal(
         road.shift_signs(np.array(hypotheses)), [road.shift_signs(b) for b in hypotheses]
     )

@@ -300,13 +300,14 @@ def draw_episode(
         matches = [i for i, h in enumerate(setup.hypotheses) if h == bias]
         index = matches[0] if matches else -1
     init = setup.config["initial_state"]
+    ghost = _ghost_centre(bias, setup.hypotheses)
     y = init["lateral_offset"]
-    if init["between_hypotheses"]:
-        y = _halfway_to_nearest(bias, setup.hypotheses, y)
+    if init["between_hypotheses"] and ghost is not None:
+        y = 0.5 * ghost  # halfway between the true centre (y = 0) and the ghost's
     y = y + init["lateral_offset_std"] * float(jitter[0])
     th = init["heading"] + init["heading_std"] * float(jitter[1])
-    if init["heading_toward_other"]:
-        th += math.copysign(init["heading_toward_other"], _toward_nearest(bias, setup.hypotheses))
+    if init["heading_toward_other"] and ghost is not None:  # two hypotheses: config check
+        th += math.copysign(init["heading_toward_other"], ghost)
     v = init["speed"] + init["speed_std"] * float(jitter[2])
     v = min(max(v, 0.0), setup.params.max_speed)
     delta = init["steering"]
@@ -320,22 +321,13 @@ def draw_episode(
     return VehicleState(0.0, y, th, v, delta), index, bias, block, phases
 
 
-def _halfway_to_nearest(bias: float, hypotheses: Sequence[float], otherwise: float) -> float:
-    """The offset halfway between the true lane's centre (y = 0) and the centre the nearest
-    other hypothesis b_j puts it at (y = b_j - b): (b_j - b) / 2 (m); ``otherwise`` when
-    there is no other hypothesis."""
-    nearest = nearest_other_hypothesis(bias, hypotheses)
-    if nearest is None:
-        return otherwise
-    return 0.5 * (nearest - bias)
-
-
-def _toward_nearest(bias: float, hypotheses: Sequence[float]) -> float:
+def _ghost_centre(bias: float, hypotheses: Sequence[float]) -> float | None:
     """Where the nearest other hypothesis b_j puts the lane's centre relative to the true
-    one, ``b_j - b`` (m; its sign is the side ``initial_state.heading_toward_other`` turns
-    the car to). The config check guarantees another hypothesis exists."""
+    one, ``y = b_j - b`` (m); None when there is no other hypothesis. Used by
+    ``initial_state.between_hypotheses`` (start at half of it) and
+    ``initial_state.heading_toward_other`` (turn toward its side)."""
     nearest = nearest_other_hypothesis(bias, hypotheses)
-    return 0.0 if nearest is None else nearest - bias
+    return None if nearest is None else nearest - bias
 
 
 def draw_noise_block(rng: np.random.Generator, setup: EnvSetup) -> np.ndarray:
