@@ -95,6 +95,7 @@ _SAFETY_COLUMNS = [
     Column(interval(fixed(3), "lateral_rmse"), "lat. RMSE (m) [95% CI]"),
     Column(count_share("wrong_lane_confident_runs", "estimated_runs"), "confident wrong lane"),
     Column(count_share("wrong_lane_ever_runs", "estimated_runs"), "ever conf. wrong"),
+    Column(count_share("wrong_decision_runs", "estimated_runs"), "decided wrong (incl. withheld)"),
     Column(count_share("undecided_runs", "estimated_runs"), "undecided"),
     Column(count_share("model_mismatch_runs", "estimated_runs"), "model mismatch"),
     Column(decision_time, "decides in (s) median / p90"),

@@ -74,6 +74,8 @@ SUITE_COLUMNS = (
     "wrong_lane_confident_runs_share_ci_high",
     "wrong_lane_ever_runs", "wrong_lane_ever_runs_share_ci_low",
     "wrong_lane_ever_runs_share_ci_high",
+    "wrong_decision_runs", "wrong_decision_runs_share_ci_low",
+    "wrong_decision_runs_share_ci_high",
     "undecided_runs", "undecided_runs_share_ci_low", "undecided_runs_share_ci_high",
     "model_mismatch_runs", "model_mismatch_runs_share_ci_low", "model_mismatch_runs_share_ci_high",
 )  # fmt: skip
@@ -105,6 +107,7 @@ _TABLE = [
     Column(interval(percent, "steering_live_share"), "steering live [95% CI]"),
     Column(count_share("wrong_lane_confident_runs", "estimated_runs"), "ends conf. wrong"),
     Column(count_share("wrong_lane_ever_runs", "estimated_runs"), "ever conf. wrong"),
+    Column(count_share("wrong_decision_runs", "estimated_runs"), "decided wrong (incl. withheld)"),
 ]
 """The Markdown table's columns (the cells of the report's tables, :mod:`benchmarks.tables`)."""
 
@@ -113,11 +116,16 @@ def difficulty_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per scenario, the lane-centring baseline's row of :func:`suite_rows` judged by the bar.
 
     Returns one dict per scenario where that baseline estimated: ``scenario``, ``runs``,
-    ``wrong_ever`` (runs confidently in a wrong lane at some step), its Clopper-Pearson
-    interval, ``decide_median`` (s; None: the median run never decided), how its runs end
+    ``wrong_ever`` (runs whose reported weights were confidently in a wrong lane at some
+    step), ``decided_wrong`` (runs that decided a wrong lane at some step: those, and the runs
+    where the reversal rule withheld a wrong-lane decision, :attr:`EstimationResult.withheld
+    <estimators.offline.EstimationResult>`) with its Clopper-Pearson interval,
+    ``decide_median`` (s; None: the median run never decided), how its runs end
     (``ends_wrong``, ``ends_undecided``, ``ends_refused``: confidently wrong, undecided, a
-    model mismatch) and ``hard``: the share of ``wrong_ever`` is at least
+    model mismatch) and ``hard``: the share of ``decided_wrong`` is at least
     :data:`HARD_WRONG_SHARE` or the median at least :data:`HARD_DECIDE_TIME` (or never).
+    Rows made before withheld decisions were counted (no ``wrong_decision_runs``) use
+    ``wrong_lane_ever_runs``.
     """
     out = []
     for row in rows:
@@ -125,14 +133,16 @@ def difficulty_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         if row.get("model") != DIFFICULTY_BASELINE or missing(n) or not n:
             continue
         n = int(n)
-        wrong = int(row.get("wrong_lane_ever_runs") or 0)
+        ever = int(row.get("wrong_lane_ever_runs") or 0)
+        counted: Any = row.get("wrong_decision_runs")
+        wrong = ever if missing(counted) else int(counted)
         value: Any = row.get("time_to_decide_median")
         median = None if missing(value) else float(value)
         low, high = clopper_pearson(wrong, n)
         hard = wrong / n >= HARD_WRONG_SHARE or median is None or median >= HARD_DECIDE_TIME
         out.append({
-            "scenario": row["scenario"], "runs": n, "wrong_ever": wrong,
-            "wrong_ever_share_ci_low": low, "wrong_ever_share_ci_high": high,
+            "scenario": row["scenario"], "runs": n, "wrong_ever": ever, "decided_wrong": wrong,
+            "decided_wrong_share_ci_low": low, "decided_wrong_share_ci_high": high,
             "decide_median": median,
             "ends_wrong": int(row.get("wrong_lane_confident_runs") or 0),
             "ends_undecided": int(row.get("undecided_runs") or 0),
@@ -143,7 +153,8 @@ def difficulty_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 _DIFFICULTY = [
     Column("scenario", "scenario", left=True),
-    Column(count_share("wrong_ever", "runs"), "conf. wrong at some step"),
+    Column(count_share("decided_wrong", "runs"), "decided wrong at some step"),
+    Column(lambda r: str(r["wrong_ever"]), "of which reported"),
     Column(
         lambda r: "never" if r["decide_median"] is None else f"{r['decide_median']:.2f}",
         "decides in (s), median",
@@ -156,10 +167,12 @@ _DIFFICULTY = [
 ]
 _DIFFICULTY_TITLE = (
     f"The {DIFFICULTY_BASELINE} baseline (steering-free) "
-    f"per scenario; hard = confidently in a wrong lane at some step of at least "
-    f"{HARD_WRONG_SHARE:.0%} of its runs, or a median of at least {HARD_DECIDE_TIME:g} s to "
-    "decide (never counts); how its runs end is shown, not counted by the bar; k/n [95 % "
-    "Clopper-Pearson interval]"
+    f"per scenario; hard = it decided (> 0.95) a wrong lane at some step of at least "
+    f"{HARD_WRONG_SHARE:.0%} of its runs, or needs a median of at least {HARD_DECIDE_TIME:g} s "
+    "to decide (never counts); a wrong decision counts whether its weights were reported or the "
+    "reversal rule withheld it, sending the run back to its prior (of which reported: the "
+    "runs whose reported weights show it); how its runs end is shown, not counted by the bar; "
+    "k/n [95 % Clopper-Pearson interval]"
 )
 
 

@@ -1,5 +1,9 @@
 """How much the lane weights may move: the steering channel's consistency checks.
 
+Why this module is long: the docstring states the rule's equations and the traced failure
+behind each constant, and the rule has a batched path and a single-run path in Python floats
+(the single car's speed) that a test keeps equal; they belong beside each other.
+
 The mixture filter's weights multiply, sample after sample, the likelihoods
 of each hypothesis' innovations (paper eq. 19). That product is only as good
 as the steering model: when the model's equation error is larger than the
@@ -227,8 +231,12 @@ EVIDENCE_STATE = (
     "_verified_log_w",
     "_committed",
     "_candidate",
+    "_withheld",
 )
-"""The per-run arrays of the rule (kept by the filter with its other per-run state)."""
+"""The per-run arrays of the rule (kept by the filter with its other per-run state).
+``_withheld`` (R,): the hypothesis index of the decision the reversal rule withheld (the
+confident decision that contradicted the committed one and sent the run back to its prior),
+``NOT_COMMITTED`` (-1) while there is none."""
 
 
 @dataclass(frozen=True)
@@ -285,6 +293,7 @@ def initial_evidence_state(log_prior: np.ndarray) -> dict[str, np.ndarray]:
         "_verified_log_w": log_prior.copy(),
         "_committed": np.full(n_runs, NOT_COMMITTED),
         "_candidate": np.zeros((n_runs, 2)),
+        "_withheld": np.full(n_runs, NOT_COMMITTED),
     }
 
 
@@ -349,8 +358,10 @@ def _hold_first_decision(
         commit:    candidate held for commit_time (s)          -> committed = i
         contradict: committed = i and the run decided on j != i -> weights = prior, for ever
 
-    Updates ``state``'s ``_committed``, ``_candidate`` (and ``_verified_log_w``) and
-    ``stats["decision"]`` in place; returns the weights."""
+    Updates ``state``'s ``_committed``, ``_candidate`` (and ``_verified_log_w``, and
+    ``_withheld``: the hypothesis j of the contradicting decision, which the weights passed
+    the threshold on before they went back to the prior) and ``stats["decision"]`` in place;
+    returns the weights."""
     checked = stats.pop("checked")
     committed = state["_committed"]
     if committed.size == 1 and committed[0] >= 0:  # one committed run (the single env's case)
@@ -371,12 +382,15 @@ def _hold_first_decision(
     candidate = np.where(eligible, top, 0.0)
     state["_candidate"] = np.stack([candidate, held], axis=1)
     is_committed = committed >= 0
-    contradicted = (committed == CONTRADICTED) | (decided & is_committed & (top != committed))
+    contradicting = decided & is_committed & (top != committed)
+    contradicted = (committed == CONTRADICTED) | contradicting
     commits = ~is_committed & (committed != CONTRADICTED) & (held >= rule.commit_steps)
     state["_committed"] = np.where(contradicted, CONTRADICTED, np.where(commits, top, committed))
     if not contradicted.any():
         return log_w
     prior = state["_log_prior"]
+    if contradicting.any():
+        state["_withheld"] = np.where(contradicting, top, state["_withheld"])
     state["_verified_log_w"] = np.where(contradicted[:, None], prior, state["_verified_log_w"])
     stats["decision"] = np.where(contradicted, MODEL_MISMATCH, stats["decision"])
     return np.where(contradicted[:, None], prior, log_w)

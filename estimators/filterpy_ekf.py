@@ -250,6 +250,12 @@ class FilterpyGMEKF:
         return self._gated[0].copy() if self._single else self._gated.copy()
 
     @property
+    def withheld_decisions(self) -> np.ndarray:
+        """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.withheld_decisions`."""
+        withheld = self._evidence["_withheld"].astype(np.int64)
+        return withheld[0] if self._single else withheld
+
+    @property
     def low_speed(self) -> np.ndarray:
         """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.low_speed`."""
         return self._slow[0].copy() if self._single else self._slow.copy()

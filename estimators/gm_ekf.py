@@ -362,6 +362,17 @@ class GaussianMixtureEKF:
         return self._run_view(self._checked_state().decision)
 
     @property
+    def withheld_decisions(self) -> np.ndarray:
+        """The hypothesis the reversal rule withheld a decision for in each run, -1 where none:
+        (R,) int (a single run: one int). When a run committed to hypothesis i and its weights
+        later passed the decision threshold on j != i, the rule sent them back to the prior
+        (``model_mismatch``) instead of reporting j (:mod:`estimators.evidence`); this is j.
+        One of the two decisions was wrong, since the lane does not change within a run: the
+        benchmark counts a withheld decision for a wrong lane as a wrong decision."""
+        withheld = self._checked_state().evidence["_withheld"].astype(np.int64)
+        return self._run_view(withheld)
+
+    @property
     def low_speed(self) -> np.ndarray:
         """Runs whose steering channel is off (speed estimate below ``min_speed``, or the
         road ahead more curved than ``steering_curvature_limit``): (R,) bool (a single run:

@@ -1,5 +1,9 @@
 """Run an estimator over recorded runs, many at once.
 
+Why this module is long: :class:`EstimationResult` carries the benchmark's per-run metrics
+(lateral error, lane decisions, wrong decisions reported or withheld, NEES, channel NIS) next
+to the loop that fills it, so that every consumer reads one definition of each.
+
 :func:`run_estimator` feeds one or many recordings (DataFrames with the
 recording columns, :data:`hasa_env.sim.setup.RECORDING_COLUMNS`) to an
 estimator as one batch: row 0 resets it, row k steps it with row k's
@@ -95,6 +99,9 @@ class EstimationResult:
         channel_nis: (R, T, 3) normalized innovation squared of each channel
             [speed, camera, steering] (:attr:`GaussianMixtureEKF.channel_nis`;
             None if the estimator has none; NaN where not used).
+        withheld: (R,) the hypothesis index of the decision the reversal rule withheld
+            (:attr:`GaussianMixtureEKF.withheld_decisions`; -1: none; None if the
+            estimator has no such rule).
     """
 
     state_names: tuple[str, ...]
@@ -114,6 +121,7 @@ class EstimationResult:
     model_error: np.ndarray | None = None
     channel_nis: np.ndarray | None = None
     evidence_scale: np.ndarray | None = None
+    withheld: np.ndarray | None = None
 
     @property
     def num_runs(self) -> int:
@@ -167,6 +175,19 @@ class EstimationResult:
         """(R,) share of each run's valid steps with more than ``threshold`` on a wrong lane."""
         wrong = np.where(self.true_lane_mask()[:, None, :], 0.0, self.weights).max(axis=2)
         return ((wrong > threshold) & self.valid).sum(axis=1) / self.lengths
+
+    def wrong_decision_ever(self, threshold: float = 0.95) -> np.ndarray:
+        """(R,) runs that decided a wrong lane at some step: more than ``threshold`` weight
+        on a wrong lane at a reported step, or a decision for a wrong lane that the reversal
+        rule withheld (``withheld``; the filter's weights passed its own decision threshold
+        there before going back to the prior, so the reported weights never show it)."""
+        ever = self.wrong_lane_confident_share(threshold) > 0
+        if self.withheld is None:
+            return ever
+        rows = np.arange(self.num_runs)
+        index = np.maximum(self.withheld, 0)
+        withheld_wrong = (self.withheld >= 0) & ~self.true_lane_mask()[rows, index]
+        return ever | withheld_wrong
 
     def lateral_nees(self, start: int = 0) -> np.ndarray:
         """(R,) mean normalized estimation error squared of the lateral offset,
@@ -382,6 +403,7 @@ class _Trace:
         self.slowing = estimator if isinstance(estimator, _LowSpeed) else None
         self.checking = estimator if isinstance(estimator, _ChannelNIS) else None
         self.coding = estimator if hasattr(estimator, "decision_codes") else None
+        self.withholding = estimator if hasattr(estimator, "withheld_decisions") else None
         self.gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if self.gating is not None else None
         self.low_speed = (
             np.zeros((n_runs, n_steps), dtype=bool) if self.slowing is not None else None
@@ -451,6 +473,9 @@ class _Trace:
             channel_nis=None
             if self.channel_nis is None
             else np.where(valid[:, :, None], self.channel_nis, np.nan),
+            withheld=None
+            if self.withholding is None
+            else np.atleast_1d(self.withholding.withheld_decisions),
         )
 
 

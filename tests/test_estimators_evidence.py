@@ -166,6 +166,48 @@ def test_a_reversed_decision_goes_back_to_the_prior_and_says_so():
     assert floored.min() >= 1e-12 * 0.999  # the floor
 
 
+def test_the_reversal_rule_names_the_decision_it_withheld():
+    # the run of the test above: committed to hypothesis 1, then its weights pass the
+    # threshold on hypothesis 0 and go back to the prior; that decision is never reported
+    rng = np.random.default_rng(4)
+    score = np.where(np.arange(2300)[:, None] < 300, [[1.0, 0.0]], [[0.0, 1.0]])
+    score = score + rng.standard_normal(2300)[:, None]
+    rule = _rule()
+    log_w = np.log(np.array([[0.5, 0.5], [0.5, 0.5]]))
+    state = initial_evidence_state(log_w)
+    withheld = []
+    for k in range(2300):
+        both = np.stack([score[k], score[min(k, 299)]])  # run 1: hypothesis 1 throughout
+        log_w, state, _ = weigh_evidence(rule, log_w, -0.5 * both * both, both, state)
+        withheld.append(state["_withheld"].copy())
+    withheld = np.array(withheld)
+    assert np.all(withheld[:300] == -1)  # nothing withheld while the first decision holds
+    assert np.all(withheld[-1] == [0, -1])  # run 0: a decision for 0 withheld; run 1: none
+    first = int(np.argmax(withheld[:, 0] == 0))
+    assert np.all(withheld[first:, 0] == 0)  # kept for the rest of the run
+
+
+def test_a_withheld_wrong_decision_counts_as_a_wrong_decision():
+    from estimators.offline import EstimationResult
+
+    n_runs, n_steps = 3, 4
+    weights = np.full((n_runs, n_steps, 2), 0.5)
+    weights[0, 1] = [0.02, 0.98]  # run 0 reports a wrong decision (bias 0: lane 0 is true)
+    result = EstimationResult(
+        state_names=("v_x", "y"), hypotheses=np.tile([0.0, -1.8], (n_runs, 1)),
+        time=np.tile(np.arange(n_steps) * DT, (n_runs, 1)), valid=np.ones((n_runs, n_steps), bool),
+        lengths=np.full(n_runs, n_steps), mean=np.zeros((n_runs, n_steps, 2)),
+        std=np.ones((n_runs, n_steps, 2)), weights=weights,
+        most_likely=np.zeros((n_runs, n_steps), int),
+        truth={"bias": np.zeros((n_runs, n_steps))},
+        withheld=np.array([-1, 1, 0]),  # run 1: a decision for lane 1 withheld; run 2: lane 0
+    )  # fmt: skip
+    assert result.wrong_lane_confident_share().tolist() == [0.25, 0.0, 0.0]
+    assert result.wrong_decision_ever().tolist() == [True, True, False]
+    without = EstimationResult(**{**result.__dict__, "withheld": None})
+    assert without.wrong_decision_ever().tolist() == [True, False, False]
+
+
 def test_one_run_and_many_runs_agree_on_the_reversal_rule():
     rng = np.random.default_rng(6)
     u = rng.standard_normal((2300, 3))

@@ -224,15 +224,41 @@ def test_the_suite_says_which_scenarios_a_lane_centring_prior_cannot_solve() -> 
         _lane_centring_row("almost", wrong_lane_ever_runs=1),  # 2.5 %: not
         _lane_centring_row("slow", time_to_decide_median=3.0),
         _lane_centring_row("never", time_to_decide_median=None, undecided_runs=30),
-        _lane_centring_row("refuses", model_mismatch_runs=12, undecided_runs=3),
+        # refused by the mismatch test, no wrong decision withheld: not hard
+        _lane_centring_row(
+            "refuses", model_mismatch_runs=12, undecided_runs=3, wrong_decision_runs=0
+        ),  # fmt: skip
+        # right at once, then 12 wrong decisions the reversal rule withheld: hard
+        _lane_centring_row("withheld", model_mismatch_runs=12, wrong_decision_runs=12),
         {"scenario": "paper", "model": "generalized", "estimated_runs": 40},
     ]
     hard = {r["scenario"]: r for r in difficulty_rows(rows)}
-    assert set(hard) == {"paper", "wrong", "almost", "slow", "never", "refuses"}
-    assert [k for k, r in hard.items() if r["hard"]] == ["wrong", "slow", "never"]
+    assert set(hard) == {"paper", "wrong", "almost", "slow", "never", "refuses", "withheld"}
+    assert [k for k, r in hard.items() if r["hard"]] == ["wrong", "slow", "never", "withheld"]
     assert hard["refuses"]["ends_refused"] == 12 and hard["refuses"]["ends_undecided"] == 3
-    low, high = hard["wrong"]["wrong_ever_share_ci_low"], hard["wrong"]["wrong_ever_share_ci_high"]
+    assert hard["withheld"]["decided_wrong"] == 12 and hard["withheld"]["wrong_ever"] == 0
+    low = hard["wrong"]["decided_wrong_share_ci_low"]
+    high = hard["wrong"]["decided_wrong_share_ci_high"]
     assert 0.0 < low < 0.05 < high < 1.0
     text = format_suite(rows)
-    assert "| never | 0/40 [0.0%, 8.8%] | never | 0 / 30 / 0 | yes |" in text
-    assert "| refuses | 0/40 [0.0%, 8.8%] | 0.01 | 0 / 3 / 12 | no |" in text
+    assert "| never | 0/40 [0.0%, 8.8%] | 0 | never | 0 / 30 / 0 | yes |" in text
+    assert "| refuses | 0/40 [0.0%, 8.8%] | 0 | 0.01 | 0 / 3 / 12 | no |" in text
+    assert "| withheld | 12/40 [16.6%, 46.5%] | 0 | 0.01 | 0 / 0 / 12 | yes |" in text
+
+
+def test_runs_decided_wrong_count_withheld_decisions_and_old_rows_fall_back() -> None:
+    from benchmarks.protocol.aggregate import aggregate_estimation
+
+    def row(run: int, share: float, withheld: bool | None = None) -> dict:
+        r = {"seed": 1, "driver": "1", "track": "straight", "run": run, "model": "m",
+             "lateral_rmse": 0.1, "steps_to_decide": 3, "time_to_decide": 0.03,
+             "true_lane_final": True, "final_true_lane_weight": 0.99,
+             "final_decision": "decided", "wrong_lane_confident": False,
+             "wrong_lane_confident_share": share, "lateral_nees": 1.0, "nis_speed": 1.0,
+             "nis_camera": 1.0, "nis_steering": 1.0}  # fmt: skip
+        return r if withheld is None else r | {"wrong_decision_ever": withheld}
+
+    counted = aggregate_estimation([row(0, 0.1, True), row(1, 0.0, True), row(2, 0.0, False)])
+    assert counted[0]["wrong_lane_ever_runs"] == 1 and counted[0]["wrong_decision_runs"] == 2
+    old = aggregate_estimation([row(0, 0.1), row(1, 0.0), row(2, 0.0)])  # made before the key
+    assert old[0]["wrong_lane_ever_runs"] == 1 and old[0]["wrong_decision_runs"] == 1

@@ -1,5 +1,9 @@
 """Aggregation of the per-run rows: per-driver tables, per-seed summaries, the verdict.
 
+Why this module is long: the three levels below share one frame's columns and the safety
+counts' definitions (a count added at the first level reaches the verdict and its exact
+interval through one tuple); split, each level would restate them.
+
 Three levels, all with pandas ``groupby``:
 
 1. per (seed, driver, model): means over the driver's validation runs (the
@@ -256,21 +260,30 @@ def _never(times: pd.Series) -> int:
     return int(np.isposinf(pd.to_numeric(times, errors="coerce").to_numpy(float)).sum())
 
 
+def _with_decision_columns(frame: pd.DataFrame) -> pd.DataFrame:
+    """``frame`` with the columns rows made before them lack: the decision metrics (NaN) and
+    ``wrong_decision_ever`` (before withheld decisions were counted: the reported ones)."""
+    for column in _DECISION_COLUMNS:
+        if column not in frame:
+            frame[column] = np.nan
+    if "wrong_decision_ever" not in frame:
+        shares = pd.to_numeric(frame["wrong_lane_confident_share"], errors="coerce")
+        frame["wrong_decision_ever"] = shares > 0
+    return frame
+
+
 def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (seed, driver, model): lateral RMSE mean/std/max over runs, decisions, paper values."""
     if not rows:
         return []
-    frame = _frame(rows)
-    for column in _DECISION_COLUMNS:  # rows made before the decision metrics
-        if column not in frame:
-            frame[column] = np.nan
+    frame = _with_decision_columns(_frame(rows))
     # never decided: an infinite time (NaN is left for the degenerate runs, left out)
     frame["time_to_decide"] = pd.to_numeric(frame["time_to_decide"], errors="coerce").fillna(np.inf)
     frame = _without_degenerate(
         frame, "lateral_rmse",
         ("lateral_rmse", "steps_to_decide", "true_lane_final", "final_true_lane_weight",
          "final_decision", "wrong_lane_confident", "wrong_lane_confident_share",
-         *_DECISION_COLUMNS),
+         "wrong_decision_ever", *_DECISION_COLUMNS),
     )  # fmt: skip
     frame["steps"] = pd.to_numeric(frame["steps_to_decide"], errors="coerce")
     table = (
@@ -300,6 +313,10 @@ def aggregate_estimation(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             wrong_lane_ever_runs=(
                 "wrong_lane_confident_share",
                 lambda v: int(np.sum(pd.to_numeric(v, errors="coerce") > 0)),
+            ),
+            wrong_decision_runs=(
+                "wrong_decision_ever",
+                lambda v: int((v == True).sum()),  # noqa: E712 (NaN: a degenerate run)
             ),
             undecided_runs=("final_decision", lambda v: int((v == "undecided").sum())),
             model_mismatch_runs=("final_decision", lambda v: int((v == "model_mismatch").sum())),
@@ -356,8 +373,8 @@ def same_seed(seeds: pd.Series, seed: Any) -> pd.Series:
     return seeds.astype(object) == seed
 
 
-_SAFETY_COUNTS = ("wrong_lane_confident_runs", "wrong_lane_ever_runs", "undecided_runs",
-                  "model_mismatch_runs", "never_decided_runs")  # fmt: skip
+_SAFETY_COUNTS = ("wrong_lane_confident_runs", "wrong_lane_ever_runs", "wrong_decision_runs",
+                  "undecided_runs", "model_mismatch_runs", "never_decided_runs")  # fmt: skip
 _DECISION_MEANS = ("decided_time_share", "lateral_rmse_after_decision", "steering_off_share",
                    "steering_live_share")  # fmt: skip
 

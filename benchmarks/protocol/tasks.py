@@ -500,6 +500,7 @@ def _estimation_rows(
     final_decision = result.final_decision()
     wrong_confident = result.wrong_lane_confident(task.weight_threshold)
     wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
+    wrong_decision = result.wrong_decision_ever(task.weight_threshold)
     nees = result.lateral_nees()
     channel = _channel_diagnostics(result, kind)
     calibration = lane_calibration_bins(result)
@@ -521,6 +522,7 @@ def _estimation_rows(
                 "final_decision": str(final_decision[j]),
                 "wrong_lane_confident": bool(wrong_confident[j]),
                 "wrong_lane_confident_share": float(wrong_share[j]),
+                "wrong_decision_ever": bool(wrong_decision[j]),
                 "lateral_nees": float(nees[j]),
                 **{key: float(values[j]) for key, values in channel.items()},
                 "calibration_count": calibration[j, 0].astype(int).tolist(),
