@@ -163,6 +163,11 @@ class SpeedScheduledGain(SteeringModel):
     (TwoPointModel.paper(steering_signal="applied"), "hasa_env/LaneKeeping-v0", 1.0),
     (GeneralizedModel.paper(steering_signal="applied"), "hasa_env/LaneKeepingCurved-v0", 15.0),
     (SpeedScheduledGain([0.98, 0.05], steering_signal="applied"), "hasa_env/LaneKeeping-v0", 1.0),
+    # a dead time: the model driver acts on the bearings of decision_lag - 1 steps before
+    (GeneralizedModel.paper(steering_signal="applied", decision_lag=3), "hasa_env/LaneKeeping-v0",
+     1.0),
+    (TwoPointModel.paper(steering_signal="applied", decision_lag=20),
+     "hasa_env/LaneKeepingCurved-v0", 15.0),
 ])  # fmt: skip
 def test_a_model_driver_is_what_its_model_predicts(model, env_id, ratio):
     """Noise-free, a model driver's recording is exactly the model's one-step prediction
@@ -177,7 +182,7 @@ def test_a_model_driver_is_what_its_model_predicts(model, env_id, ratio):
     in_model_units = frame.assign(steering=frame["steering"] * ratio)
     predicted = model.predict(in_model_units, road=road) / ratio
     recorded = frame["steering"].to_numpy()
-    start = model.max_lag + 1
+    start = model.max_lag + model.decision_lag
     assert np.isfinite(predicted[start:]).all()
     np.testing.assert_allclose(predicted[start:], recorded[start:], rtol=1e-9, atol=1e-13)
     assert np.abs(recorded).max() > 1e-3  # it actually steered

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -16,6 +17,7 @@ from hasa_env.drivers.base import (
     speed_profile_arrays,
 )
 from hasa_env.sim.road import Road
+from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.base import SteeringModel
 from hasa_env.steering.features import near_far_bearings
 
@@ -40,6 +42,10 @@ class ModelDriver:
     A recording of this driver therefore follows the model exactly (up to
     clipping): :mod:`hasa_env.steering.features` aligns row k's steering with
     the bearings of row k-1, which is when it was decided.
+
+    A model with a dead time (``decision_lag`` L > 1) sees the bearings and v_y of L - 1
+    steps before: u(k) uses phi(k-L+1), ..., so that a recording of it pairs row k's
+    steering with row k-L's bearings as its features do.
 
     At reset the model's memory is filled with the initial steering and the
     initial bearings (a car at rest in the model's sense).
@@ -131,6 +137,24 @@ _INFO_NEEDED = (
 )
 
 
+def _with_dead_time(form: ARXForm, decision_lag: int) -> ARXForm:
+    """The ARX form a driver acting at row k evaluates: ``decision_lag - 1`` leading zero
+    coefficients on the bearings and v_y (beta'_{j + L - 1} = beta_j). The steering it
+    decides at row k is applied over the step to row k+1, whose features pair it with the
+    bearings of row k+1-L (:mod:`hasa_env.steering.features`); lag 1 (the default) and 0
+    need no padding (0: the same-row bearings, the closest a driver can come)."""
+    pad = max(int(decision_lag) - 1, 0)
+    if not pad:
+        return form
+    zeros = (0.0,) * pad
+    return replace(
+        form,
+        b=zeros + form.b if form.b else (),
+        c=zeros + form.c if form.c else (),
+        d=zeros + form.d if form.d else (),
+    )
+
+
 class ModelBatch:
     """N model drivers whose models are ARX models, acting on arrays."""
 
@@ -138,9 +162,13 @@ class ModelBatch:
         self.drivers = list(drivers)
         self.num_cars = len(self.drivers)
         maybe_forms = [d.model.arx() for d in self.drivers]
-        forms = [f for f in maybe_forms if f is not None]
-        if len(forms) != len(maybe_forms):
+        if any(f is None for f in maybe_forms):
             raise ValueError("ModelBatch needs ARX models")
+        forms = [
+            _with_dead_time(f, d.model.decision_lag)
+            for f, d in zip(maybe_forms, self.drivers, strict=True)
+            if f is not None
+        ]
         self.forms = forms
         n = self.num_cars
         self.order = {k: max(len(getattr(f, k)) for f in forms) for k in ("a", "b", "c", "d")}
