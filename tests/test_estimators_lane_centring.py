@@ -17,7 +17,7 @@ import estimators
 from estimators._testing import drive_arx
 from estimators.base import LaneEstimator
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
-from estimators.offline import run_estimator
+from estimators.offline import hypotheses_of, run_estimator
 from hasa_env.steering.arx import ARXForm
 
 PAPER = ARXForm(a=(1.47, -0.51), b=(-5.73, 17.32, -17.65, 6.12), c=(0.11,), d=(-0.02, 0.02))
@@ -137,3 +137,32 @@ def test_batch_and_single_runs_agree(params, runs):
     one = run_estimator(LaneCentringEKF(params), runs[1])
     np.testing.assert_allclose(one.weights[0], batch.weights[1], atol=1e-9)
     np.testing.assert_allclose(one.mean[0], batch.mean[1], atol=1e-9)
+
+
+def test_a_car_that_moves_onto_the_other_centre_has_its_wrong_decision_withheld(params, runs):
+    """A lane shift without a shift in the markings: from 3 s the car moves, over 4 s, onto the
+    centre the other hypothesis puts the lane at. The prior decides the true lane at once, then
+    the other one; the reversal rule withholds the second (the run ends as a model mismatch,
+    the reported weights never show it) and names it, and it counts as a wrong decision."""
+    moved = []
+    for frame in runs[:2] + runs[4:6]:
+        hyps = np.asarray(hypotheses_of(frame), dtype=float)
+        true = float(frame["bias"].iloc[0])
+        other = float(hyps[~np.isclose(hyps, true)][0])
+        ramp = np.clip((frame["time"].to_numpy() - 3.0) / 4.0, 0.0, 1.0)
+        shift = (other - true) * (1.0 - np.cos(np.pi * ramp)) / 2.0
+        out = frame.copy()
+        out.attrs = frame.attrs
+        out["lateral_offset"] += shift
+        out["sensor_camera_lateral"] += shift
+        moved.append(out)
+    ekf = LaneCentringEKF(params)
+    res = run_estimator(ekf, moved)
+    wrong = ~res.true_lane_mask()
+    assert (res.final_decision() == "model_mismatch").all()
+    assert res.withheld is not None and (res.withheld >= 0).all()
+    assert wrong[np.arange(4), res.withheld].all()  # each withheld decision was for the wrong lane
+    np.testing.assert_array_equal(ekf.withheld_decisions, res.withheld)
+    assert (res.wrong_lane_confident_share() == 0).all()  # never reported
+    assert res.wrong_decision_ever().all()
+    assert not run_estimator(LaneCentringEKF(params), runs[:2]).wrong_decision_ever().any()
