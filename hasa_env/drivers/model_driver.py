@@ -162,12 +162,12 @@ class ModelBatch:
         self.drivers = list(drivers)
         self.num_cars = len(self.drivers)
         maybe_forms = [d.model.arx() for d in self.drivers]
-        if any(f is None for f in maybe_forms):
+        arx_forms = [f for f in maybe_forms if f is not None]
+        if len(arx_forms) != len(maybe_forms):
             raise ValueError("ModelBatch needs ARX models")
         forms = [
             _with_dead_time(f, d.model.decision_lag)
-            for f, d in zip(maybe_forms, self.drivers, strict=True)
-            if f is not None
+            for f, d in zip(arx_forms, self.drivers, strict=True)
         ]
         self.forms = forms
         n = self.num_cars
