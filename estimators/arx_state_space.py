@@ -349,8 +349,11 @@ class ARXStateSpace:
             points = check_road_points(road_points)
             dx_near, dx_far = points[..., 0], points[..., 2]
             off_near, off_far = y - points[..., 1], y - points[..., 3]
-            u[..., 0] = -(theta + np.arctan2(off_near, dx_near))
-            u[..., 1] = -(theta + np.arctan2(off_far, dx_far))
+            # atan(off / dx), not atan2: the same arithmetic as the straight road's for
+            # dy = 0 (dx > 0 is checked), so a straight run's filter is the same to the bit
+            # with road points (near, 0, far, 0) as without (a batch mixing tracks)
+            u[..., 0] = -(theta + np.arctan(off_near / dx_near))
+            u[..., 1] = -(theta + np.arctan(off_far / dx_far))
             across = (dx_near, dx_far), (off_near, off_far)
         u[..., 2] = vy
         if not with_jacobian:

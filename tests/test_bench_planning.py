@@ -8,10 +8,11 @@ import pytest
 
 from benchmarks.protocol.config import ProtocolConfig
 from benchmarks.protocol.models import load_models
-from benchmarks.protocol.plan import RunRef, chunks
+from benchmarks.protocol.plan import RunRef, chunks, load_frames, synthetic_plan
 from benchmarks.protocol.run import chunk_tasks, fit_seeds
 from estimators import FilterSettings, GaussianMixtureEKF
 from estimators.evidence import DECISIONS
+from estimators.offline import run_estimator
 from hasa_env.steering.models import GeneralizedModel
 
 
@@ -54,9 +55,10 @@ def test_fits_in_parallel_equal_the_fits_one_after_another() -> None:
     for one, two in zip(serial, parallel, strict=True):
         assert one.infos == two.infos  # the same fitted coefficients and checks, seed by seed
         assert one.lane_centring == two.lane_centring
-        # one task of the validation runs (6) and one of the curved run per seed
-        sizes = [len(t.runs) for t in chunk_tasks(config, two, False)]
-        assert sizes == [1, 6]
+        # one task per seed: its curved run and its validation runs (6), tracks mixed
+        tasks = chunk_tasks(config, two, False)
+        assert [len(t.runs) for t in tasks] == [7]
+        assert [r.track for r in tasks[0].runs] == ["curved"] + ["straight"] * 6
 
 
 def test_decision_codes_name_the_estimate_decision() -> None:
@@ -81,3 +83,25 @@ def test_decision_codes_name_the_estimate_decision() -> None:
         assert list(np.asarray(DECISIONS)[codes]) == list(est.decision)
         seen |= set(est.decision)
     assert len(seen) > 1, "every step undecided: the test checks one code only"
+
+
+def test_a_batch_mixing_tracks_filters_each_straight_run_as_alone() -> None:
+    """A task's curved and straight runs are filtered in one batch (the curved ones with their
+    road points, the straight ones with the straight road's (near, 0, far, 0)): every straight
+    run's estimate is the one it gets in a batch of straight runs, to the bit."""
+    config = ProtocolConfig(seeds=(3701,), drivers=2, runs=1, ill_runs=1, duration=3.0,
+                            curved_runs=1)  # fmt: skip
+    plan = synthetic_plan(config, 3701)
+    straight = load_frames(plan.main, "straight", plan.env_config, plan.params)
+    curved = load_frames(plan.curved, "curved", plan.env_config, plan.params)
+    settings = FilterSettings.from_env_config(straight[0].attrs["config"], steering_ratio=15.0)
+    for model in (GeneralizedModel.paper().arx(), None):
+        alone = run_estimator(GaussianMixtureEKF(model, settings), straight)
+        mixed = run_estimator(GaussianMixtureEKF(model, settings), [*curved, *straight])
+        names = ("mean", "std", "weights", "decision", "model_error", "evidence_scale",
+                 "channel_nis", "gated", "low_speed", "withheld")  # fmt: skip
+        for name in names:
+            ours, theirs = getattr(alone, name), getattr(mixed, name)
+            assert (ours is None) == (theirs is None), name
+            if ours is not None:
+                np.testing.assert_array_equal(ours, theirs[len(curved) :], err_msg=name)

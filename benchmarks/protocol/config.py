@@ -176,10 +176,10 @@ class ProtocolConfig:
             speeds people drive is trusted there (the speed rule's range is that of every
             training run, :mod:`estimators.trust`). Empty: the paper's protocol.
         batch_size: most runs per task, vectorized together; a seed's curved and
-            validation runs are each cut into the fewest near-equal tasks (100: one task
-            of the paper's 93 validation runs and one of the 4 curved runs per seed. A
-            filter step costs about as much for 4 runs as for 93, so fewer, larger batches
-            cost less in all; the tasks run largest first, which balances 2 workers:
+            validation runs together are cut into the fewest near-equal tasks (100: one
+            task of the 4 curved and the 93 validation runs per seed, filtered in one
+            batch. A filter step costs about as much for 4 runs as for 93, so fewer,
+            larger batches cost less in all; the tasks run largest first:
             docs/design.md §9.5). Results do not depend on the executor or worker count;
             another batch size can change them in the last digits.
         ljung_box_lags: lags of the Ljung-Box whiteness test.

@@ -43,12 +43,13 @@
    (:mod:`estimators.evidence`) and without the lane-keeping check.
 
 Runs are grouped into tasks of at most ``batch_size`` consecutive runs of one
-track, the fewest near-equal ones (the vectorized driver runner and the estimator
-batched over the task's runs; measured on a 2-core machine, a task of 4 runs
-takes about 9 s of CPU, one of 48 runs 20 s and one of 93 runs 28 s: each filter
-step has a fixed cost) and mapped, the largest first, over local processes or a
-Dask cluster (:func:`benchmarks.executor.map_tasks`); the seeds' fits before
-them run on the same executor (:func:`fit_seeds`). Every run is seeded on its own and
+population seed, its curved runs first, the fewest near-equal ones (each track's
+runs generated in one vectorized driver runner, every run of the task filtered in
+one batch; measured on a 2-core machine, a task of 4 runs took about 9 s of CPU,
+one of 48 runs 20 s and one of 93 runs 28 s: each filter step has a fixed cost)
+and mapped, the largest first, over local processes or a Dask cluster
+(:func:`benchmarks.executor.map_tasks`); the seeds' fits before them run on the
+same executor (:func:`fit_seeds`). Every run is seeded on its own and
 the tasks depend only on the protocol (never on the executor or the number
 of workers), so results are identical on any executor and worker count. A
 different ``batch_size`` can change per-run numbers by floating-point
@@ -413,17 +414,18 @@ def _fit_baselines(
 
 
 def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list[ChunkTask]:
-    """The tasks of one fitted plan: its curved runs, then its validation runs, each in the
-    fewest near-equal chunks of at most ``config.batch_size`` runs (:func:`~benchmarks.
-    protocol.plan.chunks`). A ``detailed`` plan (the first seed's) also records the figures'
-    traces (of its plot run and first curved run) and the illustrative driver's details."""
+    """The tasks of one fitted plan: its curved runs and its validation runs, in that order,
+    in the fewest near-equal chunks of at most ``config.batch_size`` runs (:func:`~benchmarks.
+    protocol.plan.chunks`; a chunk may hold runs of both tracks: each track's runs are
+    generated in their own vector env and filtered in one batch, the road of each run its
+    own). A ``detailed`` plan (the first seed's) also records the figures' traces (of its
+    plot run and first curved run) and the illustrative driver's details."""
     plan = fit.plan
     trace_runs = {fit.plot_run.key} | ({plan.curved[0].key} if plan.curved else set())
 
-    def task(runs: Sequence[RunRef], track: str) -> ChunkTask:
+    def task(runs: Sequence[RunRef]) -> ChunkTask:
         return ChunkTask(
             runs=tuple(runs),
-            track=track,
             estimate=config.estimate,
             seed=plan.seed,
             env_config=plan.env_config,
@@ -441,9 +443,7 @@ def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list
             lane_centring=fit.lane_centring,
         )
 
-    return [task(chunk, "curved") for chunk in chunks(plan.curved, config.batch_size)] + [
-        task(chunk, config.track) for chunk in chunks(fit.validation, config.batch_size)
-    ]
+    return [task(chunk) for chunk in chunks([*plan.curved, *fit.validation], config.batch_size)]
 
 
 @dataclass(frozen=True)

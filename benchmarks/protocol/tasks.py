@@ -79,11 +79,11 @@ def degenerate_reason(frame: pd.DataFrame) -> str | None:
 
 @dataclass(frozen=True)
 class ChunkTask:
-    """The work of one task: a batch of runs of one track and one population seed."""
+    """The work of one task: a batch of runs of one population seed (on either track: each
+    run names its own)."""
 
     seed: int | None
     runs: tuple[RunRef, ...]
-    track: str
     env_config: Mapping[str, Any]
     driver_params: Mapping[str, Any]
     models: tuple[FittedModel, ...]
@@ -126,7 +126,7 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     one that fails is reported in ``failures``.
     """
     start = time.process_time()
-    frames = load_frames(task.runs, task.track, task.env_config, task.driver_params)
+    frames = _task_frames(task)
     out = ChunkResult()
     predictions: dict[str, dict[int, np.ndarray]] = {}
     residuals: dict[str, list[np.ndarray]] = {}
@@ -164,6 +164,20 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
         row["degenerate"] = reasons[(row["seed"], row["driver"], row["track"], row["run"])]
     out.seconds = time.process_time() - start
     return out
+
+
+def _task_frames(task: ChunkTask) -> list[pd.DataFrame]:
+    """The recordings of the task's runs, in their order: each track's runs generated in one
+    vector env (or loaded)."""
+    frames: list[pd.DataFrame | None] = [None] * len(task.runs)
+    tracks = dict.fromkeys(ref.track for ref in task.runs)
+    for track in tracks:
+        where = [i for i, ref in enumerate(task.runs) if ref.track == track]
+        runs = [task.runs[i] for i in where]
+        loaded = load_frames(runs, track, task.env_config, task.driver_params)
+        for i, frame in zip(where, loaded, strict=True):
+            frames[i] = frame
+    return [f for f in frames if f is not None]
 
 
 def _baseline_estimators(task: ChunkTask) -> list[tuple[str, Callable[[Any], Any]]]:
