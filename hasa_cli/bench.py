@@ -542,18 +542,21 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
         except SchedulerError as exc:
             error(PROG, str(exc))
             return EXIT_USAGE if exc.kind == "address" else EXIT_ENVIRONMENT
-    if args.scenario != "all":
-        return _run_scenario(args, user_models, args.scenario, out, scheduler)[0]
     started = time.perf_counter()
+    if args.scenario != "all":
+        code, results = _run_scenarios(args, user_models, [args.scenario], scheduler)
+        if results is None:
+            return code
+        return _write_scenario(args, results[args.scenario], out, started)
+    code, results = _run_scenarios(args, user_models, list(SCENARIOS), scheduler)
+    if results is None:
+        return code
     out.mkdir(parents=True, exist_ok=True)
-    results, status = {}, EXIT_OK
-    for name in SCENARIOS:
+    status = EXIT_OK
+    for name, result in results.items():
         if not args.quiet:
             print(f"== scenario {name}")
-        code, result = _run_scenario(args, user_models, name, out / name, scheduler)
-        if result is None:
-            return code
-        results[name], status = result, max(status, code)
+        status = max(status, _write_scenario(args, result, out / name, started))
     rows = suite_rows(results)
     try:
         write_suite(rows, out)
@@ -573,33 +576,33 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     return status
 
 
-def _run_scenario(
+def _run_scenarios(
     args: argparse.Namespace,
     user_models: Sequence[str],
-    scenario: str,
-    out: Path,
+    scenarios: Sequence[str],
     scheduler: Any,
-) -> tuple[int, Any]:
-    """Run the protocol in one scenario and write its folder: (exit status, result or None)."""
+) -> tuple[int, dict[str, Any] | None]:
+    """Run the protocol in each scenario (several: one suite, :func:`benchmarks.protocol.
+    suite.run_suite`): (exit status, the results by scenario, or None when nothing ran)."""
     from benchmarks.executor import ClusterLost  # start-up: only where needed
-    from benchmarks.output import write_result_folder  # start-up: only where needed
     from benchmarks.protocol import BenchmarkError, run_protocol  # start-up: only where needed
-    from benchmarks.report import format_tables  # start-up: only where needed
-    from benchmarks.schema import ResultsSchemaError  # start-up: only where needed
+    from benchmarks.protocol.suite import run_suite  # start-up: only where needed
 
-    started = time.perf_counter()
     progress = _Progress(args.quiet)
+    options = {
+        "workers": args.workers,
+        "scheduler": scheduler,
+        "progress": progress,
+        "no_worker_timeout": args.worker_timeout,
+        "trust_model_modules": args.trust_model_module,
+    }
     try:
-        config = _config(args, scenario)
-        result = run_protocol(
-            config,
-            user_models,
-            workers=args.workers,
-            scheduler=scheduler,
-            progress=progress,
-            no_worker_timeout=args.worker_timeout,
-            trust_model_modules=args.trust_model_module,
-        )
+        if len(scenarios) == 1:
+            name = scenarios[0]
+            results = {name: run_protocol(_config(args, name), user_models, **options)}
+        else:
+            configs = {name: _config(args, name) for name in scenarios}
+            results = run_suite(configs, user_models, **options)
     except BenchmarkError as exc:
         progress.close()
         error(PROG, str(exc))
@@ -611,17 +614,28 @@ def _run_scenario(
     except BaseException:  # Ctrl-C, SIGTERM: end the progress bar's line before the message
         progress.close()
         raise
+    progress.close()
+    return EXIT_OK, results
+
+
+def _write_scenario(args: argparse.Namespace, result: Any, out: Path, started: float) -> int:
+    """Write one scenario's folder, print its tables and its problems: the exit status."""
+    from benchmarks.output import write_result_folder  # start-up: only where needed
+    from benchmarks.report import format_tables  # start-up: only where needed
+    from benchmarks.schema import ResultsSchemaError  # start-up: only where needed
+
+    progress = _Progress(args.quiet)
     progress("writing results, tables and figures", 0, 0)
     try:
         written = write_result_folder(result, out, figures=not args.no_plots)
     except OSError as exc:
         progress.close()
         error(PROG, f"cannot write the results to {out}: {exc}")
-        return EXIT_ENVIRONMENT, None
+        return EXIT_ENVIRONMENT
     except ResultsSchemaError as exc:  # a bug of ours: the files are written all the same
         progress.close()
         error(PROG, f"{out / 'results.json'} {exc} (every file is written; please report this)")
-        return EXIT_PARTIAL, result
+        return EXIT_PARTIAL
     progress.close()
     if not args.quiet:
         print(printable(format_tables(result), newlines=True))
@@ -639,7 +653,7 @@ def _run_scenario(
     for failure in result.errors:
         error(PROG, failure["message"])
     partial = result.errors or result.skipped or result.degenerate
-    return (EXIT_PARTIAL if partial else EXIT_OK), result
+    return EXIT_PARTIAL if partial else EXIT_OK
 
 
 # -------------------------------------------------------------------------- perf

@@ -124,12 +124,15 @@ from hasa_env.drivers import SpeedProfile
 from hasa_env.sim.config import deep_merge
 
 __all__ = [
+    "FitJob",
     "FittedPlan",
     "Schedule",
     "aggregate_result",
     "chunk_tasks",
     "fit_and_check",
+    "fit_seed",
     "fit_seeds",
+    "map_on_executor",
     "run_protocol",
     "schedule",
 ]
@@ -249,7 +252,7 @@ class FittedPlan:
 
 
 @dataclass(frozen=True)
-class _FitJob:
+class FitJob:
     """The fits of one seed, as a task of the executor (:func:`fit_seeds`)."""
 
     config: ProtocolConfig
@@ -257,7 +260,7 @@ class _FitJob:
     candidates: tuple[Candidate, ...]
 
 
-def _fit_seed(job: _FitJob) -> tuple[FittedPlan, list[ModelError]]:
+def fit_seed(job: FitJob) -> tuple[FittedPlan, list[ModelError]]:
     """One seed's plan fitted and checked (:func:`fit_and_check`) and its model errors."""
     errors: list[ModelError] = []
     plan = make_plan(job.config, job.seed)
@@ -265,7 +268,7 @@ def _fit_seed(job: _FitJob) -> tuple[FittedPlan, list[ModelError]]:
     return fit, errors
 
 
-def _map_on_executor(
+def map_on_executor(
     function: Callable[[Any], Any],
     items: Sequence[Any],
     what: str,
@@ -329,9 +332,9 @@ def fit_seeds(
             fits.append(fit_and_check(config, make_plan(config, seed), candidates, errors, say))
             say("fits", len(fits), len(seeds))
         return fits
-    jobs = [_FitJob(config, seed, tuple(candidates)) for seed in seeds[1:]]
-    done = _map_on_executor(
-        _fit_seed, jobs, "fit the models", workers, scheduler,
+    jobs = [FitJob(config, seed, tuple(candidates)) for seed in seeds[1:]]
+    done = map_on_executor(
+        fit_seed, jobs, "fit the models", workers, scheduler,
         lambda count: say("fits", 1 + count, len(seeds)), no_worker_timeout,
     )  # fmt: skip
     for _, seed_errors in done:
@@ -489,7 +492,7 @@ def schedule(
         say("runs", int(done_runs[done - 1]), total_runs)
 
     t_tasks = time.perf_counter()
-    ordered: list[ChunkResult] = _map_on_executor(
+    ordered: list[ChunkResult] = map_on_executor(
         run_chunk, [tasks[i] for i in order], "run the tasks", workers, scheduler, on_task,
         no_worker_timeout,
     )  # fmt: skip
