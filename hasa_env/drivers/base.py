@@ -21,7 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hasa_env.sim.road import Road, curvature_lookup_array
+from hasa_env.sim.road import Road
 
 __all__ = [
     "Driver",
@@ -203,7 +203,7 @@ def speed_command(
         reach = v * v / (2.0 * braking) + 2.0 * v + 20.0
         ahead = reach[:, None] * _PREVIEW[None, :]
         stations = info["station"][:, None] + ahead
-        kappa = np.abs(curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations))
+        kappa = np.abs(road.curvature_lookup(stations))
         with np.errstate(divide="ignore"):
             bend_speed2 = np.where(kappa > 0, lateral[:, None] / kappa, np.inf)
         envelope = bend_speed2 + 2.0 * braking[:, None] * ahead
