@@ -51,6 +51,7 @@ __all__ = [
     "lane_bearings",
     "params_from_dict",
     "params_to_dict",
+    "sum_from",
 ]
 
 MIN_SPEED = 1.0
@@ -115,6 +116,16 @@ def lane_bearings(
         np.asarray(lane_centre_bearing(road, s, y, theta, near, near_offset), dtype=np.float64),
         np.asarray(lane_centre_bearing(road, s, y, theta, far, far_offset), dtype=np.float64),
     )
+
+
+def sum_from(first: np.ndarray, terms: np.ndarray) -> np.ndarray:
+    """``first + terms[:, 0] + terms[:, 1] + ...`` of N cars ((N,) and (N, m) arrays), added
+    left to right as a loop over the columns adds them (``np.add.accumulate`` is sequential:
+    the same additions in the same order, the same bits), in one call."""
+    table = np.empty((terms.shape[0], terms.shape[1] + 1))
+    table[:, 0] = first
+    table[:, 1:] = terms
+    return np.add.accumulate(table, axis=1)[:, -1]
 
 
 class DelayLine:
