@@ -182,6 +182,9 @@ class HumanBatch(ABC):
     """
 
     params_type: ClassVar[type]
+    info_needed: ClassVar[tuple[str, ...]] = (*INFO_NEEDED, "bias")
+    """The ``info`` keys the batch reads (a :class:`~hasa_env.drivers.base.CompositeBatch`
+    hands it only these)."""
     sees_ahead: ClassVar[bool] = False
     """True: the control law looks at the driven lane ahead itself (:func:`lane_bearings`);
     False: it steers on :meth:`perceived` offsets."""
