@@ -23,7 +23,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import fields
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Protocol, cast
 
 import numpy as np
 
@@ -449,9 +449,21 @@ class HumanComposite(CompositeBatch):
     full reset) each part drives alone, as a plain :class:`CompositeBatch`.
     """
 
+    # the shared stages' state, set at each full reset while the stages are stacked
+    _dt: float
+    _pedal_rho: np.ndarray
+    _pedal_innovation: np.ndarray
+    _pedal_draws: NoiseBlocks
+    _pedal: np.ndarray
+    _initial_speed: np.ndarray
+    _all_fresh: bool
+    _fresh: np.ndarray
+
     def __init__(self, parts: Sequence[tuple[np.ndarray, HumanBatch]], num_cars: int) -> None:
         super().__init__(parts, num_cars)
-        self.humans: list[tuple[np.ndarray, HumanBatch]] = [(i, b) for i, b in self.parts]
+        self.humans: list[tuple[np.ndarray, HumanBatch]] = [
+            (i, cast(HumanBatch, b)) for i, b in self.parts
+        ]
         params: list[Any] = [None] * num_cars  # every car's parameters, in car order
         for idx, batch in self.humans:
             for i, p in zip(idx.tolist(), batch.params, strict=True):
