@@ -21,7 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hasa_env.sim.road import Road, curvature_lookup_array
+from hasa_env.sim.road import Road
 
 __all__ = [
     "Driver",
@@ -203,7 +203,7 @@ def speed_command(
         reach = v * v / (2.0 * braking) + 2.0 * v + 20.0
         ahead = reach[:, None] * _PREVIEW[None, :]
         stations = info["station"][:, None] + ahead
-        kappa = np.abs(curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations))
+        kappa = np.abs(road.curvature_lookup(stations))
         with np.errstate(divide="ignore"):
             bend_speed2 = np.where(kappa > 0, lateral[:, None] / kappa, np.inf)
         envelope = bend_speed2 + 2.0 * braking[:, None] * ahead
@@ -259,11 +259,35 @@ class LoopBatch:
 
 
 class CompositeBatch:
-    """Several batches, each driving its own subset of the cars."""
+    """Several batches, each driving its own subset of the cars.
+
+    A part whose batch names the ``info`` keys it reads (a tuple ``info_needed``, as
+    :class:`~hasa_env.drivers.human.HumanBatch` does) gets only those of its cars' info
+    (those ``info`` has); any other part gets every key but the ``"_key"`` masks.
+    """
 
     def __init__(self, parts: Sequence[tuple[np.ndarray, BatchDriver]], num_cars: int) -> None:
         self.parts = [(np.asarray(idx, dtype=np.int64), batch) for idx, batch in parts]
         self.num_cars = num_cars
+        self._needed: list[tuple[str, ...] | None] = [
+            getattr(batch, "info_needed", None) for _, batch in self.parts
+        ]
+
+    def _part_infos(
+        self, info: Mapping[str, np.ndarray]
+    ) -> list[tuple[np.ndarray, Any, dict[str, np.ndarray]]]:
+        """(car indices, batch, its cars' info) of every part."""
+        every: list[str] | None = None
+        out = []
+        for (idx, batch), needed in zip(self.parts, self._needed, strict=True):
+            if needed is None:
+                if every is None:
+                    every = [k for k in info if not k.startswith("_")]
+                keys: Sequence[str] = every
+            else:
+                keys = [k for k in needed if k in info]
+            out.append((idx, batch, {k: np.asarray(info[k])[idx] for k in keys}))
+        return out
 
     def reset(
         self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | np.ndarray | None = None
@@ -286,9 +310,7 @@ class CompositeBatch:
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
         steering = np.zeros(self.num_cars)
         acceleration = np.zeros(self.num_cars)
-        keys = [k for k in info if not k.startswith("_")]
-        for idx, batch in self.parts:
-            sub = {k: np.asarray(info[k])[idx] for k in keys}
+        for idx, batch, sub in self._part_infos(info):
             s, a = batch.act(sub, road)
             steering[idx] = s
             acceleration[idx] = a
@@ -297,9 +319,8 @@ class CompositeBatch:
     def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
         """The steering of :meth:`act` alone (parts with a ``steer`` method)."""
         steering = np.zeros(self.num_cars)
-        keys = [k for k in info if not k.startswith("_")]
-        for idx, batch in self.parts:
-            steering[idx] = partial(batch).steer({k: np.asarray(info[k])[idx] for k in keys}, road)
+        for idx, batch, sub in self._part_infos(info):
+            steering[idx] = partial(batch).steer(sub, road)
         return steering
 
 

@@ -23,7 +23,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import fields
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Protocol, cast
 
 import numpy as np
 
@@ -46,11 +46,13 @@ __all__ = [
     "car_streams",
     "check_common",
     "check_range",
+    "HumanComposite",
     "human_batch",
     "info_keys",
     "lane_bearings",
     "params_from_dict",
     "params_to_dict",
+    "sum_from",
 ]
 
 MIN_SPEED = 1.0
@@ -117,6 +119,16 @@ def lane_bearings(
     )
 
 
+def sum_from(first: np.ndarray, terms: np.ndarray) -> np.ndarray:
+    """``first + terms[:, 0] + terms[:, 1] + ...`` of N cars ((N,) and (N, m) arrays), added
+    left to right as a loop over the columns adds them (``np.add.accumulate`` is sequential:
+    the same additions in the same order, the same bits), in one call."""
+    table = np.empty((terms.shape[0], terms.shape[1] + 1))
+    table[:, 0] = first
+    table[:, 1:] = terms
+    return np.add.accumulate(table, axis=1)[:, -1]
+
+
 class DelayLine:
     """A pure delay of ``steps[i]`` env steps on car i's vector of ``width`` signals.
 
@@ -171,6 +183,9 @@ class HumanBatch(ABC):
     """
 
     params_type: ClassVar[type]
+    info_needed: ClassVar[tuple[str, ...]] = (*INFO_NEEDED, "bias")
+    """The ``info`` keys the batch reads (a :class:`~hasa_env.drivers.base.CompositeBatch`
+    hands it only these)."""
     sees_ahead: ClassVar[bool] = False
     """True: the control law looks at the driven lane ahead itself (:func:`lane_bearings`);
     False: it steers on :meth:`perceived` offsets."""
@@ -256,13 +271,17 @@ class HumanBatch(ABC):
 
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
         steering = self.steer(info, road)
+        return steering, self.acceleration(info, road)
+
+    def acceleration(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        """The speed command of :meth:`act` (m/s^2), its pedal remnant drawn (call it once a
+        step, after :meth:`steer`)."""
         remnant = None
         if self._pedal_innovation.any():
             draws = self._pedal_draws.next()[:, 0]
             self._pedal = self._pedal_rho * self._pedal + self._pedal_innovation * draws
             remnant = self._pedal
-        acceleration = speed_command(self.profile, self._initial_speed, info, road, remnant)
-        return steering, acceleration
+        return speed_command(self.profile, self._initial_speed, info, road, remnant)
 
     def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
         """The steering of :meth:`act` alone (rad, road wheel), without the speed command.
@@ -270,6 +289,11 @@ class HumanBatch(ABC):
         For callers that use only the steering (a human advising while the car
         drives): the same steering, and the next calls stay the same.
         """
+        return self.motor.step(self.command(info, road), info["speed"])
+
+    def command(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        """The command u(k) (rad) the output stage gets: :meth:`steer` before its
+        ``motor.step`` (a car's first step also starts the output stage)."""
         if self._dt is None:
             raise RuntimeError("call reset() before act()")
         if not self.sees_ahead and (self._keeps_offset or road.lane_shifts):
@@ -288,8 +312,7 @@ class HumanBatch(ABC):
             self._initial_speed[rows] = np.asarray(info["speed"], dtype=np.float64)[rows]
             self._start(info, road, start, rows)
             self._fresh = np.zeros(self.num_cars, dtype=bool)
-        command = self._command(info, road)
-        return self.motor.step(command, info["speed"])
+        return self._command(info, road)
 
     def perceived(self, info: Mapping[str, np.ndarray], road: Road) -> Mapping[str, np.ndarray]:
         """The true ``info`` as the drivers steer on it: offset and heading from the lane
@@ -402,13 +425,122 @@ def human_batch(params: Sequence[Any]) -> PartialBatchDriver:
                 f"not synthetic driver parameters: {type(p).__name__} (allowed: {allowed})"
             )
         groups.setdefault(type(p), []).append(i)
-    parts: list[tuple[np.ndarray, PartialBatchDriver]] = [
+    parts: list[tuple[np.ndarray, HumanBatch]] = [
         (np.array(idx), HumanBatch.registry[kind]([params[i] for i in idx]))
         for kind, idx in groups.items()
     ]
     if len(parts) == 1:
         return parts[0][1]
-    return CompositeBatch(parts, len(params))
+    return HumanComposite(parts, len(params))
+
+
+class HumanComposite(CompositeBatch):
+    """Several archetypes' batches (:func:`human_batch`) with one output stage and one speed
+    stage for all their cars.
+
+    Each part computes its cars' commands (:meth:`HumanBatch.command`); one
+    :class:`~hasa_env.drivers.motor.MotorStage` turns all of them into steering and one
+    :func:`~hasa_env.drivers.base.speed_command` (with every car's pedal remnant) gives the
+    accelerations: one call each per step instead of one per archetype. Every car keeps its
+    own noise streams and every operation of the stages is per car, so each car gets the
+    bits it gets in its archetype's batch. The stages stack only when the parts draw the
+    same noise channels (all or none with command noise, all or none with a pedal
+    remnant: the channels a car draws depend on its batch's); otherwise (decided at every
+    full reset) each part drives alone, as a plain :class:`CompositeBatch`.
+    """
+
+    # the shared stages' state, set at each full reset while the stages are stacked
+    _dt: float
+    _pedal_rho: np.ndarray
+    _pedal_innovation: np.ndarray
+    _pedal_draws: NoiseBlocks
+    _pedal: np.ndarray
+    _initial_speed: np.ndarray
+    _all_fresh: bool
+    _fresh: np.ndarray
+
+    def __init__(self, parts: Sequence[tuple[np.ndarray, HumanBatch]], num_cars: int) -> None:
+        super().__init__(parts, num_cars)
+        self.humans: list[tuple[np.ndarray, HumanBatch]] = [
+            (i, cast(HumanBatch, b)) for i, b in self.parts
+        ]
+        params: list[Any] = [None] * num_cars  # every car's parameters, in car order
+        for idx, batch in self.humans:
+            for i, p in zip(idx.tolist(), batch.params, strict=True):
+                params[i] = p
+
+        def arr(key: str) -> np.ndarray:
+            return np.array([getattr(p, key) for p in params], dtype=np.float64)
+
+        self.profile = speed_profile_arrays([p.speed for p in params])
+        self.motor = MotorStage(
+            arr("neuromuscular_frequency"),
+            arr("neuromuscular_damping"),
+            [p.motor for p in params],
+            arr("max_steering"),
+        )
+        self.stacked = False
+
+    def reset(
+        self, seeds: Sequence[int | None], dt: float, cars: Sequence[int] | np.ndarray | None = None
+    ) -> None:
+        """As :meth:`CompositeBatch.reset`; the shared stages restart the same cars."""
+        super().reset(seeds, dt, cars)
+        if cars is not None:
+            if self.stacked:
+                rows = np.asarray(cars, dtype=np.int64).reshape(-1)
+                self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt, rows)
+                self._pedal_draws.restart(rows, [car_streams(s, PEDAL_STREAM) for s in seeds])
+                self._pedal[rows] = 0.0
+                self._fresh[rows] = True
+            return
+        batches = [b for _, b in self.humans]
+        self.stacked = (
+            len({b.motor.commanded for b in batches}) == 1
+            and len({bool(b._pedal_innovation.any()) for b in batches}) == 1
+        )
+        if not self.stacked:
+            return
+        self._dt = float(dt)
+        self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
+        self._pedal_rho, self._pedal_innovation = ou_coefficients(
+            self.profile["pedal_noise"], self.profile["pedal_time_constant"], self._dt
+        )
+        self._pedal_draws = NoiseBlocks([car_streams(s, PEDAL_STREAM) for s in seeds], 1)
+        self._pedal = np.zeros(self.num_cars)
+        self._initial_speed = np.zeros(self.num_cars)
+        self._all_fresh = True
+        self._fresh = np.ones(self.num_cars, dtype=bool)
+
+    def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
+        if not self.stacked:
+            return super().act(info, road)
+        steering = self.steer(info, road)
+        remnant = None
+        if self._pedal_innovation.any():
+            draws = self._pedal_draws.next()[:, 0]
+            self._pedal = self._pedal_rho * self._pedal + self._pedal_innovation * draws
+            remnant = self._pedal
+        return steering, speed_command(self.profile, self._initial_speed, info, road, remnant)
+
+    def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        if not self.stacked:
+            return super().steer(info, road)
+        if self._all_fresh or self._fresh.any():
+            start = np.asarray(info["steering"], dtype=np.float64)
+            rows = None if self._all_fresh else np.flatnonzero(self._fresh)
+            self.motor.start(start, rows)
+            speed = np.asarray(info["speed"], dtype=np.float64)
+            if rows is None:
+                self._initial_speed = speed.copy()
+            else:
+                self._initial_speed[rows] = speed[rows]
+            self._all_fresh = False
+            self._fresh = np.zeros(self.num_cars, dtype=bool)
+        commands = np.empty(self.num_cars)
+        for idx, batch, sub in self._part_infos(info):
+            commands[idx] = batch.command(sub, road)
+        return self.motor.step(commands, info["speed"])
 
 
 def check_common(owner: str, params: Any) -> None:

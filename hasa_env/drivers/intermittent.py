@@ -61,6 +61,7 @@ from hasa_env.drivers.human import (
     HumanDriver,
     car_streams,
     check_range,
+    sum_from,
 )
 from hasa_env.drivers.lqr import PreviewFeedback
 from hasa_env.drivers.motor import NoiseBlocks
@@ -200,9 +201,8 @@ class IntermittentBatch(HumanBatch):
         now = seen[:, 2] + v * self.delay
         f = self.feedback(seen[:, 0], seen[:, 1], now, v, road, info.get("bias"))
         desired = -self.wheelbase * f / (self.feedback.acceleration_gain * v2)
-        target = self._base
-        for m in range(self.slots):  # fixed order: the same bits alone or in a batch
-            target = target + np.where(self._active[:, m], self._amplitude[:, m], 0.0)
+        # fixed order (slot 0, 1, ...): the same bits alone or in a batch
+        target = sum_from(self._base, np.where(self._active, self._amplitude, 0.0))
         error = desired - target
         evidence = v2 * error / self.wheelbase
         drift = self.accumulator_gain * evidence - self.leak * self._accumulator
@@ -223,14 +223,11 @@ class IntermittentBatch(HumanBatch):
             self._refractory = np.where(fire, self.refractory_steps, self._refractory)
             self.launches += fire
         self._accumulator = accumulator
-        command = self._base
-        for m in range(self.slots):
-            shape = minimum_jerk(self._age[:, m] / self.duration_steps)
-            command = command + np.where(self._active[:, m], self._amplitude[:, m] * shape, 0.0)
+        shape = minimum_jerk(self._age / self.duration_steps[:, None])
+        command = sum_from(self._base, np.where(self._active, self._amplitude * shape, 0.0))
         self._age = np.where(self._active, self._age + 1, self._age)
         done = self._active & (self._age >= self.duration_steps[:, None])
-        for m in range(self.slots):
-            self._base = self._base + np.where(done[:, m], self._amplitude[:, m], 0.0)
+        self._base = sum_from(self._base, np.where(done, self._amplitude, 0.0))
         self._active &= ~done
         self._amplitude = np.where(done, 0.0, self._amplitude)
         limit = self.max_steering

@@ -56,8 +56,8 @@ from typing import Any
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-from hasa_env.drivers.human import check_range
-from hasa_env.sim.road import Road, curvature_lookup_array
+from hasa_env.drivers.human import check_range, sum_from
+from hasa_env.sim.road import Road
 
 __all__ = ["PreviewCost", "PreviewFeedback", "preview_gains"]
 
@@ -200,9 +200,9 @@ class PreviewFeedback:
         if not road.is_straight or road.lane_shifts:
             v2 = v * v
             stations = station[:, None] + v[:, None] * self.preview_times
-            kappa = curvature_lookup_array(road.curvature, 1.0 / road.spacing, stations)
+            kappa = road.curvature_lookup(stations)
             if road.lane_shifts:
                 kappa = kappa + road.driven_curvature(stations, bias)
-            for j in range(kappa.shape[1]):
-                out = out + k[:, 3 + j] * (v2 * kappa[:, j])
+            # out + term_0 + term_1 + ..., left to right: the same bits alone or in a batch
+            out = sum_from(out, k[:, 3 : 3 + kappa.shape[1]] * (v2[:, None] * kappa))
         return out

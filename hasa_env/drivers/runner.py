@@ -239,7 +239,12 @@ def run_drivers(
         max_steps = -(-setup.max_sim_steps // setup.action_repeat)
         width = len(RECORDING_COLUMNS)
         data = np.zeros((max_steps + 1, n, width))
-        data[0] = _info_block(0, info, np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
+        _info_block(data[0], 0, info, np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
+        # the info is all run_drivers reads: the native vector env steps without building
+        # the observation (the same state, info and rewards)
+        step_env = getattr(env, "step_without_observation", None)
+        if step_env is None:
+            step_env = _drop_observation(env)
         done = np.zeros(n, dtype=bool)
         length = np.full(n, max_steps, dtype=np.int64)
         step = 0
@@ -256,9 +261,9 @@ def run_drivers(
             actions = np.column_stack(
                 [np.where(active, steering, 0.0), np.where(active, acceleration, 0.0)]
             )
-            _, reward, terminated, truncated, info = env.step(actions)
+            reward, terminated, truncated, info = step_env(actions)
             step += 1
-            data[step] = _info_block(step, info, reward, terminated, truncated)
+            _info_block(data[step], step, info, reward, terminated, truncated)
             ended = active & (terminated | truncated)
             length[ended] = step
             done |= ended
@@ -280,23 +285,31 @@ def run_drivers(
     return frames
 
 
+def _drop_observation(env: Any) -> Any:
+    """``env.step`` returning (rewards, terminated, truncated, infos) (the observation dropped)."""
+
+    def step(actions: np.ndarray) -> tuple[Any, Any, Any, Any]:
+        _, reward, terminated, truncated, info = env.step(actions)
+        return reward, terminated, truncated, info
+
+    return step
+
+
 def _info_block(
+    out: np.ndarray,
     step: int,
     info: Mapping[str, np.ndarray],
     reward: np.ndarray,
     terminated: np.ndarray,
     truncated: np.ndarray,
-) -> np.ndarray:
+) -> None:
+    """Write one step's recording rows of every car (:data:`RECORDING_COLUMNS`) into
+    ``out`` ((N, columns) float64, a slice of the run's preallocated array)."""
     columns = [np.full(reward.shape, float(step))]
-    columns.extend(np.asarray(info[k], dtype=np.float64) for k in INFO_KEYS)
-    columns.extend(
-        (
-            np.asarray(reward, dtype=np.float64),
-            terminated.astype(np.float64),
-            truncated.astype(np.float64),
-        )
-    )
-    return np.column_stack(columns)
+    columns.extend(np.asarray(info[k]) for k in INFO_KEYS)
+    columns.extend((np.asarray(reward), terminated, truncated))
+    # ints and bools are cast to float64 as astype(np.float64) would: exact
+    np.stack(columns, axis=1, out=out, casting="safe")
 
 
 def run_population(

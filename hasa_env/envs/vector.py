@@ -62,6 +62,15 @@ class LaneKeepingVectorEnv(LaneKeepingBase, VectorCarShell, VectorEnv):
         start_cars(cars, idx, self._rngs, self.setup, options, self._curvature)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        rewards, terminated, time_up, info = self.step_without_observation(actions)
+        return self._observation(started(self._car)), rewards, terminated, time_up, info
+
+    def step_without_observation(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """:meth:`step` without building the observation: (rewards, terminated, truncated,
+        infos), the same values (for callers that read the info only, as
+        :func:`hasa_env.drivers.runner.run_drivers`)."""
         cars = started(self._car)
         setup = self.setup
         steer, acc = physical_action(setup, actions, self.num_envs)
@@ -94,7 +103,7 @@ class LaneKeepingVectorEnv(LaneKeepingBase, VectorCarShell, VectorEnv):
             terminated[idx] = False
             time_up[idx] = False
         self._autoreset = terminated | time_up
-        return self._observation(cars), rewards, terminated, time_up, self._info(cars)
+        return rewards, terminated, time_up, self._info(cars)
 
     # ------------------------------------------------------------- helpers
     def _sensor_obs(self, car: Car) -> np.ndarray:

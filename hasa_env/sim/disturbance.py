@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import SimpleNamespace
 from typing import Any
 
@@ -55,6 +55,20 @@ class Disturbance:
     wind_frequencies: tuple[float, ...]
     camber_amplitude: float
     camber_wavenumbers: tuple[float, ...]
+    _rates: np.ndarray = field(init=False, repr=False, compare=False)
+    _amplitudes: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # the array backend's tables, one entry per sine in the order of the sum: its rate
+        # (omega_i per s of time, then k_j per m of station) and its amplitude
+        winds, cambers = len(self.wind_frequencies), len(self.camber_wavenumbers)
+        rates = np.array((*self.wind_frequencies, *self.camber_wavenumbers), dtype=np.float64)
+        amplitudes = np.array(
+            (self.wind_amplitude,) * winds + (self.camber_amplitude,) * cambers, dtype=np.float64
+        )
+        for name, table in (("_rates", rates), ("_amplitudes", amplitudes)):
+            table.setflags(write=False)
+            object.__setattr__(self, name, table)
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> Disturbance | None:
@@ -94,9 +108,12 @@ class Disturbance:
         ``phases`` is a sequence of floats (one car) or an (N, n_phases) array
         (N cars, ``time`` and ``station`` then (N,) arrays); the sines are
         added one by one in the same order for both, so the two backends give
-        the same bits.
+        the same bits (N cars: every sine at once, then summed left to right by
+        ``np.add.accumulate``, the same additions in the same order).
         """
-        columns = phases if isinstance(phases, list | tuple) else phases.T
+        if not isinstance(phases, list | tuple):
+            return self._lateral_acceleration_array(time, station, phases)
+        columns = phases
         total = 0.0
         k = 0
         for omega in self.wind_frequencies:
@@ -106,3 +123,18 @@ class Disturbance:
             total = total + self.camber_amplitude * ops.sin(wavenumber * station + columns[k])
             k += 1
         return total
+
+    def _lateral_acceleration_array(
+        self, time: Any, station: Any, phases: np.ndarray
+    ) -> np.ndarray:
+        """:meth:`lateral_acceleration` of N cars: the (N, n_phases) sines at once, summed
+        left to right from 0.0 (``0.0 + s_0 + s_1 + ...``, as the scalar loop adds them)."""
+        winds = len(self.wind_frequencies)
+        clocks = np.empty(np.shape(phases))  # omega_i t, then k_j s, per car and sine
+        clocks[..., :winds] = np.asarray(time, dtype=np.float64)[..., None] * self._rates[:winds]
+        clocks[..., winds:] = np.asarray(station, dtype=np.float64)[..., None] * self._rates[winds:]
+        terms = self._amplitudes * np.sin(clocks + phases)
+        if terms.shape[-1] == 0:
+            return np.zeros(terms.shape[:-1])
+        terms[..., 0] += 0.0  # the loop's 0.0 + s_0 (a -0.0 becomes 0.0)
+        return np.add.accumulate(terms, axis=-1)[..., -1]

@@ -73,7 +73,12 @@ class Road:
     y: np.ndarray = field(init=False, repr=False)
     psi: np.ndarray = field(init=False, repr=False)
     curvature_list: list[float] = field(init=False, repr=False)
+    curvature_slopes: np.ndarray = field(init=False, repr=False)
+    """kappa[i + 1] - kappa[i] (1/m per grid cell), read-only: the piecewise-linear
+    lookup's slope table (:meth:`curvature_lookup`), computed once."""
     _grid: np.ndarray = field(init=False, repr=False)
+    _straight: bool = field(init=False, repr=False)
+    _inv_spacing: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         kappa = np.asarray(self.curvature, dtype=np.float64)
@@ -94,7 +99,11 @@ class Road:
         object.__setattr__(self, "y", np.concatenate([[0.0], np.cumsum(dy)]))
         object.__setattr__(self, "curvature_list", kappa.tolist())
         object.__setattr__(self, "_grid", np.arange(kappa.size) * ds)
-        for arr in (self.curvature, self.psi, self.x, self.y):
+        # per-step constants, computed once: the drivers and the env ask for them every step
+        object.__setattr__(self, "curvature_slopes", kappa[1:] - kappa[:-1])
+        object.__setattr__(self, "_straight", not np.any(kappa))
+        object.__setattr__(self, "_inv_spacing", 1.0 / ds)
+        for arr in (self.curvature, self.psi, self.x, self.y, self.curvature_slopes):
             arr.setflags(write=False)
         toward = tuple(bool(t) for t in self.shifts_toward_other)
         if toward and len(toward) != len(self.lane_shifts):
@@ -118,7 +127,16 @@ class Road:
 
     @property
     def is_straight(self) -> bool:
-        return not np.any(self.curvature)
+        """Zero curvature everywhere (computed once, at construction)."""
+        return self._straight
+
+    def curvature_lookup(self, station: np.ndarray) -> np.ndarray:
+        """kappa(s) (1/m) at the stations ``station`` (m, any shape), piecewise linear between
+        the grid nodes and constant beyond the table: :func:`curvature_lookup_array` with the
+        road's slope table, the same bits."""
+        return curvature_lookup_array(
+            self.curvature, self._inv_spacing, station, self.curvature_slopes
+        )
 
     def shift_signs(self, bias: np.ndarray | float) -> np.ndarray:
         """sign(h_near - b) (+1.0 or -1.0, the shape of ``bias``): the direction from the
@@ -403,11 +421,23 @@ def curvature_lookup_scalar(curvature: list[float], inv_spacing: float, station:
 
 
 def curvature_lookup_array(
-    curvature: np.ndarray, inv_spacing: float, station: np.ndarray
+    curvature: np.ndarray,
+    inv_spacing: float,
+    station: np.ndarray,
+    slopes: np.ndarray | None = None,
 ) -> np.ndarray:
-    """kappa(s) from the node array (numpy, for the vector env); same arithmetic as the scalar one."""
+    """kappa(s) from the node array (numpy, for the vector env); same arithmetic as the scalar one::
+
+        pos = clip(s / ds, 0, n - 1),  i = min(floor(pos), n - 2)
+        kappa(s) = kappa[i] + (pos - i) (kappa[i + 1] - kappa[i])
+
+    ``slopes``: the table ``kappa[1:] - kappa[:-1]`` (:attr:`Road.curvature_slopes`), read
+    instead of subtracting the two nodes at every call (the same difference, the same bits).
+    """
     top = curvature.size - 1
     pos = np.minimum(np.maximum(station * inv_spacing, 0.0), top)
     i = np.minimum(pos.astype(np.int64), top - 1)
     k0 = curvature[i]
-    return k0 + (pos - i) * (curvature[i + 1] - k0)
+    if slopes is None:
+        return k0 + (pos - i) * (curvature[i + 1] - k0)
+    return k0 + (pos - i) * slopes[i]

@@ -23,7 +23,6 @@ from hasa_env.sim.disturbance import Disturbance
 from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS, VehicleParams, VehicleState
 from hasa_env.sim.road import (
     Road,
-    curvature_lookup_array,
     curvature_lookup_scalar,
     make_road,
     nearest_other_hypothesis,
@@ -147,7 +146,7 @@ class EnvSetup:
         """kappa(s) for N cars (array in, array out); a constant 0.0 on a straight road."""
         if self.road.is_straight:
             return _zero_curvature
-        return partial(curvature_lookup_array, self.road.curvature, 1.0 / self.road.spacing)
+        return self.road.curvature_lookup
 
     # ----- spaces -------------------------------------------------------------
     def action_space(self) -> spaces.Box:
