@@ -285,7 +285,7 @@ class FilterMatrices:
         self._h_base_t = np.ascontiguousarray(h_base.T).ravel().copy()
         self._h_maps = h_maps.reshape(4, 3 * n).copy()
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
-        self._h_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._h_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
         self._measurement_var_column = self.measurement_var[:, None].copy()
         self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
@@ -384,25 +384,27 @@ class FilterMatrices:
             points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
             w, deriv = self._features(x, points_b)
 
-        def propagate(name: str) -> tuple[np.ndarray, np.ndarray]:
+        def propagate(name: str, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+            """x' and F' of the variant ``name``, on ``rows`` (None: all)."""
             a_t, g_t, jac_base, maps = self._tables[name]
-            x_new = x @ a_t
+            x_rows = x if rows is None else x[rows]
+            x_new = x_rows @ a_t
             if not has_memory or name == "held":
-                return x_new, np.broadcast_to(jac_base.reshape(n, n), (x.shape[0], n, n))
-            x_new += w @ g_t
-            jac = deriv @ maps
+                return x_new, np.broadcast_to(jac_base.reshape(n, n), (x_rows.shape[0], n, n))
+            x_new += (w if rows is None else w[rows]) @ g_t
+            jac = (deriv if rows is None else deriv[rows]) @ maps
             jac += jac_base
             return x_new, jac.reshape(-1, n, n)
 
         drive = acceleration @ self.input_matrix_t  # (R, n)
         if codes is not None:
+            # each variant on its own rows (every row's arithmetic is its own)
             codes_b = np.repeat(codes, n_comp)
             x_new = np.empty_like(x)
             jac = np.empty((x.shape[0], n, n))
             for code in np.unique(codes):
-                rows = codes_b == code
-                x_c, jac_c = propagate(_VARIANTS[code])
-                x_new[rows], jac[rows] = x_c[rows], jac_c[rows]
+                rows = np.flatnonzero(codes_b == code)
+                x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
             q = self._process_noise_variants[codes_b]
             decorrelated = codes == 1
             if decorrelated.any():
@@ -504,9 +506,21 @@ class FilterMatrices:
                 if gated.any():
                     z = np.where(gated, np.nan, z)
                     all_observed = False
-                    x_post, cov_post, log_lik, innovation, s_diag, _ = self._update(
-                        x, cov, z, n_comp, False, points_b
+                    # the update again for the runs that gated, their rows only (every row's
+                    # arithmetic is its own; the other runs' rows are those of the first update)
+                    runs = np.flatnonzero(gated.any(axis=1))
+                    rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
+                    again = self._update(
+                        x[rows],
+                        cov[rows],
+                        z[runs],
+                        n_comp,
+                        False,
+                        None if points_b is None else points_b[rows],
                     )
+                    updated = (x_post, cov_post, log_lik, innovation, s_diag)
+                    for full, part in zip(updated, again[:5], strict=True):
+                        full[rows] = part
         normalized = innovation / np.sqrt(s_diag)
         if not all_observed:
             normalized[np.repeat(np.isnan(z), n_comp, axis=0)] = np.nan
@@ -596,11 +610,11 @@ class FilterMatrices:
 
     def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
         """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
-        cached = self._h_cache.get(n_b)
-        if cached is None:
+        cached = self._h_cache
+        if cached is None or cached[0].shape[0] < n_b:
             cached = (np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1)))
-            self._h_cache = {n_b: cached}  # keep only the latest batch size
-        return cached
+            self._h_cache = cached  # keep the largest batch; a smaller one takes its first rows
+        return cached[0][:n_b], cached[1][:n_b]
 
 
 # adjugate of a 3x3 matrix s flattened row-major: adj[p] = s[A[p]] s[B[p]] - s[C[p]] s[D[p]]
