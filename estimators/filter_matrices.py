@@ -31,6 +31,9 @@ __all__ = ["FilterMatrices", "filter_model"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 _VARIANTS = ("full", "decorrelated", "held")  # transition tables, by code 0, 1, 2
+_MIN_RUNS_SKIPPED = 8
+"""The gated update is repeated on the gated runs' rows only when that skips at least this
+many runs (fewer: gathering and scattering the rows costs more than it saves)."""
 
 
 def filter_model(
@@ -398,13 +401,18 @@ class FilterMatrices:
 
         drive = acceleration @ self.input_matrix_t  # (R, n)
         if codes is not None:
-            # each variant on its own rows (every row's arithmetic is its own)
+            # the most common variant on every row, each other one on its own rows only
+            # (every row's arithmetic is its own: the same numbers as on all rows)
             codes_b = np.repeat(codes, n_comp)
-            x_new = np.empty_like(x)
-            jac = np.empty((x.shape[0], n, n))
-            for code in np.unique(codes):
-                rows = np.flatnonzero(codes_b == code)
-                x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
+            counts = np.bincount(codes, minlength=len(_VARIANTS))
+            common = int(counts.argmax())
+            x_new, jac = propagate(_VARIANTS[common])
+            if not jac.flags.writeable:  # the held variant's constant F, broadcast
+                jac = jac.copy()
+            for code in np.flatnonzero(counts):
+                if code != common:
+                    rows = np.flatnonzero(codes_b == code)
+                    x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
             q = self._process_noise_variants[codes_b]
             decorrelated = codes == 1
             if decorrelated.any():
@@ -506,21 +514,25 @@ class FilterMatrices:
                 if gated.any():
                     z = np.where(gated, np.nan, z)
                     all_observed = False
-                    # the update again for the runs that gated, their rows only (every row's
-                    # arithmetic is its own; the other runs' rows are those of the first update)
                     runs = np.flatnonzero(gated.any(axis=1))
-                    rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
-                    again = self._update(
-                        x[rows],
-                        cov[rows],
-                        z[runs],
-                        n_comp,
-                        False,
-                        None if points_b is None else points_b[rows],
-                    )
-                    updated = (x_post, cov_post, log_lik, innovation, s_diag)
-                    for full, part in zip(updated, again[:5], strict=True):
-                        full[rows] = part
+                    if n_runs - runs.size < _MIN_RUNS_SKIPPED:
+                        x_post, cov_post, log_lik, innovation, s_diag, _ = self._update(
+                            x, cov, z, n_comp, False, points_b
+                        )
+                    else:  # the update again on the rows of the runs that gated only (every
+                        # row's arithmetic is its own: the others' rows would not change)
+                        rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
+                        again = self._update(
+                            x[rows],
+                            cov[rows],
+                            z[runs],
+                            n_comp,
+                            False,
+                            None if points_b is None else points_b[rows],
+                        )
+                        updated = (x_post, cov_post, log_lik, innovation, s_diag)
+                        for full, part in zip(updated, again[:5], strict=True):
+                            full[rows] = part
         normalized = innovation / np.sqrt(s_diag)
         if not all_observed:
             normalized[np.repeat(np.isnan(z), n_comp, axis=0)] = np.nan

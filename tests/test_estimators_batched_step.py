@@ -20,6 +20,7 @@ import pytest
 from benchmarks.protocol.config import ProtocolConfig
 from benchmarks.protocol.plan import load_frames, synthetic_plan
 from estimators import FilterSettings, GaussianMixtureEKF
+from estimators.filter_matrices import _MIN_RUNS_SKIPPED
 from estimators.mixture_trace import BLOCK_STEPS
 from estimators.offline import EstimationResult, run_estimator
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
@@ -105,7 +106,8 @@ def _batch(runs: int, seed: int) -> tuple[GaussianMixtureEKF, np.ndarray, np.nda
     return ekf, state.x, state.P
 
 
-def test_each_transition_variant_is_predicted_as_for_all_rows() -> None:
+@pytest.mark.parametrize("held_runs", [[2, 4], [0, 2, 3, 4]], ids=["held few", "held most"])
+def test_each_transition_variant_is_predicted_as_for_all_rows(held_runs) -> None:
     """Runs of three transition variants in one batch: each run's prediction is the one of a
     batch whose runs all take its variant."""
     runs = 6
@@ -115,7 +117,7 @@ def test_each_transition_variant_is_predicted_as_for_all_rows() -> None:
     acc[4, 1] = np.nan
     steering = 0.03 * rng.standard_normal(runs)
     steering[[1, 3]] = np.nan  # no reading: the plain transition
-    held = np.array([False, False, True, False, True, False])  # the memory held
+    held = np.isin(np.arange(runs), held_runs)  # the memory held
     points = np.tile([10.0, 0.0, 25.0, 0.0], (runs, 1))
     points[5] = [10.0, 0.3, 25.0, 1.9]
     predict = ekf.matrices.predict_batch
@@ -136,9 +138,9 @@ def test_each_transition_variant_is_predicted_as_for_all_rows() -> None:
 
 
 def test_the_gated_update_is_repeated_as_for_all_rows() -> None:
-    """Two of five runs gate a channel: the update repeated on their rows only gives what
+    """Two of twelve runs gate a channel: the update repeated on their rows only gives what
     the update of every row without the gated channels gives."""
-    runs = 5
+    runs = 12
     ekf, x, cov = _batch(runs, 5005)
     log_w = ekf.mixture_state.log_w
     z = np.column_stack([np.hypot(x[::2, 0], x[::2, 2]), x[::2, 1] + x[::2, 3], x[::2, -1]])
@@ -149,7 +151,8 @@ def test_the_gated_update_is_repeated_as_for_all_rows() -> None:
     x_post, cov_post, log_lik, gated, normalized = matrices.gated_update_batch(
         x, cov, z, 2, False, gate=6.0, log_weights=log_w
     )
-    assert gated[1, 1] and gated[3, 2] and not gated[[0, 2, 4]].any()
+    assert gated[1, 1] and gated[3, 2] and gated.sum() == 2
+    assert runs - 2 >= _MIN_RUNS_SKIPPED  # the rows-only path
     without = np.where(gated, np.nan, z)
     every_row = matrices._update(x, cov, without, 2, False, None)
     for name, ours, theirs in zip(("x", "P", "log_lik"), (x_post, cov_post, log_lik),
