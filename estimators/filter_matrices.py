@@ -493,8 +493,9 @@ class FilterMatrices:
             or gated).
         """
         points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
+        linearized = h, jac, jac_t = self._linearize(x, points_b)
         x_post, cov_post, log_lik, innovation, s_diag, distance_sq = self._update(
-            x, cov, z, n_comp, all_observed, points_b
+            x, cov, z, n_comp, all_observed, points_b, linearized
         )
         n_runs = z.shape[0]
         gated = np.zeros((n_runs, 3), dtype=bool)
@@ -517,7 +518,7 @@ class FilterMatrices:
                     runs = np.flatnonzero(gated.any(axis=1))
                     if n_runs - runs.size < _MIN_RUNS_SKIPPED:
                         x_post, cov_post, log_lik, innovation, s_diag, _ = self._update(
-                            x, cov, z, n_comp, False, points_b
+                            x, cov, z, n_comp, False, points_b, linearized
                         )
                     else:  # the update again on the rows of the runs that gated only (every
                         # row's arithmetic is its own: the others' rows would not change)
@@ -528,7 +529,8 @@ class FilterMatrices:
                             z[runs],
                             n_comp,
                             False,
-                            None if points_b is None else points_b[rows],
+                            None,
+                            (h[rows], jac[rows], jac_t[rows]),
                         )
                         updated = (x_post, cov_post, log_lik, innovation, s_diag)
                         for full, part in zip(updated, again[:5], strict=True):
@@ -538,17 +540,12 @@ class FilterMatrices:
             normalized[np.repeat(np.isnan(z), n_comp, axis=0)] = np.nan
         return x_post, cov_post, log_lik, gated, normalized
 
-    def _update(
-        self,
-        x: np.ndarray,
-        cov: np.ndarray,
-        z: np.ndarray,
-        n_comp: int,
-        all_observed: bool,
-        points: np.ndarray | None,
-    ) -> tuple[np.ndarray, ...]:
-        """The update, plus the innovations (B, 3) (0 where missing), diag(S) (B, 3) and
-        the squared Mahalanobis distances ``nu^T S^-1 nu`` (B,)."""
+    def _linearize(
+        self, x: np.ndarray, points: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """h(x) (B, 3) and the measurement Jacobians H (B, 3, n) and H^T (B, n, 3) at the
+        predicted means ``x`` (B, n), with the road points (B, 4) (None: straight). Not
+        changed by :meth:`_update`, so a repeated update (the gate) reuses them."""
         n = x.shape[1]
         n_b = x.shape[0]
         speed = np.hypot(x[:, VX], x[:, VY])
@@ -569,8 +566,23 @@ class FilterMatrices:
         speed_row = x[:, VX : VY + 1 : VY - VX] / np.maximum(speed, 1e-6)[:, None]
         jac[:, VX : VY + 1 : VY - VX] = speed_row
         jac_t[:, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
-        jac = jac.reshape(n_b, 3, n)
-        jac_t = jac_t.reshape(n_b, n, 3)
+        return h, jac.reshape(n_b, 3, n), jac_t.reshape(n_b, n, 3)
+
+    def _update(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z: np.ndarray,
+        n_comp: int,
+        all_observed: bool,
+        points: np.ndarray | None,
+        linearized: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, ...]:
+        """The update, plus the innovations (B, 3) (0 where missing), diag(S) (B, 3) and
+        the squared Mahalanobis distances ``nu^T S^-1 nu`` (B,). ``linearized``:
+        :meth:`_linearize` of ``x`` and ``points`` if known."""
+        n_b = x.shape[0]
+        h, jac, jac_t = self._linearize(x, points) if linearized is None else linearized
         if n_comp > 1:
             innovation = (z[:, None, :] - h.reshape(-1, n_comp, 3)).reshape(n_b, 3)
         else:
