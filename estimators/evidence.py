@@ -198,6 +198,16 @@ def verified_steps(rule: EvidenceRule, model_error: np.ndarray, samples: np.ndar
     return (samples >= VERIFY_MIN_SAMPLES) & (bound <= rule.mismatch_model_error)
 
 
+def _error_bound(model_error: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """:func:`model_error_bound` at ``VERIFY_QUANTILE_Z`` where ``samples >=
+    VERIFY_MIN_SAMPLES`` (the same arithmetic; there ``1 - h - z sqrt(h) > 0.7``; elsewhere
+    not meaningful): for :func:`verified_steps` in :func:`_weigh`, which keeps numpy's errors
+    off."""
+    h = 2.0 / (9.0 * samples)
+    root = 1.0 - h - VERIFY_QUANTILE_Z * np.sqrt(h)
+    return model_error / (root * root * root)
+
+
 def _bound_one(model_error: float, samples: float, z: float) -> float:
     """:func:`model_error_bound` for one run, in floats (the same arithmetic; samples > 0)."""
     h = 2.0 / (9.0 * samples)
@@ -380,7 +390,7 @@ def _hold_first_decision(
     candidate, held = state["_candidate"][:, 0], state["_candidate"][:, 1]
     held = np.where(eligible, np.where((held > 0) & (candidate == top), held + 1.0, 1.0), 0.0)
     candidate = np.where(eligible, top, 0.0)
-    state["_candidate"] = np.stack([candidate, held], axis=1)
+    state["_candidate"] = np.column_stack((candidate, held))
     is_committed = committed >= 0
     contradicting = decided & is_committed & (top != committed)
     contradicted = (committed == CONTRADICTED) | contradicting
@@ -509,15 +519,17 @@ def _weigh(
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
-        verified = verified_steps(rule, model_error, samples)
-        if any_mismatch:
-            verified &= ~mismatch
-        if verified.all():
-            new_state["_verified_log_w"] = new_log_w
-        elif verified.any():
-            new_state["_verified_log_w"] = np.where(
-                verified[:, None], new_log_w, state["_verified_log_w"]
-            )
+        enough = samples >= VERIFY_MIN_SAMPLES
+        if enough.any():  # (none has enough data in a run's first samples: none verified)
+            verified = enough & (_error_bound(model_error, samples) <= rule.mismatch_model_error)
+            if any_mismatch:
+                verified &= ~mismatch
+            if verified.all():
+                new_state["_verified_log_w"] = new_log_w
+            elif verified.any():
+                new_state["_verified_log_w"] = np.where(
+                    verified[:, None], new_log_w, state["_verified_log_w"]
+                )
     else:
         raw = log_w + log_lik
         new_log_w = normalize_log_weights(

@@ -161,3 +161,27 @@ def test_the_gated_update_is_repeated_as_for_all_rows() -> None:
     expected = every_row[3] / np.sqrt(every_row[4])
     expected[np.repeat(np.isnan(without), 2, axis=0)] = np.nan
     np.testing.assert_array_equal(normalized, expected)
+
+
+def test_the_evidence_rule_verifies_as_verified_steps() -> None:
+    """The batched rule's verification (the bound computed only with enough samples) is
+    :func:`estimators.evidence.verified_steps`, on both sides of every threshold."""
+    from estimators.evidence import (
+        VERIFY_MIN_SAMPLES,
+        EvidenceRule,
+        _error_bound,
+        verified_steps,
+    )
+
+    rule = EvidenceRule.from_settings(FilterSettings(), 0.01)
+    rng = np.random.default_rng(5006)
+    samples = np.concatenate([[0.0, 1.0, 9.999, VERIFY_MIN_SAMPLES], rng.uniform(0, 500, 400)])
+    model_error = rng.uniform(0.0, 2.0 * rule.mismatch_model_error, samples.size)
+    model_error[[0, 5, 9]] = np.nan
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fast = (samples >= VERIFY_MIN_SAMPLES) & (
+            _error_bound(model_error, samples) <= rule.mismatch_model_error
+        )
+    expected = verified_steps(rule, model_error, samples)
+    assert expected.any() and not expected.all()
+    np.testing.assert_array_equal(fast, expected)
