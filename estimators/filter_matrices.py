@@ -401,10 +401,12 @@ class FilterMatrices:
 
         drive = acceleration @ self.input_matrix_t  # (R, n)
         if codes is not None:
-            # the most common variant on every row, each other one on its own rows only
-            # (every row's arithmetic is its own: the same numbers as on all rows)
+            # the most common variant on every row, each other one on its own rows only:
+            # every row's arithmetic is its own, the same numbers as on all rows, as long as
+            # the products stay matrix products (one row would be a vector-matrix product,
+            # which BLAS sums in another order: then on all rows, and its rows taken)
             codes_b = np.repeat(codes, n_comp)
-            counts = np.bincount(codes, minlength=len(_VARIANTS))
+            counts = np.bincount(codes_b, minlength=len(_VARIANTS))
             common = int(counts.argmax())
             x_new, jac = propagate(_VARIANTS[common])
             if not jac.flags.writeable:  # the held variant's constant F, broadcast
@@ -412,7 +414,11 @@ class FilterMatrices:
             for code in np.flatnonzero(counts):
                 if code != common:
                     rows = np.flatnonzero(codes_b == code)
-                    x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
+                    if rows.size > 1:
+                        x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
+                    else:
+                        x_all, jac_all = propagate(_VARIANTS[code])
+                        x_new[rows], jac[rows] = x_all[rows], jac_all[rows]
             q = self._process_noise_variants[codes_b]
             decorrelated = codes == 1
             if decorrelated.any():
