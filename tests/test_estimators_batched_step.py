@@ -197,3 +197,33 @@ def test_the_evidence_rule_verifies_as_verified_steps() -> None:
     expected = verified_steps(rule, model_error, samples)
     assert expected.any() and not expected.all()
     np.testing.assert_array_equal(fast, expected)
+
+
+@pytest.mark.parametrize("confidence", [0.0, 0.95])
+def test_the_evidence_rule_without_steering_data_gives_the_formulas_values(confidence) -> None:
+    """Runs that never used the steering channel (no model; the channel off): the rule skips
+    its statistics' arithmetic; its values are those the formulas give such runs in a batch
+    with a run that did use it."""
+    from estimators.evidence import (
+        EvidenceRule,
+        _run_statistics,
+        _updated_statistics,
+        initial_evidence_state,
+    )
+
+    rule = EvidenceRule.from_settings(FilterSettings(evidence_confidence=confidence), 0.01)
+    log_prior = np.log(np.full((4, 2), 0.5))
+    state = initial_evidence_state(log_prior)
+    no_data = np.full((4, 2), np.nan)
+    with_data = no_data.copy()
+    with_data[3] = [0.4, -1.2]  # the last run used it
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        alone = _updated_statistics(rule, no_data[:3], None, initial_evidence_state(log_prior[:3]))
+        mixed = _updated_statistics(rule, with_data, None, state)
+        for key, value in alone.items():
+            np.testing.assert_array_equal(value, mixed[key][:3], err_msg=key)
+        skipped = _run_statistics(rule, alone, None)
+        computed = _run_statistics(rule, mixed, None)
+    for ours, theirs in zip(skipped, computed, strict=True):
+        assert ours.dtype == theirs.dtype
+        np.testing.assert_array_equal(ours, theirs[:3])
