@@ -20,7 +20,7 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
 import pandas as pd
@@ -334,7 +334,8 @@ def _run_mixture_filter(
     n_runs, n_steps = z.shape[:2]
     if points is not None:
         check_road_points(points)
-    trace = MixtureTrace(n_runs, n_steps, *first.component_means.shape[-2:], store_components)
+    n_comp, n_states = first.component_means.shape[-2:]
+    trace = MixtureTrace(n_runs, n_steps, n_comp, n_states, store_components)
     trace.append(estimator.mixture_state)
     for k in range(1, n_steps):
         estimator.advance(
@@ -455,7 +456,10 @@ class _Trace:
             setattr(self, name, getattr(trace, name))
         for name in ("low_speed", "decision", "model_error", "evidence_scale", "channel_nis"):
             setattr(self, name, getattr(trace, name))
-        self.gating = self.slowing = self.checking = self.coding = self.withholding = estimator
+        # (the filter has every optional record's attributes)
+        self.gating = self.slowing = self.checking = self.coding = self.withholding = cast(
+            Any, estimator
+        )
         return self
 
     def store(self, k: int, e: Estimate) -> None:
