@@ -198,6 +198,16 @@ def verified_steps(rule: EvidenceRule, model_error: np.ndarray, samples: np.ndar
     return (samples >= VERIFY_MIN_SAMPLES) & (bound <= rule.mismatch_model_error)
 
 
+def _error_bound(model_error: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """:func:`model_error_bound` at ``VERIFY_QUANTILE_Z`` where ``samples >=
+    VERIFY_MIN_SAMPLES`` (the same arithmetic; there ``1 - h - z sqrt(h) > 0.7``; elsewhere
+    not meaningful): for :func:`verified_steps` in :func:`_weigh`, which keeps numpy's errors
+    off."""
+    h = 2.0 / (9.0 * samples)
+    root = 1.0 - h - VERIFY_QUANTILE_Z * np.sqrt(h)
+    return model_error / (root * root * root)
+
+
 def _bound_one(model_error: float, samples: float, z: float) -> float:
     """:func:`model_error_bound` for one run, in floats (the same arithmetic; samples > 0)."""
     h = 2.0 / (9.0 * samples)
@@ -380,7 +390,7 @@ def _hold_first_decision(
     candidate, held = state["_candidate"][:, 0], state["_candidate"][:, 1]
     held = np.where(eligible, np.where((held > 0) & (candidate == top), held + 1.0, 1.0), 0.0)
     candidate = np.where(eligible, top, 0.0)
-    state["_candidate"] = np.stack([candidate, held], axis=1)
+    state["_candidate"] = np.column_stack((candidate, held))
     is_committed = committed >= 0
     contradicting = decided & is_committed & (top != committed)
     contradicted = (committed == CONTRADICTED) | contradicting
@@ -491,33 +501,21 @@ def _weigh(
     all_active = math.isfinite(log_w.sum())  # pruned (or zero-prior) hypotheses do not count
     active = None if all_active else np.isfinite(log_w)
     new_state = _updated_statistics(rule, score, active, state)
-    weight, weight_sq = new_state["_evidence_weight"], new_state["_evidence_weight_sq"]
-    nis, lag = new_state["_nis"], new_state["_lag_product"]
-    # lambda and rho of the best-fitting active hypothesis (NaN before any data)
-    best = np.argmin(nis if active is None else np.where(active, nis, np.inf), axis=1)
-    rows_index = np.arange(nis.shape[0])
-    best_nis = nis[rows_index, best]
-    model_error = best_nis / weight
-    rho = lag[rows_index, best] / best_nis
-    rho_plus = np.minimum(np.fmax(rho, 0.0), MAX_AUTOCORRELATION)  # (NaN: 0)
-    inflation = (1.0 + rho_plus) / (1.0 - rho_plus)
-    # effective number of independent squared innovations behind lambda (0 before any data)
-    samples = weight * weight / (weight_sq * inflation)
-    mismatch = model_error > rule.mismatch_model_error * chi2_upper_ratio(samples)
-    bounded = model_error_bound(model_error, samples, rule.bound_z) if rule.bound_z else model_error
-    scale = np.minimum(np.fmax(bounded, 1.0) * inflation, MAX_EVIDENCE_SCALE)  # (NaN lambda: 1)
+    model_error, rho, samples, mismatch, scale = _run_statistics(rule, new_state, active)
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
-        verified = verified_steps(rule, model_error, samples)
-        if any_mismatch:
-            verified &= ~mismatch
-        if verified.all():
-            new_state["_verified_log_w"] = new_log_w
-        elif verified.any():
-            new_state["_verified_log_w"] = np.where(
-                verified[:, None], new_log_w, state["_verified_log_w"]
-            )
+        enough = samples >= VERIFY_MIN_SAMPLES
+        if enough.any():  # (none has enough data in a run's first samples: none verified)
+            verified = enough & (_error_bound(model_error, samples) <= rule.mismatch_model_error)
+            if any_mismatch:
+                verified &= ~mismatch
+            if verified.all():
+                new_state["_verified_log_w"] = new_log_w
+            elif verified.any():
+                new_state["_verified_log_w"] = np.where(
+                    verified[:, None], new_log_w, state["_verified_log_w"]
+                )
     else:
         raw = log_w + log_lik
         new_log_w = normalize_log_weights(
@@ -534,6 +532,36 @@ def _weigh(
         "checked": (samples >= MIN_CHECKED_SAMPLES) & ~mismatch,
     }
     return new_log_w, new_state, stats
+
+
+def _run_statistics(
+    rule: EvidenceRule, state: dict[str, np.ndarray], active: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """lambda, rho, the effective samples N, the mismatch test and tau of each run (R,) from
+    the updated statistics ``state`` (module docstring). Before any run used the steering
+    channel (n = 0 in every run: no steering model, or the channel off since the reset) they
+    are what the formulas give for n = s = e = c = 0: NaN, NaN, NaN (0 / 0), no mismatch and
+    tau = 1, without the arithmetic."""
+    weight, weight_sq = state["_evidence_weight"], state["_evidence_weight_sq"]
+    if not weight.any():
+        shape = weight.shape
+        nan = np.full(shape, np.nan)
+        return nan, nan.copy(), nan.copy(), np.zeros(shape, dtype=bool), np.ones(shape)
+    nis, lag = state["_nis"], state["_lag_product"]
+    # lambda and rho of the best-fitting active hypothesis (NaN before any data)
+    best = np.argmin(nis if active is None else np.where(active, nis, np.inf), axis=1)
+    rows_index = np.arange(nis.shape[0])
+    best_nis = nis[rows_index, best]
+    model_error = best_nis / weight
+    rho = lag[rows_index, best] / best_nis
+    rho_plus = np.minimum(np.fmax(rho, 0.0), MAX_AUTOCORRELATION)  # (NaN: 0)
+    inflation = (1.0 + rho_plus) / (1.0 - rho_plus)
+    # effective number of independent squared innovations behind lambda (0 before any data)
+    samples = weight * weight / (weight_sq * inflation)
+    mismatch = model_error > rule.mismatch_model_error * chi2_upper_ratio(samples)
+    bounded = model_error_bound(model_error, samples, rule.bound_z) if rule.bound_z else model_error
+    scale = np.minimum(np.fmax(bounded, 1.0) * inflation, MAX_EVIDENCE_SCALE)  # (NaN lambda: 1)
+    return model_error, rho, samples, mismatch, scale
 
 
 def _updated_statistics(
@@ -559,6 +587,10 @@ def _updated_statistics(
         lag = keep * lag + alpha * (u * state["_last_score"])
     else:
         used = ~np.isnan(u).any(axis=1)  # missing, gated and low-speed steps: NaN
+        if not used.any():  # (no steering model, or the channel off in every run)
+            new_state = dict(state)
+            new_state["_last_score"] = np.zeros_like(u)  # the next lag product is 0 (a gap)
+            return new_state
         rows = used[:, None] if active is None else used[:, None] & active
         u = np.where(rows, u, 0.0)  # 0 where not used: the next lag product is 0 (a gap)
         weight = np.where(used, keep * weight + alpha, weight)

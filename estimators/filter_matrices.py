@@ -31,6 +31,9 @@ __all__ = ["FilterMatrices", "filter_model"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 _VARIANTS = ("full", "decorrelated", "held")  # transition tables, by code 0, 1, 2
+_MIN_RUNS_SKIPPED = 8
+"""The gated update is repeated on the gated runs' rows only when that skips at least this
+many runs (fewer: gathering and scattering the rows costs more than it saves)."""
 
 
 def filter_model(
@@ -285,7 +288,7 @@ class FilterMatrices:
         self._h_base_t = np.ascontiguousarray(h_base.T).ravel().copy()
         self._h_maps = h_maps.reshape(4, 3 * n).copy()
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
-        self._h_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._h_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
         self._measurement_var_column = self.measurement_var[:, None].copy()
         self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
@@ -384,25 +387,38 @@ class FilterMatrices:
             points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
             w, deriv = self._features(x, points_b)
 
-        def propagate(name: str) -> tuple[np.ndarray, np.ndarray]:
+        def propagate(name: str, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+            """x' and F' of the variant ``name``, on ``rows`` (None: all)."""
             a_t, g_t, jac_base, maps = self._tables[name]
-            x_new = x @ a_t
+            x_rows = x if rows is None else x[rows]
+            x_new = x_rows @ a_t
             if not has_memory or name == "held":
-                return x_new, np.broadcast_to(jac_base.reshape(n, n), (x.shape[0], n, n))
-            x_new += w @ g_t
-            jac = deriv @ maps
+                return x_new, np.broadcast_to(jac_base.reshape(n, n), (x_rows.shape[0], n, n))
+            x_new += (w if rows is None else w[rows]) @ g_t
+            jac = (deriv if rows is None else deriv[rows]) @ maps
             jac += jac_base
             return x_new, jac.reshape(-1, n, n)
 
         drive = acceleration @ self.input_matrix_t  # (R, n)
         if codes is not None:
+            # the most common variant on every row, each other one on its own rows only:
+            # every row's arithmetic is its own, the same numbers as on all rows, as long as
+            # the products stay matrix products (one row would be a vector-matrix product,
+            # which BLAS sums in another order: then on all rows, and its rows taken)
             codes_b = np.repeat(codes, n_comp)
-            x_new = np.empty_like(x)
-            jac = np.empty((x.shape[0], n, n))
-            for code in np.unique(codes):
-                rows = codes_b == code
-                x_c, jac_c = propagate(_VARIANTS[code])
-                x_new[rows], jac[rows] = x_c[rows], jac_c[rows]
+            counts = np.bincount(codes_b, minlength=len(_VARIANTS))
+            common = int(counts.argmax())
+            x_new, jac = propagate(_VARIANTS[common])
+            if not jac.flags.writeable:  # the held variant's constant F, broadcast
+                jac = jac.copy()
+            for code in np.flatnonzero(counts):
+                if code != common:
+                    rows = np.flatnonzero(codes_b == code)
+                    if rows.size > 1:
+                        x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
+                    else:
+                        x_all, jac_all = propagate(_VARIANTS[code])
+                        x_new[rows], jac[rows] = x_all[rows], jac_all[rows]
             q = self._process_noise_variants[codes_b]
             decorrelated = codes == 1
             if decorrelated.any():
@@ -483,8 +499,9 @@ class FilterMatrices:
             or gated).
         """
         points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
+        linearized = h, jac, jac_t = self._linearize(x, points_b)
         x_post, cov_post, log_lik, innovation, s_diag, distance_sq = self._update(
-            x, cov, z, n_comp, all_observed, points_b
+            x, cov, z, n_comp, all_observed, points_b, linearized
         )
         n_runs = z.shape[0]
         gated = np.zeros((n_runs, 3), dtype=bool)
@@ -504,25 +521,37 @@ class FilterMatrices:
                 if gated.any():
                     z = np.where(gated, np.nan, z)
                     all_observed = False
-                    x_post, cov_post, log_lik, innovation, s_diag, _ = self._update(
-                        x, cov, z, n_comp, False, points_b
-                    )
+                    runs = np.flatnonzero(gated.any(axis=1))
+                    if n_runs - runs.size < _MIN_RUNS_SKIPPED:
+                        x_post, cov_post, log_lik, innovation, s_diag, _ = self._update(
+                            x, cov, z, n_comp, False, points_b, linearized
+                        )
+                    else:  # the update again on the rows of the runs that gated only (every
+                        # row's arithmetic is its own: the others' rows would not change)
+                        rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
+                        again = self._update(
+                            x[rows],
+                            cov[rows],
+                            z[runs],
+                            n_comp,
+                            False,
+                            None,
+                            (h[rows], jac[rows], jac_t[rows]),
+                        )
+                        updated = (x_post, cov_post, log_lik, innovation, s_diag)
+                        for full, part in zip(updated, again[:5], strict=True):
+                            full[rows] = part
         normalized = innovation / np.sqrt(s_diag)
         if not all_observed:
             normalized[np.repeat(np.isnan(z), n_comp, axis=0)] = np.nan
         return x_post, cov_post, log_lik, gated, normalized
 
-    def _update(
-        self,
-        x: np.ndarray,
-        cov: np.ndarray,
-        z: np.ndarray,
-        n_comp: int,
-        all_observed: bool,
-        points: np.ndarray | None,
-    ) -> tuple[np.ndarray, ...]:
-        """The update, plus the innovations (B, 3) (0 where missing), diag(S) (B, 3) and
-        the squared Mahalanobis distances ``nu^T S^-1 nu`` (B,)."""
+    def _linearize(
+        self, x: np.ndarray, points: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """h(x) (B, 3) and the measurement Jacobians H (B, 3, n) and H^T (B, n, 3) at the
+        predicted means ``x`` (B, n), with the road points (B, 4) (None: straight). Not
+        changed by :meth:`_update`, so a repeated update (the gate) reuses them."""
         n = x.shape[1]
         n_b = x.shape[0]
         speed = np.hypot(x[:, VX], x[:, VY])
@@ -543,8 +572,23 @@ class FilterMatrices:
         speed_row = x[:, VX : VY + 1 : VY - VX] / np.maximum(speed, 1e-6)[:, None]
         jac[:, VX : VY + 1 : VY - VX] = speed_row
         jac_t[:, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
-        jac = jac.reshape(n_b, 3, n)
-        jac_t = jac_t.reshape(n_b, n, 3)
+        return h, jac.reshape(n_b, 3, n), jac_t.reshape(n_b, n, 3)
+
+    def _update(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z: np.ndarray,
+        n_comp: int,
+        all_observed: bool,
+        points: np.ndarray | None,
+        linearized: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, ...]:
+        """The update, plus the innovations (B, 3) (0 where missing), diag(S) (B, 3) and
+        the squared Mahalanobis distances ``nu^T S^-1 nu`` (B,). ``linearized``:
+        :meth:`_linearize` of ``x`` and ``points`` if known."""
+        n_b = x.shape[0]
+        h, jac, jac_t = self._linearize(x, points) if linearized is None else linearized
         if n_comp > 1:
             innovation = (z[:, None, :] - h.reshape(-1, n_comp, 3)).reshape(n_b, 3)
         else:
@@ -596,11 +640,11 @@ class FilterMatrices:
 
     def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
         """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
-        cached = self._h_cache.get(n_b)
-        if cached is None:
+        cached = self._h_cache
+        if cached is None or cached[0].shape[0] < n_b:
             cached = (np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1)))
-            self._h_cache = {n_b: cached}  # keep only the latest batch size
-        return cached
+            self._h_cache = cached  # keep the largest batch; a smaller one takes its first rows
+        return cached[0][:n_b], cached[1][:n_b]
 
 
 # adjugate of a 3x3 matrix s flattened row-major: adj[p] = s[A[p]] s[B[p]] - s[C[p]] s[D[p]]

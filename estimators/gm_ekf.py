@@ -453,14 +453,7 @@ class GaussianMixtureEKF:
         if acc.ndim == 1:
             acc = acc.reshape(1, -1)
         if runs is None:
-            if z.shape != (state.num_runs, 3) or acc.shape != (state.num_runs, 2):
-                raise ValueError(
-                    f"expected measurement ({self.num_runs}, 3) and acceleration "
-                    f"({self.num_runs}, 2), got {np.shape(measurement)} and "
-                    f"{np.shape(acceleration)}"
-                )
-            points = road_point_rows(road_points, z.shape[0])
-            self._state = self._step(state, z, acc, points)
+            self.advance(z, acc, road_points)
         else:
             idx = self._check_runs(runs, z.shape[0], None)
             if acc.shape != (idx.size, 2) or z.shape != (idx.size, 3):
@@ -468,6 +461,47 @@ class GaussianMixtureEKF:
             points = road_point_rows(road_points, idx.size)
             state.put(idx, self._step(state.take(idx), z, acc, points))
         return self.estimate()
+
+    def advance(
+        self,
+        measurement: np.ndarray,
+        acceleration: np.ndarray,
+        road_points: np.ndarray | None = None,
+        *,
+        checked: bool = False,
+    ) -> None:
+        """:meth:`step` of the whole batch without building the :class:`Estimate`: the same
+        rules on the same arrays, for loops that read :attr:`mixture_state` instead (the
+        offline runner, :func:`estimators.offline.run_estimator`).
+
+        Args:
+            measurement: (R, 3) float64 [speed, camera, steering] at k.
+            acceleration: (R, 2) float64 IMU (a_x, a_y).
+            road_points: (R, 4) or (4,) road points at k (None: a straight road).
+            checked: the caller checked the shapes and the road points already
+                (:func:`estimators.arx_state_space.check_road_points` of the (R, 4) rows,
+                e.g. once for a whole recording): they are used as given.
+        """
+        state = self._checked_state()
+        if checked:
+            self._state = self._step(state, measurement, acceleration, road_points)
+            return
+        z, acc = measurement, acceleration
+        if z.shape != (state.num_runs, 3) or acc.shape != (state.num_runs, 2):
+            raise ValueError(
+                f"expected measurement ({self.num_runs}, 3) and acceleration "
+                f"({self.num_runs}, 2), got {np.shape(measurement)} and "
+                f"{np.shape(acceleration)}"
+            )
+        points = road_point_rows(road_points, z.shape[0])
+        self._state = self._step(state, z, acc, points)
+
+    @property
+    def mixture_state(self) -> MixtureState:
+        """The per-run state after the last reset or step, (R, ...) even for a single run
+        (:class:`MixtureState`). Read only: a step replaces the record and never changes
+        its arrays, so a reference taken now keeps this step's values."""
+        return self._checked_state()
 
     def estimate(self) -> Estimate:
         """The current estimate (mixture and hypotheses)."""

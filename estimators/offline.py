@@ -20,14 +20,16 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
 import pandas as pd
 
-from estimators.arx_state_space import PHYSICAL_STATE_NAMES
+from estimators.arx_state_space import PHYSICAL_STATE_NAMES, check_road_points
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.evidence import DECISIONS
+from estimators.gm_ekf import GaussianMixtureEKF
+from estimators.mixture_trace import MixtureTrace
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
 from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time, recording_sample_time
@@ -305,12 +307,43 @@ def run_estimator(
         return {} if points is None else {"road_points": points[:, k]}
 
     est = estimator.reset(z[:, 0], hyp, prior=prior, true_bias=true_bias, **road(0))
+    if isinstance(estimator, GaussianMixtureEKF):
+        return _run_mixture_filter(estimator, est, z, acc, points, store_components).result(
+            est, time, valid, lengths, truth
+        )
     trace = _Trace(estimator, est, n_runs, n_steps, store_components)
     trace.store(0, est)
     for k in range(1, n_steps):
         est = estimator.step(z[:, k], acc[:, k], **road(k))
         trace.store(k, est)
     return trace.result(est, time, valid, lengths, truth)
+
+
+def _run_mixture_filter(
+    estimator: GaussianMixtureEKF,
+    first: Estimate,
+    z: np.ndarray,
+    acc: np.ndarray,
+    points: np.ndarray | None,
+    store_components: bool,
+) -> _Trace:
+    """Steps 1 .. T-1 of the mixture filter, reset at step 0 (its estimate ``first``): the
+    fast path of :func:`run_estimator`, with the results of its per-step loop to the bit.
+    The road points are checked once, each step is :meth:`GaussianMixtureEKF.advance` (no
+    :class:`Estimate`) and the states are recorded in blocks (:class:`MixtureTrace`)."""
+    n_runs, n_steps = z.shape[:2]
+    if points is not None:
+        check_road_points(points)
+    n_comp, n_states = first.component_means.shape[-2:]
+    trace = MixtureTrace(n_runs, n_steps, n_comp, n_states, store_components)
+    trace.append(estimator.mixture_state)
+    for k in range(1, n_steps):
+        estimator.advance(
+            z[:, k], acc[:, k], None if points is None else points[:, k], checked=True
+        )
+        trace.append(estimator.mixture_state)
+    trace.flush()
+    return _Trace.of_mixture(trace, estimator)
 
 
 def _check_recordings(estimator: LaneEstimator, frames: list[pd.DataFrame]) -> None:
@@ -414,6 +447,20 @@ class _Trace:
         self.channel_nis = (
             np.full((n_runs, n_steps, 3), np.nan) if self.checking is not None else None
         )
+
+    @classmethod
+    def of_mixture(cls, trace: MixtureTrace, estimator: GaussianMixtureEKF) -> _Trace:
+        """The record of a :class:`MixtureTrace` of ``estimator`` (its arrays, not copies)."""
+        self = cls.__new__(cls)
+        for name in ("mean", "std", "weights", "most_likely", "components", "gated"):
+            setattr(self, name, getattr(trace, name))
+        for name in ("low_speed", "decision", "model_error", "evidence_scale", "channel_nis"):
+            setattr(self, name, getattr(trace, name))
+        # (the filter has every optional record's attributes)
+        self.gating = self.slowing = self.checking = self.coding = self.withholding = cast(
+            Any, estimator
+        )
+        return self
 
     def store(self, k: int, e: Estimate) -> None:
         """Keep the estimate at sample k: the mixture mean, its std
