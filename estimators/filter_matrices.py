@@ -509,9 +509,9 @@ class FilterMatrices:
             # quick exit: the most likely hypothesis explains every channel, its score having
             # no odds; nu_c^2 / S_cc <= nu^T S^-1 nu (Cauchy-Schwarz), so its distance bounds
             # them all
-            favourite = log_weights.argmax(axis=1)
-            if n_comp > 1:
-                favourite += self._run_offsets(n_runs, n_comp)
+            # (every run's own row, also with one hypothesis per run: a run's gate never
+            # depends on the other runs of its batch)
+            favourite = log_weights.argmax(axis=1) + self._run_offsets(n_runs, n_comp)
             if not distance_sq[favourite].max() <= gate * gate:  # (NaN: check the channels)
                 odds = log_weights.max(axis=1, keepdims=True) - log_weights  # (R, C), >= 0
                 with np.errstate(over="ignore"):  # a huge reading: an infinite score, gated

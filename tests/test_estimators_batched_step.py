@@ -20,6 +20,7 @@ import pytest
 from benchmarks.protocol.config import ProtocolConfig
 from benchmarks.protocol.plan import load_frames, synthetic_plan
 from estimators import FilterSettings, GaussianMixtureEKF
+from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.filter_matrices import _MIN_RUNS_SKIPPED
 from estimators.mixture_trace import BLOCK_STEPS
 from estimators.offline import EstimationResult, run_estimator
@@ -227,3 +228,23 @@ def test_the_evidence_rule_without_steering_data_gives_the_formulas_values(confi
     for ours, theirs in zip(skipped, computed, strict=True):
         assert ours.dtype == theirs.dtype
         np.testing.assert_array_equal(ours, theirs[:3])
+
+
+@pytest.mark.parametrize(
+    ("make", "kwargs"),
+    [(lambda s: OracleEKF(None, s), {}), (NoSteeringEKF, {"hypotheses": [0.0]})],
+)
+def test_each_run_is_gated_as_alone_also_with_one_hypothesis(frames, make, kwargs) -> None:
+    """The gate's quick exit looks at every run's own most likely hypothesis: a run with an
+    outlier is gated in a batch whose first run has none (with one hypothesis per run the exit
+    once read the first run's distance only, so an outlier went ungated in a batch)."""
+    clean = frames[0]  # no outliers
+    noisy = frames[3]  # outlying camera readings
+    settings = FilterSettings.from_env_config(clean.attrs["config"])
+    alone = run_estimator(make(settings), [noisy], **kwargs)
+    batch = run_estimator(make(settings), [clean, noisy], **kwargs)
+    assert alone.gated is not None and alone.gated.any(), "no outlier gated: nothing tested"
+    for name in ("mean", "std", "weights", "gated"):
+        np.testing.assert_array_equal(
+            getattr(batch, name)[1, : alone.lengths[0]], getattr(alone, name)[0], err_msg=name
+        )
