@@ -132,6 +132,7 @@ __all__ = [
     "fit_and_check",
     "fit_seed",
     "fit_seeds",
+    "load_candidates",
     "map_on_executor",
     "run_protocol",
     "schedule",
@@ -183,18 +184,7 @@ def run_protocol(
     start = time.perf_counter()
     errors: list[ModelError] = []
     # 0. every model loads before any run is generated: one that does not is an input error
-    candidates = load_models(
-        user_models,
-        errors,
-        time_limit=config.model_time_limit,
-        stress=config.stress,
-        trust_module=trust_model_modules,
-    )
-    if errors:
-        raise BenchmarkError(
-            f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
-            "run:\n" + "\n".join(f"  {e}" for e in errors)
-        )
+    candidates = load_candidates(config, user_models, trust_model_modules)
     # 1.-2. per seed: the runs, the training run, the fits ("fits": seeds done of all)
     fits = fit_seeds(
         config,
@@ -447,6 +437,31 @@ def chunk_tasks(config: ProtocolConfig, fit: FittedPlan, detailed: bool) -> list
         )
 
     return [task(chunk) for chunk in chunks([*plan.curved, *fit.validation], config.batch_size)]
+
+
+def load_candidates(
+    config: ProtocolConfig, user_models: Sequence[str], trust_model_modules: bool = False
+) -> list[Candidate]:
+    """Every model the protocol scores (:func:`~benchmarks.protocol.models.load_models`),
+    before any run is generated.
+
+    Raises:
+        BenchmarkError: a user model cannot be used (each one named): nothing is run.
+    """
+    errors: list[ModelError] = []
+    candidates = load_models(
+        user_models,
+        errors,
+        time_limit=config.model_time_limit,
+        stress=config.stress,
+        trust_module=trust_model_modules,
+    )
+    if errors:
+        raise BenchmarkError(
+            f"{len(errors)} of {len(user_models)} user model(s) cannot be used; nothing was "
+            "run:\n" + "\n".join(f"  {e}" for e in errors)
+        )
+    return candidates
 
 
 @dataclass(frozen=True)

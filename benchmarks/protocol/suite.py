@@ -33,7 +33,7 @@ from typing import Any
 
 from benchmarks.executor import NO_WORKER_TIMEOUT
 from benchmarks.protocol.config import BenchmarkError, ProtocolConfig
-from benchmarks.protocol.models import ModelError, load_models
+from benchmarks.protocol.models import ModelError
 from benchmarks.protocol.plan import Plan, make_plan
 from benchmarks.protocol.results import BenchmarkResult
 from benchmarks.protocol.run import (
@@ -45,6 +45,7 @@ from benchmarks.protocol.run import (
     chunk_tasks,
     fit_and_check,
     fit_seed,
+    load_candidates,
     map_on_executor,
     schedule,
 )
@@ -91,19 +92,7 @@ def run_suite(
     _check_configs(configs, first)
     say = progress or (lambda phase, done, total: None)
     start = time.perf_counter()
-    load_errors: list[ModelError] = []
-    candidates = load_models(
-        user_models,
-        load_errors,
-        time_limit=first.model_time_limit,
-        stress=first.stress,
-        trust_module=trust_model_modules,
-    )
-    if load_errors:
-        raise BenchmarkError(
-            f"{len(load_errors)} of {len(user_models)} user model(s) cannot be used; nothing "
-            "was run:\n" + "\n".join(f"  {e}" for e in load_errors)
-        )
+    candidates = load_candidates(first, user_models, trust_model_modules)
     fits, errors, fit_seconds = _fit_suite(
         configs, candidates, say, workers, scheduler, no_worker_timeout
     )
