@@ -11,7 +11,8 @@
 - Baselines: :class:`NoSteeringEKF`, :class:`SingleHypothesisEKF`,
   :class:`OracleEKF`, the steering-free lane-centring prior
   :class:`LaneCentringEKF` (fitted by :func:`fit_lane_centring`), and :class:`FilterpyGMEKF` (filterpy reference).
-- :func:`run_estimator`: filter recordings offline, batched.
+- :func:`run_estimator`: filter recordings offline, batched (:func:`stack_recordings`:
+  stacked once for several estimators).
 - Gymnasium wrappers: :class:`EstimatorInfoWrapper`,
   :class:`EstimatorObservationWrapper` (single and vector envs).
 
@@ -37,7 +38,7 @@ from estimators.calibration import (
 from estimators.filter_matrices import FilterMatrices
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
-from estimators.offline import EstimationResult, hypotheses_of, run_estimator
+from estimators.offline import EstimationResult, hypotheses_of, run_estimator, stack_recordings
 from estimators.settings import FilterSettings
 from estimators.tuning import steering_residual_std
 from estimators.wrappers import (
@@ -82,6 +83,7 @@ __all__ = [
     "inputs_from_info",
     "measurements_from_info",
     "run_estimator",
+    "stack_recordings",
     "steering_residual_std",
 ]
 

@@ -48,6 +48,8 @@ __all__ = [
     "hypotheses_of",
     "recording_filter",
     "run_estimator",
+    "stack_recordings",
+    "StackedRecordings",
 ]
 
 TRUTH_COLUMNS = ("longitudinal_velocity", "lateral_offset", "lateral_velocity", "bias")
@@ -248,9 +250,42 @@ class _ChannelNIS(Protocol):
     def channel_nis(self) -> np.ndarray: ...
 
 
+@dataclass(frozen=True)
+class StackedRecordings:
+    """Recordings stacked once (:func:`stack_recordings`), for filtering them with several
+    estimators (:func:`run_estimator` takes it in place of the frames): the padded arrays
+    (read-only: every result shares them) and, per look-ahead distance pair, the road
+    points of the recordings' own tracks."""
+
+    frames: tuple[pd.DataFrame, ...]
+    lengths: np.ndarray
+    measurements: np.ndarray
+    accelerations: np.ndarray
+    time: np.ndarray
+    truth: dict[str, np.ndarray]
+    road_points: dict[tuple[float, float], np.ndarray | None] = field(default_factory=dict)
+
+
+def stack_recordings(frames: pd.DataFrame | Sequence[pd.DataFrame]) -> StackedRecordings:
+    """The recordings as :func:`run_estimator` stacks them, done once (each estimator still
+    checks its sample time against them).
+
+    Raises:
+        ValueError: as :func:`run_estimator` for its recordings (none, missing sensor
+            columns, empty).
+    """
+    frames = [frames] if isinstance(frames, pd.DataFrame) else list(frames)
+    _check_columns(frames)
+    lengths = np.array([len(f) for f in frames])
+    z, acc, time, truth = _stacked_recordings(frames, lengths, int(lengths.max()))
+    for array in (lengths, z, acc, time, *truth.values()):
+        array.setflags(write=False)
+    return StackedRecordings(tuple(frames), lengths, z, acc, time, truth)
+
+
 def run_estimator(
     estimator: LaneEstimator,
-    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    frames: pd.DataFrame | Sequence[pd.DataFrame] | StackedRecordings,
     *,
     hypotheses: Sequence[float] | np.ndarray | None = None,
     prior: np.ndarray | None = None,
@@ -264,7 +299,9 @@ def run_estimator(
         estimator: any :class:`estimators.base.LaneEstimator` (batched ones
             filter all runs in one call per step).
         frames: one recording or a list (columns of
-            :data:`hasa_env.sim.setup.RECORDING_COLUMNS`; at least the sensor columns).
+            :data:`hasa_env.sim.setup.RECORDING_COLUMNS`; at least the sensor columns), or
+            the :class:`StackedRecordings` of a list (stacked once for several estimators:
+            the same results).
         hypotheses: lane hypotheses (C,) or (R, C); default: each recording's
             config (:func:`hypotheses_of`).
         prior: hypothesis probabilities, (C,) or (R, C); default uniform.
@@ -284,14 +321,22 @@ def run_estimator(
             another rate than the estimator's (naming both rates), or is on a
             curved road without a ``station`` column.
     """
-    if isinstance(frames, pd.DataFrame):
+    stacked = frames if isinstance(frames, StackedRecordings) else None
+    if isinstance(frames, StackedRecordings):
+        frames = list(frames.frames)
+    elif isinstance(frames, pd.DataFrame):
         frames = [frames]
-    frames = list(frames)
+    else:
+        frames = list(frames)
     _check_recordings(estimator, frames)
+    if stacked is not None:
+        lengths, z, acc = stacked.lengths, stacked.measurements, stacked.accelerations
+        time, truth = stacked.time, stacked.truth
+    else:
+        lengths = np.array([len(f) for f in frames])
+        z, acc, time, truth = _stacked_recordings(frames, lengths, int(lengths.max()))
     n_runs = len(frames)
-    lengths = np.array([len(f) for f in frames])
     n_steps = int(lengths.max())
-    z, acc, time, truth = _stacked_recordings(frames, lengths, n_steps)
     valid = np.arange(n_steps)[None, :] < lengths[:, None]
     hyp = _run_hypotheses(frames, hypotheses, n_runs)
     true_bias = None
@@ -301,7 +346,17 @@ def run_estimator(
                 "this estimator needs the true bias: the recordings lack a 'bias' column"
             )
         true_bias = truth["bias"][:, 0]
-    points = _road_points(estimator, frames, roads, n_steps) if road_geometry else None
+    points = None
+    if road_geometry and stacked is not None and roads is None:  # the recordings' own tracks
+        key = look_ahead_distances(estimator)
+        if key not in stacked.road_points:
+            computed = _road_points(estimator, frames, None, n_steps)
+            if computed is not None:
+                computed.setflags(write=False)
+            stacked.road_points[key] = computed
+        points = stacked.road_points[key]
+    elif road_geometry:
+        points = _road_points(estimator, frames, roads, n_steps)
 
     def road(k: int) -> dict[str, np.ndarray]:
         return {} if points is None else {"road_points": points[:, k]}
@@ -346,9 +401,9 @@ def _run_mixture_filter(
     return _Trace.of_mixture(trace, estimator)
 
 
-def _check_recordings(estimator: LaneEstimator, frames: list[pd.DataFrame]) -> None:
-    """Raise ValueError for no recordings, a recording without the sensor columns, an
-    empty one, or one sampled at another rate than the estimator's."""
+def _check_columns(frames: list[pd.DataFrame]) -> None:
+    """Raise ValueError for no recordings, a recording without the sensor columns, or an
+    empty one."""
     if not frames:
         raise ValueError("no recordings given")
     for i, frame in enumerate(frames):
@@ -357,6 +412,13 @@ def _check_recordings(estimator: LaneEstimator, frames: list[pd.DataFrame]) -> N
             raise ValueError(f"recording {i} lacks the columns {missing}")
         if len(frame) < 1:
             raise ValueError(f"recording {i} is empty")
+
+
+def _check_recordings(estimator: LaneEstimator, frames: list[pd.DataFrame]) -> None:
+    """Raise ValueError for no recordings, a recording without the sensor columns, an
+    empty one, or one sampled at another rate than the estimator's."""
+    _check_columns(frames)
+    for i, frame in enumerate(frames):
         timing = recording_sample_time(frame)
         if timing is not None:
             step, frequency, repeat = timing

@@ -23,7 +23,7 @@ from estimators import FilterSettings, GaussianMixtureEKF
 from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.filter_matrices import _MIN_RUNS_SKIPPED
 from estimators.mixture_trace import BLOCK_STEPS
-from estimators.offline import EstimationResult, run_estimator
+from estimators.offline import EstimationResult, run_estimator, stack_recordings
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 
 FIELDS = ("hypotheses", "time", "valid", "lengths", "mean", "std", "weights", "most_likely",
@@ -248,3 +248,17 @@ def test_each_run_is_gated_as_alone_also_with_one_hypothesis(frames, make, kwarg
         np.testing.assert_array_equal(
             getattr(batch, name)[1, : alone.lengths[0]], getattr(alone, name)[0], err_msg=name
         )
+
+
+def test_recordings_stacked_once_give_every_filter_its_own_results(frames) -> None:
+    """:func:`stack_recordings` once for several filters (the benchmark's batches): each
+    gets the results it gets from the frames, and none can write into the shared arrays."""
+    stacked = stack_recordings(frames)
+    settings = FilterSettings.from_env_config(frames[0].attrs["config"], steering_ratio=15.0)
+    for model in (GeneralizedModel.paper().arx(), TwoPointModel.paper().arx(), None):
+        alone = run_estimator(GaussianMixtureEKF(model, settings), frames)
+        shared = run_estimator(GaussianMixtureEKF(model, settings), stacked)
+        _assert_equal_results(shared, alone)
+    assert stacked.road_points  # the curved runs' road points, computed once per look-ahead
+    with pytest.raises(ValueError, match="read-only"):
+        stacked.measurements[0, 0, 0] = 1.0

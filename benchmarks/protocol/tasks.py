@@ -28,7 +28,7 @@ from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.calibration import lane_calibration_bins, steering_live_share
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
-from estimators.offline import run_estimator
+from estimators.offline import StackedRecordings, run_estimator, stack_recordings
 from estimators.settings import FilterSettings
 from estimators.trust import trusted_filter
 from hasa_env.steering import residual_diagnostics, road_information, score_runs
@@ -130,10 +130,11 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     out = ChunkResult()
     predictions: dict[str, dict[int, np.ndarray]] = {}
     residuals: dict[str, list[np.ndarray]] = {}
+    stacks = _Stacks(frames)  # each settings group's recordings stacked once, for every filter
     for fm in task.models:
         if fm.kind != "user":  # the project's own models run in-process
             try:
-                part, traced, residuals[fm.name] = _model_part(fm, task, frames)
+                part, traced, residuals[fm.name] = _model_part(fm, task, frames, stacks)
             except ModelError as exc:
                 raise RuntimeError(str(exc)) from None
         else:
@@ -156,7 +157,7 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
             trace["predictions"] = {name: preds[i] for name, preds in predictions.items()}
     if task.estimate:
         for name, make in _baseline_estimators(task):
-            _estimate_model(task, frames, name, "baseline", make, out)
+            _estimate_model(task, frames, name, "baseline", make, out, stacks)
     reasons = {
         ref.key: degenerate_reason(frame) for ref, frame in zip(task.runs, frames, strict=True)
     }
@@ -217,17 +218,22 @@ def _user_model_part(
 
 
 def _model_part(
-    fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame]
+    fm: FittedModel,
+    task: ChunkTask,
+    frames: Sequence[pd.DataFrame],
+    stacks: _Stacks | None = None,
 ) -> tuple[ChunkResult, dict[int, np.ndarray], list[np.ndarray]]:
     """One model on a batch: its steering rows and, on the main track, its estimation rows;
     plus its predictions of the runs whose traces are plotted (by run index) and its one-step
-    residuals of every run (rad, aligned with the run's rows: the road information)."""
+    residuals of every run (rad, aligned with the run's rows: the road information).
+    ``stacks``: the batch's stacked recordings, shared with the other filters (None: its
+    own)."""
     part = ChunkResult()
     preds, residuals = _score_model(fm, task, frames, part)
     residual_std = fm.residual_std
     if task.estimate and residual_std is not None:
         make = partial(model_estimator, fm, overrides=task.filter_settings)
-        _estimate_model(task, frames, fm.name, fm.kind, make, part)
+        _estimate_model(task, frames, fm.name, fm.kind, make, part, stacks)
         if task.compare_checks:  # the same filter without the evidence checks
             _estimate_model(
                 task,
@@ -236,6 +242,7 @@ def _model_part(
                 fm.kind,
                 partial(make, checks=False),
                 part,
+                stacks,
             )
     traced = {i: preds[i] for i, ref in enumerate(task.runs) if ref.key in task.trace_runs}
     return part, traced, residuals
@@ -415,6 +422,26 @@ def _decision_metrics(
     }
 
 
+class _Stacks:
+    """A batch's runs in groups that share the filter's settings (:func:`_filter_key`), each
+    group's recordings stacked once (:func:`~estimators.offline.stack_recordings`) for every
+    filter of the batch: about 0.2 s of CPU per filter pass of 97 runs (the padded arrays
+    and the curved runs' road points)."""
+
+    def __init__(self, frames: Sequence[pd.DataFrame]) -> None:
+        self.frames = frames
+        self.groups: dict[str, list[int]] = defaultdict(list)
+        for i, frame in enumerate(frames):
+            self.groups[_filter_key(frame)].append(i)
+        self._stacked: dict[tuple[int, ...], StackedRecordings] = {}
+
+    def stacked(self, indices: Sequence[int]) -> StackedRecordings:
+        key = tuple(indices)
+        if key not in self._stacked:
+            self._stacked[key] = stack_recordings([self.frames[i] for i in indices])
+        return self._stacked[key]
+
+
 def _estimate_model(
     task: ChunkTask,
     frames: Sequence[pd.DataFrame],
@@ -422,22 +449,22 @@ def _estimate_model(
     kind: str,
     make: Callable[[Any], Any],
     out: ChunkResult,
+    stacks: _Stacks | None = None,
 ) -> None:
     """Run one estimator (``make(settings)``) over the batch, in groups of runs that share
     the filter's settings; its rows go to ``out``. A user model's filter that raises or
-    loses its estimate is its ModelError."""
-    groups: dict[str, list[int]] = defaultdict(list)
-    for i, frame in enumerate(frames):
-        groups[_filter_key(frame)].append(i)
+    loses its estimate is its ModelError. ``stacks``: the groups' stacked recordings, shared
+    with the batch's other filters (None: stacked for this one)."""
+    stacks = stacks if stacks is not None else _Stacks(frames)
     rows: list[dict[str, Any]] = []
     scratch = ChunkResult()  # its early errors and traces, kept only if the estimator works
     try:
-        for indices in groups.values():
+        for indices in stacks.groups.values():
             group = [frames[i] for i in indices]
             settings = FilterSettings.from_env_config(
                 group[0].attrs["config"], **task.filter_settings
             )
-            result = run_estimator(make(settings), group)
+            result = run_estimator(make(settings), stacks.stacked(indices))
             rows += _estimation_rows(task, indices, result, name, scratch, kind)
     except ModelError:
         raise
