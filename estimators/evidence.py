@@ -193,19 +193,18 @@ def verified_steps(rule: EvidenceRule, model_error: np.ndarray, samples: np.ndar
 
         N >= VERIFY_MIN_SAMPLES  and  lambda_up(N, z = 1.645) <= mismatch_model_error
 
-    (``lambda_up``: :func:`model_error_bound`; NaN lambda, no data: not verified)."""
-    bound = model_error_bound(model_error, samples, VERIFY_QUANTILE_Z)
-    return (samples >= VERIFY_MIN_SAMPLES) & (bound <= rule.mismatch_model_error)
+    (``lambda_up``: :func:`model_error_bound`; NaN lambda, no data: not verified).
 
-
-def _error_bound(model_error: np.ndarray, samples: np.ndarray) -> np.ndarray:
-    """:func:`model_error_bound` at ``VERIFY_QUANTILE_Z`` where ``samples >=
-    VERIFY_MIN_SAMPLES`` (the same arithmetic; there ``1 - h - z sqrt(h) > 0.7``; elsewhere
-    not meaningful): for :func:`verified_steps` in :func:`_weigh`, which keeps numpy's errors
-    off."""
-    h = 2.0 / (9.0 * samples)
+    The bound is :func:`model_error_bound`'s arithmetic without its guards, which runs with
+    enough samples never need (there ``1 - h - z sqrt(h) > 0.7``); the others, not verified
+    whatever their bound, take N = ``VERIFY_MIN_SAMPLES`` in it (no division by zero), and
+    none is computed before any run has enough (a run's first samples: the filter's step)."""
+    enough = samples >= VERIFY_MIN_SAMPLES
+    if not enough.any():
+        return enough
+    h = 2.0 / (9.0 * np.maximum(samples, VERIFY_MIN_SAMPLES))
     root = 1.0 - h - VERIFY_QUANTILE_Z * np.sqrt(h)
-    return model_error / (root * root * root)
+    return enough & (model_error / (root * root * root) <= rule.mismatch_model_error)
 
 
 def _bound_one(model_error: float, samples: float, z: float) -> float:
@@ -505,17 +504,15 @@ def _weigh(
     any_mismatch = bool(mismatch.any())
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
-        enough = samples >= VERIFY_MIN_SAMPLES
-        if enough.any():  # (none has enough data in a run's first samples: none verified)
-            verified = enough & (_error_bound(model_error, samples) <= rule.mismatch_model_error)
-            if any_mismatch:
-                verified &= ~mismatch
-            if verified.all():
-                new_state["_verified_log_w"] = new_log_w
-            elif verified.any():
-                new_state["_verified_log_w"] = np.where(
-                    verified[:, None], new_log_w, state["_verified_log_w"]
-                )
+        verified = verified_steps(rule, model_error, samples)
+        if any_mismatch:
+            verified &= ~mismatch
+        if verified.all():
+            new_state["_verified_log_w"] = new_log_w
+        elif verified.any():
+            new_state["_verified_log_w"] = np.where(
+                verified[:, None], new_log_w, state["_verified_log_w"]
+            )
     else:
         raw = log_w + log_lik
         new_log_w = normalize_log_weights(

@@ -177,12 +177,14 @@ def test_the_gated_update_is_repeated_as_for_all_rows(hypotheses) -> None:
 
 
 def test_the_evidence_rule_verifies_as_verified_steps() -> None:
-    """The batched rule's verification (the bound computed only with enough samples) is
-    :func:`estimators.evidence.verified_steps`, on both sides of every threshold."""
+    """:func:`estimators.evidence.verified_steps` (the bound's arithmetic without its guards,
+    computed only with enough samples) is its definition by :func:`model_error_bound`, on
+    both sides of every threshold."""
     from estimators.evidence import (
         VERIFY_MIN_SAMPLES,
+        VERIFY_QUANTILE_Z,
         EvidenceRule,
-        _error_bound,
+        model_error_bound,
         verified_steps,
     )
 
@@ -191,13 +193,15 @@ def test_the_evidence_rule_verifies_as_verified_steps() -> None:
     samples = np.concatenate([[0.0, 1.0, 9.999, VERIFY_MIN_SAMPLES], rng.uniform(0, 500, 400)])
     model_error = rng.uniform(0.0, 2.0 * rule.mismatch_model_error, samples.size)
     model_error[[0, 5, 9]] = np.nan
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fast = (samples >= VERIFY_MIN_SAMPLES) & (
-            _error_bound(model_error, samples) <= rule.mismatch_model_error
-        )
-    expected = verified_steps(rule, model_error, samples)
+    bound = model_error_bound(model_error, samples, VERIFY_QUANTILE_Z)
+    expected = (samples >= VERIFY_MIN_SAMPLES) & (bound <= rule.mismatch_model_error)
+    with np.errstate(all="raise"):  # no division by zero, no invalid value
+        fast = verified_steps(rule, model_error, samples)
     assert expected.any() and not expected.all()
     np.testing.assert_array_equal(fast, expected)
+    # no run with enough samples: none verified, nothing computed
+    few = verified_steps(rule, model_error[:3], samples[:3])
+    assert few.dtype == bool and not few.any()
 
 
 @pytest.mark.parametrize("confidence", [0.0, 0.95])
