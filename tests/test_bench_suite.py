@@ -40,7 +40,6 @@ def test_the_suite_gives_each_scenario_the_result_it_gets_alone(monkeypatch) -> 
         fitted.append((config.scenario, plan.seed))
         return real_fit(config, plan, *args, **kwargs)
 
-    monkeypatch.setattr("benchmarks.protocol.suite.fit_and_check", counting_fit)
     monkeypatch.setattr("benchmarks.protocol.run.fit_and_check", counting_fit)
     suite = run_suite(configs, workers=1)
     # 2 seeds x (paper, whose fits lane_shift reuses, + off_centre_drivers)

@@ -130,7 +130,8 @@ __all__ = [
     "aggregate_result",
     "chunk_tasks",
     "fit_and_check",
-    "fit_seed",
+    "fit_job",
+    "fit_plans",
     "fit_seeds",
     "load_candidates",
     "map_on_executor",
@@ -243,18 +244,17 @@ class FittedPlan:
 
 @dataclass(frozen=True)
 class FitJob:
-    """The fits of one seed, as a task of the executor (:func:`fit_seeds`)."""
+    """The fits of one plan, as a task of the executor (:func:`fit_plans`)."""
 
     config: ProtocolConfig
-    seed: int | None
+    plan: Plan
     candidates: tuple[Candidate, ...]
 
 
-def fit_seed(job: FitJob) -> tuple[FittedPlan, list[ModelError]]:
-    """One seed's plan fitted and checked (:func:`fit_and_check`) and its model errors."""
+def fit_job(job: FitJob) -> tuple[FittedPlan, list[ModelError]]:
+    """One plan fitted and checked (:func:`fit_and_check`) and its model errors."""
     errors: list[ModelError] = []
-    plan = make_plan(job.config, job.seed)
-    fit = fit_and_check(job.config, plan, job.candidates, errors, lambda *_: None)
+    fit = fit_and_check(job.config, job.plan, job.candidates, errors, lambda *_: None)
     return fit, errors
 
 
@@ -310,26 +310,53 @@ def fit_seeds(
         BenchmarkError: as :func:`fit_and_check`, or the Dask scheduler fails.
         ClusterLost: the scheduler, or every worker, went away mid-run.
     """
-    seeds = config.run_seeds
-    say("fits", 0, len(seeds))
-    serial = workers is not None and int(workers) <= 1 and scheduler is None
-    # the first seed in this process: it imports what the fits and the tasks use, which the
-    # worker processes (forked from this one) then inherit instead of importing it each
-    fits = [fit_and_check(config, make_plan(config, seeds[0]), candidates, errors, say)]
-    say("fits", 1, len(seeds))
-    if serial or len(seeds) <= 2:
-        for seed in seeds[1:]:
-            fits.append(fit_and_check(config, make_plan(config, seed), candidates, errors, say))
-            say("fits", len(fits), len(seeds))
-        return fits
-    jobs = [FitJob(config, seed, tuple(candidates)) for seed in seeds[1:]]
-    done = map_on_executor(
-        fit_seed, jobs, "fit the models", workers, scheduler,
-        lambda count: say("fits", 1 + count, len(seeds)), no_worker_timeout,
-    )  # fmt: skip
-    for _, seed_errors in done:
+    fitted = fit_plans(
+        [(config, make_plan(config, seed)) for seed in config.run_seeds],
+        candidates,
+        say,
+        workers=workers,
+        scheduler=scheduler,
+        no_worker_timeout=no_worker_timeout,
+    )
+    for _, seed_errors in fitted:
         errors += seed_errors
-    return fits + [fit for fit, _ in done]
+    return [fit for fit, _ in fitted]
+
+
+def fit_plans(
+    jobs: Sequence[tuple[ProtocolConfig, Plan]],
+    candidates: Sequence[Candidate],
+    say: Progress,
+    *,
+    workers: int | None = None,
+    scheduler: Any = None,
+    no_worker_timeout: float = NO_WORKER_TIMEOUT,
+) -> list[tuple[FittedPlan, list[ModelError]]]:
+    """Each (config, plan) fitted and checked (:func:`fit_and_check`), with its model
+    errors, in order (``say``: "fits" done of all). The first in this process (with its
+    messages): it imports what the fits and the tasks use, which the worker processes
+    (forked from this one) then inherit instead of importing it each. The plans are
+    independent, so with more than two the others run in parallel on the executor of the
+    tasks (:func:`benchmarks.executor.map_tasks`; ``workers=1``: in this process too).
+
+    Raises:
+        BenchmarkError: as :func:`fit_and_check`, or the Dask scheduler fails.
+        ClusterLost: the scheduler, or every worker, went away mid-run.
+    """
+    say("fits", 0, len(jobs))
+    serial = workers is not None and int(workers) <= 1 and scheduler is None
+    done: list[tuple[FittedPlan, list[ModelError]]] = []
+    for config, plan in jobs[: len(jobs) if serial or len(jobs) <= 2 else 1]:
+        errors: list[ModelError] = []
+        done.append((fit_and_check(config, plan, candidates, errors, say), errors))
+        say("fits", len(done), len(jobs))
+    if len(done) == len(jobs):
+        return done
+    rest = [FitJob(config, plan, tuple(candidates)) for config, plan in jobs[1:]]
+    return done + map_on_executor(
+        fit_job, rest, "fit the models", workers, scheduler,
+        lambda count: say("fits", 1 + count, len(jobs)), no_worker_timeout,
+    )  # fmt: skip
 
 
 def fit_and_check(

@@ -37,16 +37,13 @@ from benchmarks.protocol.models import ModelError
 from benchmarks.protocol.plan import Plan, make_plan
 from benchmarks.protocol.results import BenchmarkResult
 from benchmarks.protocol.run import (
-    FitJob,
     FittedPlan,
     Progress,
     Schedule,
     aggregate_result,
     chunk_tasks,
-    fit_and_check,
-    fit_seed,
+    fit_plans,
     load_candidates,
-    map_on_executor,
     schedule,
 )
 
@@ -144,8 +141,7 @@ def _fit_suite(
     no_worker_timeout: float,
 ) -> tuple[dict[str, list[FittedPlan]], dict[str, list[ModelError]], dict[str, float]]:
     """Every scenario's fitted plans (in its seeds' order), model errors and fit seconds;
-    each distinct :func:`fit_key` fitted once (the first in this process, so that the
-    worker processes inherit what it imported; the others on the executor)."""
+    each distinct :func:`fit_key` fitted once (:func:`~benchmarks.protocol.run.fit_plans`)."""
     plans = {
         name: [make_plan(config, seed) for seed in config.run_seeds]
         for name, config in configs.items()
@@ -155,22 +151,15 @@ def _fit_suite(
         for i, plan in enumerate(scenario_plans):
             owner.setdefault(fit_key(plan), (name, i))
     jobs = list(owner.values())
-    say("fits", 0, len(jobs))
-    fitted: dict[tuple[str, int], tuple[FittedPlan, list[ModelError]]] = {}
-    name, i = jobs[0]
-    own_errors: list[ModelError] = []
-    fitted[jobs[0]] = (
-        fit_and_check(configs[name], plans[name][i], candidates, own_errors, say),
-        own_errors,
+    done = fit_plans(
+        [(configs[name], plans[name][i]) for name, i in jobs],
+        candidates,
+        say,
+        workers=workers,
+        scheduler=scheduler,
+        no_worker_timeout=no_worker_timeout,
     )
-    say("fits", 1, len(jobs))
-    rest = [FitJob(configs[n], plans[n][k].seed, tuple(candidates)) for n, k in jobs[1:]]
-    if rest:
-        done = map_on_executor(
-            fit_seed, rest, "fit the models", workers, scheduler,
-            lambda count: say("fits", 1 + count, len(jobs)), no_worker_timeout,
-        )  # fmt: skip
-        fitted.update(zip(jobs[1:], done, strict=True))
+    fitted = dict(zip(jobs, done, strict=True))
     fits: dict[str, list[FittedPlan]] = {}
     errors: dict[str, list[ModelError]] = {}
     seconds: dict[str, float] = {}
