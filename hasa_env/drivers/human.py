@@ -167,7 +167,50 @@ def car_streams(seed: int | None, key: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
 
 
-class HumanBatch(ABC):
+class _DriverStages:
+    """The output stage and the speed stage of N cars, shared by an archetype's batch
+    (:class:`HumanBatch`) and by several archetypes' cars driven together
+    (:class:`HumanComposite`): the :class:`~hasa_env.drivers.motor.MotorStage` and each car's
+    pedal remnant (an OU process of std ``speed.pedal_noise``, its own noise stream) added to
+    :func:`speed_command`. The owner sets ``num_cars``, ``profile`` and ``motor``."""
+
+    num_cars: int
+    profile: dict[str, np.ndarray]
+    motor: MotorStage
+    _initial_speed: np.ndarray  # each car's speed at its first step (m/s)
+    # the pedal remnant (m/s^2) of each car, its AR(1) coefficient, innovation std and draws
+    _pedal: np.ndarray
+    _pedal_rho: np.ndarray
+    _pedal_innovation: np.ndarray
+    _pedal_draws: NoiseBlocks
+
+    def _start_stages(self, seeds: Sequence[int | None], dt: float) -> None:
+        """Every car's stages at a full reset (``seeds``: one per car; ``dt`` in s)."""
+        self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], dt)
+        self._pedal_rho, self._pedal_innovation = ou_coefficients(
+            self.profile["pedal_noise"], self.profile["pedal_time_constant"], dt
+        )
+        self._pedal_draws = NoiseBlocks([car_streams(s, PEDAL_STREAM) for s in seeds], 1)
+        self._pedal = np.zeros(self.num_cars)
+
+    def _restart_stages(self, seeds: Sequence[int | None], dt: float, rows: np.ndarray) -> None:
+        """The stages of the cars ``rows`` restarted (a partial reset)."""
+        self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], dt, rows)
+        self._pedal_draws.restart(rows, [car_streams(s, PEDAL_STREAM) for s in seeds])
+        self._pedal[rows] = 0.0
+
+    def acceleration(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
+        """The speed command of ``act`` (m/s^2), its pedal remnant drawn (call it once a
+        step, after ``steer``)."""
+        remnant = None
+        if self._pedal_innovation.any():
+            draws = self._pedal_draws.next()[:, 0]
+            self._pedal = self._pedal_rho * self._pedal + self._pedal_innovation * draws
+            remnant = self._pedal
+        return speed_command(self.profile, self._initial_speed, info, road, remnant)
+
+
+class HumanBatch(_DriverStages, ABC):
     """Base of the archetypes' batches: N drivers of one archetype acting on N cars' arrays.
 
     Subclasses set ``params_type`` and implement :meth:`_reset` (per-run set-up),
@@ -190,11 +233,6 @@ class HumanBatch(ABC):
     """True: the control law looks at the driven lane ahead itself (:func:`lane_bearings`);
     False: it steers on :meth:`perceived` offsets."""
     _fresh: np.ndarray  # cars whose next step is their first, set by reset()
-    # the pedal remnant (m/s^2) of each car, its AR(1) coefficient, innovation std and draws
-    _pedal: np.ndarray
-    _pedal_rho: np.ndarray
-    _pedal_innovation: np.ndarray
-    _pedal_draws: NoiseBlocks
     registry: ClassVar[dict[type, type[HumanBatch]]] = {}
     """params_type -> batch class, filled as the archetypes' batch classes are defined."""
 
@@ -247,9 +285,7 @@ class HumanBatch(ABC):
                 raise IndexError(f"cars must index the batch of {self.num_cars} drivers")
             if float(dt) != self._dt:
                 raise ValueError(f"a partial reset keeps the batch's dt = {self._dt} s, got {dt}")
-            self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt, rows)
-            self._pedal_draws.restart(rows, [car_streams(s, PEDAL_STREAM) for s in seeds])
-            self._pedal[rows] = 0.0
+            self._restart_stages(seeds, self._dt, rows)
             self._reset(seeds, self._dt, rows)
             self._fresh[rows] = True
             return
@@ -258,12 +294,7 @@ class HumanBatch(ABC):
         if not dt > 0:
             raise ValueError(f"dt must be > 0 s, got {dt}")
         self._dt = float(dt)
-        self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
-        self._pedal_rho, self._pedal_innovation = ou_coefficients(
-            self.profile["pedal_noise"], self.profile["pedal_time_constant"], self._dt
-        )
-        self._pedal_draws = NoiseBlocks([car_streams(s, PEDAL_STREAM) for s in seeds], 1)
-        self._pedal = np.zeros(self.num_cars)
+        self._start_stages(seeds, self._dt)
         self.delay_steps = np.array([round(p.delay / dt) for p in self.params], dtype=np.int64)
         self._reset(seeds, self._dt, None)
         self._all_fresh = True
@@ -272,16 +303,6 @@ class HumanBatch(ABC):
     def act(self, info: Mapping[str, np.ndarray], road: Road) -> tuple[np.ndarray, np.ndarray]:
         steering = self.steer(info, road)
         return steering, self.acceleration(info, road)
-
-    def acceleration(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
-        """The speed command of :meth:`act` (m/s^2), its pedal remnant drawn (call it once a
-        step, after :meth:`steer`)."""
-        remnant = None
-        if self._pedal_innovation.any():
-            draws = self._pedal_draws.next()[:, 0]
-            self._pedal = self._pedal_rho * self._pedal + self._pedal_innovation * draws
-            remnant = self._pedal
-        return speed_command(self.profile, self._initial_speed, info, road, remnant)
 
     def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
         """The steering of :meth:`act` alone (rad, road wheel), without the speed command.
@@ -434,7 +455,7 @@ def human_batch(params: Sequence[Any]) -> PartialBatchDriver:
     return HumanComposite(parts, len(params))
 
 
-class HumanComposite(CompositeBatch):
+class HumanComposite(CompositeBatch, _DriverStages):
     """Several archetypes' batches (:func:`human_batch`) with one output stage and one speed
     stage for all their cars.
 
@@ -451,11 +472,6 @@ class HumanComposite(CompositeBatch):
 
     # the shared stages' state, set at each full reset while the stages are stacked
     _dt: float
-    _pedal_rho: np.ndarray
-    _pedal_innovation: np.ndarray
-    _pedal_draws: NoiseBlocks
-    _pedal: np.ndarray
-    _initial_speed: np.ndarray
     _all_fresh: bool
     _fresh: np.ndarray
 
@@ -489,9 +505,7 @@ class HumanComposite(CompositeBatch):
         if cars is not None:
             if self.stacked:
                 rows = np.asarray(cars, dtype=np.int64).reshape(-1)
-                self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt, rows)
-                self._pedal_draws.restart(rows, [car_streams(s, PEDAL_STREAM) for s in seeds])
-                self._pedal[rows] = 0.0
+                self._restart_stages(seeds, self._dt, rows)
                 self._fresh[rows] = True
             return
         batches = [b for _, b in self.humans]
@@ -502,12 +516,7 @@ class HumanComposite(CompositeBatch):
         if not self.stacked:
             return
         self._dt = float(dt)
-        self.motor.reset([car_streams(s, MOTOR_STREAM) for s in seeds], self._dt)
-        self._pedal_rho, self._pedal_innovation = ou_coefficients(
-            self.profile["pedal_noise"], self.profile["pedal_time_constant"], self._dt
-        )
-        self._pedal_draws = NoiseBlocks([car_streams(s, PEDAL_STREAM) for s in seeds], 1)
-        self._pedal = np.zeros(self.num_cars)
+        self._start_stages(seeds, self._dt)
         self._initial_speed = np.zeros(self.num_cars)
         self._all_fresh = True
         self._fresh = np.ones(self.num_cars, dtype=bool)
@@ -516,12 +525,7 @@ class HumanComposite(CompositeBatch):
         if not self.stacked:
             return super().act(info, road)
         steering = self.steer(info, road)
-        remnant = None
-        if self._pedal_innovation.any():
-            draws = self._pedal_draws.next()[:, 0]
-            self._pedal = self._pedal_rho * self._pedal + self._pedal_innovation * draws
-            remnant = self._pedal
-        return steering, speed_command(self.profile, self._initial_speed, info, road, remnant)
+        return steering, self.acceleration(info, road)
 
     def steer(self, info: Mapping[str, np.ndarray], road: Road) -> np.ndarray:
         if not self.stacked:
