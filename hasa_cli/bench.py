@@ -543,12 +543,13 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
             error(PROG, str(exc))
             return EXIT_USAGE if exc.kind == "address" else EXIT_ENVIRONMENT
     started = time.perf_counter()
+    progress = _Progress(args.quiet)  # its times count from here
     if args.scenario != "all":
-        code, results = _run_scenarios(args, user_models, [args.scenario], scheduler)
+        code, results = _run_scenarios(args, user_models, [args.scenario], scheduler, progress)
         if results is None:
             return code
-        return _write_scenario(args, results[args.scenario], out, started)
-    code, results = _run_scenarios(args, user_models, list(SCENARIOS), scheduler)
+        return _write_scenario(args, results[args.scenario], out, started, progress)
+    code, results = _run_scenarios(args, user_models, list(SCENARIOS), scheduler, progress)
     if results is None:
         return code
     out.mkdir(parents=True, exist_ok=True)
@@ -556,7 +557,7 @@ def _run_protocol(args: argparse.Namespace, user_models: Sequence[str]) -> int:
     for name, result in results.items():
         if not args.quiet:
             print(f"== scenario {name}")
-        status = max(status, _write_scenario(args, result, out / name, started))
+        status = max(status, _write_scenario(args, result, out / name, started, progress))
     rows = suite_rows(results)
     try:
         write_suite(rows, out)
@@ -581,6 +582,7 @@ def _run_scenarios(
     user_models: Sequence[str],
     scenarios: Sequence[str],
     scheduler: Any,
+    progress: _Progress,
 ) -> tuple[int, dict[str, Any] | None]:
     """Run the protocol in each scenario (several: one suite, :func:`benchmarks.protocol.
     suite.run_suite`): (exit status, the results by scenario, or None when nothing ran)."""
@@ -588,7 +590,6 @@ def _run_scenarios(
     from benchmarks.protocol import BenchmarkError, run_protocol  # start-up: only where needed
     from benchmarks.protocol.suite import run_suite  # start-up: only where needed
 
-    progress = _Progress(args.quiet)
     options = {
         "workers": args.workers,
         "scheduler": scheduler,
@@ -618,13 +619,14 @@ def _run_scenarios(
     return EXIT_OK, results
 
 
-def _write_scenario(args: argparse.Namespace, result: Any, out: Path, started: float) -> int:
+def _write_scenario(
+    args: argparse.Namespace, result: Any, out: Path, started: float, progress: _Progress
+) -> int:
     """Write one scenario's folder, print its tables and its problems: the exit status."""
     from benchmarks.output import write_result_folder  # start-up: only where needed
     from benchmarks.report import format_tables  # start-up: only where needed
     from benchmarks.schema import ResultsSchemaError  # start-up: only where needed
 
-    progress = _Progress(args.quiet)
     progress("writing results, tables and figures", 0, 0)
     try:
         written = write_result_folder(result, out, figures=not args.no_plots)
