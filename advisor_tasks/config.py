@@ -79,7 +79,7 @@ from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time
 from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
-from estimators.tuning import steering_residual_std
+from estimators.tuning import prediction_check, steering_residual_std
 from hasa_env.drivers import (
     POPULATIONS,
     make_driver,
@@ -312,10 +312,10 @@ _LANE_CHECKS: dict[tuple[Any, ...], str | None] = {}
 
 
 @functools.lru_cache(maxsize=16)
-def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, float]:
-    """(fitted model, residual std (rad)) of ``kind`` on one run of the population's first
-    driver, as it drives in the scenario, in the task's env (cached: every env of a vector
-    or an evaluation shares it)."""
+def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, TrainingRecord]:
+    """(fitted model, its training record: residual level (rad) and prediction check on the
+    run) of ``kind`` on one run of the population's first driver, as it drives in the
+    scenario, in the task's env (cached: every env of a vector or an evaluation shares it)."""
     name, seed, size = json.loads(population_key)
     config = json.loads(env_key)
     trainer = population(name, seed, size, scenario=config["scenario"])[0]
@@ -324,8 +324,11 @@ def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, fl
     )[0]
     model = _FITTED[kind]().fit(frame, sensor_std=float(config["noise"]["steering"]))
     arx = model.arx()
-    residual = steering_residual_std(arx, frame, decision_lag=model.decision_lag)
-    return model, residual
+    lag = model.decision_lag
+    return model, TrainingRecord(
+        residual_std=steering_residual_std(arx, frame, decision_lag=lag),
+        prediction=prediction_check(arx, frame, decision_lag=lag),
+    )
 
 
 def _steering_model(
@@ -345,10 +348,7 @@ def _steering_model(
         )
         config = deep_merge(env_config, {"action_repeat": 1, "track": "straight"})
         config.pop("observation", None)
-        model, fit_residual = _fitted_model(
-            spec, population_key, json.dumps(config, sort_keys=True)
-        )
-        training = TrainingRecord(residual_std=fit_residual)
+        model, training = _fitted_model(spec, population_key, json.dumps(config, sort_keys=True))
         ratio = 1.0
     else:
         try:

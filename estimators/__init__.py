@@ -40,7 +40,7 @@ from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams, fit_lane_centring
 from estimators.offline import EstimationResult, hypotheses_of, run_estimator, stack_recordings
 from estimators.settings import FilterSettings
-from estimators.tuning import steering_residual_std
+from estimators.tuning import PredictionCheck, prediction_check, steering_residual_std
 from estimators.wrappers import (
     EstimatorInfoWrapper,
     EstimatorObservationWrapper,
@@ -85,6 +85,8 @@ __all__ = [
     "run_estimator",
     "stack_recordings",
     "steering_residual_std",
+    "PredictionCheck",
+    "prediction_check",
 ]
 
 

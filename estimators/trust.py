@@ -20,6 +20,11 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
   never below the base settings' ``min_speed`` (:func:`~estimators.settings.steering_speed_limits`).
 - A model that failed its lane-keeping check, or has no ARX form, gives no lane evidence at all:
   the filter is the no-steering one (:class:`~estimators.baselines.NoSteeringEKF`).
+- So does a model that predicts the steering no better than the steering's own past does
+  (``training.prediction``, :func:`~estimators.tuning.prediction_check` on the data it is
+  trusted on: its one-step residual at or above that of a lane-free autoregression of its
+  order; docs/design.md §8.13.1). Its lane evidence would come from the errors of a model
+  that does not describe this driver.
 - ``checks=False`` (the benchmark's unchecked comparison): ``evidence_checks`` off and none of
   the limits above (curvature limit ``math.inf`` even when the user set one).
 
@@ -44,6 +49,7 @@ from estimators.settings import (
     steering_curvature_limit,
     steering_speed_limits,
 )
+from estimators.tuning import PredictionCheck
 from hasa_env.steering.arx import ARXForm
 
 __all__ = ["TrainingRecord", "TrustedFilter", "model_limits", "trusted_filter"]
@@ -57,6 +63,8 @@ class TrainingRecord:
     Attributes:
         residual_std: the model's one-step residual level (rad, model units) on its training
             data or on the data filtered; None: unknown (the base settings' level).
+        prediction: the model's prediction check on the same data
+            (:func:`~estimators.tuning.prediction_check`); None: not measured (not checked).
         curvature: the largest ``|road curvature|`` (1/m) of the roads it was fitted on;
             None: unknown.
         speed_range: (min, max) speed (m/s) it was fitted at; None: unknown.
@@ -66,6 +74,7 @@ class TrainingRecord:
     """
 
     residual_std: float | None = None
+    prediction: PredictionCheck | None = None
     curvature: float | None = None
     speed_range: tuple[float, float] | None = None
     keeps_lane: bool | None = None
@@ -212,6 +221,11 @@ def _switched_off(
         return (
             "steering off: the model does not keep the car in its lane when it steers itself"
             + summary,
+        )
+    if checks is not False and training.prediction is not None and not training.prediction.passed:
+        return (
+            "steering off: the model predicts the steering no better than its own past does "
+            f"({training.prediction.describe()})",
         )
     return ()
 

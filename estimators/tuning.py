@@ -5,11 +5,19 @@ model's own prediction error, so ``FilterSettings.steering_residual_std``
 should be the model's one-step-ahead residual level on representative runs
 (for the paper preset of the generalized model on the default synthetic
 population it is 1.7e-3 to 2.8e-3 rad, hence the default 2e-3 rad).
+
+:func:`prediction_check` asks whether the model describes the driver at all
+(:mod:`estimators.trust`, docs/design.md §8.13.1): its one-step residual level on the recorded
+steering against that of the best predictor of the steering from its own past alone (an
+autoregression of the model's own order, least squares, cross-validated over contiguous
+blocks), on the same recordings. A model that predicts the steering no better than that has
+learned nothing of the lane that holds on these data.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -17,7 +25,16 @@ import pandas as pd
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.features import steering_features
 
-__all__ = ["steering_residual_std", "steering_residuals"]
+__all__ = [
+    "LANE_FREE_FOLDS",
+    "PredictionCheck",
+    "prediction_check",
+    "steering_residual_std",
+    "steering_residuals",
+]
+
+LANE_FREE_FOLDS = 5
+"""Contiguous blocks of :func:`prediction_check`'s cross-validation."""
 
 
 def steering_residuals(
@@ -26,23 +43,17 @@ def steering_residuals(
     *,
     decision_lag: int = 1,
     steering_ratio: float = 1.0,
+    steering: str = "applied",
 ) -> np.ndarray:
     """One-step-ahead residuals ``ratio * delta(k) - delta_hat(k)`` (rad, model units) of one run.
 
     Uses the recorded applied steering (the filter's model: the equation
     error e(k) is on the applied steering, and the steering sensor's noise is
-    a separate term of R_33) and the straight-road bearings of the true state,
-    as the filter's model does (:mod:`estimators.arx_state_space`); rows
-    without a full history are dropped.
+    a separate term of R_33; ``steering="measured"``: the steering sensor's readings) and
+    the straight-road bearings of the true state, as the filter's model does
+    (:mod:`estimators.arx_state_space`); rows without a full history are dropped.
     """
-    features = steering_features(
-        frame,
-        near=arx.near_distance,
-        far=arx.far_distance,
-        decision_lag=decision_lag,
-        exact=False,
-        steering="applied",
-    )
+    features = _features(arx, frame, decision_lag, steering)
     delta = features["delta"].to_numpy() * steering_ratio
     predicted = arx.predict(
         delta,
@@ -75,3 +86,112 @@ def steering_residual_std(
     if values.size == 0:
         raise ValueError("no residuals: the recordings are shorter than the model's memory")
     return float(np.sqrt(np.mean(values * values)))
+
+
+@dataclass(frozen=True)
+class PredictionCheck:
+    """Does a steering model predict the recorded steering better than its own past does?
+
+    Attributes:
+        residual_std: the model's RMS one-step residual on the steering sensor's readings
+            (rad, model units).
+        lane_free_residual_std: on the same readings and rows, the cross-validated RMS
+            one-step residual of a lane-free autoregression of the model's order (rad,
+            model units; :func:`prediction_check`).
+    """
+
+    residual_std: float
+    lane_free_residual_std: float
+
+    @property
+    def passed(self) -> bool:
+        """True when the model's residual is below the lane-free one."""
+        return self.residual_std < self.lane_free_residual_std
+
+    def describe(self) -> str:
+        """The two levels in one phrase."""
+        return (
+            f"one-step residual {self.residual_std:.3g} rad, a lane-free autoregression of "
+            f"its order {self.lane_free_residual_std:.3g} rad on the same data"
+        )
+
+
+def prediction_check(
+    arx: ARXForm,
+    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    *,
+    decision_lag: int = 1,
+    steering_ratio: float = 1.0,
+    folds: int = LANE_FREE_FOLDS,
+) -> PredictionCheck:
+    """The model's one-step residual level on the recorded steering, and that of the steering
+    predicted from its own past alone.
+
+    Both read the steering sensor (``sensor_steering``, else ``steering``: what a predictor,
+    and the filter, see; a fit on noisy readings is not compared with a predictor of the
+    noise-free steering) times ``steering_ratio``. The lane-free predictor has the model's
+    autoregressive order n = ``len(arx.a)`` and no lane input::
+
+        delta(k) = sum_{j=1}^{n} alpha_j delta(k - j) + e(k)      (n = 0: delta_hat = 0)
+
+    Its rows are the model's (those with the model's full history; lags never cross from one
+    recording to the next), cut into ``folds`` contiguous blocks: each block is predicted
+    by alpha fitted by least squares on the others, and the level is the RMS of those
+    held-out residuals. Holding the autoregression out while the model is scored in-sample
+    (where it was fitted on these recordings) favours the model: a fitted model that fails
+    is not a close call.
+
+    Raises:
+        ValueError: fewer rows than ``folds`` (recordings shorter than the model's memory).
+    """
+    if isinstance(frames, pd.DataFrame):
+        frames = [frames]
+    order = len(arx.a)
+    targets, lagged, residuals = [], [], []
+    for frame in frames:
+        features = _features(arx, frame, decision_lag, "measured")
+        delta = features["delta"].to_numpy() * steering_ratio
+        predicted = arx.predict(
+            delta,
+            features["phi"].to_numpy(),
+            features["omega"].to_numpy(),
+            features["lateral_velocity"].to_numpy(),
+        )
+        rows = np.flatnonzero(np.isfinite(delta - predicted))
+        lags = np.empty((rows.size, order))
+        for j in range(1, order + 1):
+            lags[:, j - 1] = delta[rows - j]
+        keep = np.all(np.isfinite(lags), axis=1)
+        rows = rows[keep]
+        residuals.append(delta[rows] - predicted[rows])
+        targets.append(delta[rows])
+        lagged.append(lags[keep])
+    target = np.concatenate(targets)
+    design = np.concatenate(lagged)
+    if target.size < max(folds, 2 * order + 1):
+        raise ValueError("no residuals: the recordings are shorter than the model's memory")
+    errors = []
+    for block in np.array_split(np.arange(target.size), folds):
+        train = np.ones(target.size, dtype=bool)
+        train[block] = False
+        alpha = (
+            np.linalg.lstsq(design[train], target[train], rcond=None)[0] if order else np.zeros(0)
+        )
+        errors.append(target[block] - design[block] @ alpha)
+    model, lane_free = np.concatenate(residuals), np.concatenate(errors)
+    return PredictionCheck(
+        float(np.sqrt(np.mean(model * model))), float(np.sqrt(np.mean(lane_free * lane_free)))
+    )
+
+
+def _features(arx: ARXForm, frame: pd.DataFrame, decision_lag: int, steering: str) -> pd.DataFrame:
+    """The features the filter's model reads (straight-road bearings of the true state; the
+    ``steering``, "applied" or "measured", of :func:`steering_features`)."""
+    return steering_features(
+        frame,
+        near=arx.near_distance,
+        far=arx.far_distance,
+        decision_lag=decision_lag,
+        exact=False,
+        steering=steering,
+    )

@@ -451,6 +451,18 @@ def test_stress_set_and_unchecked_estimators_are_scored(tmp_path: Path) -> None:
         assert checked and all(r["final_decision"] == "undecided" for r in checked)
         assert any(r["final_decision"] != "undecided" for r in unchecked)
     assert "off road 4/4" in text  # the Checks table says so
+    # nor does one that predicts the steering no better than its own past (design §8.13.1)
+    level = {n: m["prediction_residual_std"] / m["lane_free_residual_std"] for n, m in
+             described.items() if m.get("lane_free_residual_std")}  # fmt: skip
+    assert level["generalized"] < 1 < 10 < level["stress_random_arx"]
+    assert not described["generalized"]["steering_trust"][0].startswith("steering off:")
+    for name in stress:
+        if level[name] >= 1 and described[name]["lane_keeping"]["passed"]:
+            assert described[name]["steering_trust"] == [
+                r for r in described[name]["steering_trust"] if "its own past" in r
+            ]
+            rows = [r for r in result.runs_estimation if r["model"] == name]
+            assert rows and all(r["final_decision"] == "undecided" for r in rows)
 
 
 # --------------------------------------------------------------- determinism

@@ -28,10 +28,25 @@ def _model() -> GeneralizedModel:
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
-    """A 50-step recording of the default env (its config: the default sensor noise)."""
+    """A 0.5 s recording of the default env driven by the test model itself (plus 1e-3 rad of
+    equation noise): a driver it describes (its config: the default sensor noise)."""
+    from hasa_env.drivers import ModelDriver, run_driver
+    from hasa_env.drivers.runner import recording_meta
+    from hasa_env.recording import load_recording, save_recording
+
+    frame = run_driver(
+        ModelDriver(_model(), noise_std=1e-3), runs=1, seed=3, config={"time_limit": 0.5}
+    )[0]
+    path = save_recording(frame, tmp_path_factory.mktemp("rec") / "run", recording_meta(frame))
+    return load_recording(path)
+
+
+@pytest.fixture(scope="module")
+def still_recording(tmp_path_factory):
+    """A 50-step recording of the default env with the steering held at zero."""
     from hasa_env.recording import RecordingWrapper, load_recording
 
-    directory = tmp_path_factory.mktemp("rec")
+    directory = tmp_path_factory.mktemp("still")
     env = RecordingWrapper(
         gym.make("hasa_env/LaneKeeping-v0", config={"time_limit": 0.5}), directory
     )
@@ -108,6 +123,93 @@ def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording,
         assert ekf.decision_lag == model.decision_lag, caller
         assert ekf.steering_model == model.arx(), caller
     assert lines == [f"hasa-drive: --estimator {path}: {expected.describe()}"]
+
+
+def test_a_model_no_better_than_the_steerings_own_past_gives_no_lane_evidence(
+    recording, still_recording
+) -> None:
+    from estimators.offline import recording_filter
+    from estimators.tuning import PredictionCheck, prediction_check
+
+    model = _model()
+    arx = model.arx()
+    # a driver the model describes: its residual is below the lane-free level
+    check = prediction_check(arx, recording.data)
+    assert check.passed and check.residual_std < 0.9 * check.lane_free_residual_std
+    assert recording_filter(recording, model).arx == arx
+    # nobody steers: the lane-free autoregression predicts the (sensor's) readings far better
+    still = prediction_check(arx, still_recording.data)
+    assert not still.passed and still.residual_std > 10 * still.lane_free_residual_std
+    refused = recording_filter(still_recording, model)
+    assert refused.arx is None and isinstance(refused.estimator(), NoSteeringEKF)
+    assert refused.reasons == (
+        "steering off: the model predicts the steering no better than its own past does "
+        f"({still.describe()})",
+    )
+    assert still.describe() == (
+        f"one-step residual {still.residual_std:.3g} rad, a lane-free autoregression of its "
+        f"order {still.lane_free_residual_std:.3g} rad on the same data"
+    )
+    # the rule is a check: the unchecked filter and an unchecked record keep the steering
+    record = TrainingRecord(residual_std=2e-3, prediction=PredictionCheck(2e-3, 1e-3))
+    assert trusted_filter(model, training=record).arx is None
+    assert trusted_filter(model, training=record, checks=False).arx == arx
+    assert trusted_filter(model, training=TrainingRecord(residual_std=2e-3)).arx == arx
+    better = dataclasses.replace(record, prediction=PredictionCheck(9e-4, 1e-3))
+    assert trusted_filter(model, training=better).arx == arx
+
+
+def _ar2_frame(n: int, sensor_std: float = 0.0) -> pd.DataFrame:
+    """A run whose applied steering is an AR(2) process with 1e-3 rad innovations, read by a
+    steering sensor with ``sensor_std`` rad of white noise; the car holds the lane centre."""
+    rng = np.random.default_rng(7)
+    delta = np.zeros(n)
+    noise = 1e-3 * rng.standard_normal(n)
+    for k in range(2, n):
+        delta[k] = 1.6 * delta[k - 1] - 0.64 * delta[k - 2] + noise[k]
+    return pd.DataFrame(
+        {
+            "steering": delta,
+            "sensor_steering": delta + sensor_std * rng.standard_normal(n),
+            "lateral_offset": np.zeros(n),
+            "heading": np.zeros(n),
+            "speed": np.full(n, 15.0),
+            "time": 0.01 * np.arange(n),
+        }
+    )
+
+
+def test_the_lane_free_level_is_a_held_out_autoregression_of_the_models_order() -> None:
+    from estimators.tuning import prediction_check
+    from hasa_env.steering.arx import ARXForm
+
+    frame = _ar2_frame(4000)
+    exact = ARXForm(a=(1.6, -0.64), b=(0.0,))  # the process itself: its residual is the noise
+    check = prediction_check(exact, frame, decision_lag=0)
+    assert check.residual_std == pytest.approx(1e-3, rel=0.05)
+    # no lane input: the lane-free autoregression, fitted on 4/5 of the run, is as good
+    assert check.lane_free_residual_std == pytest.approx(check.residual_std, rel=0.01)
+    # order 0 predicts zero: the level is the steering's own RMS
+    delta = frame["steering"].to_numpy()
+    none = prediction_check(ARXForm(a=(), b=(0.0,)), frame, decision_lag=0)
+    assert none.lane_free_residual_std == pytest.approx(float(np.sqrt(np.mean(delta**2))))
+    # two runs (lags never cross from one to the next); shorter than the memory: an error
+    both = prediction_check(exact, [frame, frame], decision_lag=0)
+    assert both.lane_free_residual_std == pytest.approx(check.lane_free_residual_std, rel=0.05)
+    with pytest.raises(ValueError, match="shorter than the model's memory"):
+        prediction_check(exact, frame.iloc[:3], decision_lag=0)
+
+
+def test_the_check_reads_the_steering_sensor_as_the_fit_and_the_filter_do() -> None:
+    from estimators.tuning import prediction_check
+    from hasa_env.steering.arx import ARXForm
+
+    exact = ARXForm(a=(1.6, -0.64), b=(0.0,))
+    clean = prediction_check(exact, _ar2_frame(4000), decision_lag=0)
+    noisy = prediction_check(exact, _ar2_frame(4000, sensor_std=1e-3), decision_lag=0)
+    # both predictors see the noisy readings: both levels rise, not only the model's
+    assert noisy.residual_std > 1.5 * clean.residual_std
+    assert noisy.lane_free_residual_std > 1.5 * clean.lane_free_residual_std
 
 
 def test_the_reasons_say_what_is_off_and_why() -> None:
@@ -188,6 +290,20 @@ def test_hasa_replay_prints_where_the_estimator_does_not_listen(tmp_path, record
     line = next(ln for ln in out.splitlines() if "estimator trust:" in ln)
     assert line.startswith(f"model {path}: estimator trust: steering off ")
     assert "above 17.1 m/s" in line
+
+
+def test_hasa_replay_says_when_a_recording_is_not_one_the_model_describes(
+    tmp_path, still_recording, capsys
+):
+    from hasa_cli.replay import main
+
+    path = tmp_path / "model.json"
+    _model().save(path)
+    argv = [str(still_recording.path), "--model", str(path), "--estimator", "--no-lane-check"]
+    assert main(argv) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ": estimator: " in ln)
+    assert "(steering off: the model predicts the steering no better than its own past" in line
+    assert line.endswith("on this recording)")
 
 
 def test_the_benchmark_describes_each_models_limits() -> None:

@@ -32,7 +32,7 @@ from benchmarks.protocol.isolation import (
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
-from estimators.tuning import steering_residual_std
+from estimators.tuning import PredictionCheck, prediction_check, steering_residual_std
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import (
     GeneralizedModel,
@@ -291,6 +291,11 @@ def fit_models(
             if candidate.fixed
             else TrainingRecord.from_run(own if isinstance(own, pd.DataFrame) else pd.concat(own))
         )
+        if residual is not None:  # the trust rule's check, made on the same run
+            check = PredictionCheck(
+                info_fit["prediction_residual_std"], info_fit["lane_free_residual_std"]
+            )
+            training = replace(training, residual_std=residual, prediction=check)
         limit, speeds = model_limits(model_fitted, training)
         info["steering_curvature_limit"] = limit
         info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
@@ -335,11 +340,15 @@ def _fit_one(
         ) from None
     fitted.name = name
     info = _fit_description(fitted, fixed, caught)
-    has_arx, residual = _filter_residual(
+    has_arx, residual, prediction = _filter_residual(
         name, fitted, train if residual_on is None else residual_on
     )
     info["arx"] = has_arx
     info["filter_residual_std"] = residual
+    info["prediction_residual_std"] = None if prediction is None else prediction.residual_std
+    info["lane_free_residual_std"] = (
+        None if prediction is None else prediction.lane_free_residual_std
+    )
     note = _fit_note(fixed, has_arx)
     if note:
         info["note"] = note
@@ -384,25 +393,27 @@ def _fit_description(
 
 def _filter_residual(
     name: str, fitted: SteeringModel, run: pd.DataFrame | list[pd.DataFrame]
-) -> tuple[bool, float | None]:
-    """Whether the model has an ARX form, and the filter's steering-residual level on ``run``
-    (:func:`estimators.tuning.steering_residual_std`; None without ARX form); ModelError if
-    the ARX form fails or predicts non-finite steering."""
+) -> tuple[bool, float | None, PredictionCheck | None]:
+    """Whether the model has an ARX form, the filter's steering-residual level on ``run``
+    (:func:`estimators.tuning.steering_residual_std`) and the trust rule's prediction check
+    there (:func:`estimators.tuning.prediction_check`), both None without ARX form;
+    ModelError if the ARX form fails or predicts non-finite steering."""
     try:
         arx = fitted.arx()
     except Exception as exc:  # noqa: BLE001
         raise ModelError(name, "fit", f"arx() raised {describe(exc)}") from None
     if arx is None:
-        return False, None
+        return False, None, None
     try:
         residual = steering_residual_std(arx, run, decision_lag=fitted.decision_lag)
+        prediction = prediction_check(arx, run, decision_lag=fitted.decision_lag)
     except Exception as exc:  # noqa: BLE001
         raise ModelError(
             name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
         ) from None
     if not (math.isfinite(residual) and residual >= 0):
         raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
-    return True, residual
+    return True, residual, prediction
 
 
 def _fit_note(fixed: bool, has_arx: bool) -> str:
