@@ -43,24 +43,16 @@ def steering_residuals(
     *,
     decision_lag: int = 1,
     steering_ratio: float = 1.0,
-    steering: str = "applied",
 ) -> np.ndarray:
     """One-step-ahead residuals ``ratio * delta(k) - delta_hat(k)`` (rad, model units) of one run.
 
     Uses the recorded applied steering (the filter's model: the equation
     error e(k) is on the applied steering, and the steering sensor's noise is
-    a separate term of R_33; ``steering="measured"``: the steering sensor's readings) and
-    the straight-road bearings of the true state, as the filter's model does
-    (:mod:`estimators.arx_state_space`); rows without a full history are dropped.
+    a separate term of R_33) and the straight-road bearings of the true state,
+    as the filter's model does (:mod:`estimators.arx_state_space`); rows
+    without a full history are dropped.
     """
-    features = _features(arx, frame, decision_lag, steering)
-    delta = features["delta"].to_numpy() * steering_ratio
-    predicted = arx.predict(
-        delta,
-        features["phi"].to_numpy(),
-        features["omega"].to_numpy(),
-        features["lateral_velocity"].to_numpy(),
-    )
+    delta, predicted = _predicted(arx, frame, decision_lag, steering_ratio, "applied")
     residual = delta - predicted
     return residual[np.isfinite(residual)]
 
@@ -149,14 +141,7 @@ def prediction_check(
     order = len(arx.a)
     targets, lagged, residuals = [], [], []
     for frame in frames:
-        features = _features(arx, frame, decision_lag, "measured")
-        delta = features["delta"].to_numpy() * steering_ratio
-        predicted = arx.predict(
-            delta,
-            features["phi"].to_numpy(),
-            features["omega"].to_numpy(),
-            features["lateral_velocity"].to_numpy(),
-        )
+        delta, predicted = _predicted(arx, frame, decision_lag, steering_ratio, "measured")
         rows = np.flatnonzero(np.isfinite(delta - predicted))
         lags = np.empty((rows.size, order))
         for j in range(1, order + 1):
@@ -184,10 +169,14 @@ def prediction_check(
     )
 
 
-def _features(arx: ARXForm, frame: pd.DataFrame, decision_lag: int, steering: str) -> pd.DataFrame:
-    """The features the filter's model reads (straight-road bearings of the true state; the
-    ``steering``, "applied" or "measured", of :func:`steering_features`)."""
-    return steering_features(
+def _predicted(
+    arx: ARXForm, frame: pd.DataFrame, decision_lag: int, steering_ratio: float, steering: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """(``ratio * delta``, the model's one-step prediction of it) over one run's rows (NaN
+    where the history is short), from the features the filter's model reads: straight-road
+    bearings of the true state and the ``steering`` ("applied" or "measured") of
+    :func:`steering_features`."""
+    features = steering_features(
         frame,
         near=arx.near_distance,
         far=arx.far_distance,
@@ -195,3 +184,11 @@ def _features(arx: ARXForm, frame: pd.DataFrame, decision_lag: int, steering: st
         exact=False,
         steering=steering,
     )
+    delta = features["delta"].to_numpy() * steering_ratio
+    predicted = arx.predict(
+        delta,
+        features["phi"].to_numpy(),
+        features["omega"].to_numpy(),
+        features["lateral_velocity"].to_numpy(),
+    )
+    return delta, predicted
