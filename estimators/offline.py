@@ -632,10 +632,11 @@ def recording_filter(
     ``residual_std``: the steering model's equation-error level (rad, model units;
     ``FilterSettings.steering_residual_std``); None: the training record's, else the model's
     one-step residual on this recording's true states
-    (:func:`estimators.tuning.steering_residual_std`; then the trust rule's prediction check,
-    :func:`estimators.tuning.prediction_check`, is made there too, unless ``training`` has it): the evidence checks
-    (:mod:`estimators.evidence`) temper evidence whose residuals exceed the level they are
-    given, but cannot recover evidence a level set far too high hides. ``training``,
+    (:func:`estimators.tuning.steering_residual_std`; the trust rule's prediction check,
+    :func:`estimators.tuning.prediction_check`, is then made there too unless ``training`` has
+    it): the evidence checks (:mod:`estimators.evidence`) temper evidence whose residuals
+    exceed the level they are given, but cannot recover evidence a level set far too high
+    hides. ``training``,
     ``overrides``: as :func:`~estimators.trust.trusted_filter` takes them (the model's own
     record of its training roads and speeds limits where its steering counts).
     """
