@@ -137,7 +137,20 @@ _CHECK_COLUMNS = [
     Column("lane_snr", "lane SNR", fixed(2)),
     Column(lambda r: ", ".join(r.get("flags") or []) or "-", "flags", left=True),
     Column(lambda r: _lane_keeping_cell(r.get("lane_keeping")), "drives (closed loop)", left=True),
+    Column(lambda r: _prediction_cell(r.get("prediction")), "predicts (vs own past)", left=True),
 ]
+
+
+def _prediction_cell(levels: tuple[float, float] | None) -> str:
+    """The prediction check in a cell: the model's one-step residual over the lane-free one,
+    "0.97 x" or "153 x: no better" (docs/design.md §8.13.1)."""
+    if not levels or levels[1] is None or levels[0] is None:
+        return "-"
+    model, lane_free = levels
+    if lane_free <= 0:
+        return "no better" if model > 0 else "-"
+    ratio = model / lane_free
+    return f"{ratio:.3g} x" + (": no better" if ratio >= 1 else "")
 
 
 def _lane_keeping_cell(outcome: dict[str, Any] | None) -> str:
@@ -237,9 +250,11 @@ def checks_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
         checks = m.get("checks") or {}
         if m.get("error") or not (checks or m.get("lane_keeping")):
             continue
+        levels = (m.get("prediction_residual_std"), m.get("lane_free_residual_std"))
         rows.append(
             {"name": m["name"], "kind": m.get("kind"), "seed": m.get("seed"), **checks}
             | {"lane_keeping": m.get("lane_keeping")}
+            | {"prediction": levels if None not in levels else None}
         )
     return rows
 
@@ -361,9 +376,11 @@ def _checks_section(result: BenchmarkResult) -> Section:
         "The fits' checks per seed (docs/design.md §6.5): ridge penalty chosen by blocked "
         "cross-validation on the training run, condition number of the standardized design, "
         "largest AR pole, lane-offset identifiability with the steering-sensor noise; "
-        "and whether the model, driving 4 cars itself on the training run's conditions, "
-        "keeps them on the road (docs/design.md §8.11: one that does not gives the "
-        "estimator no lane evidence)",
+        "whether the model, driving 4 cars itself on the training run's conditions, "
+        "keeps them on the road (docs/design.md §8.11), and its one-step residual on the "
+        "training run's steering over that of a lane-free autoregression of its order "
+        "(docs/design.md §8.13.1); a model that does not drive, or predicts no better, gives "
+        "the estimator no lane evidence",
         checks_rows(result),
         _CHECK_COLUMNS,
         "name",

@@ -451,6 +451,7 @@ def test_stress_set_and_unchecked_estimators_are_scored(tmp_path: Path) -> None:
         assert checked and all(r["final_decision"] == "undecided" for r in checked)
         assert any(r["final_decision"] != "undecided" for r in unchecked)
     assert "off road 4/4" in text  # the Checks table says so
+    assert "predicts (vs own past)" in text and " x: no better" in text  # and this one
     # nor does one that predicts the steering no better than its own past (design §8.13.1)
     level = {n: m["prediction_residual_std"] / m["lane_free_residual_std"] for n, m in
              described.items() if m.get("lane_free_residual_std")}  # fmt: skip
