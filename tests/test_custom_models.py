@@ -59,6 +59,32 @@ def user(tmp_path_factory: pytest.TempPathFactory):
         sys.path.remove(str(folder))
 
 
+def test_hasa_bench_scores_saved_models_without_speeds_and_refuses_a_spoiled_one(
+    user, tmp_path, capsys
+):
+    from benchmarks.schema import folder_problems
+    from hasa_env.steering import GeneralizedModel
+
+    preset = GeneralizedModel.paper()  # records its roads, not its speeds: no upper limit
+    preset.save(tmp_path / "preset.json")
+    arx = preset.arx()  # a spoiled copy: its own past predicted with the wrong memory
+    spoiled = preset.with_parameters([-0.5, 0.2, *arx.b, *arx.c, *arx.d])
+    spoiled.save(tmp_path / "spoiled.json")
+    out = tmp_path / "bench"
+    code = bench_main(["score", str(tmp_path / "preset.json"), str(tmp_path / "spoiled.json"),
+                       "--recordings", str(user["recordings"]), "--out", str(out),
+                       "--no-plots", "--workers", "1", "--quiet", "--min-duration", "1"])  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    assert folder_problems(out) == []  # (a null upper speed limit broke the schema)
+    models = {m["spec"]: m for m in json.loads((out / "results.json").read_text())["models"]
+              if m["kind"] == "user"}  # fmt: skip
+    preset_info = models[str(tmp_path / "preset.json")]
+    assert preset_info["steering_speed_limits"][1] is None
+    spoiled_info = models[str(tmp_path / "spoiled.json")]
+    assert spoiled_info["prediction_residual_std"] > spoiled_info["lane_free_residual_std"]
+    assert any("no better than its own past" in r for r in spoiled_info["steering_trust"])
+
+
 def test_load_model_takes_import_paths_and_model_files(user):
     imported = load_model(f"{MODULE}:NearFarPD")
     assert type(imported).__name__ == "NearFarPD" and not imported.is_fitted
