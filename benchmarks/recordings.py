@@ -123,8 +123,8 @@ class PreparedModel:
 
     def trust(self) -> TrustedFilter:
         """Where the estimator trusts the model's steering, and why not elsewhere
-        (:func:`estimators.trust.trusted_filter`; one more depends on the recording, the
-        prediction check of docs/design.md §8.13.1: :func:`describe_estimate` gives it)."""
+        (:func:`estimators.trust.trusted_filter`; the reasons do not depend on the
+        recording)."""
         return trusted_filter(self.model, steering_ratio=self.steering_ratio)
 
 
@@ -240,10 +240,9 @@ def describe_estimate(run: EstimatorRun) -> str:
         f"{b:+g} m: {w:.3f}" for b, w in zip(run.hypotheses, run.weights[-1], strict=True)
     )
     trusted = "never" if math.isnan(run.trusted_from) else f"{run.trusted_from:.2f} s"
-    off = f" ({run.steering_off} on this recording)" if run.steering_off else ""
     return (
         f"lateral RMSE {run.lateral_rmse:.3f} m, final weights [{hyp}], "
-        f"true lane trusted (> 0.9) from {trusted}{off}"
+        f"true lane trusted (> 0.9) from {trusted}"
     )
 
 

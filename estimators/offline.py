@@ -20,7 +20,6 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from types import SimpleNamespace
 from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
@@ -35,7 +34,7 @@ from estimators.road_geometry import lane_points_ahead, look_ahead_distances, st
 from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time, recording_sample_time
 from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
-from estimators.tuning import prediction_check, steering_residual_std
+from estimators.tuning import steering_residual_std
 from hasa_env.recording.format import Recording
 from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
@@ -602,9 +601,6 @@ class EstimatorRun:
         final_true_weight: weight of the true hypothesis at the end (NaN if not among them).
         trusted_from: first time (s) from which the true hypothesis' weight stays above 0.9
             (NaN if never).
-        steering_off: why the filter took no lane evidence from the steering on this
-            recording ("" when it could; e.g. the model predicts this recording's steering no
-            better than its own past does, docs/design.md §8.13.1).
     """
 
     weights: np.ndarray
@@ -614,7 +610,6 @@ class EstimatorRun:
     true_index: int
     final_true_weight: float
     trusted_from: float
-    steering_off: str = ""
 
 
 def recording_filter(
@@ -632,38 +627,30 @@ def recording_filter(
     ``residual_std``: the steering model's equation-error level (rad, model units;
     ``FilterSettings.steering_residual_std``); None: the training record's, else the model's
     one-step residual on this recording's true states
-    (:func:`estimators.tuning.steering_residual_std`; the trust rule's prediction check,
-    :func:`estimators.tuning.prediction_check`, is then made there too unless ``training`` has
-    it): the evidence checks (:mod:`estimators.evidence`) temper evidence whose residuals
-    exceed the level they are given, but cannot recover evidence a level set far too high
-    hides. ``training``,
+    (:func:`estimators.tuning.steering_residual_std`): the evidence checks
+    (:mod:`estimators.evidence`) temper evidence whose residuals exceed the level they are
+    given, but cannot recover evidence a level set far too high hides. The trust rule's
+    prediction check is made only where ``training`` carries it (made on the data the model
+    was fitted on): on a recording of another driver a model is not compared with an
+    autoregression fitted to that driver (docs/design.md §8.13.1). ``training``,
     ``overrides``: as :func:`~estimators.trust.trusted_filter` takes them (the model's own
     record of its training roads and speeds limits where its steering counts).
     """
     training = training or TrainingRecord()
     arx = steering_model.arx()
     level = training.residual_std if residual_std is None else residual_std
-    prediction = training.prediction
-    timing = recording_sample_time(recording.data)
-    if arx is not None and timing is not None:  # the model's rate first: nothing is measured
-        step, frequency, repeat = timing  # on a recording sampled at another one
-        check_sample_time(
-            SimpleNamespace(steering_model=arx), step, sim_frequency=frequency, action_repeat=repeat
-        )
-    if arx is not None and level is None:  # measured on this recording, with the check
-        lag = int(getattr(steering_model, "decision_lag", 1))
+    if arx is not None and level is None:
         level = steering_residual_std(
-            arx, recording.data, decision_lag=lag, steering_ratio=steering_ratio
+            arx,
+            recording.data,
+            decision_lag=getattr(steering_model, "decision_lag", 1),
+            steering_ratio=steering_ratio,
         )
-        if prediction is None:
-            prediction = prediction_check(
-                arx, recording.data, decision_lag=lag, steering_ratio=steering_ratio
-            )
     return trusted_filter(
         steering_model,
         FilterSettings.from_env_config(recording.config),
         steering_ratio=steering_ratio,
-        training=replace(training, residual_std=level, prediction=prediction),
+        training=replace(training, residual_std=level),
         overrides=overrides,
     )
 
@@ -706,9 +693,8 @@ def estimate_recording(
     if not 0 <= true_index < hypotheses.size:
         matches = np.flatnonzero(np.isclose(hypotheses, float(data["bias"].iloc[0])))
         true_index = int(matches[0]) if matches.size else -1
-    off = "; ".join(trust.reasons) if trust.arx is None else ""
     if true_index < 0:
-        return EstimatorRun(weights, hypotheses, lateral, rmse, -1, math.nan, math.nan, off)
+        return EstimatorRun(weights, hypotheses, lateral, rmse, -1, math.nan, math.nan)
     w_true = weights[:, true_index]
     below = np.flatnonzero(w_true <= 0.9)
     if below.size == 0:
@@ -717,9 +703,7 @@ def estimate_recording(
         trusted = float(data["time"].iloc[below[-1] + 1])
     else:
         trusted = math.nan
-    return EstimatorRun(
-        weights, hypotheses, lateral, rmse, true_index, float(w_true[-1]), trusted, off
-    )
+    return EstimatorRun(weights, hypotheses, lateral, rmse, true_index, float(w_true[-1]), trusted)
 
 
 def _road_points(

@@ -136,11 +136,11 @@ def test_a_model_no_better_than_the_steerings_own_past_gives_no_lane_evidence(
     # a driver the model describes: its residual is below the lane-free level
     check = prediction_check(arx, recording.data)
     assert check.passed and check.residual_std < 0.9 * check.lane_free_residual_std
-    assert recording_filter(recording, model).arx == arx
+    assert trusted_filter(model, training=TrainingRecord(prediction=check)).arx == arx
     # nobody steers: the lane-free autoregression predicts the (sensor's) readings far better
     still = prediction_check(arx, still_recording.data)
     assert not still.passed and still.residual_std > 10 * still.lane_free_residual_std
-    refused = recording_filter(still_recording, model)
+    refused = trusted_filter(model, training=TrainingRecord(prediction=still))
     assert refused.arx is None and isinstance(refused.estimator(), NoSteeringEKF)
     assert refused.reasons == (
         "steering off: the model predicts the steering no better than its own past does "
@@ -157,6 +157,9 @@ def test_a_model_no_better_than_the_steerings_own_past_gives_no_lane_evidence(
     assert trusted_filter(model, training=TrainingRecord(residual_std=2e-3)).arx == arx
     better = dataclasses.replace(record, prediction=PredictionCheck(9e-4, 1e-3))
     assert trusted_filter(model, training=better).arx == arx
+    # a recording of someone else is not the model's training data: no check there
+    assert recording_filter(still_recording, model).arx == arx
+    assert recording_filter(still_recording, model, training=record).arx is None
 
 
 def _ar2_frame(n: int, sensor_std: float = 0.0) -> pd.DataFrame:
@@ -290,20 +293,6 @@ def test_hasa_replay_prints_where_the_estimator_does_not_listen(tmp_path, record
     line = next(ln for ln in out.splitlines() if "estimator trust:" in ln)
     assert line.startswith(f"model {path}: estimator trust: steering off ")
     assert "above 17.1 m/s" in line
-
-
-def test_hasa_replay_says_when_a_recording_is_not_one_the_model_describes(
-    tmp_path, still_recording, capsys
-):
-    from hasa_cli.replay import main
-
-    path = tmp_path / "model.json"
-    _model().save(path)
-    argv = [str(still_recording.path), "--model", str(path), "--estimator", "--no-lane-check"]
-    assert main(argv) == 0
-    line = next(ln for ln in capsys.readouterr().out.splitlines() if ": estimator: " in ln)
-    assert "(steering off: the model predicts the steering no better than its own past" in line
-    assert line.endswith("on this recording)")
 
 
 def test_the_benchmark_describes_each_models_limits() -> None:
