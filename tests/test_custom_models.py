@@ -59,7 +59,7 @@ def user(tmp_path_factory: pytest.TempPathFactory):
         sys.path.remove(str(folder))
 
 
-def test_hasa_bench_scores_saved_models_without_speeds_and_refuses_a_spoiled_one(
+def test_hasa_bench_scores_saved_models_without_speeds_and_checks_only_fitted_predictions(
     user, tmp_path, capsys
 ):
     from benchmarks.schema import folder_problems
@@ -80,9 +80,11 @@ def test_hasa_bench_scores_saved_models_without_speeds_and_refuses_a_spoiled_one
               if m["kind"] == "user"}  # fmt: skip
     preset_info = models[str(tmp_path / "preset.json")]
     assert preset_info["steering_speed_limits"][1] is None
+    # the prediction check needs the data a model was fitted on: a saved model's levels on
+    # this training run are reported, not held against it (design §8.13.1)
     spoiled_info = models[str(tmp_path / "spoiled.json")]
     assert spoiled_info["prediction_residual_std"] > spoiled_info["lane_free_residual_std"]
-    assert any("no better than its own past" in r for r in spoiled_info["steering_trust"])
+    assert not any("its own past" in r for r in spoiled_info["steering_trust"])
 
 
 def test_load_model_takes_import_paths_and_model_files(user):

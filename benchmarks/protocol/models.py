@@ -291,8 +291,8 @@ def fit_models(
             if candidate.fixed
             else TrainingRecord.from_run(own if isinstance(own, pd.DataFrame) else pd.concat(own))
         )
-        if residual is not None:  # the trust rule's check, made on the same run
-            check = PredictionCheck(
+        if residual is not None and not candidate.fixed:  # the trust rule's prediction check
+            check = PredictionCheck(  # on the run it was fitted on (not a saved model's: §8.13.1)
                 info_fit["prediction_residual_std"], info_fit["lane_free_residual_std"]
             )
             training = replace(training, residual_std=residual, prediction=check)
