@@ -21,9 +21,9 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
 - A model that failed its lane-keeping check, or has no ARX form, gives no lane evidence at all:
   the filter is the no-steering one (:class:`~estimators.baselines.NoSteeringEKF`).
 - So does a model that predicts the steering no better than the steering's own past does
-  (``training.prediction``, :func:`~estimators.tuning.prediction_check` on the data it is
-  trusted on: its one-step residual at or above that of a lane-free autoregression of its
-  order; docs/design.md §8.13.1). Its lane evidence would come from the errors of a model
+  (``training.prediction``, :func:`~estimators.tuning.prediction_check` on the data it was
+  fitted on: its one-step residual at or above that of a lane-free autoregression of its
+  order; docs/design.md §8.13.1; no check where the record has none). Its lane evidence would come from the errors of a model
   that does not describe this driver.
 - ``checks=False`` (the benchmark's unchecked comparison): ``evidence_checks`` off and none of
   the limits above (curvature limit ``math.inf`` even when the user set one).
@@ -63,7 +63,7 @@ class TrainingRecord:
     Attributes:
         residual_std: the model's one-step residual level (rad, model units) on its training
             data or on the data filtered; None: unknown (the base settings' level).
-        prediction: the model's prediction check on the same data
+        prediction: the model's prediction check on the data it was fitted on
             (:func:`~estimators.tuning.prediction_check`); None: not measured (not checked).
         curvature: the largest ``|road curvature|`` (1/m) of the roads it was fitted on;
             None: unknown.
