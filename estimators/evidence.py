@@ -118,11 +118,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from statistics import NormalDist
 
 import numpy as np
 
 from estimators.settings import FilterSettings
+from estimators.small_arrays import all_finite, all_true, any_true
 
 __all__ = [
     "DECIDED",
@@ -200,7 +202,7 @@ def verified_steps(rule: EvidenceRule, model_error: np.ndarray, samples: np.ndar
     whatever their bound, take N = ``VERIFY_MIN_SAMPLES`` in it (no division by zero), and
     none is computed before any run has enough (a run's first samples: the filter's step)."""
     enough = samples >= VERIFY_MIN_SAMPLES
-    if not enough.any():
+    if not any_true(enough):
         return enough
     h = 2.0 / (9.0 * np.maximum(samples, VERIFY_MIN_SAMPLES))
     root = 1.0 - h - VERIFY_QUANTILE_Z * np.sqrt(h)
@@ -261,7 +263,7 @@ class EvidenceRule:
     commit_steps: float = math.inf
     bound_z: float = 0.0
 
-    @property
+    @cached_property
     def log_decision_threshold(self) -> float:
         return math.log(self.decision_threshold)
 
@@ -378,8 +380,8 @@ def _hold_first_decision(
         if int(stats["decision"][0]) != DECIDED or lw.index(max(lw)) == committed[0]:
             return log_w
     decided = stats["decision"] == DECIDED
-    if not decided.any() and not (committed != NOT_COMMITTED).any():
-        if state["_candidate"].any():
+    if not any_true(decided) and not any_true(committed != NOT_COMMITTED):
+        if any_true(state["_candidate"] != 0):
             state["_candidate"] = np.zeros_like(state["_candidate"])
         return log_w  # (nothing decided, nothing committed: the common case at the start)
     top = np.argmax(log_w, axis=1).astype(np.float64)
@@ -395,10 +397,10 @@ def _hold_first_decision(
     contradicted = (committed == CONTRADICTED) | contradicting
     commits = ~is_committed & (committed != CONTRADICTED) & (held >= rule.commit_steps)
     state["_committed"] = np.where(contradicted, CONTRADICTED, np.where(commits, top, committed))
-    if not contradicted.any():
+    if not any_true(contradicted):
         return log_w
     prior = state["_log_prior"]
-    if contradicting.any():
+    if any_true(contradicting):
         state["_withheld"] = np.where(contradicting, top, state["_withheld"])
     state["_verified_log_w"] = np.where(contradicted[:, None], prior, state["_verified_log_w"])
     stats["decision"] = np.where(contradicted, MODEL_MISMATCH, stats["decision"])
@@ -417,19 +419,17 @@ def _weigh_one(
     arrays of two numbers; ``tests/test_estimators_evidence.py`` checks the two agree)."""
     alpha = rule.alpha
     keep = 1.0 - alpha
-    lw = log_w[0].tolist()
+    (lw,) = log_w.tolist()
     n_comp = len(lw)
-    active = [math.isfinite(v) for v in lw]
-    u = [
-        (min(max(s, -1e3), 1e3) if a else 0.0)
-        for s, a in zip(score[0].tolist(), active, strict=True)
-    ]
-    used = not any(math.isnan(v) for v in u)
-    weight = float(state["_evidence_weight"][0])
-    weight_sq = float(state["_evidence_weight_sq"][0])
-    nis = state["_nis"][0].tolist()
-    lag = state["_lag_product"][0].tolist()
-    last = state["_last_score"][0].tolist()
+    active = list(map(math.isfinite, lw))
+    all_active = False not in active
+    u = _clipped_scores(score, active, all_active)
+    used = not any(map(math.isnan, u))
+    weight = state["_evidence_weight"].item()
+    weight_sq = state["_evidence_weight_sq"].item()
+    (nis,) = state["_nis"].tolist()
+    (lag,) = state["_lag_product"].tolist()
+    (last,) = state["_last_score"].tolist()
     if used:
         weight = keep * weight + alpha
         weight_sq = (keep * keep) * weight_sq + alpha * alpha
@@ -437,8 +437,7 @@ def _weigh_one(
         lag = [keep * g + alpha * (v * p) for g, v, p in zip(lag, u, last, strict=True)]
     else:
         u = [0.0] * n_comp
-    candidates = [(n, i) for i, (n, a) in enumerate(zip(nis, active, strict=True)) if a]
-    best = min(candidates)[1] if candidates else 0
+    best = _best_fitting(nis, active, all_active)
     best_nis = nis[best]
     model_error = best_nis / weight if weight > 0 else math.nan
     rho = lag[best] / best_nis if best_nis != 0 else math.nan
@@ -465,19 +464,23 @@ def _weigh_one(
     if mismatch:
         new_log_w = state["_verified_log_w"]
     else:
-        increment = (log_lik[0] / scale).tolist()
+        increment = [d / scale for d in log_lik[0].tolist()]
         raw = [w + d if a else -math.inf for w, d, a in zip(lw, increment, active, strict=True)]
-        new_log_w = normalize_log_weights(np.array([raw]), log_w)
+        new_lw = _normalized_one(raw)
+        new_log_w = np.array([new_lw]) if new_lw else normalize_log_weights(np.array([raw]), log_w)
         if math.isfinite(rule.log_floor):
             floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
             new_log_w = normalize_log_weights(floored, new_log_w)
+            new_lw = []
         if verified:
             new_state["_verified_log_w"] = new_log_w
     if mismatch:
         decision = MODEL_MISMATCH
     else:
         decision = (
-            DECIDED if max(new_log_w[0].tolist()) >= rule.log_decision_threshold else UNDECIDED
+            DECIDED
+            if max(new_lw or new_log_w[0].tolist()) >= rule.log_decision_threshold
+            else UNDECIDED
         )
     stats = {
         "decision": np.array([decision]),
@@ -489,6 +492,23 @@ def _weigh_one(
     return new_log_w, new_state, stats
 
 
+def _clipped_scores(score: np.ndarray, active: list[bool], all_active: bool) -> list[float]:
+    """One run's normalized steering innovations u_i (1, C) clipped to +-1e3, 0 for the
+    inactive hypotheses (a NaN stays: the channel was not used)."""
+    (u,) = score.tolist()
+    if all_active:
+        return [v if -1e3 <= v <= 1e3 else min(max(v, -1e3), 1e3) for v in u]
+    return [(min(max(v, -1e3), 1e3) if a else 0.0) for v, a in zip(u, active, strict=True)]
+
+
+def _best_fitting(nis: list[float], active: list[bool], all_active: bool) -> int:
+    """The active hypothesis with the least e_i (the first of equals; 0 when none is active)."""
+    if all_active:
+        return min(zip(nis, range(len(nis)), strict=True))[1]
+    candidates = [(n, i) for i, (n, a) in enumerate(zip(nis, active, strict=True)) if a]
+    return min(candidates)[1] if candidates else 0
+
+
 def _weigh(
     rule: EvidenceRule,
     log_w: np.ndarray,
@@ -497,19 +517,19 @@ def _weigh(
     state: dict[str, np.ndarray],
 ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """:func:`weigh_evidence` for R runs: the statistics, then the weights."""
-    all_active = math.isfinite(log_w.sum())  # pruned (or zero-prior) hypotheses do not count
+    all_active = all_finite(log_w)  # pruned (or zero-prior) hypotheses do not count
     active = None if all_active else np.isfinite(log_w)
     new_state = _updated_statistics(rule, score, active, state)
     model_error, rho, samples, mismatch, scale = _run_statistics(rule, new_state, active)
-    any_mismatch = bool(mismatch.any())
+    any_mismatch = any_true(mismatch)
     if rule.enabled:
         new_log_w = _tempered_log_weights(rule, log_w, log_lik, scale, mismatch, active, state)
         verified = verified_steps(rule, model_error, samples)
         if any_mismatch:
             verified &= ~mismatch
-        if verified.all():
+        if all_true(verified):
             new_state["_verified_log_w"] = new_log_w
-        elif verified.any():
+        elif any_true(verified):
             new_state["_verified_log_w"] = np.where(
                 verified[:, None], new_log_w, state["_verified_log_w"]
             )
@@ -577,14 +597,14 @@ def _updated_statistics(
     nis, lag = state["_nis"], state["_lag_product"]
     # a normalized innovation beyond 1e3 is as inconsistent as it gets (no overflow)
     u = np.minimum(np.maximum(score if active is None else np.where(active, score, 0.0), -1e3), 1e3)
-    if math.isfinite(u.sum()):  # the steering channel was used in every run (the common case)
+    if all_finite(u):  # the steering channel was used in every run (the common case)
         weight = keep * weight + alpha
         weight_sq = (keep * keep) * weight_sq + alpha * alpha
         nis = keep * nis + alpha * (u * u)
         lag = keep * lag + alpha * (u * state["_last_score"])
     else:
         used = ~np.isnan(u).any(axis=1)  # missing, gated and low-speed steps: NaN
-        if not used.any():  # (no steering model, or the channel off in every run)
+        if not any_true(used):  # (no steering model, or the channel off in every run)
             new_state = dict(state)
             new_state["_last_score"] = np.zeros_like(u)  # the next lag product is 0 (a gap)
             return new_state
@@ -619,7 +639,7 @@ def _tempered_log_weights(
         log w_i <- max(log w_i - logsumexp_j log w_j, log weight_floor), normalized again
 
     and, on a mismatch, the last verified weights."""
-    any_mismatch = bool(mismatch.any())
+    any_mismatch = any_true(mismatch)
     increment = log_lik / scale[:, None]
     if any_mismatch:
         increment = np.where(mismatch[:, None], 0.0, increment)
@@ -641,11 +661,39 @@ def _tempered_log_weights(
 def normalize_log_weights(log_w: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     """``log_w - logsumexp(log_w)`` per run; a run whose weights all vanished keeps ``fallback``."""
     total = np.logaddexp.reduce(log_w, axis=1, keepdims=True)  # logsumexp, stable
-    if math.isfinite(total.sum()):
+    if all_finite(total):
         return log_w - total
     ok = np.isfinite(total)
     with np.errstate(invalid="ignore"):
         return np.where(ok, log_w - np.where(ok, total, 0.0), fallback)
+
+
+def _logaddexp(a: float, b: float) -> float:
+    """``numpy.logaddexp(a, b)`` in Python floats: numpy's formula (``npy_logaddexp``) with
+    the same C library ``exp`` and ``log1p``, so the same bits (a test compares them)."""
+    if a == b:
+        return a + _LOG_2
+    difference = a - b
+    if difference > 0:
+        return a + math.log1p(math.exp(-difference))
+    if difference <= 0:
+        return b + math.log1p(math.exp(difference))
+    return difference  # NaN
+
+
+_LOG_2 = math.log(2.0)
+
+
+def _normalized_one(log_w: list[float]) -> list[float]:
+    """:func:`normalize_log_weights` of one run's log weights as a list, in Python floats:
+    ``log_w - logsumexp(log_w)`` with numpy's reduction order (``logaddexp`` from the first
+    entry on); ``[]`` when the sum is not finite (the caller falls back)."""
+    total = log_w[0]
+    for value in log_w[1:]:
+        total = _logaddexp(total, value)
+    if not math.isfinite(total):
+        return []
+    return [value - total for value in log_w]
 
 
 def decision_names(codes: np.ndarray | int) -> np.ndarray | str:

@@ -36,6 +36,7 @@ from estimators.arx_state_space import (
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     DECIDED,
+    DECISIONS,
     UNDECIDED,
     EvidenceRule,
     decision_names,
@@ -46,6 +47,7 @@ from estimators.evidence import (
 from estimators.filter_matrices import FilterMatrices, filter_model
 from estimators.road_geometry import straight_road_points
 from estimators.settings import FilterSettings
+from estimators.small_arrays import all_finite, all_true, all_within, any_true, min_below
 from hasa_env.steering.arx import ARXForm
 
 __all__ = ["GaussianMixtureEKF", "FilterMatrices", "MixtureState"]
@@ -487,7 +489,8 @@ class GaussianMixtureEKF:
             self._state = self._step(state, measurement, acceleration, road_points)
             return
         z, acc = measurement, acceleration
-        if z.shape != (state.num_runs, 3) or acc.shape != (state.num_runs, 2):
+        n_runs = state.log_w.shape[0]
+        if z.shape != (n_runs, 3) or acc.shape != (n_runs, 2):
             raise ValueError(
                 f"expected measurement ({self.num_runs}, 3) and acceleration "
                 f"({self.num_runs}, 2), got {np.shape(measurement)} and "
@@ -508,26 +511,27 @@ class GaussianMixtureEKF:
         if self._state is None:
             raise RuntimeError("call reset() first")
         state = self._state
-        n_runs, n_comp = state.log_w.shape
-        n = state.x.shape[1]
-        w = np.exp(state.log_w)
         if self._single:
             x = state.x  # (C, n) for the single run
             log_w = state.log_w[0]
+            w = np.exp(log_w)
             return Estimate(
-                w[0] @ x,
+                w @ x,
                 x,
                 state.P,
-                w[0],
+                w,
                 log_w,
-                int(np.argmax(log_w)),
+                int(log_w.argmax()),
                 state.hypotheses[0],
                 self.state_names,
-                decision_names(int(state.decision[0])),
-                float(state.model_error[0]),
-                float(state.autocorrelation[0]),
-                float(state.evidence_scale[0]),
+                DECISIONS[state.decision.item()],
+                state.model_error.item(),
+                state.autocorrelation.item(),
+                state.evidence_scale.item(),
             )
+        n_runs, n_comp = state.log_w.shape
+        n = state.x.shape[1]
+        w = np.exp(state.log_w)
         x = state.x.reshape(n_runs, n_comp, n)
         return Estimate(
             (w[:, None, :] @ x)[:, 0, :],
@@ -623,7 +627,7 @@ class GaussianMixtureEKF:
         acc = _plausible_acceleration(acc, self.settings.max_acceleration)
         steering = z[:, 2]
         off = state.channel_off
-        any_off = bool(off.any())
+        any_off = any_true(off)
         x_pred, cov_pred = self._predict(state, acc, off if any_off else None)
         if any_off:
             z, all_observed = _without_steering(z, off), False
@@ -631,7 +635,7 @@ class GaussianMixtureEKF:
             x_pred, cov_pred, z, all_observed, state.log_w, points
         )
         normalized = normalized.reshape(*state.log_w.shape, 3)
-        all_active = bool(state.active.all())
+        all_active = all_true(state.active)
         innovation_log_w, log_w, evidence, stats = self._weigh(
             state, all_active, log_lik, normalized
         )
@@ -639,9 +643,9 @@ class GaussianMixtureEKF:
             x_post, cov_post = _freeze_pruned(state, x_post, cov_post)
         active, log_w = self._prune(state.active, all_active, log_w)
         channel_off, restart = self._switch_channel(off, any_off, x_post, log_w, steering, points)
-        if restart is not None and restart.any():
+        if restart is not None and any_true(restart):
             self._restart_memory(x_post, cov_post, restart, active, steering, points)
-        any_gated = bool(gated.any())
+        any_gated = any_true(gated)
         if any_gated:
             steering = _memory_steering(steering, gated, restart)
         return MixtureState(
@@ -670,7 +674,7 @@ class GaussianMixtureEKF:
         (``z_3 steering_ratio``; NaN without a model) and every non-finite entry NaN
         (missing: its row of H, nu and R is dropped), and whether none is missing."""
         z = z * self._measurement_scale
-        all_observed = math.isfinite(z.sum())
+        all_observed = all_finite(z)
         if not all_observed:  # NaN and +-inf are missing
             z = np.where(np.isfinite(z), z, np.nan)
         return z, all_observed
@@ -766,7 +770,7 @@ class GaussianMixtureEKF:
         newly = log_w < self._log_prune_threshold
         if not all_active:
             newly &= active
-        if not newly.any():
+        if not any_true(newly):
             return active, log_w
         newly[np.arange(newly.shape[0]), log_w.argmax(axis=1)] = False
         new_active = active & ~newly
@@ -795,7 +799,7 @@ class GaussianMixtureEKF:
         whose memory restarts, ``off(k-1) and not off and z_3(k) finite`` (None: none can).
         The speed test is skipped when bounds on every hypothesis' speed already decide
         it (``|v_i| >= v_x,i``; ``|v_i| <= |v_x,i| + |v_y,i|``)."""
-        speed_check = self._min_speed > 0 and (any_off or x[:, VX].min() < self._min_speed)
+        speed_check = self._min_speed > 0 and (any_off or min_below(x[:, VX], self._min_speed))
         if not speed_check and self._max_speed < math.inf:
             fastest = np.abs(x[:, VX]).max() + np.abs(x[:, VY]).max()
             speed_check = any_off or fastest > self._max_speed
@@ -889,7 +893,7 @@ def _memory_steering(
     """The steering reading z_3(k) for the next prediction's memory update: NaN (none) where
     the steering channel was gated as an outlier (but kept where the memory just restarted
     from it)."""
-    if not gated[:, 2].any():
+    if not any_true(gated[:, 2]):
         return steering
     dropped = gated[:, 2] if restart is None else gated[:, 2] & ~restart
     return np.where(dropped, np.nan, steering)
@@ -898,9 +902,9 @@ def _memory_steering(
 def _plausible_acceleration(acc: np.ndarray, limit: float) -> np.ndarray:
     """The IMU input with non-finite entries and entries beyond +-``limit`` (m/s^2) set to NaN."""
     if math.isinf(limit):
-        if math.isfinite(acc.sum()):
+        if all_finite(acc):
             return acc
         return np.where(np.isfinite(acc), acc, np.nan)
-    if np.abs(acc).max() <= limit:  # False with a NaN
+    if all_within(acc, limit):  # False with a NaN
         return acc
     return np.where(np.abs(acc) <= limit, acc, np.nan)
