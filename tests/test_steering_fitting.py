@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from hasa_env.drivers import ModelDriver, run_driver
 from hasa_env.steering import (
@@ -15,6 +16,7 @@ from hasa_env.steering import (
     IdentifiabilityWarning,
     TwoPointModel,
     check_identifiability,
+    ljung_box,
     residual_diagnostics,
     score,
     score_runs,
@@ -162,6 +164,24 @@ def test_residual_diagnostics_tell_white_from_coloured():
     assert not c.white and c.ljung_box_p < 1e-10
     assert c.autocorrelation[0] == 1.0 and c.autocorrelation[1] == pytest.approx(0.75, abs=0.05)
     assert w.confidence_band == pytest.approx(1.96 / np.sqrt(3000))
+
+
+def test_ljung_box_is_statsmodels_to_the_bit():
+    """:func:`ljung_box` (lags 1..L only) gives statsmodels' ``acorr_ljungbox`` (every lag's
+    autocovariance by ``np.correlate``) to the bit: white, random-walk and offset series of
+    many lengths, levels and lag counts, up to more samples than a run has."""
+    rng = np.random.default_rng(5011)
+    for trial in range(300):
+        n = int(rng.integers(10, 6000))
+        lags = int(min(int(rng.integers(1, 40)), max(n // 5, 1)))
+        series = rng.standard_normal(n) * 10 ** rng.uniform(-6, 2)
+        if trial % 3 == 1:
+            series = np.cumsum(series) * 1e-3
+        elif trial % 3 == 2:
+            series = series + 5.0
+        theirs = acorr_ljungbox(series, lags=[lags], return_df=True)
+        expected = (float(theirs["lb_stat"].iloc[0]), float(theirs["lb_pvalue"].iloc[0]))
+        assert ljung_box(series, lags) == expected, (n, lags)
 
 
 @pytest.fixture(scope="module")

@@ -45,6 +45,7 @@ __all__ = [
     "check_identifiability",
     "fit_model",
     "lagged",
+    "ljung_box",
     "near_far_bearings",
     "residual_diagnostics",
     "road_information",
@@ -75,6 +76,7 @@ _SUBMODULES = {
     ),
     "scoring": (
         "ResidualDiagnostics",
+        "ljung_box",
         "residual_diagnostics",
         "road_information",
         "score",

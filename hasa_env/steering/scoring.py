@@ -8,7 +8,7 @@
 - :func:`road_information`: the share of a road-blind baseline's one-step error
   that a model explains, ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.3).
 - :func:`residual_diagnostics`: autocorrelation and Ljung-Box whiteness
-  (statsmodels) of residuals.
+  (statsmodels' statistics; :func:`ljung_box`) of residuals.
 - :func:`simulate_arx`: free run of an ARX model over a run's bearings.
 
 Runs are recordings (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`) or features
@@ -24,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy import signal
-from statsmodels.stats.diagnostic import acorr_ljungbox
+from scipy import signal, stats
 from statsmodels.tsa.stattools import acf
 
 from hasa_env.sim.road import Road
@@ -36,6 +35,7 @@ from hasa_env.steering.design import as_runs, lagged, r_squared
 __all__ = [
     "DIVERGENCE_LIMIT",
     "ResidualDiagnostics",
+    "ljung_box",
     "residual_diagnostics",
     "road_information",
     "score",
@@ -95,15 +95,37 @@ def residual_diagnostics(
     r = acf(e, nlags=lags, fft=True)
     band = 1.96 / math.sqrt(n)
     outside = float(np.mean(np.abs(r[1:]) > band))
-    lb = acorr_ljungbox(e, lags=[lags], return_df=True)
-    return ResidualDiagnostics(
-        np.asarray(r),
-        band,
-        outside,
-        float(lb["lb_stat"].iloc[0]),
-        float(lb["lb_pvalue"].iloc[0]),
-        n,
-    )
+    statistic, p_value = ljung_box(e, lags)
+    return ResidualDiagnostics(np.asarray(r), band, outside, statistic, p_value, n)
+
+
+def ljung_box(residuals: np.ndarray, lags: int) -> tuple[float, float]:
+    """The Ljung-Box statistic over ``lags`` lags of a 1-D series (no NaN) and its p-value:
+    statsmodels' ``acorr_ljungbox(residuals, lags=[lags])`` to the bit, without its
+    autocovariances at every lag up to n - 1 (``np.correlate`` of the whole series, O(n^2)):
+
+        Q = n (n + 2) sum_{k=1..lags} r_k^2 / (n - k),   p = P(chi^2_lags > Q)
+
+    with ``r_k = c_k / c_0``, ``c_k = sum_t x_{t+k} x_t / n`` of the demeaned series ``x``.
+    Each ``c_k`` is the dot product ``np.correlate`` computes for lag k (the same numpy
+    dot routine on the same slices, as statsmodels' own ``acovf`` does when given
+    ``nlag``), and the rest is statsmodels' arithmetic in its order; a test compares the
+    two on many series.
+    """
+    x = np.asarray(residuals, dtype=np.float64)
+    n = x.shape[0]
+    demeaned = x - x.mean()
+    covariance = np.empty(lags + 1)
+    covariance[0] = demeaned.dot(demeaned)
+    for k in range(1, lags + 1):
+        covariance[k] = demeaned[k:].dot(demeaned[: n - k])
+    covariance = covariance / (n * np.ones(lags + 1))
+    autocorrelation = covariance / covariance[0]
+    lag = np.array([lags])
+    terms = autocorrelation[1 : lags + 1] ** 2 / (n - np.arange(1, lags + 1))
+    statistic = n * (n + 2) * np.cumsum(terms)[lag - 1]
+    p_value = stats.chi2.sf(statistic, lag)
+    return float(statistic[0]), float(p_value[0])
 
 
 # ------------------------------------------------------------------ scoring
