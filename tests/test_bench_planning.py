@@ -6,18 +6,19 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from benchmarks.protocol import tasks
 from benchmarks.protocol.config import ProtocolConfig
-from benchmarks.protocol.models import load_models
+from benchmarks.protocol.models import FittedModel, load_models
 from benchmarks.protocol.plan import RunRef, chunks, load_frames, synthetic_plan
 from benchmarks.protocol.run import chunk_tasks, fit_seeds
 from estimators import FilterSettings, GaussianMixtureEKF
 from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.evidence import DECISIONS
 from estimators.offline import run_estimator
-from hasa_env.steering.models import GeneralizedModel
+from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 
 
 def _runs(count: int) -> list[RunRef]:
@@ -143,3 +144,41 @@ def test_a_task_runs_each_distinct_filter_pass_once(monkeypatch) -> None:
     stacks.run(OracleEKF(None, base), indices)  # not shared: a pass of its own
     stacks.run(GaussianMixtureEKF(GeneralizedModel.paper().arx(), base), indices)
     assert len(passes) == 3
+
+
+def test_models_of_the_same_features_share_them_and_score_as_alone() -> None:
+    """A task computes each run's steering features once for the models that take the same
+    ones (look-ahead distances, decision lag, steering signal), and their finite rows and the
+    driver's own numbers once per run: every model's rows, predictions and residuals are
+    those it gets scoring alone, to the bit."""
+    config = ProtocolConfig(seeds=(5006,), drivers=2, runs=1, ill_runs=1, duration=3.0,
+                            curved_runs=1)  # fmt: skip
+    plan = synthetic_plan(config, 5006)
+    runs = [*plan.curved, *plan.main]
+    frames = [*load_frames(plan.curved, "curved", plan.env_config, plan.params),
+              *load_frames(plan.main, "straight", plan.env_config, plan.params)]  # fmt: skip
+    models = [
+        GeneralizedModel.paper(),
+        TwoPointModel.paper(),
+        GeneralizedModel.paper(far_distance=25.0),
+    ]
+    fitted = [FittedModel(f"m{i}", "builtin", m, 1e-3) for i, m in enumerate(models)]
+    task = tasks.ChunkTask(
+        seed=5006, runs=tuple(runs), env_config=plan.env_config, driver_params=plan.params,
+        models=tuple(fitted), estimate=True, ljung_box_lags=20, acf_lags=20,
+        weight_threshold=0.95, error_window=2.0, trace_runs=frozenset(),
+        detail_driver=plan.illustrative,
+    )  # fmt: skip
+    stacks = tasks._Stacks(frames)
+    for fm in fitted:
+        shared, alone = tasks.ChunkResult(), tasks.ChunkResult()
+        ours = tasks._score_model(fm, task, frames, shared, stacks)
+        theirs = tasks._score_model(fm, task, frames, alone)
+        assert pd.DataFrame(shared.steering).equals(pd.DataFrame(alone.steering))
+        for mine, other in zip(ours[0] + ours[1], theirs[0] + theirs[1], strict=True):
+            np.testing.assert_array_equal(mine, other)
+        for mine, other in zip(shared.acf[fm.name], alone.acf[fm.name], strict=True):
+            np.testing.assert_array_equal(mine, other)
+    # the two paper models share each run's features; the far-sighted one has its own
+    assert len(stacks._features) == 2 * len(frames)
+    assert stacks.features(models[0], 0) is stacks.features(models[1], 0)

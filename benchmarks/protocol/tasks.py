@@ -39,6 +39,7 @@ from estimators.offline import (
 from estimators.settings import FilterSettings
 from estimators.trust import trusted_filter
 from hasa_env.steering import residual_diagnostics, road_information, score_runs
+from hasa_env.steering.base import SteeringModel
 
 __all__ = [
     "STANDSTILL_SPEED",
@@ -236,7 +237,7 @@ def _model_part(
     ``stacks``: the batch's stacked recordings, shared with the other filters (None: its
     own)."""
     part = ChunkResult()
-    preds, residuals = _score_model(fm, task, frames, part)
+    preds, residuals = _score_model(fm, task, frames, part, stacks)
     residual_std = fm.residual_std
     if task.estimate and residual_std is not None:
         make = partial(model_estimator, fm, overrides=task.filter_settings)
@@ -284,15 +285,16 @@ def _merge(out: ChunkResult, part: ChunkResult) -> None:
         into.update({k: v for k, v in trace.items() if k != "estimates"})
 
 
-def _warm_mask(features: pd.DataFrame, model: Any) -> np.ndarray:
-    """Rows where every feature the model uses is finite at lags 0..max_lag."""
+def _warm_mask(features: pd.DataFrame, model: Any, stacks: _Stacks | None = None) -> np.ndarray:
+    """Rows where every feature the model uses is finite at lags 0..max_lag (``stacks``:
+    the batch's shared features and their finite rows)."""
     try:
         used = sorted({r.feature for r in model.regressors} | {"delta"})
         lag = int(model.max_lag)
     except Exception:  # noqa: BLE001 - a broken regressors property
         used, lag = list(features.columns), 0
     used = [c for c in used if c in features.columns]
-    finite = np.all(np.isfinite(features[used].to_numpy(dtype=np.float64)), axis=1)
+    finite = _finite_rows(features, used) if stacks is None else stacks.finite_rows(features, used)
     if lag > 0:
         window = np.lib.stride_tricks.sliding_window_view(
             np.concatenate([np.zeros(lag, bool), finite]), lag + 1
@@ -301,18 +303,29 @@ def _warm_mask(features: pd.DataFrame, model: Any) -> np.ndarray:
     return finite
 
 
+def _finite_rows(features: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
+    """(T,) bool: the rows whose ``columns`` are all finite."""
+    return np.all(np.isfinite(features[list(columns)].to_numpy(dtype=np.float64)), axis=1)
+
+
 def _score_model(
-    fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame], out: ChunkResult
+    fm: FittedModel,
+    task: ChunkTask,
+    frames: Sequence[pd.DataFrame],
+    out: ChunkResult,
+    stacks: _Stacks | None = None,
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Score one model on every run of a batch (its steering rows go to ``out``); its
-    one-step predictions and residuals (measured minus predicted steering, rad) per run."""
+    one-step predictions and residuals (measured minus predicted steering, rad) per run.
+    ``stacks``: the batch's runs with their steering features, shared with the other
+    models (None: the model's own)."""
     model = fm.model
     preds = []
     residuals = []
-    for ref, frame in zip(task.runs, frames, strict=True):
+    for i, (ref, frame) in enumerate(zip(task.runs, frames, strict=True)):
         where = f"driver {ref.driver!r} run {ref.index} ({ref.track})"
         try:
-            features = model.features(frame)
+            features = model.features(frame) if stacks is None else stacks.features(model, i)
             prediction = np.asarray(model.predict_features(features), dtype=np.float64)
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"on {where}: {describe(exc)}") from None
@@ -323,7 +336,7 @@ def _score_model(
                 f"on {where}: predict_features returned shape {prediction.shape}, "
                 f"expected ({len(features)},)",
             )
-        warm = _warm_mask(features, model)
+        warm = _warm_mask(features, model, stacks)
         bad = warm & ~np.isfinite(prediction)
         if bad.any():
             raise ModelError(
@@ -340,7 +353,6 @@ def _score_model(
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
         row = scores.iloc[0]
-        lateral = frame["lateral_offset"].to_numpy(dtype=np.float64)
         out.steering.append(
             {
                 "seed": ref.seed,
@@ -356,9 +368,7 @@ def _score_model(
                 "free_run_rmse": float(row["free_run_rmse"]) if free_run else None,
                 "free_run_diverged": bool(row["free_run_diverged"]) if free_run else None,
                 # how the driver drove this run (the same for every model)
-                "sdlp": float(np.std(lateral)),
-                "max_abs_lateral_offset": float(np.max(np.abs(lateral))),
-                "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
+                **(_driving(frame) if stacks is None else stacks.driving(i)),
             }
         )
         residual = features["delta"].to_numpy(dtype=np.float64) - prediction
@@ -429,6 +439,17 @@ def _decision_metrics(
     }
 
 
+def _driving(frame: pd.DataFrame) -> dict[str, Any]:
+    """How the driver drove a run (the same for every model): the standard deviation of the
+    lateral position ``sdlp`` (m), its largest ``|offset|`` (m) and whether it left the road."""
+    lateral = frame["lateral_offset"].to_numpy(dtype=np.float64)
+    return {
+        "sdlp": float(np.std(lateral)),
+        "max_abs_lateral_offset": float(np.max(np.abs(lateral))),
+        "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
+    }
+
+
 class _Stacks:
     """A batch's runs in groups that share the filter's settings (:func:`_filter_key`), each
     group's recordings stacked once (:func:`~estimators.offline.stack_recordings`) for every
@@ -448,12 +469,53 @@ class _Stacks:
             self.groups[_filter_key(frame)].append(i)
         self._stacked: dict[tuple[int, ...], StackedRecordings] = {}
         self._results: dict[tuple[Any, ...], EstimationResult] = {}
+        self._features: dict[tuple[Any, ...], pd.DataFrame] = {}
+        self._held: dict[int, tuple[Any, ...]] = {}  # id of a kept features frame -> its key
+        self._finite: dict[tuple[Any, ...], np.ndarray] = {}
+        self._driving: dict[int, dict[str, Any]] = {}
 
     def stacked(self, indices: Sequence[int]) -> StackedRecordings:
         key = tuple(indices)
         if key not in self._stacked:
             self._stacked[key] = stack_recordings([self.frames[i] for i in indices])
         return self._stacked[key]
+
+    def features(self, model: Any, index: int) -> pd.DataFrame:
+        """``model.features`` of run ``index``: the steering features
+        (:func:`~hasa_env.steering.features.steering_features`) computed once per run and
+        feature settings (look-ahead distances, decision lag, steering signal) for every
+        model that takes them as :class:`~hasa_env.steering.base.SteeringModel` does (the
+        same frame, checked against the model as a frame of features is); any other model
+        makes its own."""
+        frame = self.frames[index]
+        if type(model).features is not SteeringModel.features:
+            return model.features(frame)
+        key = (index, float(model.near_distance), float(model.far_distance),
+               int(model.decision_lag), str(model.steering_signal))  # fmt: skip
+        kept = self._features.get(key)
+        if kept is None:
+            kept = self._features[key] = model.features(frame)
+            self._held[id(kept)] = key
+            return kept
+        return model.features(kept)
+
+    def finite_rows(self, features: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
+        """:func:`_finite_rows` (read-only), once per kept features frame (:meth:`features`)
+        and columns; of any other frame computed each time."""
+        key = self._held.get(id(features))  # a kept frame lives as long as this object
+        if key is None:
+            return _finite_rows(features, columns)
+        key = (*key, *columns)
+        if key not in self._finite:
+            self._finite[key] = _finite_rows(features, columns)
+            self._finite[key].setflags(write=False)
+        return self._finite[key]
+
+    def driving(self, index: int) -> dict[str, Any]:
+        """:func:`_driving` of run ``index``, computed once (a copy for each row)."""
+        if index not in self._driving:
+            self._driving[index] = _driving(self.frames[index])
+        return dict(self._driving[index])
 
     def run(self, estimator: Any, indices: Sequence[int]) -> EstimationResult:
         """:func:`~estimators.offline.run_estimator` of ``estimator`` on the group of runs
