@@ -19,6 +19,7 @@ from hasa_env.steering import (
     ljung_box,
     residual_diagnostics,
     score,
+    score_features,
     score_runs,
     select_order,
 )
@@ -234,6 +235,24 @@ def test_scores_of_the_true_model_and_of_steer_as_before(paper_driver_runs):
     assert baseline["rmse"] > truth["rmse"]
     per_run = score_runs(GeneralizedModel.paper(steering_signal="applied"), paper_driver_runs)
     assert len(per_run) == 3 and per_run["rmse"].mean() == pytest.approx(truth["rmse"])
+
+
+def test_score_features_is_a_row_of_score_runs(paper_driver_runs):
+    """:func:`score_features` of a run's features (with the one-step predictions given or
+    not) holds :func:`score_runs`' row of that run, to the bit, with and without the free
+    run; the benchmark scores each run with it."""
+    model = GeneralizedModel.paper(steering_signal="applied")
+    for free_run in (True, False):
+        table = score_runs(model, paper_driver_runs, free_run=free_run)
+        for i, run in enumerate(paper_driver_runs):
+            features = model.features(run)
+            given = score_features(
+                model, features, free_run=free_run, one_step=model.predict_features(features)
+            )
+            for row in (score_features(model, features, free_run=free_run), given):
+                assert list(row) == list(table.columns)
+                expected = table.iloc[i].to_numpy(dtype=np.float64)
+                np.testing.assert_array_equal(np.array(list(row.values()), float), expected)
 
 
 def test_fit_needs_enough_varied_data():

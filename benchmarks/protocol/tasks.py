@@ -38,7 +38,12 @@ from estimators.offline import (
 )
 from estimators.settings import FilterSettings
 from estimators.trust import trusted_filter
-from hasa_env.steering import residual_diagnostics, road_information, score_runs
+from hasa_env.steering import (
+    residual_diagnostics,
+    road_information,
+    score_features,
+    score_runs,
+)
 from hasa_env.steering.base import SteeringModel
 
 __all__ = [
@@ -299,7 +304,7 @@ def _warm_mask(features: pd.DataFrame, model: Any, stacks: _Stacks | None = None
         window = np.lib.stride_tricks.sliding_window_view(
             np.concatenate([np.zeros(lag, bool), finite]), lag + 1
         )
-        finite = window.all(axis=1)
+        return np.asarray(window.all(axis=1))
     return finite
 
 
@@ -349,10 +354,9 @@ def _score_model(
         # free run is sample by sample through predict_features: too slow to score here
         free_run = fm.residual_std is not None
         try:
-            scores = score_runs(model, [features], lags=task.ljung_box_lags, free_run=free_run)
+            row = _scores(model, features, prediction, task.ljung_box_lags, free_run)
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
-        row = scores.iloc[0]
         out.steering.append(
             {
                 "seed": ref.seed,
@@ -378,6 +382,21 @@ def _score_model(
         preds.append(prediction)
         residuals.append(residual)
     return preds, residuals
+
+
+def _scores(
+    model: Any, features: pd.DataFrame, prediction: np.ndarray, lags: int, free_run: bool
+) -> Mapping[str, Any] | pd.Series:
+    """The model's scores on one run's features (:func:`~hasa_env.steering.score_runs`' row):
+    a model that features and predicts as :class:`~hasa_env.steering.base.SteeringModel`
+    does is scored with the one-step ``prediction`` made already
+    (:func:`~hasa_env.steering.score_features`); any other one as by ``score_runs``."""
+    if (
+        type(model).features is SteeringModel.features
+        and type(model).predict_features is SteeringModel.predict_features
+    ):
+        return score_features(model, features, lags, free_run, one_step=prediction)
+    return score_runs(model, [features], lags=lags, free_run=free_run).iloc[0]
 
 
 def _filter_key(frame: pd.DataFrame) -> str:

@@ -1,6 +1,6 @@
 """Scoring steering models (paper table 1; docs/design.md §6.3-6.4).
 
-- :func:`score` / :func:`score_runs`: RMSE, R^2 on delta, R^2 on the
+- :func:`score` / :func:`score_runs` / :func:`score_features`: RMSE, R^2 on delta, R^2 on the
   increments delta(k) - delta(k-1) and the Ljung-Box p-value of the
   residuals, for one-step prediction (measured past steering) and free-run
   simulation; a free run that diverges is reported as such
@@ -39,6 +39,7 @@ __all__ = [
     "residual_diagnostics",
     "road_information",
     "score",
+    "score_features",
     "score_runs",
     "simulate_arx",
 ]
@@ -82,14 +83,9 @@ def residual_diagnostics(
     Several runs are concatenated (NaNs dropped); the few lag products that
     straddle two runs do not matter at thousands of samples per run.
     """
-    if isinstance(residuals, np.ndarray) and residuals.ndim == 1:
-        parts = [residuals]
-    else:
-        parts = [np.asarray(r, dtype=np.float64).reshape(-1) for r in residuals]
-    e = np.concatenate([p[np.isfinite(p)] for p in parts]) if parts else np.zeros(0)
+    e, lags, testable = _tested_residuals(residuals, lags)
     n = e.size
-    lags = int(min(lags, max(n // 5, 1)))
-    if n < 10 or not np.any(e != e[0] if n else False):
+    if not testable:
         nan = float("nan")
         return ResidualDiagnostics(np.full(lags + 1, np.nan), nan, nan, nan, nan, n)
     r = acf(e, nlags=lags, fft=True)
@@ -97,6 +93,29 @@ def residual_diagnostics(
     outside = float(np.mean(np.abs(r[1:]) > band))
     statistic, p_value = ljung_box(e, lags)
     return ResidualDiagnostics(np.asarray(r), band, outside, statistic, p_value, n)
+
+
+def _tested_residuals(
+    residuals: np.ndarray | Sequence[np.ndarray], lags: int
+) -> tuple[np.ndarray, int, bool]:
+    """The residuals :func:`residual_diagnostics` tests (the runs' finite ones, concatenated),
+    its lag count (at most a fifth of them) and whether they can be tested (at least 10 that
+    are not all equal)."""
+    if isinstance(residuals, np.ndarray) and residuals.ndim == 1:
+        parts = [residuals]
+    else:
+        parts = [np.asarray(r, dtype=np.float64).reshape(-1) for r in residuals]
+    e = np.concatenate([p[np.isfinite(p)] for p in parts]) if parts else np.zeros(0)
+    n = e.size
+    lags = int(min(lags, max(n // 5, 1)))
+    return e, lags, not (n < 10 or not np.any(e != e[0] if n else False))
+
+
+def _ljung_box_p(residuals: np.ndarray, lags: int) -> float:
+    """``residual_diagnostics(residuals, lags).ljung_box_p`` without the autocorrelations it
+    also computes (the scores use the p-value only)."""
+    e, lags, testable = _tested_residuals(residuals, lags)
+    return ljung_box(e, lags)[1] if testable else float("nan")
 
 
 def ljung_box(residuals: np.ndarray, lags: int) -> tuple[float, float]:
@@ -233,12 +252,11 @@ def _metrics(
     # steering, free run minus its own previous value (where it has one)
     reference = lagged(estimate, 1) if free_run else previous
     inc_error = increments - (estimate - reference)[valid]
-    diag = residual_diagnostics(error, lags)
     return {
         "rmse": math.sqrt(sse / n),
         "r2": r_squared(sse, delta[valid]),
         "r2_increments": r_squared(float(inc_error @ inc_error), increments),
-        "ljung_box_p": diag.ljung_box_p,
+        "ljung_box_p": _ljung_box_p(error, lags),
         "n": n,
         "diverged": 0.0,
     }
@@ -252,19 +270,32 @@ def score_runs(
     free_run: bool = True,
 ) -> pd.DataFrame:
     """Scores of a model on each run (one row per run), see :func:`score` for the columns."""
-    rows = []
-    for run in as_runs(runs):
-        features = model.features(run, road)
-        delta = features["delta"].to_numpy(dtype=np.float64)
-        one_step = model.predict_features(features)
-        row = _metrics(delta, one_step, lags, free_run=False)
-        del row["diverged"]
-        if free_run:
-            simulated = model.simulate(features)
-            for key, value in _metrics(delta, simulated, lags, free_run=True).items():
-                row[f"free_run_{key}"] = value
-        rows.append(row)
+    rows = [
+        score_features(model, model.features(run, road), lags, free_run) for run in as_runs(runs)
+    ]
     return pd.DataFrame(rows)
+
+
+def score_features(
+    model: SteeringModel,
+    features: pd.DataFrame,
+    lags: int = 20,
+    free_run: bool = True,
+    one_step: np.ndarray | None = None,
+) -> dict[str, float]:
+    """The scores of a model on one run's features (``model.features`` of the run): its row
+    of :func:`score_runs`, as a dict. ``one_step``: the model's one-step predictions
+    (``model.predict_features(features)``) when the caller has them already."""
+    delta = features["delta"].to_numpy(dtype=np.float64)
+    if one_step is None:
+        one_step = model.predict_features(features)
+    row = _metrics(delta, one_step, lags, free_run=False)
+    del row["diverged"]
+    if free_run:
+        simulated = model.simulate(features)
+        for key, value in _metrics(delta, simulated, lags, free_run=True).items():
+            row[f"free_run_{key}"] = value
+    return row
 
 
 def score(
