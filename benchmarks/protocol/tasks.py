@@ -1,4 +1,10 @@
-"""The protocol's tasks: score every model and estimator on a batch of runs, in any process."""
+"""The protocol's tasks: score every model and estimator on a batch of runs, in any process.
+
+Why this module is long: a task is the unit of work of the benchmark, and what it computes
+once for all its models and filters (:class:`_Stacks`: stacked recordings, shared filter
+passes, steering features; docs/design.md §9.5.5) sits next to the scoring that uses it, so
+that the sharing and the equality it relies on are read in one place.
+"""
 
 from __future__ import annotations
 
@@ -477,9 +483,9 @@ class _Stacks:
 
     And each distinct pass done once (:meth:`run`): the filters with the same
     :func:`~estimators.offline.pass_key` on the same group give the same result to the bit
-    (with ``--stress``, the no-steering filters of the three stress models the trust rule
-    refuses and the no-steering baseline: four passes of about 1.6 s of CPU each on 97
-    runs, one done)."""
+    (with ``--stress``, the no-steering filters of the three or four stress models the trust
+    rule refuses and the no-steering baseline: four or five passes of about 1.6 s of CPU each
+    on 97 runs, one done)."""
 
     def __init__(self, frames: Sequence[pd.DataFrame]) -> None:
         self.frames = frames
