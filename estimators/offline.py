@@ -27,6 +27,7 @@ import pandas as pd
 
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES, check_road_points
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
+from estimators.baselines import NoSteeringEKF
 from estimators.evidence import DECISIONS
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.mixture_trace import MixtureTrace
@@ -48,6 +49,7 @@ __all__ = [
     "hypotheses_of",
     "recording_filter",
     "run_estimator",
+    "pass_key",
     "stack_recordings",
     "StackedRecordings",
 ]
@@ -281,6 +283,45 @@ def stack_recordings(frames: pd.DataFrame | Sequence[pd.DataFrame]) -> StackedRe
     for array in (lengths, z, acc, time, *truth.values()):
         array.setflags(write=False)
     return StackedRecordings(tuple(frames), lengths, z, acc, time, truth)
+
+
+STEERING_ONLY_FIELDS = (
+    "steering_residual_std",
+    "steering_sensor_std",
+    "steering_ratio",
+    "min_speed",
+    "steering_max_speed",
+    "steering_curvature_limit",
+)
+"""The :class:`FilterSettings` fields a mixture filter without a steering model never reads:
+the steering channel's noise and scale (its measurement is NaN, its row of the update
+skipped) and the limits that switch that channel off (:class:`GaussianMixtureEKF` keeps
+``min_speed`` 0 and the others infinite without a model)."""
+
+
+def pass_key(estimator: LaneEstimator) -> tuple[Any, ...] | None:
+    """What :func:`run_estimator`'s result depends on besides the recordings, for the
+    estimators whose passes can be shared; None for every other one.
+
+    Two estimators with equal keys give the same :class:`EstimationResult` on the same
+    recordings, to the bit, so a pass of one stands for a pass of the other. Keyed: a fresh
+    (never reset) :class:`GaussianMixtureEKF` or :class:`~estimators.baselines.NoSteeringEKF`
+    (exactly these classes: a subclass may add behaviour) without a steering model, by its
+    class, sample time, decision lag and settings with the :data:`STEERING_ONLY_FIELDS` at
+    their defaults: e.g. the no-steering filters of the steering models the trust rule
+    refuses (:func:`estimators.trust.trusted_filter`), which differ from the no-steering
+    baseline in their ``steering_residual_std`` only.
+    """
+    if type(estimator) not in (GaussianMixtureEKF, NoSteeringEKF):
+        return None
+    mixture = cast(GaussianMixtureEKF, estimator)
+    if mixture.steering_model is not None or mixture.model.has_steering or mixture.num_runs:
+        return None
+    defaults = FilterSettings()
+    settings = replace(
+        mixture.settings, **{name: getattr(defaults, name) for name in STEERING_ONLY_FIELDS}
+    )
+    return (type(estimator).__name__, mixture.dt, mixture.decision_lag, settings)
 
 
 def run_estimator(

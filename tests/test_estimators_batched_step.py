@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,13 @@ from estimators import FilterSettings, GaussianMixtureEKF
 from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.filter_matrices import _MIN_RUNS_SKIPPED
 from estimators.mixture_trace import BLOCK_STEPS
-from estimators.offline import EstimationResult, run_estimator, stack_recordings
+from estimators.offline import (
+    STEERING_ONLY_FIELDS,
+    EstimationResult,
+    pass_key,
+    run_estimator,
+    stack_recordings,
+)
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
 
 FIELDS = ("hypotheses", "time", "valid", "lengths", "mean", "std", "weights", "most_likely",
@@ -266,3 +273,29 @@ def test_recordings_stacked_once_give_every_filter_its_own_results(frames) -> No
     assert stacked.road_points  # the curved runs' road points, computed once per look-ahead
     with pytest.raises(ValueError, match="read-only"):
         stacked.measurements[0, 0, 0] = 1.0
+
+
+def test_filters_without_steering_of_equal_pass_keys_give_equal_results(frames) -> None:
+    """:func:`pass_key`: a filter without a steering model never reads the steering-only
+    settings (the benchmark runs one pass for the no-steering filters of the models the trust
+    rule refuses and the no-steering baseline), whatever their values; the key tells apart
+    the settings that matter and leaves every other estimator out."""
+    base = FilterSettings.from_env_config(frames[0].attrs["config"])
+    reference = NoSteeringEKF(base)
+    key = pass_key(reference)
+    assert key is not None
+    expected = run_estimator(reference, frames)
+    changed = {"steering_residual_std": 0.05, "steering_sensor_std": 0.0, "steering_ratio": 15.0,
+               "min_speed": 12.0, "steering_max_speed": 5.0, "steering_curvature_limit": 1e-4}  # fmt: skip
+    assert set(changed) == set(STEERING_ONLY_FIELDS)
+    variants = [{name: value} for name, value in changed.items()] + [changed]
+    for overrides in variants:
+        other = NoSteeringEKF(replace(base, **overrides))
+        assert pass_key(other) == key, overrides
+        _assert_equal_results(run_estimator(other, frames), expected)
+    assert pass_key(NoSteeringEKF(replace(base, camera_noise_std=0.1))) != key
+    assert pass_key(GaussianMixtureEKF(None, base)) != key  # another class
+    steering = GaussianMixtureEKF(GeneralizedModel.paper().arx(), base)
+    for estimator in (steering, OracleEKF(None, base)):
+        assert pass_key(estimator) is None
+    assert reference.num_runs and pass_key(reference) is None  # it has run: no key

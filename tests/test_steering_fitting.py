@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from hasa_env.drivers import ModelDriver, run_driver
 from hasa_env.steering import (
@@ -15,8 +16,10 @@ from hasa_env.steering import (
     IdentifiabilityWarning,
     TwoPointModel,
     check_identifiability,
+    ljung_box,
     residual_diagnostics,
     score,
+    score_features,
     score_runs,
     select_order,
 )
@@ -164,6 +167,24 @@ def test_residual_diagnostics_tell_white_from_coloured():
     assert w.confidence_band == pytest.approx(1.96 / np.sqrt(3000))
 
 
+def test_ljung_box_is_statsmodels_to_the_bit():
+    """:func:`ljung_box` (lags 1..L only) gives statsmodels' ``acorr_ljungbox`` (every lag's
+    autocovariance by ``np.correlate``) to the bit: white, random-walk and offset series of
+    many lengths, levels and lag counts, up to more samples than a run has."""
+    rng = np.random.default_rng(5011)
+    for trial in range(300):
+        n = int(rng.integers(10, 6000))
+        lags = int(min(int(rng.integers(1, 40)), max(n // 5, 1)))
+        series = rng.standard_normal(n) * 10 ** rng.uniform(-6, 2)
+        if trial % 3 == 1:
+            series = np.cumsum(series) * 1e-3
+        elif trial % 3 == 2:
+            series = series + 5.0
+        theirs = acorr_ljungbox(series, lags=[lags], return_df=True)
+        expected = (float(theirs["lb_stat"].iloc[0]), float(theirs["lb_pvalue"].iloc[0]))
+        assert ljung_box(series, lags) == expected, (n, lags)
+
+
 @pytest.fixture(scope="module")
 def paper_driver_runs():
     """Three 30 s runs of the paper's generalized model driving at 15 m/s with noise."""
@@ -214,6 +235,24 @@ def test_scores_of_the_true_model_and_of_steer_as_before(paper_driver_runs):
     assert baseline["rmse"] > truth["rmse"]
     per_run = score_runs(GeneralizedModel.paper(steering_signal="applied"), paper_driver_runs)
     assert len(per_run) == 3 and per_run["rmse"].mean() == pytest.approx(truth["rmse"])
+
+
+def test_score_features_is_a_row_of_score_runs(paper_driver_runs):
+    """:func:`score_features` of a run's features (with the one-step predictions given or
+    not) holds :func:`score_runs`' row of that run, to the bit, with and without the free
+    run; the benchmark scores each run with it."""
+    model = GeneralizedModel.paper(steering_signal="applied")
+    for free_run in (True, False):
+        table = score_runs(model, paper_driver_runs, free_run=free_run)
+        for i, run in enumerate(paper_driver_runs):
+            features = model.features(run)
+            given = score_features(
+                model, features, free_run=free_run, one_step=model.predict_features(features)
+            )
+            for row in (score_features(model, features, free_run=free_run), given):
+                assert list(row) == list(table.columns)
+                expected = table.iloc[i].to_numpy(dtype=np.float64)
+                np.testing.assert_array_equal(np.array(list(row.values()), float), expected)
 
 
 def test_fit_needs_enough_varied_data():

@@ -1,7 +1,14 @@
-"""The protocol's tasks: score every model and estimator on a batch of runs, in any process."""
+"""The protocol's tasks: score every model and estimator on a batch of runs, in any process.
+
+Why this module is long: a task is the unit of work of the benchmark, and what it computes
+once for all its models and filters (:class:`_Stacks`: stacked recordings, shared filter
+passes, steering features; docs/design.md §9.5.5) sits next to the scoring that uses it, so
+that the sharing and the equality it relies on are read in one place.
+"""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import time
@@ -28,10 +35,22 @@ from estimators.baselines import NoSteeringEKF, OracleEKF
 from estimators.calibration import lane_calibration_bins, steering_live_share
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
-from estimators.offline import StackedRecordings, run_estimator, stack_recordings
+from estimators.offline import (
+    EstimationResult,
+    StackedRecordings,
+    pass_key,
+    run_estimator,
+    stack_recordings,
+)
 from estimators.settings import FilterSettings
 from estimators.trust import trusted_filter
-from hasa_env.steering import residual_diagnostics, road_information, score_runs
+from hasa_env.steering import (
+    residual_diagnostics,
+    road_information,
+    score_features,
+    score_runs,
+)
+from hasa_env.steering.base import SteeringModel
 
 __all__ = [
     "STANDSTILL_SPEED",
@@ -229,7 +248,7 @@ def _model_part(
     ``stacks``: the batch's stacked recordings, shared with the other filters (None: its
     own)."""
     part = ChunkResult()
-    preds, residuals = _score_model(fm, task, frames, part)
+    preds, residuals = _score_model(fm, task, frames, part, stacks)
     residual_std = fm.residual_std
     if task.estimate and residual_std is not None:
         make = partial(model_estimator, fm, overrides=task.filter_settings)
@@ -277,35 +296,47 @@ def _merge(out: ChunkResult, part: ChunkResult) -> None:
         into.update({k: v for k, v in trace.items() if k != "estimates"})
 
 
-def _warm_mask(features: pd.DataFrame, model: Any) -> np.ndarray:
-    """Rows where every feature the model uses is finite at lags 0..max_lag."""
+def _warm_mask(features: pd.DataFrame, model: Any, stacks: _Stacks | None = None) -> np.ndarray:
+    """Rows where every feature the model uses is finite at lags 0..max_lag (``stacks``:
+    the batch's shared features and their finite rows)."""
     try:
         used = sorted({r.feature for r in model.regressors} | {"delta"})
         lag = int(model.max_lag)
     except Exception:  # noqa: BLE001 - a broken regressors property
         used, lag = list(features.columns), 0
     used = [c for c in used if c in features.columns]
-    finite = np.all(np.isfinite(features[used].to_numpy(dtype=np.float64)), axis=1)
+    finite = _finite_rows(features, used) if stacks is None else stacks.finite_rows(features, used)
     if lag > 0:
         window = np.lib.stride_tricks.sliding_window_view(
             np.concatenate([np.zeros(lag, bool), finite]), lag + 1
         )
-        finite = window.all(axis=1)
+        return np.asarray(window.all(axis=1))
     return finite
 
 
+def _finite_rows(features: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
+    """(T,) bool: the rows whose ``columns`` are all finite."""
+    return np.all(np.isfinite(features[list(columns)].to_numpy(dtype=np.float64)), axis=1)
+
+
 def _score_model(
-    fm: FittedModel, task: ChunkTask, frames: Sequence[pd.DataFrame], out: ChunkResult
+    fm: FittedModel,
+    task: ChunkTask,
+    frames: Sequence[pd.DataFrame],
+    out: ChunkResult,
+    stacks: _Stacks | None = None,
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Score one model on every run of a batch (its steering rows go to ``out``); its
-    one-step predictions and residuals (measured minus predicted steering, rad) per run."""
+    one-step predictions and residuals (measured minus predicted steering, rad) per run.
+    ``stacks``: the batch's runs with their steering features, shared with the other
+    models (None: the model's own)."""
     model = fm.model
     preds = []
     residuals = []
-    for ref, frame in zip(task.runs, frames, strict=True):
+    for i, (ref, frame) in enumerate(zip(task.runs, frames, strict=True)):
         where = f"driver {ref.driver!r} run {ref.index} ({ref.track})"
         try:
-            features = model.features(frame)
+            features = model.features(frame) if stacks is None else stacks.features(model, i)
             prediction = np.asarray(model.predict_features(features), dtype=np.float64)
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"on {where}: {describe(exc)}") from None
@@ -316,7 +347,7 @@ def _score_model(
                 f"on {where}: predict_features returned shape {prediction.shape}, "
                 f"expected ({len(features)},)",
             )
-        warm = _warm_mask(features, model)
+        warm = _warm_mask(features, model, stacks)
         bad = warm & ~np.isfinite(prediction)
         if bad.any():
             raise ModelError(
@@ -329,11 +360,9 @@ def _score_model(
         # free run is sample by sample through predict_features: too slow to score here
         free_run = fm.residual_std is not None
         try:
-            scores = score_runs(model, [features], lags=task.ljung_box_lags, free_run=free_run)
+            row = _scores(model, features, prediction, task.ljung_box_lags, free_run)
         except Exception as exc:  # noqa: BLE001
             raise ModelError(fm.name, "predict", f"scoring {where}: {describe(exc)}") from None
-        row = scores.iloc[0]
-        lateral = frame["lateral_offset"].to_numpy(dtype=np.float64)
         out.steering.append(
             {
                 "seed": ref.seed,
@@ -349,9 +378,7 @@ def _score_model(
                 "free_run_rmse": float(row["free_run_rmse"]) if free_run else None,
                 "free_run_diverged": bool(row["free_run_diverged"]) if free_run else None,
                 # how the driver drove this run (the same for every model)
-                "sdlp": float(np.std(lateral)),
-                "max_abs_lateral_offset": float(np.max(np.abs(lateral))),
-                "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
+                **(_driving(frame) if stacks is None else stacks.driving(i)),
             }
         )
         residual = features["delta"].to_numpy(dtype=np.float64) - prediction
@@ -361,6 +388,21 @@ def _score_model(
         preds.append(prediction)
         residuals.append(residual)
     return preds, residuals
+
+
+def _scores(
+    model: Any, features: pd.DataFrame, prediction: np.ndarray, lags: int, free_run: bool
+) -> Mapping[str, Any] | pd.Series:
+    """The model's scores on one run's features (:func:`~hasa_env.steering.score_runs`' row):
+    a model that features and predicts as :class:`~hasa_env.steering.base.SteeringModel`
+    does is scored with the one-step ``prediction`` made already
+    (:func:`~hasa_env.steering.score_features`); any other one as by ``score_runs``."""
+    if (
+        type(model).features is SteeringModel.features
+        and type(model).predict_features is SteeringModel.predict_features
+    ):
+        return score_features(model, features, lags, free_run, one_step=prediction)
+    return score_runs(model, [features], lags=lags, free_run=free_run).iloc[0]
 
 
 def _filter_key(frame: pd.DataFrame) -> str:
@@ -422,11 +464,28 @@ def _decision_metrics(
     }
 
 
+def _driving(frame: pd.DataFrame) -> dict[str, Any]:
+    """How the driver drove a run (the same for every model): the standard deviation of the
+    lateral position ``sdlp`` (m), its largest ``|offset|`` (m) and whether it left the road."""
+    lateral = frame["lateral_offset"].to_numpy(dtype=np.float64)
+    return {
+        "sdlp": float(np.std(lateral)),
+        "max_abs_lateral_offset": float(np.max(np.abs(lateral))),
+        "left_road": bool(frame["terminated"].to_numpy(dtype=bool).any()),
+    }
+
+
 class _Stacks:
     """A batch's runs in groups that share the filter's settings (:func:`_filter_key`), each
     group's recordings stacked once (:func:`~estimators.offline.stack_recordings`) for every
     filter of the batch: about 0.2 s of CPU per filter pass of 97 runs (the padded arrays
-    and the curved runs' road points)."""
+    and the curved runs' road points).
+
+    And each distinct pass done once (:meth:`run`): the filters with the same
+    :func:`~estimators.offline.pass_key` on the same group give the same result to the bit
+    (with ``--stress``, the no-steering filters of the three or four stress models the trust
+    rule refuses and the no-steering baseline: four or five passes of about 1.6 s of CPU each
+    on 97 runs, one done)."""
 
     def __init__(self, frames: Sequence[pd.DataFrame]) -> None:
         self.frames = frames
@@ -434,12 +493,69 @@ class _Stacks:
         for i, frame in enumerate(frames):
             self.groups[_filter_key(frame)].append(i)
         self._stacked: dict[tuple[int, ...], StackedRecordings] = {}
+        self._results: dict[tuple[Any, ...], EstimationResult] = {}
+        self._features: dict[tuple[Any, ...], pd.DataFrame] = {}
+        self._held: dict[int, tuple[Any, ...]] = {}  # id of a kept features frame -> its key
+        self._finite: dict[tuple[Any, ...], np.ndarray] = {}
+        self._driving: dict[int, dict[str, Any]] = {}
 
     def stacked(self, indices: Sequence[int]) -> StackedRecordings:
         key = tuple(indices)
         if key not in self._stacked:
             self._stacked[key] = stack_recordings([self.frames[i] for i in indices])
         return self._stacked[key]
+
+    def features(self, model: Any, index: int) -> pd.DataFrame:
+        """``model.features`` of run ``index``: the steering features
+        (:func:`~hasa_env.steering.features.steering_features`) computed once per run and
+        feature settings (look-ahead distances, decision lag, steering signal) for every
+        model that takes them as :class:`~hasa_env.steering.base.SteeringModel` does (the
+        same frame, checked against the model as a frame of features is); any other model
+        makes its own."""
+        frame = self.frames[index]
+        if type(model).features is not SteeringModel.features:
+            return model.features(frame)
+        key = (index, float(model.near_distance), float(model.far_distance),
+               int(model.decision_lag), str(model.steering_signal))  # fmt: skip
+        kept = self._features.get(key)
+        if kept is None:
+            kept = self._features[key] = model.features(frame)
+            self._held[id(kept)] = key
+            return kept
+        return model.features(kept)
+
+    def finite_rows(self, features: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
+        """:func:`_finite_rows` (read-only), once per kept features frame (:meth:`features`)
+        and columns; of any other frame computed each time."""
+        key = self._held.get(id(features))  # a kept frame lives as long as this object
+        if key is None:
+            return _finite_rows(features, columns)
+        key = (*key, *columns)
+        if key not in self._finite:
+            self._finite[key] = _finite_rows(features, columns)
+            self._finite[key].setflags(write=False)
+        return self._finite[key]
+
+    def driving(self, index: int) -> dict[str, Any]:
+        """:func:`_driving` of run ``index``, computed once (a copy for each row)."""
+        if index not in self._driving:
+            self._driving[index] = _driving(self.frames[index])
+        return dict(self._driving[index])
+
+    def run(self, estimator: Any, indices: Sequence[int]) -> EstimationResult:
+        """:func:`~estimators.offline.run_estimator` of ``estimator`` on the group of runs
+        ``indices``; a pass with the same key as an earlier one is that pass' result,
+        copied (each caller owns its result, whatever it does to it)."""
+        estimator_key = pass_key(estimator)
+        if estimator_key is None:
+            return run_estimator(estimator, self.stacked(indices))
+        key = (tuple(indices), estimator_key)
+        kept = self._results.get(key)
+        if kept is None:
+            result = run_estimator(estimator, self.stacked(indices))
+            self._results[key] = copy.deepcopy(result)
+            return result
+        return copy.deepcopy(kept)
 
 
 def _estimate_model(
@@ -464,7 +580,7 @@ def _estimate_model(
             settings = FilterSettings.from_env_config(
                 group[0].attrs["config"], **task.filter_settings
             )
-            result = run_estimator(make(settings), stacks.stacked(indices))
+            result = stacks.run(make(settings), indices)
             rows += _estimation_rows(task, indices, result, name, scratch, kind)
     except ModelError:
         raise

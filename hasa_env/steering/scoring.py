@@ -1,6 +1,6 @@
 """Scoring steering models (paper table 1; docs/design.md §6.3-6.4).
 
-- :func:`score` / :func:`score_runs`: RMSE, R^2 on delta, R^2 on the
+- :func:`score` / :func:`score_runs` / :func:`score_features`: RMSE, R^2 on delta, R^2 on the
   increments delta(k) - delta(k-1) and the Ljung-Box p-value of the
   residuals, for one-step prediction (measured past steering) and free-run
   simulation; a free run that diverges is reported as such
@@ -8,7 +8,7 @@
 - :func:`road_information`: the share of a road-blind baseline's one-step error
   that a model explains, ``1 - SSE_model / SSE_road_blind`` (docs/design.md §6.3).
 - :func:`residual_diagnostics`: autocorrelation and Ljung-Box whiteness
-  (statsmodels) of residuals.
+  (statsmodels' statistics; :func:`ljung_box`) of residuals.
 - :func:`simulate_arx`: free run of an ARX model over a run's bearings.
 
 Runs are recordings (:data:`hasa_env.sim.setup.RECORDING_COLUMNS`) or features
@@ -24,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy import signal
-from statsmodels.stats.diagnostic import acorr_ljungbox
+from scipy import signal, stats
 from statsmodels.tsa.stattools import acf
 
 from hasa_env.sim.road import Road
@@ -36,9 +35,11 @@ from hasa_env.steering.design import as_runs, lagged, r_squared
 __all__ = [
     "DIVERGENCE_LIMIT",
     "ResidualDiagnostics",
+    "ljung_box",
     "residual_diagnostics",
     "road_information",
     "score",
+    "score_features",
     "score_runs",
     "simulate_arx",
 ]
@@ -82,6 +83,24 @@ def residual_diagnostics(
     Several runs are concatenated (NaNs dropped); the few lag products that
     straddle two runs do not matter at thousands of samples per run.
     """
+    e, lags, testable = _tested_residuals(residuals, lags)
+    n = e.size
+    if not testable:
+        nan = float("nan")
+        return ResidualDiagnostics(np.full(lags + 1, np.nan), nan, nan, nan, nan, n)
+    r = acf(e, nlags=lags, fft=True)
+    band = 1.96 / math.sqrt(n)
+    outside = float(np.mean(np.abs(r[1:]) > band))
+    statistic, p_value = ljung_box(e, lags)
+    return ResidualDiagnostics(np.asarray(r), band, outside, statistic, p_value, n)
+
+
+def _tested_residuals(
+    residuals: np.ndarray | Sequence[np.ndarray], lags: int
+) -> tuple[np.ndarray, int, bool]:
+    """The residuals :func:`residual_diagnostics` tests (the runs' finite ones, concatenated),
+    its lag count (at most a fifth of them) and whether they can be tested (at least 10 that
+    are not all equal)."""
     if isinstance(residuals, np.ndarray) and residuals.ndim == 1:
         parts = [residuals]
     else:
@@ -89,21 +108,43 @@ def residual_diagnostics(
     e = np.concatenate([p[np.isfinite(p)] for p in parts]) if parts else np.zeros(0)
     n = e.size
     lags = int(min(lags, max(n // 5, 1)))
-    if n < 10 or not np.any(e != e[0] if n else False):
-        nan = float("nan")
-        return ResidualDiagnostics(np.full(lags + 1, np.nan), nan, nan, nan, nan, n)
-    r = acf(e, nlags=lags, fft=True)
-    band = 1.96 / math.sqrt(n)
-    outside = float(np.mean(np.abs(r[1:]) > band))
-    lb = acorr_ljungbox(e, lags=[lags], return_df=True)
-    return ResidualDiagnostics(
-        np.asarray(r),
-        band,
-        outside,
-        float(lb["lb_stat"].iloc[0]),
-        float(lb["lb_pvalue"].iloc[0]),
-        n,
-    )
+    return e, lags, not (n < 10 or not np.any(e != e[0] if n else False))
+
+
+def _ljung_box_p(residuals: np.ndarray, lags: int) -> float:
+    """``residual_diagnostics(residuals, lags).ljung_box_p`` without the autocorrelations it
+    also computes (the scores use the p-value only)."""
+    e, lags, testable = _tested_residuals(residuals, lags)
+    return ljung_box(e, lags)[1] if testable else float("nan")
+
+
+def ljung_box(residuals: np.ndarray, lags: int) -> tuple[float, float]:
+    """The Ljung-Box statistic over ``lags`` lags of a 1-D series (no NaN) and its p-value:
+    statsmodels' ``acorr_ljungbox(residuals, lags=[lags])`` to the bit, without its
+    autocovariances at every lag up to n - 1 (``np.correlate`` of the whole series, O(n^2)):
+
+        Q = n (n + 2) sum_{k=1..lags} r_k^2 / (n - k),   p = P(chi^2_lags > Q)
+
+    with ``r_k = c_k / c_0``, ``c_k = sum_t x_{t+k} x_t / n`` of the demeaned series ``x``.
+    Each ``c_k`` is the dot product ``np.correlate`` computes for lag k (the same numpy
+    dot routine on the same slices, as statsmodels' own ``acovf`` does when given
+    ``nlag``), and the rest is statsmodels' arithmetic in its order; a test compares the
+    two on many series.
+    """
+    x = np.asarray(residuals, dtype=np.float64)
+    n = x.shape[0]
+    demeaned = x - x.mean()
+    covariance = np.empty(lags + 1)
+    covariance[0] = demeaned.dot(demeaned)
+    for k in range(1, lags + 1):
+        covariance[k] = demeaned[k:].dot(demeaned[: n - k])
+    covariance = covariance / (n * np.ones(lags + 1))
+    autocorrelation = covariance / covariance[0]
+    lag = np.array([lags])
+    terms = autocorrelation[1 : lags + 1] ** 2 / (n - np.arange(1, lags + 1))
+    statistic = n * (n + 2) * np.cumsum(terms)[lag - 1]
+    p_value = stats.chi2.sf(statistic, lag)
+    return float(statistic[0]), float(p_value[0])
 
 
 # ------------------------------------------------------------------ scoring
@@ -211,12 +252,11 @@ def _metrics(
     # steering, free run minus its own previous value (where it has one)
     reference = lagged(estimate, 1) if free_run else previous
     inc_error = increments - (estimate - reference)[valid]
-    diag = residual_diagnostics(error, lags)
     return {
         "rmse": math.sqrt(sse / n),
         "r2": r_squared(sse, delta[valid]),
         "r2_increments": r_squared(float(inc_error @ inc_error), increments),
-        "ljung_box_p": diag.ljung_box_p,
+        "ljung_box_p": _ljung_box_p(error, lags),
         "n": n,
         "diverged": 0.0,
     }
@@ -230,19 +270,32 @@ def score_runs(
     free_run: bool = True,
 ) -> pd.DataFrame:
     """Scores of a model on each run (one row per run), see :func:`score` for the columns."""
-    rows = []
-    for run in as_runs(runs):
-        features = model.features(run, road)
-        delta = features["delta"].to_numpy(dtype=np.float64)
-        one_step = model.predict_features(features)
-        row = _metrics(delta, one_step, lags, free_run=False)
-        del row["diverged"]
-        if free_run:
-            simulated = model.simulate(features)
-            for key, value in _metrics(delta, simulated, lags, free_run=True).items():
-                row[f"free_run_{key}"] = value
-        rows.append(row)
+    rows = [
+        score_features(model, model.features(run, road), lags, free_run) for run in as_runs(runs)
+    ]
     return pd.DataFrame(rows)
+
+
+def score_features(
+    model: SteeringModel,
+    features: pd.DataFrame,
+    lags: int = 20,
+    free_run: bool = True,
+    one_step: np.ndarray | None = None,
+) -> dict[str, float]:
+    """The scores of a model on one run's features (``model.features`` of the run): its row
+    of :func:`score_runs`, as a dict. ``one_step``: the model's one-step predictions
+    (``model.predict_features(features)``) when the caller has them already."""
+    delta = features["delta"].to_numpy(dtype=np.float64)
+    if one_step is None:
+        one_step = model.predict_features(features)
+    row = _metrics(delta, one_step, lags, free_run=False)
+    del row["diverged"]
+    if free_run:
+        simulated = model.simulate(features)
+        for key, value in _metrics(delta, simulated, lags, free_run=True).items():
+            row[f"free_run_{key}"] = value
+    return row
 
 
 def score(
