@@ -9,22 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _driver_states import random_info
 
 from hasa_env.drivers import population
 from hasa_env.drivers.human import INFO_NEEDED, human_batch
 from hasa_env.sim.road import make_road
-
-
-def _info(rng: np.random.Generator, n: int, k: int) -> dict[str, np.ndarray]:
-    """Plausible true states of n cars at step k (they need not come from one trajectory)."""
-    return {
-        "time": np.full(n, 0.01 * k),
-        "station": 15.0 * 0.01 * k + rng.uniform(0.0, 5.0, n),
-        "lateral_offset": rng.normal(0.0, 0.4, n),
-        "heading": rng.normal(0.0, 0.01, n),
-        "speed": rng.uniform(12.0, 18.0, n),
-        "steering": rng.normal(0.0, 0.005, n),
-    }
 
 
 @pytest.mark.parametrize("track", ["straight", "curved"])
@@ -38,7 +27,7 @@ def test_a_restarted_car_drives_as_a_driver_reset_alone(track, population_name, 
     batch = human_batch(params)
     batch.reset(list(range(100, 100 + n)), 0.01)
     rng = np.random.default_rng(0)
-    infos = [_info(rng, n, k) for k in range(260)]
+    infos = [random_info(rng, n, k) for k in range(260)]
     restart_at, cars, seeds = 37, np.array(restarted), [7, 9]
     alone = {int(c): human_batch([params[c]]) for c in cars}
     steering, accelerations = [], []
@@ -73,7 +62,7 @@ def test_steer_is_the_steering_of_act():
     b.reset(list(range(9)), 0.01)
     rng = np.random.default_rng(1)
     for k in range(50):
-        info = _info(rng, 9, k)
+        info = random_info(rng, 9, k)
         assert np.array_equal(a.act(info, road)[0], b.steer(info, road))
 
 

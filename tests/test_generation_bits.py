@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from _driver_states import random_info
 
 from hasa_env.drivers import population
 from hasa_env.drivers.base import CompositeBatch
@@ -19,18 +20,6 @@ from hasa_env.drivers.human import HumanBatch, HumanComposite, human_batch, sum_
 from hasa_env.sim.dynamics import ARRAY_OPS, SCALAR_OPS
 from hasa_env.sim.road import curvature_lookup_array, make_road
 from hasa_env.sim.setup import build_setup
-
-
-def _info(rng: np.random.Generator, n: int, k: int) -> dict[str, np.ndarray]:
-    return {
-        "time": np.full(n, 0.01 * k),
-        "station": 15.0 * 0.01 * k + rng.uniform(0.0, 5.0, n),
-        "lateral_offset": rng.normal(0.0, 0.4, n),
-        "heading": rng.normal(0.0, 0.01, n),
-        "speed": rng.uniform(12.0, 18.0, n),
-        "steering": rng.normal(0.0, 0.005, n),
-        "bias": np.zeros(n),
-    }
 
 
 def _per_archetype(params: list) -> CompositeBatch:
@@ -58,7 +47,7 @@ def test_stacked_stages_give_each_archetypes_bits(track, name, stacked):
     assert ours.stacked == stacked  # mixed: noisy corrections draw no command noise
     rng = np.random.default_rng(5003)
     for k in range(1100):  # past the first block of noise draws (1000 steps)
-        info = _info(rng, len(params), k)
+        info = random_info(rng, len(params), k, bias=True)
         if k == 600:  # a partial reset restarts cars 1 and 4 in both
             for batch in (ours, theirs):
                 batch.reset([5090, 5091], 0.01, cars=[1, 4])
