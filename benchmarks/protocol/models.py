@@ -295,7 +295,7 @@ def fit_models(
             check = PredictionCheck(  # on the run it was fitted on (not a saved model's: §8.13.1)
                 info_fit["prediction_residual_std"], info_fit["lane_free_residual_std"]
             )
-            training = replace(training, residual_std=residual, prediction=check)
+            training = replace(training, prediction=check)
         limit, speeds = model_limits(model_fitted, training)
         info["steering_curvature_limit"] = limit
         info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
