@@ -102,6 +102,21 @@ and ``lane_change`` scenarios (docs/design.md §14.6), where the driver leaves t
 centre on purpose and every steering model reads that as evidence for the other lane; its cost
 is the runs that were confidently wrong first and right later, which now end undecided.
 
+Aim cap (``aim_offset_std`` sigma_a > 0; docs/design.md §8.19): on a straight road a driver
+who aims p off the centre of lane i steers exactly as one who aims p + d off the centre of a
+lane d away, so with the aim unknown the steering tells lanes apart only as far as a prior on
+where people hold the car does. The filter keeps, per run and hypothesis, the car's lateral
+offset from that hypothesis' centre averaged over ``aim_offset_time`` (a_i), and after the
+tempering, before the decision and the reversal rule, no run's log-odds grow past that
+prior's::
+
+    A_i = -a_i^2 / (2 sigma_a^2),   b = argmax_i log w_i
+    d_i = (log w_b - log pi_b) - (log w_i - log pi_i)
+    d_i(k) <= max(|A_b - A_i|, d_i(k-1))                     then normalized
+
+Log-odds gathered under a larger bound are kept (the hypotheses are constant within a run);
+the cap never adds evidence and never turns it around (:func:`aim_capped_log_weights`).
+
 Decision state of a run (:data:`DECISIONS`)::
 
     "model_mismatch"  mismatch (above), or a decision reversed (the reversal rule)
@@ -262,6 +277,7 @@ class EvidenceRule:
     log_floor: float
     commit_steps: float = math.inf
     bound_z: float = 0.0
+    aim_variance: float = 0.0
 
     @cached_property
     def log_decision_threshold(self) -> float:
@@ -281,6 +297,7 @@ class EvidenceRule:
             if math.isfinite(settings.commit_time)
             else math.inf,
             bound_z=_normal_quantile(settings.evidence_confidence),
+            aim_variance=settings.aim_offset_std**2,
         )
 
 
@@ -350,10 +367,127 @@ def weigh_evidence(
     else:
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             new_log_w, new_state, stats = _weigh(rule, log_w, log_lik, score, state)
+    if rule.enabled and rule.aim_variance > 0 and AIM_OFFSET in state:
+        new_log_w = _aim_capped(rule, new_log_w, log_w, new_state, stats)
     if rule.enabled and math.isfinite(rule.commit_steps):
         new_log_w = _hold_first_decision(rule, new_log_w, new_state, stats)
     stats.pop("checked", None)
     return new_log_w, new_state, stats
+
+
+def aim_offset_rate(settings: FilterSettings, dt: float, has_steering: bool) -> float:
+    """The aim cap's averaging rate Ts / ``aim_offset_time`` per sample of ``dt`` (s); 0 when
+    the cap is off (``aim_offset_std`` 0, or no steering model: it bounds steering evidence)."""
+    if not has_steering or settings.aim_offset_std <= 0:
+        return 0.0
+    return min(1.0, dt / settings.aim_offset_time)
+
+
+AIM_OFFSET = "_aim_offset"
+"""The key of the per-run (R, C) average lateral offset a_i of each hypothesis in the rule's
+state (kept by the filter when ``aim_offset_std`` > 0; :func:`_aim_capped`)."""
+
+
+def aim_capped_log_weights(
+    log_w: np.ndarray,
+    log_prior: np.ndarray,
+    aim_offset: np.ndarray,
+    aim_variance: float,
+    previous: np.ndarray | None = None,
+) -> np.ndarray:
+    """The aim cap (module docstring) of log weights ``log_w`` (R, C) with prior ``log_prior``
+    and average offsets ``aim_offset`` (R, C, m): the log-odds of the run's most likely
+    hypothesis b over each other one, against the prior's, held to what the aim prior allows
+    or, with the weights of the step before (``previous``), to what they already were::
+
+        A_i = -a_i^2 / (2 sigma_a^2)
+        d_i = (log w_b - log pi_b) - (log w_i - log pi_i)
+        d_i <= max(|A_b - A_i|, d_i(previous)),  then normalized
+
+    Zero weights (pruned) stay zero."""
+    score = aim_offset * aim_offset * (-0.5 / aim_variance)
+    rows = np.arange(log_w.shape[0])
+    best = np.argmax(log_w, axis=1)
+    with np.errstate(invalid="ignore"):
+        bound = np.abs(score[rows, best][:, None] - score)
+        if previous is not None:
+            odds = (previous[rows, best] - log_prior[rows, best])[:, None] - (previous - log_prior)
+            bound = np.maximum(bound, np.where(np.isfinite(odds), odds, 0.0))
+        floor = (log_w[rows, best] - log_prior[rows, best])[:, None] + log_prior - bound
+        capped = np.where(np.isfinite(log_w), np.maximum(log_w, floor), -np.inf)
+    return normalize_log_weights(capped, log_w)
+
+
+def _aim_capped_one(
+    log_w: np.ndarray,
+    log_prior: np.ndarray,
+    aim_offset: np.ndarray,
+    aim_variance: float,
+    previous: np.ndarray,
+) -> np.ndarray:
+    """:func:`aim_capped_log_weights` of one run (1, C) in Python floats: the same IEEE
+    operations in the same order, so the same bits (a test compares them)."""
+    (lw,) = log_w.tolist()
+    (prior,) = log_prior.tolist()
+    (prev,) = previous.tolist()
+    factor = -0.5 / aim_variance
+    score = [a * a * factor for a in aim_offset[0].tolist()]
+    best = lw.index(max(lw))
+    base, previous_base, best_score = lw[best] - prior[best], prev[best] - prior[best], score[best]
+    capped = []
+    for w, p, v, s in zip(lw, prior, prev, score, strict=True):
+        if not math.isfinite(w):
+            capped.append(-math.inf)
+            continue
+        bound = abs(best_score - s)
+        odds = previous_base - (v - p)
+        if not math.isfinite(odds):
+            odds = 0.0
+        bound = bound if bound >= odds or bound != bound else odds
+        floor = base + p - bound
+        capped.append(w if w >= floor else floor)
+    normalized = _normalized_one(capped)
+    if normalized:
+        return np.array([normalized])
+    return normalize_log_weights(np.array([capped]), log_w)
+
+
+def _aim_capped(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    previous: np.ndarray,
+    state: dict[str, np.ndarray],
+    stats: dict[str, np.ndarray],
+) -> np.ndarray:
+    """:func:`aim_capped_log_weights` of the rule's new weights ``log_w`` (``previous``: the
+    step's weights before it); the verified weights stored at this step become the capped
+    ones and the decision of the runs without a mismatch is taken again from the capped
+    weights (``state`` and ``stats`` in place)."""
+    prior = state["_log_prior"]
+    verified = state["_verified_log_w"]
+    decision = stats["decision"]
+    if log_w.shape[0] == 1:  # one run (the single car): Python floats, the same bits
+        capped = _aim_capped_one(log_w, prior, state[AIM_OFFSET], rule.aim_variance, previous)
+        if verified is log_w:  # (one run's rule stores its new weights, or keeps the old)
+            state["_verified_log_w"] = capped
+        if int(decision[0]) != MODEL_MISMATCH:
+            top = max(capped[0].tolist())
+            stats["decision"] = np.array(
+                [DECIDED if top >= rule.log_decision_threshold else UNDECIDED]
+            )
+        return capped
+    capped = aim_capped_log_weights(log_w, prior, state[AIM_OFFSET], rule.aim_variance, previous)
+    if verified is log_w:
+        state["_verified_log_w"] = capped
+    else:
+        stored_now = (verified == log_w).all(axis=1, keepdims=True)
+        state["_verified_log_w"] = np.where(stored_now, capped, verified)
+    stats["decision"] = np.where(
+        decision == MODEL_MISMATCH,
+        MODEL_MISMATCH,
+        np.where(capped.max(axis=1) >= rule.log_decision_threshold, DECIDED, UNDECIDED),
+    )
+    return capped
 
 
 def _hold_first_decision(

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -21,10 +22,12 @@ from scipy.special import logsumexp
 from estimators.arx_state_space import road_point_rows
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
+    AIM_OFFSET,
     DECIDED,
     EVIDENCE_STATE,
     UNDECIDED,
     EvidenceRule,
+    aim_offset_rate,
     decision_names,
     initial_evidence_state,
     weigh_evidence,
@@ -123,6 +126,9 @@ class FilterpyGMEKF:
         self._filters: list[list[ARXExtendedKalmanFilter | None]] | None = None
         self._single = False
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
+        self._aim_rate = aim_offset_rate(settings, self.model.dt, self.model.has_steering)
+        if not self._aim_rate:
+            self._rule = replace(self._rule, aim_variance=0.0)
 
     @property
     def dt(self) -> float:
@@ -165,7 +171,7 @@ class FilterpyGMEKF:
             self._points, self._slow = points.copy(), slow
             self._gated_count = np.zeros((n_runs, 3), dtype=np.int64)
             self._gated = np.zeros((n_runs, 3), dtype=bool)
-            self._evidence = initial_evidence_state(log_w)
+            self._evidence = self._initial_evidence(log_w, x0)
             self._stats = {
                 "decision": np.where(
                     log_w.max(axis=1) >= math.log(self.settings.decision_threshold),
@@ -197,7 +203,7 @@ class FilterpyGMEKF:
                 self._slow[r] = slow[j]
                 self._gated_count[r] = 0
                 self._gated[r] = False
-                for name, value in initial_evidence_state(log_w[j : j + 1]).items():
+                for name, value in self._initial_evidence(log_w[j : j + 1], x0[j : j + 1]).items():
                     self._evidence[name][r] = value[0]
                 self._stats["decision"][r] = (
                     DECIDED
@@ -260,6 +266,14 @@ class FilterpyGMEKF:
         """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.low_speed`."""
         return self._slow[0].copy() if self._single else self._slow.copy()
 
+    def _initial_evidence(self, log_w: np.ndarray, x0: np.ndarray) -> dict[str, np.ndarray]:
+        """The evidence rule's per-run arrays at reset, with the aim cap's average offsets
+        (each hypothesis' y(0)) when the cap is on."""
+        evidence = initial_evidence_state(log_w)
+        if self._aim_rate:
+            evidence[AIM_OFFSET] = x0[..., 1].copy()
+        return evidence
+
     def _new_bank(self, x0: np.ndarray, log_w: np.ndarray) -> list[ARXExtendedKalmanFilter | None]:
         """One run's filters at reset: x_i(0) = ``x0[i]`` (C, n), P_i(0) the prior
         covariance (None where the prior weight is 0)."""
@@ -306,6 +320,12 @@ class FilterpyGMEKF:
         rows = self._gate(r, bank, z, log_w, points)
         log_lik, score = self._update_bank(r, bank, z, rows, points)
         evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
+        if self._aim_rate:  # the aim cap's average offsets move toward x(k|k)'s
+            aim = self._evidence[AIM_OFFSET][r].copy()
+            for c, ekf in enumerate(bank):
+                if ekf is not None:
+                    aim[c] += self._aim_rate * (ekf.x[1, 0] - aim[c])
+            evidence[AIM_OFFSET] = aim[None]
         new_log_w, evidence, stats = weigh_evidence(
             self._rule, log_w[None], log_lik[None], score[None], evidence
         )

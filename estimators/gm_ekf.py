@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -35,10 +35,12 @@ from estimators.arx_state_space import (
 )
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
+    AIM_OFFSET,
     DECIDED,
     DECISIONS,
     UNDECIDED,
     EvidenceRule,
+    aim_offset_rate,
     decision_names,
     initial_evidence_state,
     normalize_log_weights,
@@ -305,6 +307,10 @@ class GaussianMixtureEKF:
         self._measurement_scale = np.array([1.0, 1.0, ratio])
         self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
+        # the aim cap bounds the steering's lane evidence: without a steering model it is off
+        self._aim_rate = aim_offset_rate(settings, self.model.dt, self.model.has_steering)
+        if not self._aim_rate:
+            self._rule = replace(self._rule, aim_variance=0.0)
         self._min_speed = settings.min_speed if self.model.has_steering else 0.0
         self._max_speed = settings.steering_max_speed if self.model.has_steering else math.inf
         self._curvature_limit = (
@@ -592,7 +598,7 @@ class GaussianMixtureEKF:
         cov[:] = self.matrices.initial_covariance
         steering = z[:, 2] * self.settings.steering_ratio
         log_decision_threshold = math.log(self.settings.decision_threshold)
-        return MixtureState(
+        state = MixtureState(
             x=x.reshape(-1, n),
             P=cov.reshape(-1, n, n),
             log_w=log_w,
@@ -612,6 +618,9 @@ class GaussianMixtureEKF:
             road_points=points,
             straight_points=self._straight_points,
         )
+        if self._aim_rate:
+            state.evidence[AIM_OFFSET] = x[..., 1].reshape(n_runs, n_comp).copy()
+        return state
 
     # ------------------------------------------------------------ the rules
     def _step(
@@ -637,7 +646,11 @@ class GaussianMixtureEKF:
         normalized = normalized.reshape(*state.log_w.shape, 3)
         all_active = all_true(state.active)
         innovation_log_w, log_w, evidence, stats = self._weigh(
-            state, all_active, log_lik, normalized
+            state,
+            all_active,
+            log_lik,
+            normalized,
+            self._aim_evidence(state.evidence, x_post) if self._aim_rate else None,
         )
         if not all_active:
             x_post, cov_post = _freeze_pruned(state, x_post, cov_post)
@@ -668,6 +681,17 @@ class GaussianMixtureEKF:
             road_points=points,
             straight_points=state.straight_points,
         )
+
+    def _aim_evidence(
+        self, evidence: dict[str, np.ndarray], x_post: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """The rule's per-run arrays ``evidence`` with the aim cap's average lateral offsets
+        moved toward x(k|k)'s (``a_i <- a_i + (Ts / aim_offset_time) (y_i - a_i)``;
+        :mod:`estimators.evidence`)."""
+        aim = evidence[AIM_OFFSET]
+        moved = dict(evidence)
+        moved[AIM_OFFSET] = aim + self._aim_rate * (x_post[:, 1].reshape(aim.shape) - aim)
+        return moved
 
     def _observed(self, z: np.ndarray) -> tuple[np.ndarray, bool]:
         """Missing measurements: ``z`` (R, 3) with the steering in model units
@@ -738,6 +762,7 @@ class GaussianMixtureEKF:
         all_active: bool,
         log_lik: np.ndarray,
         normalized: np.ndarray,
+        evidence: dict[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Evidence (paper eq. 19, tempered by the consistency checks of
         :func:`estimators.evidence.weigh_evidence`; pruned hypotheses have weight 0)::
@@ -745,7 +770,9 @@ class GaussianMixtureEKF:
             log w_i = log w_i + l_i / tau,   l_i = -1/2 (nu_i^T S_i^-1 nu_i + log det S_i + m log 2 pi)
             log w_i = log w_i - logsumexp_j(log w_j)
 
-        Returns the log weights before the update (pruned: -inf), the new log weights (R, C),
+        ``evidence``: the rule's per-run arrays to weigh with (default the state's; the step
+        passes them with the aim cap's offsets moved). Returns the log weights before the
+        update (pruned: -inf), the new log weights (R, C),
         the rule's new statistics and its per-run ``decision``, ``model_error``,
         ``autocorrelation`` and ``evidence_scale``."""
         log_w = state.log_w if all_active else np.where(state.active, state.log_w, -np.inf)
@@ -754,7 +781,7 @@ class GaussianMixtureEKF:
             log_w,
             log_lik.reshape(log_w.shape),
             normalized[:, :, 2],
-            state.evidence,
+            state.evidence if evidence is None else evidence,
         )
         return log_w, new_log_w, evidence, stats
 

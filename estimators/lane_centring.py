@@ -190,9 +190,12 @@ class LaneCentringEKF(GaussianMixtureEKF):
         self.decimation = max(1, int(round(params.decimation_time / self.dt)))
         # the rule's statistics run at the decimated rate: its window stays in seconds; its
         # first term is a level check made once, and its fitted q already carries an upper
-        # bound: the tempering uses lambda itself (no evidence_confidence bound)
+        # bound: the tempering uses lambda itself (no evidence_confidence bound); the aim cap
+        # bounds a steering model's evidence, and this filter has none
         self._rule = replace(
-            EvidenceRule.from_settings(self.settings, self.dt * self.decimation), bound_z=0.0
+            EvidenceRule.from_settings(self.settings, self.dt * self.decimation),
+            bound_z=0.0,
+            aim_variance=0.0,
         )
         self._posterior: np.ndarray | None = None
 
@@ -226,6 +229,7 @@ class LaneCentringEKF(GaussianMixtureEKF):
         all_active: bool,
         log_lik: np.ndarray,
         normalized: np.ndarray,
+        evidence: dict[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Evidence: at the first step and every D samples after it the centring terms l_i and
         u_i (module docstring) are
@@ -247,7 +251,7 @@ class LaneCentringEKF(GaussianMixtureEKF):
         centring_score = normalized.copy()
         centring_score[:, :, 2] = np.where(due[:, None], score, np.nan)
         log_w, new_log_w, evidence, stats = super()._weigh(
-            state, all_active, log_lik, centring_score
+            state, all_active, log_lik, centring_score, evidence
         )
         evidence = dict(evidence)
         evidence[_LAST_Y] = np.where(due[:, None], y, last)

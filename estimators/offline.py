@@ -292,11 +292,14 @@ STEERING_ONLY_FIELDS = (
     "min_speed",
     "steering_max_speed",
     "steering_curvature_limit",
+    "aim_offset_std",
+    "aim_offset_time",
 )
 """The :class:`FilterSettings` fields a mixture filter without a steering model never reads:
 the steering channel's noise and scale (its measurement is NaN, its row of the update
-skipped) and the limits that switch that channel off (:class:`GaussianMixtureEKF` keeps
-``min_speed`` 0 and the others infinite without a model)."""
+skipped), the limits that switch that channel off (:class:`GaussianMixtureEKF` keeps
+``min_speed`` 0 and the others infinite without a model) and the aim cap (it bounds steering
+evidence)."""
 
 
 def pass_key(estimator: LaneEstimator) -> tuple[Any, ...] | None:

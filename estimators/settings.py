@@ -62,6 +62,8 @@ _SCHEMA = schema(
         "weight_floor": Field("number", low=0.0, high=1e-3),
         "preferred_offset_std": Field("number", unit="m", low=0.0, high=2.0),
         "preferred_offset_drift_std": _non_negative("m"),
+        "aim_offset_std": Field("number", unit="m", low=0.0, high=2.0),
+        "aim_offset_time": _positive("s"),
     }
 )
 """What every field of :class:`FilterSettings` allows."""
@@ -197,6 +199,13 @@ class FilterSettings:
             are then taken from y - p; :mod:`estimators.arx_state_space`, docs/design.md
             §8.18). 0: no such state, the driver is assumed to aim at the lane centre.
         preferred_offset_drift_std: random-walk std of p per sample (m).
+        aim_offset_std: prior std sigma_a (m) of where a driver holds the car from the lane
+            centre. When > 0, no run's lane log-odds (weights against the prior) exceed what
+            that prior gives for where the car has been held under each hypothesis, its
+            lateral offset averaged over ``aim_offset_time`` (:mod:`estimators.evidence`, the
+            aim cap; docs/design.md §8.19). Default 0.3 m: people hold the car 0.2-0.5 m
+            from the centre. 0: no cap (the filter before it).
+        aim_offset_time: time constant (s) of that average.
     """
 
     speed_noise_std: float = 0.05
@@ -230,6 +239,8 @@ class FilterSettings:
     weight_floor: float = 0.0
     preferred_offset_std: float = 0.0
     preferred_offset_drift_std: float = 0.0
+    aim_offset_std: float = 0.3
+    aim_offset_time: float = 2.0
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and

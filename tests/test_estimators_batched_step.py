@@ -286,7 +286,8 @@ def test_filters_without_steering_of_equal_pass_keys_give_equal_results(frames) 
     assert key is not None
     expected = run_estimator(reference, frames)
     changed = {"steering_residual_std": 0.05, "steering_sensor_std": 0.0, "steering_ratio": 15.0,
-               "min_speed": 12.0, "steering_max_speed": 5.0, "steering_curvature_limit": 1e-4}  # fmt: skip
+               "min_speed": 12.0, "steering_max_speed": 5.0, "steering_curvature_limit": 1e-4,
+               "aim_offset_std": 0.0, "aim_offset_time": 7.0}  # fmt: skip
     assert set(changed) == set(STEERING_ONLY_FIELDS)
     variants = [{name: value} for name, value in changed.items()] + [changed]
     for overrides in variants:

@@ -166,7 +166,8 @@ def test_the_road_geometry_makes_the_curved_track_work(curved_runs):
         with_geometry = run_estimator(make_ekf(), frames)
         straight = run_estimator(make_ekf(), frames, road_geometry=False)
         assert with_geometry.picked_true_lane().all(), bias_index
-        assert np.all(with_geometry.true_lane_weight()[:, 20:] > 0.999), bias_index
+        # (0.996-0.9997: the aim cap holds the log-odds to what where the car is held allows)
+        assert np.all(with_geometry.true_lane_weight()[:, 20:] > 0.99), bias_index
         assert np.all(with_geometry.lateral_rmse() < 0.04), bias_index
         assert np.all(straight.lateral_rmse() > 3 * with_geometry.lateral_rmse()), bias_index
         # the same recordings with their road given explicitly
@@ -193,8 +194,8 @@ def test_synthetic_population_on_the_curved_track():
     assert with_geometry.gated[..., 2].sum() < 0.5 * straight.gated[..., 2].sum()
 
 
-@pytest.mark.parametrize("offset_std", [0.0, 0.3])
-def test_fast_filter_equals_filterpy_on_the_curved_track(curved_runs, offset_std):
+@pytest.mark.parametrize(("offset_std", "aim_std"), [(0.0, 0.0), (0.3, 0.0), (0.0, 0.3)])
+def test_fast_filter_equals_filterpy_on_the_curved_track(curved_runs, offset_std, aim_std):
     frame = curved_runs[1][0].iloc[:600].copy()
     frame.loc[100:150, "sensor_camera_lateral"] = np.nan
     frame.loc[300, "sensor_steering"] += 0.2
@@ -203,6 +204,7 @@ def test_fast_filter_equals_filterpy_on_the_curved_track(curved_runs, offset_std
         steering_residual_std=1e-3,
         preferred_offset_std=offset_std,
         preferred_offset_drift_std=1e-3,
+        aim_offset_std=aim_std,
     )
     fast = run_estimator(GaussianMixtureEKF(PAPER, settings), frame, store_components=True)
     ref = run_estimator(FilterpyGMEKF(PAPER, settings), frame, store_components=True)
