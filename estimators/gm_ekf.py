@@ -229,7 +229,11 @@ class GaussianMixtureEKF:
       ``kappa_d = 2 |dy_d| / (dx_d^2 + dy_d^2)`` from the road points at k,
       decided for step k+1) the steering channel is off and its memory held
       and restarted exactly as at low speed: a model is trusted only on roads
-      as curved as those it was fitted on (:class:`FilterSettings`).
+      as curved as those it was fitted on (:class:`FilterSettings`);
+    - evidence (:mod:`estimators.evidence`): the weights move by the tempered evidence, and,
+      with the aim cap (``aim_offset_std``, on by default), no run's log-odds grow past what a
+      prior on where drivers hold the car allows for each hypothesis' lateral offset averaged
+      over ``aim_offset_time`` (docs/design.md §8.19).
 
     Road geometry: with ``road_points`` (:mod:`estimators.road_geometry`) the
     bearings are those of the lane centre ahead on a curved road
