@@ -369,6 +369,7 @@ def weigh_evidence(
             new_log_w, new_state, stats = _weigh(rule, log_w, log_lik, score, state)
     if rule.enabled and rule.aim_variance > 0 and AIM_OFFSET in state:
         new_log_w = _aim_capped(rule, new_log_w, log_w, new_state, stats)
+    _store_verified(new_log_w, new_state, stats.pop("verified"))
     if rule.enabled and math.isfinite(rule.commit_steps):
         new_log_w = _hold_first_decision(rule, new_log_w, new_state, stats)
     stats.pop("checked", None)
@@ -452,6 +453,15 @@ def _aim_capped_one(
     return normalize_log_weights(np.array([capped]), log_w)
 
 
+def _store_verified(log_w: np.ndarray, state: dict[str, np.ndarray], verified: np.ndarray) -> None:
+    """The verified weights (module docstring): ``log_w`` (the step's final weights, after
+    the aim cap) for the runs ``verified`` (R,) at this step (``state`` in place)."""
+    if all_true(verified):
+        state["_verified_log_w"] = log_w
+    elif any_true(verified):
+        state["_verified_log_w"] = np.where(verified[:, None], log_w, state["_verified_log_w"])
+
+
 def _aim_capped(
     rule: EvidenceRule,
     log_w: np.ndarray,
@@ -460,16 +470,12 @@ def _aim_capped(
     stats: dict[str, np.ndarray],
 ) -> np.ndarray:
     """:func:`aim_capped_log_weights` of the rule's new weights ``log_w`` (``previous``: the
-    step's weights before it); the verified weights stored at this step become the capped
-    ones and the decision of the runs without a mismatch is taken again from the capped
-    weights (``state`` and ``stats`` in place)."""
+    step's weights before it); the decision of the runs without a mismatch is taken again
+    from the capped weights (``stats`` in place)."""
     prior = state["_log_prior"]
-    verified = state["_verified_log_w"]
     decision = stats["decision"]
     if log_w.shape[0] == 1:  # one run (the single car): Python floats, the same bits
         capped = _aim_capped_one(log_w, prior, state[AIM_OFFSET], rule.aim_variance, previous)
-        if verified is log_w:  # (one run's rule stores its new weights, or keeps the old)
-            state["_verified_log_w"] = capped
         if int(decision[0]) != MODEL_MISMATCH:
             top = max(capped[0].tolist())
             stats["decision"] = np.array(
@@ -477,11 +483,6 @@ def _aim_capped(
             )
         return capped
     capped = aim_capped_log_weights(log_w, prior, state[AIM_OFFSET], rule.aim_variance, previous)
-    if verified is log_w:
-        state["_verified_log_w"] = capped
-    else:
-        stored_now = (verified == log_w).all(axis=1, keepdims=True)
-        state["_verified_log_w"] = np.where(stored_now, capped, verified)
     stats["decision"] = np.where(
         decision == MODEL_MISMATCH,
         MODEL_MISMATCH,
@@ -606,8 +607,6 @@ def _weigh_one(
             floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
             new_log_w = normalize_log_weights(floored, new_log_w)
             new_lw = []
-        if verified:
-            new_state["_verified_log_w"] = new_log_w
     if mismatch:
         decision = MODEL_MISMATCH
     else:
@@ -622,6 +621,7 @@ def _weigh_one(
         "autocorrelation": np.array([rho]),
         "evidence_scale": np.array([scale]),
         "checked": np.array([(not mismatch) and samples >= MIN_CHECKED_SAMPLES]),
+        "verified": np.array([verified]),
     }
     return new_log_w, new_state, stats
 
@@ -661,13 +661,8 @@ def _weigh(
         verified = verified_steps(rule, model_error, samples)
         if any_mismatch:
             verified &= ~mismatch
-        if all_true(verified):
-            new_state["_verified_log_w"] = new_log_w
-        elif any_true(verified):
-            new_state["_verified_log_w"] = np.where(
-                verified[:, None], new_log_w, state["_verified_log_w"]
-            )
     else:
+        verified = np.zeros(log_w.shape[0], dtype=bool)
         raw = log_w + log_lik
         new_log_w = normalize_log_weights(
             raw if active is None else np.where(active, raw, -np.inf), log_w
@@ -681,6 +676,7 @@ def _weigh(
         "autocorrelation": rho,
         "evidence_scale": scale,
         "checked": (samples >= MIN_CHECKED_SAMPLES) & ~mismatch,
+        "verified": verified,
     }
     return new_log_w, new_state, stats
 
