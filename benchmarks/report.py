@@ -89,6 +89,9 @@ def _training_runs(cfg: dict[str, Any]) -> str:
     speeds = cfg.get("training_speeds") or ()
     if speeds:
         text += f" and runs started at {', '.join(f'{v:g}' for v in speeds)} m/s"
+    others = int(cfg.get("training_drivers") or 0)
+    if others:
+        text += f" and one run each of {others} more drivers of the population"
     return text
 
 

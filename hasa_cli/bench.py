@@ -202,6 +202,15 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
         "paper's one-run protocol; more: several runs and the speeds they reach)",
     )
     rec.add_argument(
+        "--training-drivers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also train the models on one run each of N more drivers drawn from the same "
+        "population, scored nowhere (synthetic runs; default 0: the paper's protocol, the "
+        "illustrative driver only)",
+    )
+    rec.add_argument(
         "--training-speeds",
         type=_speed_list,
         default=(),
@@ -440,6 +449,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
         illustrative=args.illustrative,
         training_run=args.training_run,
         training_runs=args.training_runs,
+        training_drivers=args.training_drivers,
         training_speeds=args.training_speeds,
         training_file=args.training_file,
         min_duration=args.min_duration,

@@ -90,6 +90,9 @@ _SCHEMA = schema(
         "illustrative": Field("string", doc="The training driver.", optional=True),
         "training_run": _count("Index of the training run.", 0),
         "training_runs": _count("Runs of the illustrative driver that train the models.", 1),
+        "training_drivers": _count(
+            "Extra drivers of the population, one run each, that also train the models.", 0
+        ),
         "training_speeds": Field(
             "numbers", doc="Start speeds of extra training runs of the illustrative driver.",
             unit="m/s", low=1.0, high=150.0, unique=True,
@@ -170,6 +173,12 @@ class ProtocolConfig:
         training_runs: how many of its main-track runs, from ``training_run`` on, train the
             models (1: the paper's one-run protocol; more: several runs and the speeds they
             reach, each a separate run for the fit, so lags never cross between them).
+        training_drivers: extra drivers drawn from the same population (a draw of their own,
+            :func:`~benchmarks.protocol.plan.training_population`), one run each in the
+            training scenario, that also train the models and are scored nowhere (synthetic
+            runs only): a model fitted on several drivers meets the scored drivers' steering
+            with residuals nearer its own level (docs/design.md §8.20). 0: the paper's
+            protocol (the illustrative driver only).
         training_speeds: start speeds (m/s) of extra runs of the illustrative driver that
             also train the models, one run each, driven in the training scenario from its
             own seeds and scored nowhere (synthetic runs only): a model fitted at the
@@ -226,6 +235,7 @@ class ProtocolConfig:
     illustrative: str | None = None
     training_run: int = 0
     training_runs: int = 1
+    training_drivers: int = 0
     training_speeds: tuple[float, ...] = ()
     batch_size: int = 100
     ljung_box_lags: int = 20
@@ -281,6 +291,11 @@ class ProtocolConfig:
                 f"protocol settings 'training_run' = {self.training_run} and 'training_runs' = "
                 f"{self.training_runs} need at least {last + 1} runs of the illustrative "
                 f"driver, got 'ill_runs' = {self.illustrative_runs}"
+            )
+        if self.training_drivers and self.recordings is not None:
+            raise BenchmarkError(
+                "protocol setting 'training_drivers' drives extra synthetic training runs; "
+                "with 'recordings' it must be 0 (record more training drivers instead)"
             )
         if self.training_speeds and self.recordings is not None:
             raise BenchmarkError(

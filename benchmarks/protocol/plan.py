@@ -7,12 +7,14 @@ in the plan's notes or skipped files; they are kept next to the plan they decide
 
 from __future__ import annotations
 
+import zlib
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from benchmarks.protocol.config import ILLUSTRATIVE, TRACK_ENV_IDS, BenchmarkError, ProtocolConfig
@@ -113,6 +115,8 @@ class Plan:
             ``config.scenario`` for synthetic runs, the training recording's for recordings.
         training_speeds: start speeds (m/s) of the extra training runs of the illustrative
             driver (:meth:`speed_trainings`; synthetic only).
+        training_drivers: the parameters of the extra training drivers
+            (:func:`training_population`; :meth:`driver_trainings`; synthetic only).
     """
 
     seed: int | None
@@ -131,6 +135,7 @@ class Plan:
     scenario: str = "paper"
     training_runs: int = 1
     training_speeds: tuple[float, ...] = ()
+    training_drivers: tuple[Any, ...] = ()
 
     @property
     def recorded(self) -> bool:
@@ -196,6 +201,19 @@ class Plan:
             for i, ((env, drv), speed) in enumerate(zip(pairs, self.training_speeds, strict=True))
         ]
 
+    def driver_trainings(self) -> list[RunRef]:
+        """The extra training drivers' runs, one each on the main track, indexed 0, their
+        seeds drawn for that purpose (``run_seeds(seed, n, "training-drivers/<track>")``, so
+        they are no main run's). Drive them with :attr:`training_drivers` as the parameters
+        (their names are no scored driver's). Empty for recordings."""
+        if self.seed is None or not self.training_drivers:
+            return []
+        pairs = run_seeds(self.seed, len(self.training_drivers), f"training-drivers/{self.track}")
+        return [
+            RunRef(p.name, self.track, 0, env, drv, seed=self.seed)
+            for p, (env, drv) in zip(self.training_drivers, pairs, strict=True)
+        ]
+
     def validation(self) -> list[RunRef]:
         """The main-track runs the models are scored on: all but the training runs.
 
@@ -219,6 +237,31 @@ class Plan:
 def make_plan(config: ProtocolConfig, seed: int | None) -> Plan:
     """The plan of one entry of ``config.run_seeds``: a population seed, or None (recordings)."""
     return recording_plan(config) if seed is None else synthetic_plan(config, seed)
+
+
+TRAINING_DRIVER_PREFIX = "train-"
+"""Prefix of the extra training drivers' names (``train-1``, ...): no scored driver's name."""
+
+
+def training_population(config: ProtocolConfig, seed: int) -> list[Any]:
+    """The extra training drivers of population seed ``seed`` (``config.training_drivers`` of
+    them; empty for 0): a draw of the same population and scenario with a seed of its own,
+
+        population(config.population, s, n, scenario=config.scenario),
+        s = SeedSequence([seed, crc32("training-drivers")]).generate_state(1)[0],
+
+    each renamed ``train-<name>``, so that no scored driver (of this or any seed's draw) is
+    one of them by construction of the seed, and the same ``seed`` gives the same drivers."""
+    count = config.training_drivers
+    if not count:
+        return []
+    key = zlib.crc32(b"training-drivers")
+    draw = int(np.random.SeedSequence([int(seed), key]).generate_state(1, np.uint32)[0])
+    try:
+        params = population(config.population, draw, count, scenario=config.scenario)
+    except ValueError as exc:
+        raise BenchmarkError(str(exc)) from None
+    return [replace(p, name=TRAINING_DRIVER_PREFIX + p.name) for p in params]
 
 
 def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
@@ -263,6 +306,7 @@ def synthetic_plan(config: ProtocolConfig, seed: int) -> Plan:
         env_config=config.env_config(),
         training_env_config=config.env_config(training=True),
         training_speeds=config.training_speeds,
+        training_drivers=tuple(training_population(config, seed)),
         drivers=drivers,
         driver_order=[p.name for p in params],
         scenario=config.scenario,

@@ -381,6 +381,8 @@ def fit_and_check(
     for ref, start_speed in plan.speed_trainings():  # extra runs at other speeds (train only)
         speed_env = deep_merge(train_env, {"initial_state": {"speed": start_speed}})
         train_frames += load_frames([ref], config.track, speed_env, plan.params)
+    extra = {p.name: p for p in plan.training_drivers}  # other drivers (train only)
+    train_frames += load_frames(plan.driver_trainings(), config.track, train_env, extra)
     train_frame = train_frames[0]
     t0 = time.perf_counter()
     sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])

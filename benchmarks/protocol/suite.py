@@ -52,13 +52,20 @@ __all__ = ["fit_key", "run_suite"]
 
 def fit_key(plan: Plan) -> str:
     """Every input of a seed's fits that a scenario can change, as text: the seed, the
-    training runs (their seeds), the extra training speeds, the training runs' env config
-    and every driver's parameters. Two plans of one suite (the same protocol settings but
+    training runs (their seeds), the extra training speeds and training drivers, the
+    training runs' env config and every driver's parameters. Two plans of one suite (the same protocol settings but
     the scenario) with the same key get the same fits."""
     trainings = [dataclasses.astuple(ref) for ref in plan.trainings()]
     drivers = {name: params.to_dict() for name, params in plan.params.items()}
     return json.dumps(
-        [plan.seed, trainings, list(plan.training_speeds), plan.training_env_config, drivers],
+        [
+            plan.seed,
+            trainings,
+            list(plan.training_speeds),
+            [params.to_dict() for params in plan.training_drivers],
+            plan.training_env_config,
+            drivers,
+        ],
         sort_keys=True,
         default=repr,
     )
