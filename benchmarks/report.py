@@ -83,12 +83,14 @@ def _source(cfg: dict[str, Any]) -> str:
 
 
 def _training_runs(cfg: dict[str, Any]) -> str:
-    """ "run 0" or "runs 0-2": the illustrative driver's runs that trained the models."""
+    """What trained the models: "run 0 of Ill (each seed's)", "runs 0-2 of Ill (each seed's)",
+    then the extra runs at other start speeds and of other drivers, if any."""
     first, count = cfg["training_run"], int(cfg.get("training_runs") or 1)
     text = f"run {first}" if count == 1 or first is None else f"runs {first}-{first + count - 1}"
+    text += f" of {cfg.get('illustrative')} (each seed's)"
     speeds = cfg.get("training_speeds") or ()
     if speeds:
-        text += f" and runs started at {', '.join(f'{v:g}' for v in speeds)} m/s"
+        text += f" and its runs started at {', '.join(f'{v:g}' for v in speeds)} m/s"
     others = int(cfg.get("training_drivers") or 0)
     if others:
         text += f" and one run each of {others} more drivers of the population"
@@ -98,10 +100,7 @@ def _training_runs(cfg: dict[str, Any]) -> str:
 def format_tables(result: BenchmarkResult) -> str:
     """The result's tables as plain text (ours beside the paper's published values)."""
     cfg = result.config
-    parts = [
-        f"hasa-bench: {_source(cfg)}; models fitted on {_training_runs(cfg)} of "
-        f"{cfg['illustrative']} (each seed's)"
-    ]
+    parts = [f"hasa-bench: {_source(cfg)}; models fitted on {_training_runs(cfg)}"]
     for _, title, rows, columns, group in report_sections(result):
         parts.append("")
         parts.append(title)
@@ -248,10 +247,7 @@ _INTRO = (
 def _markdown_head(cfg: dict[str, Any]) -> list[str]:
     """The report's title, what it compares, the data and the configuration."""
     lines = [f"# {_TITLE}", "", _INTRO, ""]
-    lines.append(
-        f"Data: {_source(cfg)}; models fitted on {_training_runs(cfg)} of "
-        f"{cfg.get('illustrative')} (each seed's)."
-    )
+    lines.append(f"Data: {_source(cfg)}; models fitted on {_training_runs(cfg)}.")
     lines.append("")
     lines.append("## Configuration")
     lines.append("")
@@ -384,8 +380,7 @@ def _html_body(result: BenchmarkResult) -> list[str]:
     parts = [
         f"<h1>{_esc(_TITLE)}</h1>",
         f"<p>{_esc(_INTRO)}</p>",
-        f"<p>Data: {_esc(_source(cfg))}; models fitted on {_esc(_training_runs(cfg))} of "
-        f"{_esc(str(cfg.get('illustrative')))} (each seed's).</p>",
+        f"<p>Data: {_esc(_source(cfg))}; models fitted on {_esc(_training_runs(cfg))}.</p>",
     ]
     for key, title, rows, columns, _ in report_sections(result):
         parts.append(f'<h2 id="{_esc(key)}">{_esc(key.replace("_", " ").capitalize())}</h2>')

@@ -65,7 +65,8 @@ def test_the_training_drivers_train_the_models_and_are_scored_nowhere(tmp_path: 
     doc = json.loads((more / "results.json").read_text())
     assert doc["config"]["training_drivers"] == 2
     assert (
-        "and one run each of 2 more drivers of the population" in (more / "report.md").read_text()
+        "models fitted on run 0 of Ill (each seed's) and one run each of 2 more drivers of the "
+        "population." in (more / "report.md").read_text()
     )
     scored = pd.read_csv(more / "runs_estimation.csv")
     assert not scored["driver"].astype(str).str.startswith(TRAINING_DRIVER_PREFIX).any()
