@@ -363,10 +363,9 @@ def weigh_evidence(
         ``autocorrelation`` (rho) and ``evidence_scale`` (tau).
     """
     if log_w.shape[0] == 1 and rule.enabled and rule.forgetting == 0:
-        new_log_w, new_state, stats = _weigh_one(rule, log_w, log_lik, score, state)
-    else:
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            new_log_w, new_state, stats = _weigh(rule, log_w, log_lik, score, state)
+        return _weigh_evidence_one(rule, log_w, log_lik, score, state)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        new_log_w, new_state, stats = _weigh(rule, log_w, log_lik, score, state)
     if rule.enabled and rule.aim_variance > 0 and AIM_OFFSET in state:
         new_log_w = _aim_capped(rule, new_log_w, log_w, new_state, stats)
     _store_verified(new_log_w, new_state, stats.pop("verified"))
@@ -428,7 +427,23 @@ def _aim_capped_one(
 ) -> np.ndarray:
     """:func:`aim_capped_log_weights` of one run (1, C) in Python floats: the same IEEE
     operations in the same order, so the same bits (a test compares them)."""
-    (lw,) = log_w.tolist()
+    capped, fallback = _aim_capped_list(
+        log_w[0].tolist(), log_w, log_prior, aim_offset, aim_variance, previous
+    )  # (log_w: the fallback's)
+    return np.array([capped]) if fallback is None else fallback
+
+
+def _aim_capped_list(
+    lw: list[float],
+    log_w: np.ndarray | None,
+    log_prior: np.ndarray,
+    aim_offset: np.ndarray,
+    aim_variance: float,
+    previous: np.ndarray,
+) -> tuple[list[float], np.ndarray | None]:
+    """:func:`_aim_capped_one` of the weights ``lw`` (``log_w[0]`` as a list; ``log_w`` None:
+    not built yet) as a list, and as an array when the normalization fell back to numpy's
+    (None: it did not)."""
     (prior,) = log_prior.tolist()
     (prev,) = previous.tolist()
     factor = -0.5 / aim_variance
@@ -449,8 +464,94 @@ def _aim_capped_one(
         capped.append(w if w >= floor else floor)
     normalized = _normalized_one(capped)
     if normalized:
-        return np.array([normalized])
-    return normalize_log_weights(np.array([capped]), log_w)
+        return normalized, None
+    fallback = normalize_log_weights(np.array([capped]), np.array([lw]) if log_w is None else log_w)
+    return fallback[0].tolist(), fallback
+
+
+def _weigh_evidence_one(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    log_lik: np.ndarray,
+    score: np.ndarray,
+    state: dict[str, np.ndarray],
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`weigh_evidence` of one run with the rule enabled and no forgetting, in Python
+    floats: :func:`_weigh_one`, :func:`_aim_capped_one`, :func:`_store_verified` and
+    :func:`_hold_first_decision`'s arithmetic in the same order, each array built once."""
+    lw, new_log_w, new_state, run = _rule_one(rule, log_w, log_lik, score, state)
+    decision, model_error, rho, scale, checked, verified = run
+    if rule.aim_variance > 0 and AIM_OFFSET in state:
+        lw, new_log_w = _aim_capped_list(
+            lw, new_log_w, state["_log_prior"], state[AIM_OFFSET], rule.aim_variance, log_w
+        )
+        if decision != MODEL_MISMATCH:
+            decision = DECIDED if max(lw) >= rule.log_decision_threshold else UNDECIDED
+    if new_log_w is None:
+        new_log_w = np.array([lw])
+    if verified:
+        new_state["_verified_log_w"] = new_log_w
+    if math.isfinite(rule.commit_steps):
+        new_log_w, decision = _hold_one(rule, lw, new_log_w, new_state, decision, checked)
+    stats = {
+        "decision": np.array([decision]),
+        "model_error": np.array([model_error]),
+        "autocorrelation": np.array([rho]),
+        "evidence_scale": np.array([scale]),
+    }
+    return new_log_w, new_state, stats
+
+
+def _hold_one(
+    rule: EvidenceRule,
+    lw: list[float],
+    log_w: np.ndarray,
+    state: dict[str, np.ndarray],
+    decision: int,
+    checked: bool,
+) -> tuple[np.ndarray, int]:
+    """:func:`_hold_first_decision` of one run in Python floats (``lw``: ``log_w[0]`` as a
+    list): the same tests in the same order; returns the weights and the decision code."""
+    (committed,) = state["_committed"].tolist()
+    decided = decision == DECIDED
+    if committed >= 0 and (not decided or lw.index(max(lw)) == committed):
+        return log_w, decision
+    if not decided and committed == NOT_COMMITTED:
+        if state["_candidate"][0].tolist() != [0.0, 0.0]:
+            state["_candidate"] = np.zeros((1, 2))
+        return log_w, decision
+    top = float(_argmax(lw))
+    # a prior that is itself decided is the user's belief, not evidence: no commitment
+    threshold = rule.log_decision_threshold
+    eligible = decided and checked and all(p < threshold for p in state["_log_prior"][0].tolist())
+    candidate, held = state["_candidate"][0].tolist()
+    held = (held + 1.0 if held > 0 and candidate == top else 1.0) if eligible else 0.0
+    candidate = top if eligible else 0.0
+    state["_candidate"] = np.array([[candidate, held]])
+    is_committed = committed >= 0
+    contradicting = decided and is_committed and top != committed
+    contradicted = committed == CONTRADICTED or contradicting
+    commits = not is_committed and committed != CONTRADICTED and held >= rule.commit_steps
+    new_committed = CONTRADICTED if contradicted else (top if commits else committed)
+    state["_committed"] = np.array([new_committed])
+    if not contradicted:
+        return log_w, decision
+    prior = state["_log_prior"]
+    if contradicting:
+        state["_withheld"] = np.array([top])
+    state["_verified_log_w"] = prior.copy()
+    return prior.copy(), MODEL_MISMATCH
+
+
+def _argmax(values: list[float]) -> int:
+    """``numpy.argmax`` of a list: the first largest entry, or the first NaN."""
+    best, top = 0, values[0]
+    for i, value in enumerate(values):
+        if value != value:
+            return i
+        if value > top:
+            best, top = i, value
+    return best
 
 
 def _store_verified(log_w: np.ndarray, state: dict[str, np.ndarray], verified: np.ndarray) -> None:
@@ -552,11 +653,68 @@ def _weigh_one(
     """:func:`_weigh` for one run, in Python floats (the same arithmetic in the same order:
     a single car's filter step spends most of its time in numpy's per-call overhead on
     arrays of two numbers; ``tests/test_estimators_evidence.py`` checks the two agree)."""
+    new_lw, new_log_w, new_state, run = _rule_one(rule, log_w, log_lik, score, state)
+    decision, model_error, rho, scale, checked, verified = run
+    stats = {
+        "decision": np.array([decision]),
+        "model_error": np.array([model_error]),
+        "autocorrelation": np.array([rho]),
+        "evidence_scale": np.array([scale]),
+        "checked": np.array([checked]),
+        "verified": np.array([verified]),
+    }
+    return np.array([new_lw]) if new_log_w is None else new_log_w, new_state, stats
+
+
+_RunOutcome = tuple[int, float, float, float, bool, bool]
+"""One run's decision code, lambda, rho, tau, and whether its step was checked and verified."""
+
+
+def _rule_one(
+    rule: EvidenceRule,
+    log_w: np.ndarray,
+    log_lik: np.ndarray,
+    score: np.ndarray,
+    state: dict[str, np.ndarray],
+) -> tuple[list[float], np.ndarray | None, dict[str, np.ndarray], _RunOutcome]:
+    """:func:`_weigh_one` without its arrays: the new log weights as a list (and as an array
+    when one exists already: None, else), the new statistics and the run's outcome."""
+    (lw,) = log_w.tolist()
+    active = list(map(math.isfinite, lw))
+    new_state, model_error, rho, samples, mismatch, scale = _statistics_one(
+        rule, score, active, state
+    )
+    verified = not mismatch and _verified_one(rule, model_error, samples)
+    checked = (not mismatch) and samples >= MIN_CHECKED_SAMPLES
+    if mismatch:
+        verified_log_w = state["_verified_log_w"]
+        outcome = (MODEL_MISMATCH, model_error, rho, scale, checked, verified)
+        return verified_log_w[0].tolist(), verified_log_w, new_state, outcome
+    increment = [d / scale for d in log_lik[0].tolist()]
+    raw = [w + d if a else -math.inf for w, d, a in zip(lw, increment, active, strict=True)]
+    new_lw = _normalized_one(raw)
+    new_log_w: np.ndarray | None = None
+    if not new_lw:
+        new_log_w = normalize_log_weights(np.array([raw]), log_w)
+    if math.isfinite(rule.log_floor):
+        if new_log_w is None:
+            new_log_w = np.array([new_lw])
+        floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
+        new_log_w = normalize_log_weights(floored, new_log_w)
+    if new_log_w is not None:
+        new_lw = new_log_w[0].tolist()
+    decision = DECIDED if max(new_lw) >= rule.log_decision_threshold else UNDECIDED
+    return new_lw, new_log_w, new_state, (decision, model_error, rho, scale, checked, verified)
+
+
+def _statistics_one(
+    rule: EvidenceRule, score: np.ndarray, active: list[bool], state: dict[str, np.ndarray]
+) -> tuple[dict[str, np.ndarray], float, float, float, bool, float]:
+    """:func:`_updated_statistics` and :func:`_run_statistics` of one run in floats: the new
+    statistics (unchanged arrays kept when the steering channel was not used), lambda, rho,
+    the effective samples N, the mismatch test and tau."""
     alpha = rule.alpha
     keep = 1.0 - alpha
-    (lw,) = log_w.tolist()
-    n_comp = len(lw)
-    active = list(map(math.isfinite, lw))
     all_active = False not in active
     u = _clipped_scores(score, active, all_active)
     used = not any(map(math.isnan, u))
@@ -564,14 +722,20 @@ def _weigh_one(
     weight_sq = state["_evidence_weight_sq"].item()
     (nis,) = state["_nis"].tolist()
     (lag,) = state["_lag_product"].tolist()
-    (last,) = state["_last_score"].tolist()
+    new_state = dict(state)
     if used:
+        (last,) = state["_last_score"].tolist()
         weight = keep * weight + alpha
         weight_sq = (keep * keep) * weight_sq + alpha * alpha
         nis = [keep * n + alpha * (v * v) for n, v in zip(nis, u, strict=True)]
         lag = [keep * g + alpha * (v * p) for g, v, p in zip(lag, u, last, strict=True)]
-    else:
-        u = [0.0] * n_comp
+        new_state["_evidence_weight"] = np.array([weight])
+        new_state["_evidence_weight_sq"] = np.array([weight_sq])
+        new_state["_nis"] = np.array([nis])
+        new_state["_lag_product"] = np.array([lag])
+        new_state["_last_score"] = np.array([u])
+    else:  # the statistics stay; the next lag product is 0 (a gap)
+        new_state["_last_score"] = np.zeros((1, len(u)))
     best = _best_fitting(nis, active, all_active)
     best_nis = nis[best]
     model_error = best_nis / weight if weight > 0 else math.nan
@@ -589,41 +753,7 @@ def _weigh_one(
     if rule.bound_z and not math.isnan(model_error):
         bounded = _bound_one(model_error, samples, rule.bound_z)
     scale = min((1.0 if math.isnan(bounded) else max(bounded, 1.0)) * inflation, MAX_EVIDENCE_SCALE)
-    new_state = dict(state)
-    new_state["_evidence_weight"] = np.array([weight])
-    new_state["_evidence_weight_sq"] = np.array([weight_sq])
-    new_state["_nis"] = np.array([nis])
-    new_state["_lag_product"] = np.array([lag])
-    new_state["_last_score"] = np.array([u])
-    verified = not mismatch and _verified_one(rule, model_error, samples)
-    if mismatch:
-        new_log_w = state["_verified_log_w"]
-    else:
-        increment = [d / scale for d in log_lik[0].tolist()]
-        raw = [w + d if a else -math.inf for w, d, a in zip(lw, increment, active, strict=True)]
-        new_lw = _normalized_one(raw)
-        new_log_w = np.array([new_lw]) if new_lw else normalize_log_weights(np.array([raw]), log_w)
-        if math.isfinite(rule.log_floor):
-            floored = np.where(np.array([active]), np.maximum(new_log_w, rule.log_floor), -np.inf)
-            new_log_w = normalize_log_weights(floored, new_log_w)
-            new_lw = []
-    if mismatch:
-        decision = MODEL_MISMATCH
-    else:
-        decision = (
-            DECIDED
-            if max(new_lw or new_log_w[0].tolist()) >= rule.log_decision_threshold
-            else UNDECIDED
-        )
-    stats = {
-        "decision": np.array([decision]),
-        "model_error": np.array([model_error]),
-        "autocorrelation": np.array([rho]),
-        "evidence_scale": np.array([scale]),
-        "checked": np.array([(not mismatch) and samples >= MIN_CHECKED_SAMPLES]),
-        "verified": np.array([verified]),
-    }
-    return new_log_w, new_state, stats
+    return new_state, model_error, rho, samples, mismatch, scale
 
 
 def _clipped_scores(score: np.ndarray, active: list[bool], all_active: bool) -> list[float]:

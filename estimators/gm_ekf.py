@@ -694,7 +694,14 @@ class GaussianMixtureEKF:
         :mod:`estimators.evidence`)."""
         aim = evidence[AIM_OFFSET]
         moved = dict(evidence)
-        moved[AIM_OFFSET] = aim + self._aim_rate * (x_post[:, 1].reshape(aim.shape) - aim)
+        rate = self._aim_rate
+        if aim.shape[0] == 1:  # one run: in Python floats (the same operations)
+            lateral = x_post[:, 1].tolist()
+            moved[AIM_OFFSET] = np.array(
+                [[a + rate * (y - a) for a, y in zip(aim[0].tolist(), lateral, strict=True)]]
+            )
+            return moved
+        moved[AIM_OFFSET] = aim + rate * (x_post[:, 1].reshape(aim.shape) - aim)
         return moved
 
     def _observed(self, z: np.ndarray) -> tuple[np.ndarray, bool]:
