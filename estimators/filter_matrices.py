@@ -295,6 +295,7 @@ class FilterMatrices:
         self._h_maps = h_maps.reshape(4, 3 * n).copy()
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
         self._h_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._h_scratch: tuple[np.ndarray, np.ndarray] | None = None
         self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
         self._none_gated_cache: np.ndarray | None = None
         self._measurement_var_column = self.measurement_var[:, None].copy()
@@ -303,6 +304,10 @@ class FilterMatrices:
         self._process_noise_variants = np.stack(
             [self.process_noise, self.process_noise_decorrelated, self.process_noise_vehicle]
         )
+        self._process_noise_by_variant = dict(
+            zip(_VARIANTS, self._process_noise_variants, strict=True)
+        )
+        self._has_memory = model.n_memory > 0
 
     def _features(
         self, x: np.ndarray, points: np.ndarray | None = None, speed: np.ndarray | None = None
@@ -375,6 +380,7 @@ class FilterMatrices:
         *,
         road_points: np.ndarray | None = None,
         held: np.ndarray | None = None,
+        missing_acceleration: bool | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """x(k+1|k) (B, n) and P(k+1|k) (B, n, n) for B = R * C flattened hypotheses.
 
@@ -386,55 +392,36 @@ class FilterMatrices:
             road_points: (R, 4) road points at k (None: straight road).
             held: (R,) True for runs whose memory is held (below ``min_speed``);
                 None: none.
+            missing_acceleration: whether some entry of ``acceleration`` is NaN, if the
+                caller knows (None: tested here).
         """
         n_runs = acceleration.shape[0]
         n = x.shape[1]
-        any_missing_acc = any_nan(acceleration)
+        any_missing_acc = (
+            any_nan(acceleration) if missing_acceleration is None else missing_acceleration
+        )
         if any_missing_acc:
             missing_acc = np.isnan(acceleration)
             acceleration = np.where(missing_acc, 0.0, acceleration)
         codes, variant = self._transition_variants(n_runs, previous_steering, held)
-        has_memory = self.model.n_memory > 0
         w: np.ndarray | None = None
         deriv: np.ndarray | None = None
-        if has_memory and variant != "held":
+        if self._has_memory and variant != "held":
             points_b = None if road_points is None else np.repeat(road_points, n_comp, axis=0)
             w, deriv = self._features(x, points_b)
-
-        def propagate(name: str, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-            """x' and F' of the variant ``name``, on ``rows`` (None: all)."""
-            return self._propagate(name, x, w, deriv, rows)
-
         drive = acceleration @ self.input_matrix_t  # (R, n)
         if codes is not None:
-            # the most common variant on every row, each other one on its own rows only:
-            # every row's arithmetic is its own, the same numbers as on all rows, as long as
-            # the products stay matrix products (one row would be a vector-matrix product,
-            # which BLAS sums in another order: then on all rows, and its rows taken)
-            codes_b = np.repeat(codes, n_comp)
-            counts = np.bincount(codes_b, minlength=len(_VARIANTS))
-            common = int(counts.argmax())
-            x_new, jac = propagate(_VARIANTS[common])
-            if not jac.flags.writeable:  # the held variant's constant F, broadcast
-                jac = jac.copy()
-            for code in np.flatnonzero(counts):
-                if code != common:
-                    rows = np.flatnonzero(codes_b == code)
-                    if rows.size > 1:
-                        x_new[rows], jac[rows] = propagate(_VARIANTS[code], rows)
-                    else:
-                        x_all, jac_all = propagate(_VARIANTS[code])
-                        x_new[rows], jac[rows] = x_all[rows], jac_all[rows]
-            q = self._process_noise_variants[codes_b]
-            decorrelated = codes == 1
-            if decorrelated.any():
-                steering = np.where(decorrelated, previous_steering, 0.0)
-                drive = drive + steering[:, None] * self.steering_gain
+            x_new, jac, q, drive = self._propagate_mixed(
+                x, w, deriv, codes, n_comp, previous_steering, drive
+            )
         else:
             x_new, jac = self._propagate(variant, x, w, deriv, None)
-            q = self._process_noise_variants[_VARIANTS.index(variant)]
+            q = self._process_noise_by_variant[variant]
             if variant == "decorrelated":
-                drive += previous_steering[:, None] * self.steering_gain
+                if n_runs == 1:  # (the same products, s J_j = J_j s)
+                    drive += self.steering_gain * previous_steering.item()
+                else:
+                    drive += previous_steering[:, None] * self.steering_gain
         if n_comp == 1 or n_runs == 1:  # (one run: its row of drive, broadcast)
             x_new += drive
         else:
@@ -449,6 +436,43 @@ class FilterMatrices:
         cov_new = jac @ (jac @ cov).transpose(0, 2, 1)
         cov_new += q
         return x_new, cov_new
+
+    def _propagate_mixed(
+        self,
+        x: np.ndarray,
+        w: np.ndarray | None,
+        deriv: np.ndarray | None,
+        codes: np.ndarray,
+        n_comp: int,
+        previous_steering: np.ndarray,
+        drive: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """x', F', Q and the drive ``B_D a [+ J z_3]`` (R, n) of runs whose transition
+        variants differ (``codes`` (R,), :data:`_VARIANTS`): the most common variant on every
+        row, each other one on its own rows only. Every row's arithmetic is its own, the same
+        numbers as on all rows, as long as the products stay matrix products (one row would be
+        a vector-matrix product, which BLAS sums in another order: then on all rows, and its
+        rows taken)."""
+        codes_b = np.repeat(codes, n_comp)
+        counts = np.bincount(codes_b, minlength=len(_VARIANTS))
+        common = int(counts.argmax())
+        x_new, jac = self._propagate(_VARIANTS[common], x, w, deriv, None)
+        if not jac.flags.writeable:  # the held variant's constant F, broadcast
+            jac = jac.copy()
+        for code in np.flatnonzero(counts):
+            if code != common:
+                rows = np.flatnonzero(codes_b == code)
+                if rows.size > 1:
+                    x_new[rows], jac[rows] = self._propagate(_VARIANTS[code], x, w, deriv, rows)
+                else:
+                    x_all, jac_all = self._propagate(_VARIANTS[code], x, w, deriv, None)
+                    x_new[rows], jac[rows] = x_all[rows], jac_all[rows]
+        q = self._process_noise_variants[codes_b]
+        decorrelated = codes == 1
+        if decorrelated.any():
+            steering = np.where(decorrelated, previous_steering, 0.0)
+            drive = drive + steering[:, None] * self.steering_gain
+        return x_new, jac, q, drive
 
     def _propagate(
         self,
@@ -592,20 +616,19 @@ class FilterMatrices:
         speed = np.hypot(x[:, VX], x[:, VY])
         h = x @ self._measurement_linear_t  # [0, y + b, linear part of h_3]
         h[:, 0] = speed
-        jac_base, jac_base_t = self._measurement_jacobian_bases(n_b)
         if self._steering_uses_bearings:
+            jac_base, jac_base_t = self._measurement_jacobian_bases(n_b)
             w, deriv = self._features(x, points, speed)
             h[:, 2] += w[:, :2] @ self._steering_bearing_gain
             jac = deriv @ self._h_maps
             jac += jac_base
             jac_t = deriv @ self._h_maps_t
             jac_t += jac_base_t
-        else:
-            jac = jac_base.copy()
-            jac_t = jac_base_t.copy()
+        else:  # H is constant but for its speed row, written below
+            jac, jac_t = self._measurement_jacobian_scratch(n_b)
         # speed row: d|v|/dv_x = v_x / |v|, d|v|/dv_y = v_y / |v| (flat indices (0, VX), (0, VY))
-        speed_row = x[:, VX : VY + 1 : VY - VX] / np.maximum(speed, 1e-6)[:, None]
-        jac[:, VX : VY + 1 : VY - VX] = speed_row
+        speed_row = jac[:, VX : VY + 1 : VY - VX]
+        np.divide(x[:, VX : VY + 1 : VY - VX], np.maximum(speed, 1e-6)[:, None], out=speed_row)
         jac_t[:, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
         return h, jac.reshape(n_b, 3, n), jac_t.reshape(n_b, n, 3)
 
@@ -642,9 +665,18 @@ class FilterMatrices:
         hp = jac @ cov  # H P = (P H^T)^T, (B, 3, n)
         s = hp @ jac_t
         s = s.reshape(n_b, 9)
-        s_diag = s[:, ::4]  # (s is not written to below)
-        s_diag += r
-        s_inv, det, mahalanobis_sq, normalized = _inverse_3x3(s, innovation)
+        small = None
+        if n_b <= _MAX_ROWS_IN_FLOATS:
+            try:
+                small = _update_terms_in_floats(s, r, innovation, n_obs)
+            except (ZeroDivisionError, ValueError):  # singular, or a negative variance: numpy's
+                pass  # infinities and NaNs
+        if small is None:
+            s_diag = s[:, ::4]  # (s is not written to below)
+            s_diag += r
+            s_inv, det, mahalanobis_sq, normalized = _inverse_3x3(s, innovation)
+        else:
+            s_inv, s_diag, log_lik, mahalanobis_sq, normalized = small
         gain_t = s_inv @ hp  # K^T (B, 3, n)
         gain = gain_t.transpose(0, 2, 1)
         x_post = (innovation[:, None, :] @ gain_t)[:, 0, :]
@@ -660,11 +692,12 @@ class FilterMatrices:
         cov_post = joseph
         cov_post += joseph.transpose(0, 2, 1)
         cov_post *= 0.5
-        if mahalanobis_sq is None:
-            mahalanobis_sq = np.einsum("bi,bij,bj->b", innovation, s_inv, innovation)
-        log_lik = mahalanobis_sq + np.log(det)
-        log_lik += n_obs * _LOG_2PI
-        log_lik *= -0.5
+        if small is None:
+            if mahalanobis_sq is None:
+                mahalanobis_sq = np.einsum("bi,bij,bj->b", innovation, s_inv, innovation)
+            log_lik = mahalanobis_sq + np.log(det)
+            log_lik += n_obs * _LOG_2PI
+            log_lik *= -0.5
         return x_post, cov_post, log_lik, innovation, s_diag, mahalanobis_sq, normalized
 
     def _run_offsets(self, n_runs: int, n_comp: int) -> np.ndarray:
@@ -684,6 +717,17 @@ class FilterMatrices:
             cached.setflags(write=False)
             self._none_gated_cache = cached
         return cached
+
+    def _measurement_jacobian_scratch(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
+        """H (B, 3n) and H^T (B, 3n) of a model whose H depends on the state through its speed
+        row only: the constant entries, in arrays that every :meth:`_linearize` reuses and
+        rewrites the speed row of (its callers use them within the step and never store
+        them; cached, the largest batch kept and a smaller one taking its first rows)."""
+        cached = self._h_scratch
+        if cached is None or cached[0].shape[0] < n_b:
+            cached = (np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1)))
+            self._h_scratch = cached
+        return cached[0][:n_b], cached[1][:n_b]
 
     def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
         """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
@@ -799,3 +843,69 @@ def _inverse_3x3_in_floats(
             distances_list.append(total)
         distances, normalized = np.array(distances_list), np.array(normalized_list)
     return np.array(inverses).reshape(-1, 3, 3), np.array(dets), distances, normalized
+
+
+def _update_terms_in_floats(
+    s: np.ndarray, r: np.ndarray, innovation: np.ndarray, n_obs: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The update's terms of a few filters in Python floats, from ``s = H P H^T`` (B, 9)
+    without R: the same operations in the same order as the numpy path (``S = s + diag(R)``,
+    :func:`_inverse_3x3_in_floats`, then ``-1/2 ((nu^T S^-1 nu + log det S) + m log 2 pi)``
+    with numpy's ``log``), so the same bits; raises as :func:`_inverse_3x3_in_floats` does.
+
+    Args:
+        s: (B, 9) ``H P H^T`` flattened row-major.
+        r: the diagonal of R, (3,) or (B, 3).
+        innovation: nu, (B, 3).
+        n_obs: m, the observed rows: a float, or (B,) counts.
+
+    Returns:
+        S^-1 (B, 3, 3), diag(S) (B, 3), the log-likelihoods (B,), ``nu^T S^-1 nu`` (B,) and
+        ``nu_c / sqrt(S_cc)`` (B, 3).
+    """
+    rows = s.tolist()
+    r_rows = [r.tolist()] * len(rows) if r.ndim == 1 else r.tolist()
+    inverses, dets, diagonals, distances, normalized = [], [], [], [], []
+    for (s0, s1, s2, s3, s4, s5, s6, s7, s8), (r0, r1, r2), (v0, v1, v2) in zip(
+        rows, r_rows, innovation.tolist(), strict=True
+    ):
+        s0 += r0
+        s4 += r1
+        s8 += r2
+        a0, a1, a2 = s4 * s8 - s5 * s7, s2 * s7 - s1 * s8, s1 * s5 - s2 * s4
+        a3, a4, a5 = s5 * s6 - s3 * s8, s0 * s8 - s2 * s6, s2 * s3 - s0 * s5
+        a6, a7, a8 = s3 * s7 - s4 * s6, s1 * s6 - s0 * s7, s0 * s4 - s1 * s3
+        det = s0 * a0 + s1 * a3
+        det += s2 * a6
+        i0, i1, i2 = a0 / det, a1 / det, a2 / det
+        i3, i4, i5 = a3 / det, a4 / det, a5 / det
+        i6, i7, i8 = a6 / det, a7 / det, a8 / det
+        inverses.append([i0, i1, i2, i3, i4, i5, i6, i7, i8])
+        dets.append(det)
+        diagonals.append([s0, s4, s8])
+        normalized.append([v0 / math.sqrt(s0), v1 / math.sqrt(s4), v2 / math.sqrt(s8)])
+        total = 0.0 + (v0 * i0) * v0  # numpy.einsum's order (_inverse_3x3_in_floats)
+        total += (v0 * i1) * v1
+        total += (v0 * i2) * v2
+        total += (v1 * i3) * v0
+        total += (v1 * i4) * v1
+        total += (v1 * i5) * v2
+        total += (v2 * i6) * v0
+        total += (v2 * i7) * v1
+        total += (v2 * i8) * v2
+        distances.append(total)
+    if isinstance(n_obs, np.ndarray):
+        constants = [n * _LOG_2PI for n in n_obs.tolist()]
+    else:
+        constants = [n_obs * _LOG_2PI] * len(rows)
+    log_lik = [
+        ((d + log_det) + c) * -0.5
+        for d, log_det, c in zip(distances, np.log(dets).tolist(), constants, strict=True)
+    ]
+    return (
+        np.array(inverses).reshape(-1, 3, 3),
+        np.array(diagonals),
+        np.array(log_lik),
+        np.array(distances),
+        np.array(normalized),
+    )

@@ -637,11 +637,11 @@ class GaussianMixtureEKF:
         """One step k-1 -> k of the runs of ``state``: the rules in order (class docstring);
         ``points`` are the road points at k (None: straight)."""
         z, all_observed = self._observed(z)
-        acc = _plausible_acceleration(acc, self.settings.max_acceleration)
+        acc, missing_acc = _plausible_acceleration(acc, self.settings.max_acceleration)
         steering = z[:, 2]
         off = state.channel_off
         any_off = any_true(off)
-        x_pred, cov_pred = self._predict(state, acc, off if any_off else None)
+        x_pred, cov_pred = self._predict(state, acc, off if any_off else None, missing_acc)
         if any_off:
             z, all_observed = _without_steering(z, off), False
         x_post, cov_post, log_lik, gated, normalized = self._update(
@@ -715,7 +715,11 @@ class GaussianMixtureEKF:
         return z, all_observed
 
     def _predict(
-        self, state: MixtureState, acc: np.ndarray, held: np.ndarray | None
+        self,
+        state: MixtureState,
+        acc: np.ndarray,
+        held: np.ndarray | None,
+        missing_acceleration: bool | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Predict (paper eq. 11 and 13, :meth:`FilterMatrices.predict_batch`)::
 
@@ -723,7 +727,8 @@ class GaussianMixtureEKF:
             P_i(k|k-1) = F'_i P_i(k-1|k-1) F'_i^T + Q
 
         with the road points of k-1; the memory of the ``held`` runs (R,) bool (steering
-        channel off) is held, and a NaN ``a`` (missing) is 0 with its large process noise."""
+        channel off) is held, and a NaN ``a`` (missing) is 0 with its large process noise
+        (``missing_acceleration``: whether ``acc`` has a NaN, if known)."""
         return self.matrices.predict_batch(
             state.x,
             state.P,
@@ -732,6 +737,7 @@ class GaussianMixtureEKF:
             state.log_w.shape[1],
             road_points=state.road_points,
             held=held,
+            missing_acceleration=missing_acceleration,
         )
 
     def _update(
@@ -937,12 +943,13 @@ def _memory_steering(
     return np.where(dropped, np.nan, steering)
 
 
-def _plausible_acceleration(acc: np.ndarray, limit: float) -> np.ndarray:
-    """The IMU input with non-finite entries and entries beyond +-``limit`` (m/s^2) set to NaN."""
+def _plausible_acceleration(acc: np.ndarray, limit: float) -> tuple[np.ndarray, bool | None]:
+    """The IMU input with non-finite entries and entries beyond +-``limit`` (m/s^2) set to NaN,
+    and False when it has no NaN (None: it may have)."""
     if math.isinf(limit):
         if all_finite(acc):
-            return acc
-        return np.where(np.isfinite(acc), acc, np.nan)
+            return acc, False
+        return np.where(np.isfinite(acc), acc, np.nan), None
     if all_within(acc, limit):  # False with a NaN
-        return acc
-    return np.where(np.abs(acc) <= limit, acc, np.nan)
+        return acc, False
+    return np.where(np.abs(acc) <= limit, acc, np.nan), None
