@@ -95,6 +95,15 @@ class Estimate:
     innovation_autocorrelation: np.ndarray | float = math.nan
     evidence_scale: np.ndarray | float = 1.0
 
+    @classmethod
+    def of_fields(cls, **fields: Any) -> Estimate:
+        """The estimate of every field by name, as ``Estimate(**fields)`` builds it but without
+        the frozen dataclass' ``object.__setattr__`` per field (the single car's filter builds
+        one a step; ``tests/test_estimators_single_run_floats.py`` checks the two agree)."""
+        estimate = object.__new__(cls)
+        estimate.__dict__.update(fields)
+        return estimate
+
     @property
     def decided(self) -> np.ndarray | bool:
         """True where the decision state is ``"decided"`` (a bool for a single run)."""

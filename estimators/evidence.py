@@ -446,12 +446,14 @@ def _aim_capped_list(
     (None: it did not)."""
     (prior,) = log_prior.tolist()
     (prev,) = previous.tolist()
+    (aim,) = aim_offset.tolist()
     factor = -0.5 / aim_variance
-    score = [a * a * factor for a in aim_offset[0].tolist()]
     best = lw.index(max(lw))
-    base, previous_base, best_score = lw[best] - prior[best], prev[best] - prior[best], score[best]
+    base, previous_base = lw[best] - prior[best], prev[best] - prior[best]
+    best_score = aim[best] * aim[best] * factor
     capped = []
-    for w, p, v, s in zip(lw, prior, prev, score, strict=True):
+    for w, p, v, a in zip(lw, prior, prev, aim, strict=True):
+        s = a * a * factor
         if not math.isfinite(w):
             capped.append(-math.inf)
             continue
@@ -690,8 +692,9 @@ def _rule_one(
         verified_log_w = state["_verified_log_w"]
         outcome = (MODEL_MISMATCH, model_error, rho, scale, checked, verified)
         return verified_log_w[0].tolist(), verified_log_w, new_state, outcome
-    increment = [d / scale for d in log_lik[0].tolist()]
-    raw = [w + d if a else -math.inf for w, d, a in zip(lw, increment, active, strict=True)]
+    raw = []
+    for w, d, a in zip(lw, log_lik[0].tolist(), active, strict=True):
+        raw.append(w + d / scale if a else -math.inf)
     new_lw = _normalized_one(raw)
     new_log_w: np.ndarray | None = None
     if not new_lw:
@@ -712,23 +715,34 @@ def _statistics_one(
 ) -> tuple[dict[str, np.ndarray], float, float, float, bool, float]:
     """:func:`_updated_statistics` and :func:`_run_statistics` of one run in floats: the new
     statistics (unchanged arrays kept when the steering channel was not used), lambda, rho,
-    the effective samples N, the mismatch test and tau."""
+    the effective samples N, the mismatch test and tau. The scores u_i are clipped to +-1e3
+    (0 for the inactive hypotheses; a NaN stays: the channel was not used), and the best
+    fitting hypothesis is the active one with the least e_i, the first of equals (0 when
+    none is active)."""
     alpha = rule.alpha
     keep = 1.0 - alpha
-    all_active = False not in active
-    u = _clipped_scores(score, active, all_active)
-    used = not any(map(math.isnan, u))
-    weight = state["_evidence_weight"].item()
-    weight_sq = state["_evidence_weight_sq"].item()
     (nis,) = state["_nis"].tolist()
     (lag,) = state["_lag_product"].tolist()
+    u = []
+    used = True
+    for v, a in zip(score[0].tolist(), active, strict=True):
+        if not a:
+            v = 0.0
+        elif not -1e3 <= v <= 1e3:
+            v = min(max(v, -1e3), 1e3)  # (NaN stays: the channel was not used)
+            used = used and v == v
+        u.append(v)
     new_state = dict(state)
+    weight = state["_evidence_weight"].item()
+    weight_sq = state["_evidence_weight_sq"].item()
     if used:
-        (last,) = state["_last_score"].tolist()
         weight = keep * weight + alpha
         weight_sq = (keep * keep) * weight_sq + alpha * alpha
-        nis = [keep * n + alpha * (v * v) for n, v in zip(nis, u, strict=True)]
-        lag = [keep * g + alpha * (v * p) for g, v, p in zip(lag, u, last, strict=True)]
+        new_nis, new_lag = [], []
+        for n, g, v, p in zip(nis, lag, u, state["_last_score"][0].tolist(), strict=True):
+            new_nis.append(keep * n + alpha * (v * v))
+            new_lag.append(keep * g + alpha * (v * p))
+        nis, lag = new_nis, new_lag
         new_state["_evidence_weight"] = np.array([weight])
         new_state["_evidence_weight_sq"] = np.array([weight_sq])
         new_state["_nis"] = np.array([nis])
@@ -736,41 +750,26 @@ def _statistics_one(
         new_state["_last_score"] = np.array([u])
     else:  # the statistics stay; the next lag product is 0 (a gap)
         new_state["_last_score"] = np.zeros((1, len(u)))
-    best = _best_fitting(nis, active, all_active)
-    best_nis = nis[best]
+    best = -1
+    for i, a in enumerate(active):
+        if a and (best < 0 or nis[i] < nis[best]):
+            best = i
+    best_nis = nis[max(best, 0)]
     model_error = best_nis / weight if weight > 0 else math.nan
-    rho = lag[best] / best_nis if best_nis != 0 else math.nan
-    rho_plus = 0.0 if math.isnan(rho) else min(max(rho, 0.0), MAX_AUTOCORRELATION)
+    rho = lag[max(best, 0)] / best_nis if best_nis != 0 else math.nan
+    rho_plus = 0.0 if rho != rho else min(max(rho, 0.0), MAX_AUTOCORRELATION)
     inflation = (1.0 + rho_plus) / (1.0 - rho_plus)
     samples = weight * weight / (weight_sq * inflation) if weight_sq > 0 else 0.0
+    mismatch = False
     if samples > 0:
         h = 2.0 / (9.0 * samples)
         ratio = 1.0 - h + MISMATCH_QUANTILE_Z * math.sqrt(h)
         mismatch = model_error > rule.mismatch_model_error * (ratio * ratio * ratio)
-    else:
-        mismatch = False
     bounded = model_error
-    if rule.bound_z and not math.isnan(model_error):
+    if rule.bound_z and model_error == model_error:
         bounded = _bound_one(model_error, samples, rule.bound_z)
-    scale = min((1.0 if math.isnan(bounded) else max(bounded, 1.0)) * inflation, MAX_EVIDENCE_SCALE)
+    scale = min((1.0 if bounded != bounded else max(bounded, 1.0)) * inflation, MAX_EVIDENCE_SCALE)
     return new_state, model_error, rho, samples, mismatch, scale
-
-
-def _clipped_scores(score: np.ndarray, active: list[bool], all_active: bool) -> list[float]:
-    """One run's normalized steering innovations u_i (1, C) clipped to +-1e3, 0 for the
-    inactive hypotheses (a NaN stays: the channel was not used)."""
-    (u,) = score.tolist()
-    if all_active:
-        return [v if -1e3 <= v <= 1e3 else min(max(v, -1e3), 1e3) for v in u]
-    return [(min(max(v, -1e3), 1e3) if a else 0.0) for v, a in zip(u, active, strict=True)]
-
-
-def _best_fitting(nis: list[float], active: list[bool], all_active: bool) -> int:
-    """The active hypothesis with the least e_i (the first of equals; 0 when none is active)."""
-    if all_active:
-        return min(zip(nis, range(len(nis)), strict=True))[1]
-    candidates = [(n, i) for i, (n, a) in enumerate(zip(nis, active, strict=True)) if a]
-    return min(candidates)[1] if candidates else 0
 
 
 def _weigh(
@@ -951,9 +950,12 @@ def _normalized_one(log_w: list[float]) -> list[float]:
     total = log_w[0]
     for value in log_w[1:]:
         total = _logaddexp(total, value)
-    if not math.isfinite(total):
+    if not -math.inf < total < math.inf:  # (not finite)
         return []
-    return [value - total for value in log_w]
+    normalized = []
+    for value in log_w:
+        normalized.append(value - total)
+    return normalized
 
 
 def decision_names(codes: np.ndarray | int) -> np.ndarray | str:

@@ -525,19 +525,19 @@ class GaussianMixtureEKF:
             x = state.x  # (C, n) for the single run
             log_w = state.log_w[0]
             w = np.exp(log_w)
-            return Estimate(
-                w @ x,
-                x,
-                state.P,
-                w,
-                log_w,
-                int(log_w.argmax()),
-                state.hypotheses[0],
-                self.state_names,
-                DECISIONS[state.decision.item()],
-                state.model_error.item(),
-                state.autocorrelation.item(),
-                state.evidence_scale.item(),
+            return Estimate.of_fields(
+                mean=w @ x,
+                component_means=x,
+                component_covariances=state.P,
+                weights=w,
+                log_weights=log_w,
+                most_likely=int(log_w.argmax()),
+                hypotheses=state.hypotheses[0],
+                state_names=self.state_names,
+                decision=DECISIONS[state.decision.item()],
+                model_error=state.model_error.item(),
+                innovation_autocorrelation=state.autocorrelation.item(),
+                evidence_scale=state.evidence_scale.item(),
             )
         n_runs, n_comp = state.log_w.shape
         n = state.x.shape[1]
