@@ -295,7 +295,6 @@ class FilterMatrices:
         self._h_maps = h_maps.reshape(4, 3 * n).copy()
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
         self._h_cache: tuple[np.ndarray, np.ndarray] | None = None
-        self._h_scratch: tuple[np.ndarray, np.ndarray] | None = None
         self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
         self._none_gated_cache: np.ndarray | None = None
         self._measurement_var_column = self.measurement_var[:, None].copy()
@@ -304,10 +303,23 @@ class FilterMatrices:
         self._process_noise_variants = np.stack(
             [self.process_noise, self.process_noise_decorrelated, self.process_noise_vehicle]
         )
+        self._build_small_batch_operands()
+
+    def _build_small_batch_operands(self) -> None:
+        """Operands of the few-filter paths (one run's step): lists for the float paths, rows
+        where a broadcast costs more than the operation, and the caches of :meth:`_tiled` and
+        :meth:`_constant_jacobians`."""
+        self._h_scratch: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._tiled_cache: dict[tuple[tuple[str, str], int], np.ndarray] = {}
+        self._measurement_var_rows = np.repeat(
+            self._measurement_var_column, self.model.n_states, axis=1
+        )
+        self._inverse_distance_list = self._inverse_distance.tolist()
         self._process_noise_by_variant = dict(
             zip(_VARIANTS, self._process_noise_variants, strict=True)
         )
-        self._has_memory = model.n_memory > 0
+        self._has_memory = self.model.n_memory > 0
+        self._steering_gain_row = self.steering_gain[None, :].copy()
 
     def _features(
         self, x: np.ndarray, points: np.ndarray | None = None, speed: np.ndarray | None = None
@@ -319,6 +331,9 @@ class FilterMatrices:
         derivative ``(1 / dx) / (1 + ((y - dy) / dx)^2)`` for near and far; y reads y - p
         with the driver's preferred offset p. ``speed``: ``hypot(v_x, v_y)`` (B,) if known."""
         vx, vy = x[:, VX], x[:, VY]
+        if x.shape[0] <= _MAX_ROWS_IN_FLOATS:
+            ratio_rows, inverse_rows = self._bearing_ratios_in_floats(x, points)
+            return _features_in_floats(vx, vy, ratio_rows, inverse_rows, speed)
         lateral = x[:, Y, None]
         if self.model.preferred_offset:
             lateral = lateral - x[:, PREFERRED_OFFSET, None]
@@ -328,8 +343,6 @@ class FilterMatrices:
         else:
             inverse = 1.0 / points[:, 0::2]
             ratio = (lateral - points[:, 1::2]) * inverse
-        if x.shape[0] <= _MAX_ROWS_IN_FLOATS:
-            return _features_in_floats(vx, vy, ratio, inverse, speed)
         w = np.empty((x.shape[0], 3))
         np.add(np.arctan(ratio), np.arctan2(vy, vx)[:, None], out=w[:, :2])
         w[:, 2] = vy
@@ -344,6 +357,31 @@ class FilterMatrices:
         np.multiply(x[:, VY::-VY], self._theta_sign / speed_sq[:, None], out=deriv[:, :2])
         np.divide(inverse, 1.0 + ratio * ratio, out=deriv[:, 2:])
         return w, deriv
+
+    def _bearing_ratios_in_floats(
+        self, x: np.ndarray, points: np.ndarray | None
+    ) -> tuple[list[float], list[float]]:
+        """:meth:`_features`' ratios ``(y - dy_near) / dx_near, (y - dy_far) / dx_far`` (as
+        ``(y - dy) * (1 / dx)``; y - p with the preferred offset p; dy = 0 and dx the
+        distances on a straight road) and inverses ``1 / dx`` of a few filters, flat (2 B)
+        lists, near and far of each filter in turn, in Python floats: the same operations
+        as the numpy path."""
+        if self.model.preferred_offset:
+            lateral = (x[:, Y] - x[:, PREFERRED_OFFSET]).tolist()
+        else:
+            lateral = x[:, Y].tolist()
+        ratios: list[float] = []
+        if points is None:
+            i_near, i_far = self._inverse_distance_list
+            for y in lateral:
+                ratios += (y * i_near, y * i_far)
+            return ratios, self._inverse_distance_list * len(lateral)
+        inverses: list[float] = []
+        for y, (dx_near, dy_near, dx_far, dy_far) in zip(lateral, points.tolist(), strict=True):
+            i_near, i_far = 1.0 / dx_near, 1.0 / dx_far
+            ratios += ((y - dy_near) * i_near, (y - dy_far) * i_far)
+            inverses += (i_near, i_far)
+        return ratios, inverses
 
     def _transition_variants(
         self, n_runs: int, previous_steering: np.ndarray, held: np.ndarray | None
@@ -416,10 +454,10 @@ class FilterMatrices:
             )
         else:
             x_new, jac = self._propagate(variant, x, w, deriv, None)
-            q = self._process_noise_by_variant[variant]
+            q = self._tiled(("Q", variant), self._process_noise_by_variant[variant], x.shape[0])
             if variant == "decorrelated":
                 if n_runs == 1:  # (the same products, s J_j = J_j s)
-                    drive += self.steering_gain * previous_steering.item()
+                    drive += self._steering_gain_row * previous_steering.item()
                 else:
                     drive += previous_steering[:, None] * self.steering_gain
         if n_comp == 1 or n_runs == 1:  # (one run: its row of drive, broadcast)
@@ -493,8 +531,21 @@ class FilterMatrices:
             return x_new, np.broadcast_to(jac_base.reshape(n, n), (x_rows.shape[0], n, n))
         x_new += (w if rows is None else w[rows]) @ g_t
         jac = (deriv if rows is None else deriv[rows]) @ maps
-        jac += jac_base
+        jac += self._tiled(("F", name), jac_base, jac.shape[0])
         return x_new, jac.reshape(-1, n, n)
+
+    def _tiled(self, key: tuple[str, str], array: np.ndarray, n_rows: int) -> np.ndarray:
+        """``array`` as an operand for ``n_rows`` rows: tiled to (n_rows, ...) for a few rows
+        (cached, read-only; numpy's broadcasting costs more than the operation on arrays of a
+        few numbers), else itself (broadcast). The same numbers either way."""
+        if n_rows > _MAX_ROWS_IN_FLOATS:
+            return array
+        cached = self._tiled_cache.get((key, n_rows))
+        if cached is None:
+            cached = np.tile(array, (n_rows,) + (1,) * array.ndim)
+            cached.setflags(write=False)
+            self._tiled_cache[(key, n_rows)] = cached
+        return cached
 
     def update_batch(
         self,
@@ -624,8 +675,8 @@ class FilterMatrices:
             jac += jac_base
             jac_t = deriv @ self._h_maps_t
             jac_t += jac_base_t
-        else:  # H is constant but for its speed row, written below
-            jac, jac_t = self._measurement_jacobian_scratch(n_b)
+        else:  # H is constant but for its speed row
+            return h, *self._constant_jacobians(x, speed)
         # speed row: d|v|/dv_x = v_x / |v|, d|v|/dv_y = v_y / |v| (flat indices (0, VX), (0, VY))
         speed_row = jac[:, VX : VY + 1 : VY - VX]
         np.divide(x[:, VX : VY + 1 : VY - VX], np.maximum(speed, 1e-6)[:, None], out=speed_row)
@@ -685,12 +736,22 @@ class FilterMatrices:
         # A = (I - K H) P = P - K (H P), then A (I - K H)^T + K R K^T
         # = A + (R K^T - (A H^T)^T)^T K^T
         joseph = cov - gain @ hp
-        r_col = self._measurement_var_column if all_observed else r[:, :, None]
+        if not all_observed:
+            r_col = r[:, :, None]
+        elif n_b <= _MAX_ROWS_IN_FLOATS:  # R's diagonal along every row of K^T (B, 3, n)
+            r_col = self._tiled(("R", ""), self._measurement_var_rows, n_b)
+        else:
+            r_col = self._measurement_var_column
         correction = gain_t * r_col
-        correction -= (joseph @ jac_t).transpose(0, 2, 1)
+        # transposed operands: for a few filters copied first (the same numbers; numpy's
+        # strided loop, and its copy of an operand overlapping the output, cost more there)
+        few = n_b <= _MAX_ROWS_IN_FLOATS
+        correction_h = (joseph @ jac_t).transpose(0, 2, 1)
+        correction -= correction_h.copy() if few else correction_h
         joseph += correction.transpose(0, 2, 1) @ gain_t
+        joseph_t = joseph.transpose(0, 2, 1)
         cov_post = joseph
-        cov_post += joseph.transpose(0, 2, 1)
+        cov_post += joseph_t.copy() if few else joseph_t
         cov_post *= 0.5
         if small is None:
             if mahalanobis_sq is None:
@@ -718,16 +779,34 @@ class FilterMatrices:
             self._none_gated_cache = cached
         return cached
 
-    def _measurement_jacobian_scratch(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
-        """H (B, 3n) and H^T (B, 3n) of a model whose H depends on the state through its speed
-        row only: the constant entries, in arrays that every :meth:`_linearize` reuses and
-        rewrites the speed row of (its callers use them within the step and never store
-        them; cached, the largest batch kept and a smaller one taking its first rows)."""
+    def _constant_jacobians(
+        self, x: np.ndarray, speed: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """H (B, 3, n) and H^T (B, n, 3) at ``x`` (B, n) (``speed`` (B,) its |v|) of a model
+        whose H depends on the state through its speed row only
+        (``d|v|/dv_x = v_x / max(|v|, 1e-6)``, likewise v_y), written into arrays of the
+        constant entries that every call reuses (its callers use them within the step and
+        never store them; cached, the largest batch kept and a smaller one taking its first
+        rows). For a few filters the speed row is divided in Python floats (the same
+        operations; ``max`` keeping a NaN, as ``numpy.maximum``)."""
+        n_b, n = x.shape
         cached = self._h_scratch
         if cached is None or cached[0].shape[0] < n_b:
-            cached = (np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1)))
+            jac, jac_t = np.tile(self._h_base, (n_b, 1)), np.tile(self._h_base_t, (n_b, 1))
+            cached = (jac, jac_t, jac.reshape(n_b, 3, n), jac_t.reshape(n_b, n, 3))
             self._h_scratch = cached
-        return cached[0][:n_b], cached[1][:n_b]
+        jac, jac_t, jac_3d, jac_t_3d = cached
+        if n_b > _MAX_ROWS_IN_FLOATS:
+            speed_row = jac[:n_b, VX : VY + 1 : VY - VX]
+            np.divide(x[:, VX : VY + 1 : VY - VX], np.maximum(speed, 1e-6)[:, None], out=speed_row)
+            jac_t[:n_b, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
+            return jac_3d[:n_b], jac_t_3d[:n_b]
+        rows = zip(x[:, VX].tolist(), x[:, VY].tolist(), speed.tolist(), strict=True)
+        for b, (v_x, v_y, v) in enumerate(rows):
+            v = v if not v < 1e-6 else 1e-6
+            jac_3d[b, 0, VX] = jac_t_3d[b, VX, 0] = v_x / v
+            jac_3d[b, 0, VY] = jac_t_3d[b, VY, 0] = v_y / v
+        return jac_3d[:n_b], jac_t_3d[:n_b]
 
     def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
         """The constant parts of H (B, 3n) and H^T (B, 3n), tiled for B filters (cached)."""
@@ -746,35 +825,38 @@ _COF_D = np.array([7, 8, 4, 8, 6, 5, 6, 7, 3])
 
 
 def _features_in_floats(
-    vx: np.ndarray, vy: np.ndarray, ratio: np.ndarray, inverse: np.ndarray, speed: np.ndarray | None
+    vx: np.ndarray,
+    vy: np.ndarray,
+    ratio: list[float],
+    inverse: list[float],
+    speed: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`FilterMatrices._features` of a few filters (B <= ``_MAX_ROWS_IN_FLOATS``) from
-    its ``ratio`` (B, 2) and ``inverse`` ((2,) or (B, 2)): the same numpy calls for atan,
-    atan2 and hypot, the same arithmetic in Python floats for the rest (``max(v^2, 1e-12)``
-    with a NaN kept, as ``numpy.maximum``)."""
+    its ratios and inverses, flat (2 B) lists (:meth:`FilterMatrices._bearing_ratios_in_floats`):
+    the same numpy calls for atan (elementwise: a flat array gives each entry the bits of the
+    (B, 2) one), atan2 and hypot, the same arithmetic in Python floats for the rest
+    (``max(v^2, 1e-12)`` with a NaN kept, as ``numpy.maximum``)."""
     theta = np.arctan2(vy, vx).tolist()
-    bearing = np.arctan(ratio).tolist()
+    bearing = np.arctan(np.array(ratio)).tolist()
     speed_list = (np.hypot(vx, vy) if speed is None else speed).tolist()
-    ratio_list = ratio.tolist()
-    inverse_rows = inverse.tolist() if inverse.ndim == 2 else [inverse.tolist()] * len(theta)
-    w, deriv = [], []
-    rows = zip(
-        vx.tolist(), vy.tolist(), theta, bearing, speed_list, ratio_list, inverse_rows, strict=True
-    )
-    for v_x, v_y, angle, (near, far), v, (r_near, r_far), (i_near, i_far) in rows:
+    w: list[float] = []
+    deriv: list[float] = []
+    for b, (v_x, v_y, angle, v) in enumerate(
+        zip(vx.tolist(), vy.tolist(), theta, speed_list, strict=True)
+    ):
         speed_sq = v * v
         if speed_sq < 1e-12:
             speed_sq = 1e-12
-        w.append([near + angle, far + angle, v_y])
-        deriv.append(
-            [
-                v_y * (-1.0 / speed_sq),
-                v_x * (1.0 / speed_sq),
-                i_near / (1.0 + r_near * r_near),
-                i_far / (1.0 + r_far * r_far),
-            ]
+        r_near, r_far = ratio[2 * b], ratio[2 * b + 1]
+        w += (bearing[2 * b] + angle, bearing[2 * b + 1] + angle, v_y)
+        deriv += (
+            v_y * (-1.0 / speed_sq),
+            v_x * (1.0 / speed_sq),
+            inverse[2 * b] / (1.0 + r_near * r_near),
+            inverse[2 * b + 1] / (1.0 + r_far * r_far),
         )
-    return np.array(w), np.array(deriv)
+    n_b = len(theta)
+    return np.array(w).reshape(n_b, 3), np.array(deriv).reshape(n_b, 4)
 
 
 def _inverse_3x3(
@@ -864,8 +946,12 @@ def _update_terms_in_floats(
         ``nu_c / sqrt(S_cc)`` (B, 3).
     """
     rows = s.tolist()
-    r_rows = [r.tolist()] * len(rows) if r.ndim == 1 else r.tolist()
-    inverses, dets, diagonals, distances, normalized = [], [], [], [], []
+    n_b = len(rows)
+    r_rows = [r.tolist()] * n_b if r.ndim == 1 else r.tolist()
+    inverses: list[float] = []  # flat, as diagonals and normalized
+    diagonals: list[float] = []
+    normalized: list[float] = []
+    dets, distances = [], []
     for (s0, s1, s2, s3, s4, s5, s6, s7, s8), (r0, r1, r2), (v0, v1, v2) in zip(
         rows, r_rows, innovation.tolist(), strict=True
     ):
@@ -880,32 +966,26 @@ def _update_terms_in_floats(
         i0, i1, i2 = a0 / det, a1 / det, a2 / det
         i3, i4, i5 = a3 / det, a4 / det, a5 / det
         i6, i7, i8 = a6 / det, a7 / det, a8 / det
-        inverses.append([i0, i1, i2, i3, i4, i5, i6, i7, i8])
+        inverses += (i0, i1, i2, i3, i4, i5, i6, i7, i8)
         dets.append(det)
-        diagonals.append([s0, s4, s8])
-        normalized.append([v0 / math.sqrt(s0), v1 / math.sqrt(s4), v2 / math.sqrt(s8)])
-        total = 0.0 + (v0 * i0) * v0  # numpy.einsum's order (_inverse_3x3_in_floats)
-        total += (v0 * i1) * v1
-        total += (v0 * i2) * v2
-        total += (v1 * i3) * v0
-        total += (v1 * i4) * v1
-        total += (v1 * i5) * v2
-        total += (v2 * i6) * v0
-        total += (v2 * i7) * v1
-        total += (v2 * i8) * v2
-        distances.append(total)
+        diagonals += (s0, s4, s8)
+        normalized += (v0 / math.sqrt(s0), v1 / math.sqrt(s4), v2 / math.sqrt(s8))
+        # numpy.einsum's order (_inverse_3x3_in_floats), left to right
+        distances.append(0.0 + (v0 * i0) * v0 + (v0 * i1) * v1 + (v0 * i2) * v2
+                         + (v1 * i3) * v0 + (v1 * i4) * v1 + (v1 * i5) * v2
+                         + (v2 * i6) * v0 + (v2 * i7) * v1 + (v2 * i8) * v2)  # fmt: skip
     if isinstance(n_obs, np.ndarray):
         constants = [n * _LOG_2PI for n in n_obs.tolist()]
     else:
-        constants = [n_obs * _LOG_2PI] * len(rows)
+        constants = [n_obs * _LOG_2PI] * n_b
     log_lik = [
         ((d + log_det) + c) * -0.5
         for d, log_det, c in zip(distances, np.log(dets).tolist(), constants, strict=True)
     ]
     return (
-        np.array(inverses).reshape(-1, 3, 3),
-        np.array(diagonals),
+        np.fromiter(inverses, np.float64, 9 * n_b).reshape(n_b, 3, 3),
+        np.array(diagonals).reshape(n_b, 3),
         np.array(log_lik),
         np.array(distances),
-        np.array(normalized),
+        np.array(normalized).reshape(n_b, 3),
     )

@@ -308,7 +308,7 @@ class GaussianMixtureEKF:
         self.state_names = self.model.state_names
         threshold = settings.prune_threshold
         ratio = settings.steering_ratio if self.model.has_steering else np.nan
-        self._measurement_scale = np.array([1.0, 1.0, ratio])
+        self._measurement_scale = np.array([[1.0, 1.0, ratio]])  # (a row: cheaper for one run)
         self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
         # the aim cap bounds the steering's lane evidence: without a steering model it is off

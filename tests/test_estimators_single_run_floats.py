@@ -2,15 +2,17 @@
 
 A single run's arrays hold a few numbers, where numpy's per-call overhead dominates, so the
 mixture filter does some of one run's arithmetic in Python floats
-(:mod:`estimators.small_arrays`, ``_features_in_floats`` and ``_inverse_3x3_in_floats`` of
-:mod:`estimators.filter_matrices`, ``_normalized_one`` of :mod:`estimators.evidence`): the same
-IEEE operations in the same order as numpy's, so the same bits. Each is compared with the numpy
-arithmetic it replaces, and a run filtered alone (the float paths) with the same run inside a
-batch large enough for the numpy paths, at every step and in every output.
+(:mod:`estimators.small_arrays`, ``_features_in_floats``, ``_inverse_3x3_in_floats`` and
+``_update_terms_in_floats`` of :mod:`estimators.filter_matrices`, one run's whole evidence rule
+with the aim cap in :mod:`estimators.evidence`): the same IEEE operations in the same order as
+numpy's, so the same bits. Each is compared with the numpy arithmetic it replaces, and a run
+filtered alone (the float paths) with the same run inside a batch large enough for the numpy
+paths, at every step and in every output, with the aim cap on, tight and off.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -19,13 +21,15 @@ import pytest
 
 from benchmarks.protocol.config import ProtocolConfig
 from benchmarks.protocol.plan import load_frames, synthetic_plan
-from estimators import FilterSettings, GaussianMixtureEKF
+from estimators import Estimate, FilterSettings, GaussianMixtureEKF
 from estimators.evidence import _logaddexp, _normalized_one
 from estimators.filter_matrices import (
+    _LOG_2PI,
     _MAX_ROWS_IN_FLOATS,
     FilterMatrices,
     _inverse_3x3,
     _inverse_3x3_in_floats,
+    _update_terms_in_floats,
     filter_model,
 )
 from estimators.offline import run_estimator, stack_recordings
@@ -82,6 +86,60 @@ def test_inverse_and_distance_in_floats_are_numpys() -> None:
         with np.errstate(divide="ignore", invalid="ignore"):
             inverse, det, distance, normalized = _inverse_3x3(singular, np.ones((1, 3)))
         assert distance is None and normalized is None
+
+
+def test_update_terms_in_floats_are_numpys() -> None:
+    """S = s + diag(R), its inverse, nu^T S^-1 nu, nu_c / sqrt(S_cc) and the log-likelihoods
+    of a few filters in floats are the numpy path's, with every channel observed (R (3,), m
+    a float) and with missing ones (R (B, 3), m per filter)."""
+    rng = np.random.default_rng(SEED + 4)
+    for trial in range(3000):
+        n_rows = int(rng.integers(1, _MAX_ROWS_IN_FLOATS + 1))
+        root = rng.standard_normal((n_rows, 3, 3))
+        s = (root @ root.transpose(0, 2, 1)).reshape(n_rows, 9) * 10.0 ** rng.uniform(-5, 3)
+        v = rng.standard_normal((n_rows, 3)) * 10.0 ** rng.uniform(-3, 2)
+        r: np.ndarray = rng.uniform(1e-4, 1.0, 3)
+        n_obs: float | np.ndarray = 3.0
+        if trial % 2:  # missing channels: innovation 0, variance 1, m counts the others
+            observed = rng.random((n_rows, 3)) < 0.7
+            v, r = np.where(observed, v, 0.0), np.where(observed, r, 1.0)
+            n_obs = observed.sum(axis=1)
+        inverse, s_diag, log_lik, distance, normalized = _update_terms_in_floats(s, r, v, n_obs)
+        with_r = s.copy()
+        with_r[:, ::4] += r
+        tiles = _MAX_ROWS_IN_FLOATS + 1  # the numpy path: a batch too large for the floats
+        numpy_inverse, det, _, _ = _inverse_3x3(np.tile(with_r, (tiles, 1)))
+        numpy_inverse, det = numpy_inverse[:n_rows], det[:n_rows]
+        expected_distance = np.einsum("bi,bij,bj->b", v, numpy_inverse, v)
+        expected = expected_distance + np.log(det)
+        expected += n_obs * _LOG_2PI
+        expected *= -0.5
+        np.testing.assert_array_equal(inverse, numpy_inverse)
+        np.testing.assert_array_equal(s_diag, with_r[:, ::4])
+        np.testing.assert_array_equal(distance, expected_distance)
+        np.testing.assert_array_equal(normalized, v / np.sqrt(with_r[:, ::4]))
+        np.testing.assert_array_equal(log_lik, expected)
+    for s in (-np.eye(3).reshape(1, 9), -2.0 * np.eye(3).reshape(1, 9)):  # S = 0; S = -I
+        with pytest.raises((ZeroDivisionError, ValueError)):  # as the inverse (numpy's then)
+            _update_terms_in_floats(s, np.ones(3), np.ones((1, 3)), 3.0)
+        with pytest.raises((ZeroDivisionError, ValueError)):
+            _inverse_3x3_in_floats(s + np.eye(3).reshape(1, 9), np.ones((1, 3)))
+
+
+def test_estimate_of_fields_is_the_dataclass() -> None:
+    rng = np.random.default_rng(SEED + 5)
+    root = rng.standard_normal((2, 8, 8))
+    fields = {"mean": rng.standard_normal(8), "component_means": rng.standard_normal((2, 8)),
+              "component_covariances": root @ root.transpose(0, 2, 1), "weights": np.ones(2) / 2,
+              "log_weights": np.log(np.ones(2) / 2), "most_likely": 1,
+              "hypotheses": np.array([0.0, -3.6]), "state_names": tuple("abcdefgh"),
+              "decision": "decided", "model_error": 1.5, "innovation_autocorrelation": 0.2,
+              "evidence_scale": 3.0}  # fmt: skip
+    ours, theirs = Estimate.of_fields(**fields), Estimate(**fields)
+    assert set(fields) == {field.name for field in dataclasses.fields(Estimate)}
+    assert vars(ours) == vars(theirs) and repr(ours) == repr(theirs)
+    np.testing.assert_array_equal(ours.covariance, theirs.covariance)
+    np.testing.assert_array_equal(ours.std, theirs.std)
 
 
 @pytest.mark.parametrize("preferred_offset_std", [0.0, 0.3])
@@ -171,6 +229,9 @@ def _outputs(ekf: GaussianMixtureEKF, est, run: int | None) -> list[np.ndarray]:
         ("generalized", {"mismatch_model_error": 1.05, "commit_time": 0.2}),
         ("two-point", {"steering_curvature_limit": 0.004, "max_acceleration": 3.0}),
         ("two-point", {"evidence_checks": False, "preferred_offset_std": 0.3}),
+        ("generalized", {"aim_offset_std": 0.0}),
+        ("generalized", {"aim_offset_std": 0.1, "aim_offset_time": 0.5, "commit_time": 0.2}),
+        ("two-point", {"aim_offset_std": 0.15, "mismatch_model_error": 1.05}),
     ],
 )
 def test_a_run_alone_is_filtered_as_in_a_large_batch(frames, model, overrides) -> None:
