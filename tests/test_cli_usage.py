@@ -25,6 +25,16 @@ def test_an_abbreviated_option_is_refused_with_the_option_it_may_mean(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def test_an_option_of_another_subcommand_is_named_as_such(tmp_path):
+    # (it said "unrecognized arguments: --out x (did you mean '--out'?)")
+    done = run_program("hasa-bench", "perf", "--out", "x", cwd=tmp_path)
+    assert done.returncode == 2
+    (line,) = _error_lines(done.stderr, "hasa-bench")
+    assert "unrecognized arguments: --out x" in line
+    assert "(--out is an option of 'hasa-bench paper' and 'hasa-bench score' only)" in line
+    assert "did you mean" not in line
+
+
 def test_a_misspelt_choice_and_subcommand_get_a_suggestion(tmp_path):
     done = run_program("hasa-bench", "paper", "--scenario", "lane_shfit", cwd=tmp_path)
     assert done.returncode == 2 and "did you mean 'lane_shift'?" in done.stderr
