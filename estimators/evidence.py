@@ -479,7 +479,7 @@ def _weigh_evidence_one(
     state: dict[str, np.ndarray],
 ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """:func:`weigh_evidence` of one run with the rule enabled and no forgetting, in Python
-    floats: :func:`_weigh_one`, :func:`_aim_capped_one`, :func:`_store_verified` and
+    floats: :func:`_rule_one`, :func:`_aim_capped_one`, :func:`_store_verified` and
     :func:`_hold_first_decision`'s arithmetic in the same order, each array built once."""
     lw, new_log_w, new_state, run = _rule_one(rule, log_w, log_lik, score, state)
     decision, model_error, rho, scale, checked, verified = run
@@ -645,29 +645,6 @@ def _hold_first_decision(
     return np.where(contradicted[:, None], prior, log_w)
 
 
-def _weigh_one(
-    rule: EvidenceRule,
-    log_w: np.ndarray,
-    log_lik: np.ndarray,
-    score: np.ndarray,
-    state: dict[str, np.ndarray],
-) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """:func:`_weigh` for one run, in Python floats (the same arithmetic in the same order:
-    a single car's filter step spends most of its time in numpy's per-call overhead on
-    arrays of two numbers; ``tests/test_estimators_evidence.py`` checks the two agree)."""
-    new_lw, new_log_w, new_state, run = _rule_one(rule, log_w, log_lik, score, state)
-    decision, model_error, rho, scale, checked, verified = run
-    stats = {
-        "decision": np.array([decision]),
-        "model_error": np.array([model_error]),
-        "autocorrelation": np.array([rho]),
-        "evidence_scale": np.array([scale]),
-        "checked": np.array([checked]),
-        "verified": np.array([verified]),
-    }
-    return np.array([new_lw]) if new_log_w is None else new_log_w, new_state, stats
-
-
 _RunOutcome = tuple[int, float, float, float, bool, bool]
 """One run's decision code, lambda, rho, tau, and whether its step was checked and verified."""
 
@@ -679,8 +656,11 @@ def _rule_one(
     score: np.ndarray,
     state: dict[str, np.ndarray],
 ) -> tuple[list[float], np.ndarray | None, dict[str, np.ndarray], _RunOutcome]:
-    """:func:`_weigh_one` without its arrays: the new log weights as a list (and as an array
-    when one exists already: None, else), the new statistics and the run's outcome."""
+    """:func:`_weigh` for one run, in Python floats (the same arithmetic in the same order:
+    a single car's filter step spends most of its time in numpy's per-call overhead on
+    arrays of two numbers; ``tests/test_estimators_evidence.py`` checks the two agree): the
+    new log weights as a list (and as an array when one exists already: None, else), the
+    new statistics and the run's outcome."""
     (lw,) = log_w.tolist()
     active = list(map(math.isfinite, lw))
     new_state, model_error, rho, samples, mismatch, scale = _statistics_one(

@@ -264,7 +264,20 @@ def test_the_wrappers_report_the_decision_state():
     st.sampled_from([0.0, 0.95]),
 )
 def test_the_single_run_path_equals_the_batched_one(steps, prior, confidence):
-    from estimators.evidence import _weigh, _weigh_one
+    from estimators.evidence import _rule_one, _weigh
+
+    def weigh_one(log_w, log_lik, score, state):  # the float path's outcome as _weigh's arrays
+        lw, new_log_w, new_state, run = _rule_one(rule, log_w, log_lik, score, state)
+        decision, model_error, rho, scale, checked, verified = run
+        stats = {
+            "decision": np.array([decision]),
+            "model_error": np.array([model_error]),
+            "autocorrelation": np.array([rho]),
+            "evidence_scale": np.array([scale]),
+            "checked": np.array([checked]),
+            "verified": np.array([verified]),
+        }
+        return np.array([lw]) if new_log_w is None else new_log_w, new_state, stats
 
     rule = _rule(mismatch_model_error=2.0, evidence_confidence=confidence)
     with np.errstate(divide="ignore"):
@@ -273,7 +286,7 @@ def test_the_single_run_path_equals_the_batched_one(steps, prior, confidence):
     for l0, l1, s0, s1 in steps:
         log_lik = np.array([[l0, l1]])
         score = np.array([[s0, s0 if math.isnan(s0) else s1]])
-        w1, st1, stats1 = _weigh_one(rule, one[0], log_lik, score, one[1])
+        w1, st1, stats1 = weigh_one(one[0], log_lik, score, one[1])
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             w2, st2, stats2 = _weigh(rule, batched[0], log_lik, score, batched[1])
         np.testing.assert_allclose(w1, w2, rtol=1e-12, atol=1e-12)
