@@ -210,14 +210,15 @@ class ArgumentParser(argparse.ArgumentParser):
         if unknown:
             options = sorted({o for p in self._parsers() for o in p._option_string_actions})
             for word in unknown.group(1).split():
+                if not word.startswith("-"):
+                    continue
                 name = word.split("=")[0]
                 owners = [p.prog for p in self._parsers() if name in p._option_string_actions]
-                if word.startswith("-") and owners:  # spelt right, given to another command
+                if owners:  # spelt right, given to another command
                     return f" ({name} is an option of {' and '.join(map(repr, owners))} only)"
-                if word.startswith("-"):
-                    close = difflib.get_close_matches(name, options, n=1)
-                    if close:
-                        return f" (did you mean {close[0]!r}?)"
+                close = difflib.get_close_matches(name, options, n=1)
+                if close:
+                    return f" (did you mean {close[0]!r}?)"
             return ""
         choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
         if choice:

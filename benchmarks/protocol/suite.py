@@ -53,8 +53,8 @@ __all__ = ["fit_key", "run_suite"]
 def fit_key(plan: Plan) -> str:
     """Every input of a seed's fits that a scenario can change, as text: the seed, the
     training runs (their seeds), the extra training speeds and training drivers, the
-    training runs' env config and every driver's parameters. Two plans of one suite (the same protocol settings but
-    the scenario) with the same key get the same fits."""
+    training runs' env config and every driver's parameters. Two plans of one suite (the
+    same protocol settings but the scenario) with the same key get the same fits."""
     trainings = [dataclasses.astuple(ref) for ref in plan.trainings()]
     drivers = {name: params.to_dict() for name, params in plan.params.items()}
     return json.dumps(
