@@ -6,10 +6,20 @@ can show them without importing the protocol (statsmodels, matplotlib: seconds).
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_MODEL_TIME_LIMIT", "DEFAULT_SEEDS", "NO_WORKER_TIMEOUT"]
+__all__ = [
+    "DEFAULT_MODEL_TIME_LIMIT",
+    "DEFAULT_SEEDS",
+    "DEFAULT_TRAINING_DRIVERS",
+    "NO_WORKER_TIMEOUT",
+]
 
 DEFAULT_SEEDS = (0, 1, 2, 3, 4)
 """Population seeds of ``hasa-bench paper`` (the verdict's intervals are over them)."""
+
+DEFAULT_TRAINING_DRIVERS = 8
+"""Extra drivers of the population, one run each, that also train the models of a synthetic
+``hasa-bench paper`` (docs/design.md §8.21; 0, the paper's one-run protocol, is
+``--training-drivers 0``; recordings: always 0)."""
 
 DEFAULT_MODEL_TIME_LIMIT = 600.0
 """Time limit in s of one call into a user model (import, a fit, a batch of runs)."""

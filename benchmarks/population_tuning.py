@@ -95,7 +95,13 @@ def evaluate(
         "sdlp", "left_road_runs", "within_range"}``.
     """
     with _variant(population, command_scale, pedal_scale) as name:
-        config = ProtocolConfig(population=name, seeds=tuple(seeds), estimate=False, curved_runs=0)
+        config = ProtocolConfig(
+            population=name,
+            seeds=tuple(seeds),
+            estimate=False,
+            curved_runs=0,
+            training_drivers=0,  # table 1 is of a fit on the illustrative participant
+        )
         result = run_protocol(config, workers=workers)
     per_seed = []
     for seed in seeds:

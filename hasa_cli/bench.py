@@ -37,7 +37,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS, NO_WORKER_TIMEOUT
+from benchmarks.defaults import (
+    DEFAULT_MODEL_TIME_LIMIT,
+    DEFAULT_SEEDS,
+    DEFAULT_TRAINING_DRIVERS,
+    NO_WORKER_TIMEOUT,
+)
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_OK,
@@ -204,11 +209,11 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
     rec.add_argument(
         "--training-drivers",
         type=int,
-        default=0,
+        default=None,
         metavar="N",
         help="also train the models on one run each of N more drivers drawn from the same "
-        "population, scored nowhere (synthetic runs; default 0: the paper's protocol, the "
-        "illustrative driver only)",
+        f"population, scored nowhere (synthetic runs; default {DEFAULT_TRAINING_DRIVERS}, with "
+        "--recordings 0; 0: the paper's protocol, the illustrative driver only)",
     )
     rec.add_argument(
         "--training-speeds",

@@ -522,7 +522,9 @@ def test_recordings_give_the_same_numbers_as_the_synthetic_runs(tmp_path: Path) 
     """Saved runs (the recording format writes floats exactly) score exactly as generated."""
     from hasa_env.drivers import population, run_population, save_runs
 
-    config = ProtocolConfig(seeds=(0,), drivers=2, runs=2, ill_runs=3, duration=3.0, curved_runs=1)
+    config = ProtocolConfig(
+        seeds=(0,), drivers=2, runs=2, ill_runs=3, duration=3.0, curved_runs=1, training_drivers=0
+    )  # recordings train on the illustrative driver's runs only
     synthetic = run_protocol(config, workers=1)
     drivers = population("paper", seed=0, size=2)
     env = config.env_config()  # the population's study conditions and the run length

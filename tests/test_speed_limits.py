@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -54,9 +55,13 @@ def test_a_fit_records_its_speeds_and_the_model_file_keeps_them(tmp_path) -> Non
 def test_the_benchmark_gives_each_model_its_training_speeds() -> None:
     config = ProtocolConfig(
         seeds=(0,), drivers=2, runs=1, ill_runs=2, duration=4.0, curved_runs=0,
-        population="paper-pi",
+        population="paper-pi", training_drivers=0,
     )  # fmt: skip
     result = run_protocol(config, workers=1)
     limits = {m["name"]: m["steering_speed_limits"] for m in result.models if not m.get("error")}
     low, high = limits["generalized"]
     assert 0 < low < 15.0 < high < 17.0  # the training run starts at 15 m/s and holds it here
+    # the default also trains on 8 more drivers, whose speeds the limits then span
+    result = run_protocol(dataclasses.replace(config, training_drivers=None), workers=1)
+    limits = {m["name"]: m["steering_speed_limits"] for m in result.models if not m.get("error")}
+    assert limits["generalized"][0] <= low and limits["generalized"][1] > high + 1.0

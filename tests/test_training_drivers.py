@@ -1,5 +1,7 @@
-"""Training on several drivers (issue 25 item 1, docs/design.md §8.20): ``--training-drivers N``
-adds one run each of N drivers drawn from the same population, scored nowhere."""
+"""Training on several drivers (issue 25 item 1, docs/design.md §8.20, §8.21):
+``--training-drivers N`` adds one run each of N drivers drawn from the same population, scored
+nowhere; 8 by default for synthetic runs, 0 (the paper's protocol) on request and with
+recordings."""
 
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from hasa_cli.bench import main
 TINY = ["--seed", "0", "--population", "paper-pi", "--drivers", "2", "--runs", "1",
         "--ill-runs", "2", "--duration", "4", "--curved-runs", "0", "--no-plots", "--quiet"]  # fmt: skip
 CONFIG = ProtocolConfig(seeds=(0,), population="paper-pi", drivers=2, runs=1, ill_runs=2,
-                        duration=4.0, curved_runs=0)  # fmt: skip
+                        duration=4.0, curved_runs=0, training_drivers=0)  # fmt: skip
 
 
 def test_the_training_drivers_are_a_draw_of_their_own_named_apart_and_reproducible() -> None:
@@ -40,8 +42,11 @@ def test_the_training_drivers_are_a_draw_of_their_own_named_apart_and_reproducib
     assert fit_key(plan) == fit_key(make_plan(config, 0))
 
 
-def test_the_default_is_the_papers_protocol_without_other_drivers() -> None:
-    assert ProtocolConfig().training_drivers == 0
+def test_the_default_trains_on_eight_more_drivers_and_zero_is_the_papers_protocol() -> None:
+    assert ProtocolConfig().training_drivers == 8
+    assert ProtocolConfig(recordings="r").training_drivers == 0  # no population to draw from
+    default = make_plan(replace(CONFIG, training_drivers=None), 0)
+    assert len(default.driver_trainings()) == 8
     plan = make_plan(CONFIG, 0)
     assert plan.driver_trainings() == [] and plan.training_drivers == ()
 
@@ -60,10 +65,11 @@ def test_training_drivers_out_of_range_are_refused(settings: dict, message: str)
 
 def test_the_training_drivers_train_the_models_and_are_scored_nowhere(tmp_path: Path) -> None:
     plain, more = tmp_path / "plain", tmp_path / "more"
-    assert main(["paper", *TINY, "--out", str(plain)]) == 0
+    assert main(["paper", *TINY, "--training-drivers", "0", "--out", str(plain)]) == 0
     assert main(["paper", *TINY, "--training-drivers", "2", "--out", str(more)]) == 0
     doc = json.loads((more / "results.json").read_text())
     assert doc["config"]["training_drivers"] == 2
+    assert json.loads((plain / "results.json").read_text())["config"]["training_drivers"] == 0
     assert (
         "models fitted on run 0 of Ill (each seed's) and one run each of 2 more drivers of the "
         "population." in (more / "report.md").read_text()

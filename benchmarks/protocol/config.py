@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS
+from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS, DEFAULT_TRAINING_DRIVERS
 from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
 from hasa_env.scenarios import SCENARIOS
@@ -91,7 +91,10 @@ _SCHEMA = schema(
         "training_run": _count("Index of the training run.", 0),
         "training_runs": _count("Runs of the illustrative driver that train the models.", 1),
         "training_drivers": _count(
-            "Extra drivers of the population, one run each, that also train the models.", 0
+            "Extra drivers of the population, one run each, that also train the models "
+            "(null: 8 for synthetic runs, 0 with recordings).",
+            0,
+            True,
         ),
         "training_speeds": Field(
             "numbers", doc="Start speeds of extra training runs of the illustrative driver.",
@@ -177,8 +180,10 @@ class ProtocolConfig:
             :func:`~benchmarks.protocol.plan.training_population`), one run each in the
             training scenario, that also train the models and are scored nowhere (synthetic
             runs only): a model fitted on several drivers meets the scored drivers' steering
-            with residuals nearer its own level (docs/design.md §8.20). 0: the paper's
-            protocol (the illustrative driver only).
+            with residuals nearer its own level (docs/design.md §8.20). None (the default):
+            :data:`~benchmarks.defaults.DEFAULT_TRAINING_DRIVERS` (8) for synthetic runs, 0
+            with ``recordings`` (§8.21); 0: the paper's protocol (the illustrative driver
+            only).
         training_speeds: start speeds (m/s) of extra runs of the illustrative driver that
             also train the models, one run each, driven in the training scenario from its
             own seeds and scored nowhere (synthetic runs only): a model fitted at the
@@ -235,7 +240,7 @@ class ProtocolConfig:
     illustrative: str | None = None
     training_run: int = 0
     training_runs: int = 1
-    training_drivers: int = 0
+    training_drivers: int | None = None
     training_speeds: tuple[float, ...] = ()
     batch_size: int = 100
     ljung_box_lags: int = 20
@@ -267,6 +272,9 @@ class ProtocolConfig:
             error=lambda path, message: BenchmarkError(message),
         )
         object.__setattr__(self, "seeds", tuple(self.seeds))
+        if self.training_drivers is None:  # the default: several drivers, unless recorded
+            default = 0 if self.recordings is not None else DEFAULT_TRAINING_DRIVERS
+            object.__setattr__(self, "training_drivers", default)
         object.__setattr__(self, "training_speeds", tuple(float(v) for v in self.training_speeds))
         object.__setattr__(self, "filter_settings", dict(self.filter_settings))
         names = [f.name for f in fields(FilterSettings)]
@@ -295,8 +303,9 @@ class ProtocolConfig:
         if self.training_drivers and self.recordings is not None:
             raise BenchmarkError(
                 "protocol setting 'training_drivers' drives extra synthetic training runs; "
-                "with 'recordings' it must be 0 (recorded models train on the illustrative "
-                "participant's recordings: 'illustrative', 'training_runs')"
+                "with 'recordings' it must be 0 or None, which resolves to 0 (recorded models "
+                "train on the illustrative participant's recordings: 'illustrative', "
+                "'training_runs')"
             )
         if self.training_speeds and self.recordings is not None:
             raise BenchmarkError(
