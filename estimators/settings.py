@@ -205,7 +205,9 @@ class FilterSettings:
             lateral offset averaged over ``aim_offset_time`` (:mod:`estimators.evidence`, the
             aim cap; docs/design.md §8.19). Default 0.3 m: people hold the car 0.2-0.5 m
             from the centre. 0: no cap (the filter before it).
-        aim_offset_time: time constant (s) of that average.
+        aim_offset_time: time constant (s) of that average. Default 10 s (2 s before
+            docs/design.md §8.23: a 2 s average follows the car's wander, and the cap's
+            ratchet kept the largest bound any wander allowed).
     """
 
     speed_noise_std: float = 0.05
@@ -240,7 +242,7 @@ class FilterSettings:
     preferred_offset_std: float = 0.0
     preferred_offset_drift_std: float = 0.0
     aim_offset_std: float = 0.3
-    aim_offset_time: float = 2.0
+    aim_offset_time: float = 10.0
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and

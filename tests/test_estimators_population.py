@@ -67,7 +67,10 @@ def test_swapping_the_true_hypothesis_keeps_the_error_statistics(results):
     for name in results[0]["names"]:
         a = results[0]["rmse"][results[0]["owner"] == name]
         b = results[1]["rmse"][results[1]["owner"] == name]
-        assert abs(a.mean() - b.mean()) < 0.005, name
+        # the start (0.5 m off the true centre) lies toward the other hypothesis in one case
+        # and away from it in the other; the aim cap's 10 s average remembers it (docs/design.md
+        # §8.23): measured 0.0002-0.0070 m apart (0.0026 m with its former 2 s average)
+        assert abs(a.mean() - b.mean()) < 0.01, name
         assert abs(a.std() - b.std()) < 0.005, name
 
 
