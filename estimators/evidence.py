@@ -106,9 +106,9 @@ Aim cap (``aim_offset_std`` sigma_a > 0; docs/design.md §8.19): on a straight r
 who aims p off the centre of lane i steers exactly as one who aims p + d off the centre of a
 lane d away, so with the aim unknown the steering tells lanes apart only as far as a prior on
 where people hold the car does. The filter keeps, per run and hypothesis, the car's lateral
-offset from that hypothesis' centre averaged over ``aim_offset_time`` (a_i; 10 s, §8.23), and after the
-tempering, before the decision and the reversal rule, no run's log-odds grow past that
-prior's::
+offset from that hypothesis' centre averaged over ``aim_offset_time`` (a_i; 10 s, §8.23), and
+after the tempering, before the decision and the reversal rule, no run's log-odds grow past
+that prior's::
 
     A_i = -a_i^2 / (2 sigma_a^2),   b = argmax_i log w_i
     d_i = (log w_b - log pi_b) - (log w_i - log pi_i)
