@@ -303,8 +303,8 @@ class ProtocolConfig:
         if self.training_drivers and self.recordings is not None:
             raise BenchmarkError(
                 "protocol setting 'training_drivers' drives extra synthetic training runs; "
-                "with 'recordings' it must be 0 or None, which resolves to 0 (recorded models "
-                "train on the illustrative participant's recordings: 'illustrative', "
+                "with 'recordings' it must be 0 or left unset, its default there (recorded "
+                "models train on the illustrative participant's recordings: 'illustrative', "
                 "'training_runs')"
             )
         if self.training_speeds and self.recordings is not None:
