@@ -5,17 +5,24 @@ from __future__ import annotations
 
 import importlib.util
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "live_share_ceiling.py"
 
 
-def test_the_ceiling_example_gives_one_live_share_per_driver() -> None:
+def _example() -> ModuleType:
+    """The example, imported afresh from its file (examples/ is no package)."""
     spec = importlib.util.spec_from_file_location("live_share_ceiling", EXAMPLE)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
+    return module
+
+
+def test_the_ceiling_example_gives_one_live_share_per_driver() -> None:
+    module = _example()
     table = module.main(["--seeds", "7000", "--drivers", "2", "--runs", "2", "--duration", "6"])
     assert list(table["driver"]) == ["Ill", "1"]
     assert table["live"].between(0.0, 1.0).all()
@@ -28,10 +35,7 @@ def test_the_ceiling_example_gives_one_live_share_per_driver() -> None:
 def test_the_ceiling_example_fits_the_autoregression_it_is_given(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    spec = importlib.util.spec_from_file_location("live_share_ceiling", EXAMPLE)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _example()
     fitted = []
     real = module.GeneralizedModel
 
