@@ -92,7 +92,7 @@ _SCHEMA = schema(
         "training_runs": _count("Runs of the illustrative driver that train the models.", 1),
         "training_drivers": _count(
             "Extra drivers of the population, one run each, that also train the models "
-            "(null: 8 for synthetic runs, 0 with recordings).",
+            f"(null: {DEFAULT_TRAINING_DRIVERS} for synthetic runs, 0 with recordings).",
             0,
             True,
         ),
