@@ -236,8 +236,11 @@ def _init_worker(parent: int) -> None:
 
 def _terminate_pool(pool: ProcessPoolExecutor) -> None:
     """Stop a process pool now: pending tasks cancelled, running workers terminated
-    (SIGTERM, then SIGKILL after 2 s) and reaped."""
+    (SIGTERM, then SIGKILL after 2 s) and reaped, then the pool's manager thread joined
+    (up to 2 s): at exit CPython wakes a manager thread still running through a pipe it may
+    be closing at that moment ("Exception ignored ... Bad file descriptor" after Ctrl-C)."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         with contextlib.suppress(OSError, ValueError):
@@ -249,6 +252,8 @@ def _terminate_pool(pool: ProcessPoolExecutor) -> None:
             if process.is_alive():
                 process.kill()
                 process.join(1.0)
+    if manager is not None:
+        manager.join(2.0)
 
 
 def _map_dask(
