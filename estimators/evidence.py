@@ -117,6 +117,19 @@ that prior's::
 Log-odds gathered under a larger bound are kept (the hypotheses are constant within a run);
 the cap never adds evidence and never turns it around (:func:`aim_capped_log_weights`).
 
+Path rule (``aim_offset_limit`` z_a, default 4; docs/design.md §8.24): the filter also keeps
+the largest |a_i| each hypothesis' average ever reached (``_aim_reach``). A run in which every
+hypothesis' reach has passed ``z_a sigma_a`` (1.2 m by default) is refused as under the
+reversal rule below, for the rest of the run::
+
+    max_k |a_i(k)| >= z_a sigma_a  for every i   ->   weights = prior, "model_mismatch"
+
+The driver then held the car, for many seconds, where the aim prior puts no driver under any
+hypothesis (a lane shift or a lane change followed on purpose): every lane-keeping steering
+model reads that as evidence for the lane the car now sits in, whichever it is. Found by
+tracing the two-point model's wrong endings in ``lane_shift`` (it decided during the shift,
+for the lane the car was moving into, with no earlier decision for the reversal rule).
+
 Decision state of a run (:data:`DECISIONS`)::
 
     "model_mismatch"  mismatch (above), or a decision reversed (the reversal rule)
@@ -278,6 +291,7 @@ class EvidenceRule:
     commit_steps: float = math.inf
     bound_z: float = 0.0
     aim_variance: float = 0.0
+    aim_limit: float = math.inf
 
     @cached_property
     def log_decision_threshold(self) -> float:
@@ -298,7 +312,15 @@ class EvidenceRule:
             else math.inf,
             bound_z=_normal_quantile(settings.evidence_confidence),
             aim_variance=settings.aim_offset_std**2,
+            aim_limit=settings.aim_offset_limit * settings.aim_offset_std
+            if settings.aim_offset_std > 0
+            else math.inf,
         )
+
+    @property
+    def holds(self) -> bool:
+        """Whether the reversal rule or the path rule can change a run's weights."""
+        return self.enabled and (math.isfinite(self.commit_steps) or math.isfinite(self.aim_limit))
 
 
 def _normal_quantile(probability: float) -> float:
@@ -369,7 +391,7 @@ def weigh_evidence(
     if rule.enabled and rule.aim_variance > 0 and AIM_OFFSET in state:
         new_log_w = _aim_capped(rule, new_log_w, log_w, new_state, stats)
     _store_verified(new_log_w, new_state, stats.pop("verified"))
-    if rule.enabled and math.isfinite(rule.commit_steps):
+    if rule.holds:
         new_log_w = _hold_first_decision(rule, new_log_w, new_state, stats)
     stats.pop("checked", None)
     return new_log_w, new_state, stats
@@ -386,6 +408,62 @@ def aim_offset_rate(settings: FilterSettings, dt: float, has_steering: bool) -> 
 AIM_OFFSET = "_aim_offset"
 """The key of the per-run (R, C) average lateral offset a_i of each hypothesis in the rule's
 state (kept by the filter when ``aim_offset_std`` > 0; :func:`_aim_capped`)."""
+
+AIM_REACH = "_aim_reach"
+"""The key of the per-run (R, C) largest |a_i| so far (kept with :data:`AIM_OFFSET`; the
+path rule, :func:`path_left`)."""
+
+
+def moved_aim_offsets(
+    state: dict[str, np.ndarray], lateral: np.ndarray, rate: float
+) -> dict[str, np.ndarray]:
+    """A copy of the rule's per-run arrays ``state`` with the aim cap's averages moved toward
+    the posterior lateral offsets ``lateral`` (R * C,) and their reach updated::
+
+        a_i <- a_i + rate (y_i - a_i),   reach_i <- max(reach_i, |a_i|)
+
+    ``rate`` = Ts / ``aim_offset_time`` (:func:`aim_offset_rate`)."""
+    aim = state[AIM_OFFSET]
+    moved = dict(state)
+    if aim.shape[0] == 1:  # one run: in Python floats (the same operations)
+        new = [a + rate * (y - a) for a, y in zip(aim[0].tolist(), lateral.tolist(), strict=True)]
+        old = state[AIM_REACH][0].tolist()
+        reach = [r if r >= abs(a) else abs(a) for r, a in zip(old, new, strict=True)]
+        moved[AIM_OFFSET] = np.array([new])
+        moved[AIM_REACH] = np.array([reach])
+        return moved
+    new_aim = aim + rate * (lateral.reshape(aim.shape) - aim)
+    moved[AIM_OFFSET] = new_aim
+    moved[AIM_REACH] = np.maximum(state[AIM_REACH], np.abs(new_aim))
+    return moved
+
+
+def initial_aim_offsets(lateral: np.ndarray) -> dict[str, np.ndarray]:
+    """The aim cap's per-run arrays at reset from the prior lateral offsets ``lateral``
+    (R, C): the averages start there, and so does their reach."""
+    aim = np.array(lateral, dtype=np.float64, copy=True)
+    return {AIM_OFFSET: aim, AIM_REACH: np.abs(aim)}
+
+
+def path_left(rule: EvidenceRule, state: dict[str, np.ndarray]) -> np.ndarray | None:
+    """(R,) True for the runs the path rule (module docstring) refuses at this step: every
+    hypothesis' average offset has reached ``aim_limit`` and the prior is not itself decided
+    (a decided prior is the user's belief: the rule is off, as the reversal rule). None when
+    no run is refused (or the rule is off)."""
+    reach = state.get(AIM_REACH)
+    if reach is None or not math.isfinite(rule.aim_limit):
+        return None
+    if reach.shape[0] == 1:  # one run: in Python floats
+        if min(reach[0].tolist()) < rule.aim_limit:
+            return None
+        if max(state["_log_prior"][0].tolist()) >= rule.log_decision_threshold:
+            return None
+        return np.array([True])
+    left = reach.min(axis=1) >= rule.aim_limit
+    if not any_true(left):
+        return None
+    left &= state["_log_prior"].max(axis=1) < rule.log_decision_threshold
+    return left if any_true(left) else None
 
 
 def aim_capped_log_weights(
@@ -493,7 +571,7 @@ def _weigh_evidence_one(
         new_log_w = np.array([lw])
     if verified:
         new_state["_verified_log_w"] = new_log_w
-    if math.isfinite(rule.commit_steps):
+    if rule.holds:
         new_log_w, decision = _hold_one(rule, lw, new_log_w, new_state, decision, checked)
     stats = {
         "decision": np.array([decision]),
@@ -516,9 +594,10 @@ def _hold_one(
     list): the same tests in the same order; returns the weights and the decision code."""
     (committed,) = state["_committed"].tolist()
     decided = decision == DECIDED
-    if committed >= 0 and (not decided or lw.index(max(lw)) == committed):
+    left = path_left(rule, state) is not None  # refused by the path rule: no shortcut
+    if not left and committed >= 0 and (not decided or lw.index(max(lw)) == committed):
         return log_w, decision
-    if not decided and committed == NOT_COMMITTED:
+    if not left and not decided and committed == NOT_COMMITTED:
         if state["_candidate"][0].tolist() != [0.0, 0.0]:
             state["_candidate"] = np.zeros((1, 2))
         return log_w, decision
@@ -532,7 +611,7 @@ def _hold_one(
     state["_candidate"] = np.array([[candidate, held]])
     is_committed = committed >= 0
     contradicting = decided and is_committed and top != committed
-    contradicted = committed == CONTRADICTED or contradicting
+    contradicted = committed == CONTRADICTED or contradicting or left
     commits = not is_committed and committed != CONTRADICTED and held >= rule.commit_steps
     new_committed = CONTRADICTED if contradicted else (top if commits else committed)
     state["_committed"] = np.array([new_committed])
@@ -613,12 +692,13 @@ def _hold_first_decision(
     returns the weights."""
     checked = stats.pop("checked")
     committed = state["_committed"]
-    if committed.size == 1 and committed[0] >= 0:  # one committed run (the single env's case)
+    left = path_left(rule, state)
+    if left is None and committed.size == 1 and committed[0] >= 0:  # one committed run
         lw = log_w[0].tolist()
         if int(stats["decision"][0]) != DECIDED or lw.index(max(lw)) == committed[0]:
             return log_w
     decided = stats["decision"] == DECIDED
-    if not any_true(decided) and not any_true(committed != NOT_COMMITTED):
+    if left is None and not any_true(decided) and not any_true(committed != NOT_COMMITTED):
         if any_true(state["_candidate"] != 0):
             state["_candidate"] = np.zeros_like(state["_candidate"])
         return log_w  # (nothing decided, nothing committed: the common case at the start)
@@ -633,6 +713,8 @@ def _hold_first_decision(
     is_committed = committed >= 0
     contradicting = decided & is_committed & (top != committed)
     contradicted = (committed == CONTRADICTED) | contradicting
+    if left is not None:
+        contradicted |= left
     commits = ~is_committed & (committed != CONTRADICTED) & (held >= rule.commit_steps)
     state["_committed"] = np.where(contradicted, CONTRADICTED, np.where(commits, top, committed))
     if not any_true(contradicted):

@@ -23,12 +23,14 @@ from estimators.arx_state_space import road_point_rows
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     AIM_OFFSET,
+    AIM_REACH,
     DECIDED,
     EVIDENCE_STATE,
     UNDECIDED,
     EvidenceRule,
     aim_offset_rate,
     decision_names,
+    initial_aim_offsets,
     initial_evidence_state,
     weigh_evidence,
 )
@@ -271,7 +273,7 @@ class FilterpyGMEKF:
         (each hypothesis' y(0)) when the cap is on."""
         evidence = initial_evidence_state(log_w)
         if self._aim_rate:
-            evidence[AIM_OFFSET] = x0[..., 1].copy()
+            evidence.update(initial_aim_offsets(x0[..., 1]))
         return evidence
 
     def _new_bank(self, x0: np.ndarray, log_w: np.ndarray) -> list[ARXExtendedKalmanFilter | None]:
@@ -322,10 +324,12 @@ class FilterpyGMEKF:
         evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
         if self._aim_rate:  # the aim cap's average offsets move toward x(k|k)'s
             aim = self._evidence[AIM_OFFSET][r].copy()
+            reach = self._evidence[AIM_REACH][r].copy()
             for c, ekf in enumerate(bank):
                 if ekf is not None:
                     aim[c] += self._aim_rate * (ekf.x[1, 0] - aim[c])
-            evidence[AIM_OFFSET] = aim[None]
+                    reach[c] = max(reach[c], abs(aim[c]))
+            evidence[AIM_OFFSET], evidence[AIM_REACH] = aim[None], reach[None]
         new_log_w, evidence, stats = weigh_evidence(
             self._rule, log_w[None], log_lik[None], score[None], evidence
         )

@@ -35,14 +35,15 @@ from estimators.arx_state_space import (
 )
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
-    AIM_OFFSET,
     DECIDED,
     DECISIONS,
     UNDECIDED,
     EvidenceRule,
     aim_offset_rate,
     decision_names,
+    initial_aim_offsets,
     initial_evidence_state,
+    moved_aim_offsets,
     normalize_log_weights,
     weigh_evidence,
 )
@@ -623,7 +624,7 @@ class GaussianMixtureEKF:
             straight_points=self._straight_points,
         )
         if self._aim_rate:
-            state.evidence[AIM_OFFSET] = x[..., 1].reshape(n_runs, n_comp).copy()
+            state.evidence.update(initial_aim_offsets(x[..., 1].reshape(n_runs, n_comp)))
         return state
 
     # ------------------------------------------------------------ the rules
@@ -654,7 +655,9 @@ class GaussianMixtureEKF:
             all_active,
             log_lik,
             normalized,
-            self._aim_evidence(state.evidence, x_post) if self._aim_rate else None,
+            moved_aim_offsets(state.evidence, x_post[:, 1], self._aim_rate)
+            if self._aim_rate
+            else None,
         )
         if not all_active:
             x_post, cov_post = _freeze_pruned(state, x_post, cov_post)
@@ -685,24 +688,6 @@ class GaussianMixtureEKF:
             road_points=points,
             straight_points=state.straight_points,
         )
-
-    def _aim_evidence(
-        self, evidence: dict[str, np.ndarray], x_post: np.ndarray
-    ) -> dict[str, np.ndarray]:
-        """The rule's per-run arrays ``evidence`` with the aim cap's average lateral offsets
-        moved toward x(k|k)'s (``a_i <- a_i + (Ts / aim_offset_time) (y_i - a_i)``;
-        :mod:`estimators.evidence`)."""
-        aim = evidence[AIM_OFFSET]
-        moved = dict(evidence)
-        rate = self._aim_rate
-        if aim.shape[0] == 1:  # one run: in Python floats (the same operations)
-            lateral = x_post[:, 1].tolist()
-            moved[AIM_OFFSET] = np.array(
-                [[a + rate * (y - a) for a, y in zip(aim[0].tolist(), lateral, strict=True)]]
-            )
-            return moved
-        moved[AIM_OFFSET] = aim + rate * (x_post[:, 1].reshape(aim.shape) - aim)
-        return moved
 
     def _observed(self, z: np.ndarray) -> tuple[np.ndarray, bool]:
         """Missing measurements: ``z`` (R, 3) with the steering in model units

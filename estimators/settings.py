@@ -64,6 +64,7 @@ _SCHEMA = schema(
         "preferred_offset_drift_std": _non_negative("m"),
         "aim_offset_std": Field("number", unit="m", low=0.0, high=2.0),
         "aim_offset_time": _positive("s"),
+        "aim_offset_limit": _positive(infinite=True),
     }
 )
 """What every field of :class:`FilterSettings` allows."""
@@ -208,6 +209,13 @@ class FilterSettings:
         aim_offset_time: time constant (s) of that average. Default 10 s (2 s before
             docs/design.md §8.23: a 2 s average follows the car's wander, and the cap's
             ratchet kept the largest bound any wander allowed).
+        aim_offset_limit: with the aim cap on, a run in which the average offset of *every*
+            hypothesis has at some step passed ``aim_offset_limit * aim_offset_std`` (in units
+            of sigma_a; default 4: 1.2 m) is refused as a model mismatch for the rest of the
+            run: the driver held the car where the aim prior puts no driver under any
+            hypothesis (a lane shift or change followed on purpose), so no lane-keeping
+            steering model's evidence means anything there (:mod:`estimators.evidence`, the
+            path rule; docs/design.md §8.24). ``math.inf``: off.
     """
 
     speed_noise_std: float = 0.05
@@ -243,6 +251,7 @@ class FilterSettings:
     preferred_offset_drift_std: float = 0.0
     aim_offset_std: float = 0.3
     aim_offset_time: float = 10.0
+    aim_offset_limit: float = 4.0
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and
