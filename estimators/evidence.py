@@ -179,6 +179,13 @@ of a model whose lambda is at the threshold)."""
 NOT_COMMITTED, CONTRADICTED = -1.0, -2.0
 """Codes of ``_committed`` besides a hypothesis index: no decision yet; a decision reversed."""
 
+REFUSALS = ("", "reversal rule", "path rule")
+"""What sent a run back to its prior for good, by the code kept in ``_refused_by`` (R,): 0
+nothing, 1 the reversal rule (a decision contradicted), 2 the path rule (the car left every
+hypothesis' centre; when both fire at one step, the path rule). A run in ``model_mismatch``
+with code 0 is held by the mismatch test, which ends when the model fits again."""
+REVERSAL_RULE, PATH_RULE = 1.0, 2.0
+
 MIN_CHECKED_SAMPLES = 2.0
 """Effective samples lambda needs before a step counts as checked (the reversal rule's commit)."""
 
@@ -271,11 +278,12 @@ EVIDENCE_STATE = (
     "_committed",
     "_candidate",
     "_withheld",
+    "_refused_by",
 )
 """The per-run arrays of the rule (kept by the filter with its other per-run state).
 ``_withheld`` (R,): the hypothesis index of the decision the reversal rule withheld (the
 confident decision that contradicted the committed one and sent the run back to its prior),
-``NOT_COMMITTED`` (-1) while there is none."""
+``NOT_COMMITTED`` (-1) while there is none. ``_refused_by`` (R,): the code of :data:`REFUSALS`."""
 
 
 @dataclass(frozen=True)
@@ -344,6 +352,7 @@ def initial_evidence_state(log_prior: np.ndarray) -> dict[str, np.ndarray]:
         "_committed": np.full(n_runs, NOT_COMMITTED),
         "_candidate": np.zeros((n_runs, 2)),
         "_withheld": np.full(n_runs, NOT_COMMITTED),
+        "_refused_by": np.zeros(n_runs),
     }
 
 
@@ -617,6 +626,8 @@ def _hold_one(
     state["_committed"] = np.array([new_committed])
     if not contradicted:
         return log_w, decision
+    if committed != CONTRADICTED:
+        state["_refused_by"] = np.array([PATH_RULE if left else REVERSAL_RULE])
     prior = state["_log_prior"]
     if contradicting:
         state["_withheld"] = np.array([top])
@@ -719,6 +730,10 @@ def _hold_first_decision(
     state["_committed"] = np.where(contradicted, CONTRADICTED, np.where(commits, top, committed))
     if not any_true(contradicted):
         return log_w
+    newly = contradicted & (committed != CONTRADICTED)
+    if any_true(newly):
+        reason = REVERSAL_RULE if left is None else np.where(left, PATH_RULE, REVERSAL_RULE)
+        state["_refused_by"] = np.where(newly, reason, state["_refused_by"])
     prior = state["_log_prior"]
     if any_true(contradicting):
         state["_withheld"] = np.where(contradicting, top, state["_withheld"])

@@ -264,6 +264,12 @@ class FilterpyGMEKF:
         return withheld[0] if self._single else withheld
 
     @property
+    def refusal_codes(self) -> np.ndarray:
+        """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.refusal_codes`."""
+        codes = self._evidence["_refused_by"].astype(np.int64)
+        return codes[0] if self._single else codes
+
+    @property
     def low_speed(self) -> np.ndarray:
         """See :attr:`estimators.gm_ekf.GaussianMixtureEKF.low_speed`."""
         return self._slow[0].copy() if self._single else self._slow.copy()

@@ -386,6 +386,13 @@ class GaussianMixtureEKF:
         return self._run_view(withheld)
 
     @property
+    def refusal_codes(self) -> np.ndarray:
+        """What sent each run back to its prior for good: (R,) int codes of
+        :data:`estimators.evidence.REFUSALS` (0 nothing, 1 the reversal rule, 2 the path rule;
+        a single run: one int)."""
+        return self._run_view(self._checked_state().evidence["_refused_by"].astype(np.int64))
+
+    @property
     def low_speed(self) -> np.ndarray:
         """Runs whose steering channel is off (speed estimate below ``min_speed``, or the
         road ahead more curved than ``steering_curvature_limit``): (R,) bool (a single run:

@@ -28,7 +28,7 @@ import pandas as pd
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES, check_road_points
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.baselines import NoSteeringEKF
-from estimators.evidence import DECISIONS
+from estimators.evidence import DECISIONS, REFUSALS
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.mixture_trace import MixtureTrace
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
@@ -108,6 +108,9 @@ class EstimationResult:
         withheld: (R,) the hypothesis index of the decision the reversal rule withheld
             (:attr:`GaussianMixtureEKF.withheld_decisions`; -1: none; None if the
             estimator has no such rule).
+        refused_by: (R,) what sent each run back to its prior for good
+            (:attr:`GaussianMixtureEKF.refusal_codes`, codes of
+            :data:`estimators.evidence.REFUSALS`; None if the estimator has no such rule).
     """
 
     state_names: tuple[str, ...]
@@ -128,6 +131,7 @@ class EstimationResult:
     channel_nis: np.ndarray | None = None
     evidence_scale: np.ndarray | None = None
     withheld: np.ndarray | None = None
+    refused_by: np.ndarray | None = None
 
     @property
     def num_runs(self) -> int:
@@ -169,6 +173,19 @@ class EstimationResult:
             raise ValueError("the estimator reported no decision state")
         rows = np.arange(self.num_runs)
         return np.asarray(DECISIONS)[self.decision[rows, self.lengths - 1]]
+
+    def refusal_reasons(self) -> np.ndarray:
+        """(R,) why each run that ends in ``model_mismatch`` does: ``"path rule"`` (the car
+        left every hypothesis' centre), ``"reversal rule"`` (a decision was contradicted) or
+        ``"mismatch test"`` (the model does not fit the steering now; :mod:`estimators.evidence`);
+        ``""`` for the runs that end otherwise."""
+        final = self.final_decision()
+        codes = (
+            np.zeros(self.num_runs, dtype=np.int64) if self.refused_by is None else self.refused_by
+        )
+        names = np.asarray(REFUSALS, dtype=object)[codes]
+        names[names == ""] = "mismatch test"
+        return np.where(final == "model_mismatch", names, "").astype(str)
 
     def wrong_lane_confident(self, threshold: float = 0.95) -> np.ndarray:
         """(R,) runs that end with more than ``threshold`` weight on a single wrong lane."""
@@ -543,6 +560,7 @@ class _Trace:
         self.checking = estimator if isinstance(estimator, _ChannelNIS) else None
         self.coding = estimator if hasattr(estimator, "decision_codes") else None
         self.withholding = estimator if hasattr(estimator, "withheld_decisions") else None
+        self.refusing = estimator if hasattr(estimator, "refusal_codes") else None
         self.gated = np.zeros((n_runs, n_steps, 3), dtype=bool) if self.gating is not None else None
         self.low_speed = (
             np.zeros((n_runs, n_steps), dtype=bool) if self.slowing is not None else None
@@ -566,6 +584,7 @@ class _Trace:
         self.gating = self.slowing = self.checking = self.coding = self.withholding = cast(
             Any, estimator
         )
+        self.refusing = cast(Any, estimator)
         return self
 
     def store(self, k: int, e: Estimate) -> None:
@@ -629,6 +648,9 @@ class _Trace:
             withheld=None
             if self.withholding is None
             else np.atleast_1d(self.withholding.withheld_decisions),
+            refused_by=None
+            if self.refusing is None
+            else np.atleast_1d(self.refusing.refusal_codes),
         )
 
 

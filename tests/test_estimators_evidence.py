@@ -185,6 +185,7 @@ def test_the_reversal_rule_names_the_decision_it_withheld():
     assert np.all(withheld[-1] == [0, -1])  # run 0: a decision for 0 withheld; run 1: none
     first = int(np.argmax(withheld[:, 0] == 0))
     assert np.all(withheld[first:, 0] == 0)  # kept for the rest of the run
+    assert state["_refused_by"].tolist() == [1.0, 0.0]  # REFUSALS[1]: "reversal rule"
 
 
 def test_a_withheld_wrong_decision_counts_as_a_wrong_decision():

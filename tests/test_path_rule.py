@@ -19,6 +19,7 @@ from estimators.evidence import (
     AIM_REACH,
     DECIDED,
     MODEL_MISMATCH,
+    REFUSALS,
     EvidenceRule,
     initial_aim_offsets,
     initial_evidence_state,
@@ -48,6 +49,7 @@ def _step(rule: EvidenceRule, reach: list[list[float]], prior: list[list[float]]
 def test_a_run_that_left_every_centre_is_refused_and_stays_refused():
     (log_w, state, stats), prior = _step(RULE, [[1.8, 1.25], [1.8, 1.15]])
     assert stats["decision"].tolist() == [MODEL_MISMATCH, DECIDED]
+    assert [REFUSALS[int(c)] for c in state["_refused_by"]] == ["path rule", ""]
     np.testing.assert_array_equal(log_w[0], prior[0])  # back to the prior
     assert np.exp(log_w[1, 1]) > 0.95
     # the refusal holds for the rest of the run, whatever the evidence
@@ -115,11 +117,13 @@ def test_a_followed_lane_shift_ends_refused_and_lane_keeping_does_not(shifted_an
     arx = model.paper().arx()
     result = run_estimator(GaussianMixtureEKF(arx, settings), frame)
     assert _final(result) == MODEL_MISMATCH
+    assert result.refusal_reasons().tolist() == ["path rule"]
     # refused by this rule: without it neither the reversal rule nor the mismatch test does
     off = run_estimator(
         GaussianMixtureEKF(arx, replace(settings, aim_offset_limit=math.inf)), frame
     )
     assert _final(off) != MODEL_MISMATCH
+    assert off.refusal_reasons().tolist() == [""]
     kept = shifted_and_kept["paper"]
     settings = FilterSettings.from_env_config(kept.attrs["config"], steering_ratio=15.0)
     result = run_estimator(GaussianMixtureEKF(arx, settings), kept)
