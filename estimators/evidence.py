@@ -126,13 +126,14 @@ reversal rule below, for the rest of the run::
 
 The driver then held the car, for many seconds, where the aim prior puts no driver under any
 hypothesis (a lane shift or a lane change followed on purpose): every lane-keeping steering
-model reads that as evidence for the lane the car now sits in, whichever it is. Found by
-tracing the two-point model's wrong endings in ``lane_shift`` (it decided during the shift,
-for the lane the car was moving into, with no earlier decision for the reversal rule).
+model reads that as evidence for the lane the car now sits in, whichever it is. Found on the
+two-point model's wrong endings in ``lane_shift`` (it decided for the lane the car had been
+moved into, with no earlier decision for the reversal rule to contradict).
 
 Decision state of a run (:data:`DECISIONS`)::
 
-    "model_mismatch"  mismatch (above), or a decision reversed (the reversal rule)
+    "model_mismatch"  mismatch (above), a decision reversed (the reversal rule) or the
+                      car held off every centre (the path rule)
     "decided"         otherwise, when max_i w_i >= decision_threshold
     "undecided"       otherwise
 
