@@ -240,9 +240,10 @@ def describe_estimate(run: EstimatorRun) -> str:
         f"{b:+g} m: {w:.3f}" for b, w in zip(run.hypotheses, run.weights[-1], strict=True)
     )
     trusted = "never" if math.isnan(run.trusted_from) else f"{run.trusted_from:.2f} s"
+    decision = run.final_decision + (f" ({run.refused_by})" if run.refused_by else "")
     return (
         f"lateral RMSE {run.lateral_rmse:.3f} m, final weights [{hyp}], "
-        f"true lane trusted (> 0.9) from {trusted}"
+        f"true lane trusted (> 0.9) from {trusted}, ends {decision}"
     )
 
 

@@ -667,6 +667,10 @@ class EstimatorRun:
         final_true_weight: weight of the true hypothesis at the end (NaN if not among them).
         trusted_from: first time (s) from which the true hypothesis' weight stays above 0.9
             (NaN if never).
+        final_decision: the decision state at the last row (``"undecided"``, ``"decided"``
+            or ``"model_mismatch"``; :mod:`estimators.evidence`).
+        refused_by: for a run that ends in ``model_mismatch``, why
+            (:meth:`EstimationResult.refusal_reasons`); ``""`` otherwise.
     """
 
     weights: np.ndarray
@@ -676,6 +680,8 @@ class EstimatorRun:
     true_index: int
     final_true_weight: float
     trusted_from: float
+    final_decision: str = ""
+    refused_by: str = ""
 
 
 def recording_filter(
@@ -756,11 +762,15 @@ def estimate_recording(
     true_y = data["lateral_offset"].to_numpy(dtype=np.float64)
     rmse = float(np.sqrt(np.mean((lateral - true_y) ** 2)))
     true_index = int(data["bias_index"].iloc[0])
+    outcome = {
+        "final_decision": str(result.final_decision()[0]),
+        "refused_by": str(result.refusal_reasons()[0]),
+    }
     if not 0 <= true_index < hypotheses.size:
         matches = np.flatnonzero(np.isclose(hypotheses, float(data["bias"].iloc[0])))
         true_index = int(matches[0]) if matches.size else -1
     if true_index < 0:
-        return EstimatorRun(weights, hypotheses, lateral, rmse, -1, math.nan, math.nan)
+        return EstimatorRun(weights, hypotheses, lateral, rmse, -1, math.nan, math.nan, **outcome)
     w_true = weights[:, true_index]
     below = np.flatnonzero(w_true <= 0.9)
     if below.size == 0:
@@ -769,7 +779,9 @@ def estimate_recording(
         trusted = float(data["time"].iloc[below[-1] + 1])
     else:
         trusted = math.nan
-    return EstimatorRun(weights, hypotheses, lateral, rmse, true_index, float(w_true[-1]), trusted)
+    return EstimatorRun(
+        weights, hypotheses, lateral, rmse, true_index, float(w_true[-1]), trusted, **outcome
+    )
 
 
 def _road_points(

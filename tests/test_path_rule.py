@@ -139,3 +139,20 @@ def test_filterpy_reference_keeps_the_same_path_rule(shifted_and_kept):
     assert _final(fast) == MODEL_MISMATCH
     np.testing.assert_array_equal(fast.decision, ref.decision)
     np.testing.assert_allclose(fast.weights, ref.weights, rtol=0, atol=1e-9)
+
+
+def test_hasa_replay_says_which_rule_refused_a_recording(shifted_and_kept, tmp_path):
+    from benchmarks.recordings import describe_estimate
+    from estimators.offline import estimate_recording
+    from hasa_env.drivers.runner import recording_meta
+    from hasa_env.recording import load_recording, save_recording
+
+    frame = shifted_and_kept["lane_shift"]
+    recording = load_recording(save_recording(frame, tmp_path / "shift", recording_meta(frame)))
+    run = estimate_recording(recording, GeneralizedModel.paper(), steering_ratio=15.0)
+    assert (run.final_decision, run.refused_by) == ("model_mismatch", "path rule")
+    assert describe_estimate(run).endswith("ends model_mismatch (path rule)")
+    kept = shifted_and_kept["paper"]
+    recording = load_recording(save_recording(kept, tmp_path / "kept", recording_meta(kept)))
+    run = estimate_recording(recording, GeneralizedModel.paper(), steering_ratio=15.0)
+    assert run.refused_by == "" and describe_estimate(run).endswith(f"ends {run.final_decision}")
