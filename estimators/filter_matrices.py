@@ -582,10 +582,15 @@ class FilterMatrices:
         road_points: np.ndarray | None = None,
         gate: float = math.inf,
         log_weights: np.ndarray | None = None,
+        drop_steering: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`update_batch` with the outlier gate g of :class:`FilterSettings`.
 
         ``road_points``: (R, 4) road points at this sample (None: straight road).
+        ``drop_steering``: (R,) True for runs whose steering innovation is scored (the
+        log-likelihoods and normalized innovations returned include it) but does not update
+        their states (the runs in ``model_mismatch``, ``FilterSettings.mismatch_drops_steering``):
+        their x(k|k), P(k|k) are those of the update without the steering row.
 
         Channel c of run r is dropped for every hypothesis of that run when
         no hypothesis explains it, each weighed by its log-odds against the
@@ -654,7 +659,38 @@ class FilterMatrices:
             normalized = innovation / np.sqrt(s_diag)
         if not all_observed:
             normalized[np.repeat(np.isnan(z), n_comp, axis=0)] = np.nan
+        if drop_steering is not None:
+            x_post, cov_post = self._update_without_steering(
+                x, cov, z, n_comp, drop_steering, linearized, (x_post, cov_post)
+            )
         return x_post, cov_post, log_lik, gated, normalized
+
+    def _update_without_steering(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z: np.ndarray,
+        n_comp: int,
+        drop_steering: np.ndarray,
+        linearized: tuple[np.ndarray, np.ndarray, np.ndarray],
+        posterior: tuple[np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``posterior`` (x(k|k), P(k|k)) with the rows of the ``drop_steering`` runs (R,)
+        whose steering was used (``z`` after the gate) updated again without it (every row's
+        arithmetic is its own, as in the gate's repeated update)."""
+        runs = np.flatnonzero(drop_steering & ~np.isnan(z[:, 2]))
+        if runs.size == 0:
+            return posterior
+        x_post, cov_post = posterior
+        x_post, cov_post = x_post.copy(), cov_post.copy()
+        rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
+        z_runs = z[runs].copy()
+        z_runs[:, 2] = np.nan
+        h, jac, jac_t = linearized
+        again = self._update(x[rows], cov[rows], z_runs, n_comp, False, None,
+                             (h[rows], jac[rows], jac_t[rows]))  # fmt: skip
+        x_post[rows], cov_post[rows] = again[0], again[1]
+        return x_post, cov_post
 
     def _linearize(
         self, x: np.ndarray, points: np.ndarray | None

@@ -27,6 +27,7 @@ from estimators.evidence import (
     AIM_REACH,
     DECIDED,
     EVIDENCE_STATE,
+    MODEL_MISMATCH,
     UNDECIDED,
     EvidenceRule,
     aim_offset_rate,
@@ -327,7 +328,21 @@ class FilterpyGMEKF:
             if ekf is not None:
                 ekf.predict(u=u)
         rows = self._gate(r, bank, z, log_w, points)
+        refused = (
+            settings.mismatch_drops_steering
+            and model.has_steering
+            and int(self._stats["decision"][r]) == MODEL_MISMATCH
+            and 2 in rows
+        )
+        prior: list[tuple[np.ndarray, np.ndarray] | None] = []
+        if refused:  # scored, but no state update from the steering (FilterSettings)
+            prior = [None if ekf is None else (ekf.x.copy(), ekf.P.copy()) for ekf in bank]
         log_lik, score = self._update_bank(r, bank, z, rows, points)
+        if refused:
+            for ekf, before in zip(bank, prior, strict=True):
+                if ekf is not None and before is not None:
+                    ekf.x, ekf.P = before[0], before[1]
+            self._update_bank(r, bank, z, rows[rows != 2], points)
         evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
         if self._aim_rate:  # the aim cap's average offsets move toward x(k|k)'s
             aim = self._evidence[AIM_OFFSET][r].copy()

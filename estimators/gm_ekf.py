@@ -37,6 +37,7 @@ from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     DECIDED,
     DECISIONS,
+    MODEL_MISMATCH,
     UNDECIDED,
     EvidenceRule,
     aim_offset_rate,
@@ -653,7 +654,7 @@ class GaussianMixtureEKF:
         if any_off:
             z, all_observed = _without_steering(z, off), False
         x_post, cov_post, log_lik, gated, normalized = self._update(
-            x_pred, cov_pred, z, all_observed, state.log_w, points
+            x_pred, cov_pred, z, all_observed, state.log_w, points, self._refused_steering(state)
         )
         normalized = normalized.reshape(*state.log_w.shape, 3)
         all_active = all_true(state.active)
@@ -740,9 +741,11 @@ class GaussianMixtureEKF:
         all_observed: bool,
         log_w: np.ndarray,
         points: np.ndarray | None,
+        drop_steering: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Update with the outlier gate (paper eq. 15-18, Joseph form;
-        :meth:`FilterMatrices.gated_update_batch`)::
+        :meth:`FilterMatrices.gated_update_batch`; the states of the ``drop_steering`` runs
+        (R,) updated without their steering, which is still scored)::
 
             nu_i = z(k) - h(x_i(k|k-1)),  S_i = H_i P_i H_i^T + R,  K_i = P_i H_i^T S_i^-1
             x_i  = x_i + K_i nu_i,  P_i = (I - K_i H_i) P_i (I - K_i H_i)^T + K_i R K_i^T
@@ -763,7 +766,16 @@ class GaussianMixtureEKF:
             road_points=points,
             gate=self.settings.innovation_gate,
             log_weights=log_w,
+            drop_steering=drop_steering,
         )
+
+    def _refused_steering(self, state: MixtureState) -> np.ndarray | None:
+        """(R,) the runs in ``model_mismatch`` after the last step, whose steering updates no
+        state (``FilterSettings.mismatch_drops_steering``; None: none, or the setting off)."""
+        if not self.settings.mismatch_drops_steering or not self.model.has_steering:
+            return None
+        mismatched = state.decision == MODEL_MISMATCH
+        return mismatched if any_true(mismatched) else None
 
     def _weigh(
         self,

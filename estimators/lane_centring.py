@@ -217,9 +217,10 @@ class LaneCentringEKF(GaussianMixtureEKF):
         all_observed: bool,
         log_w: np.ndarray,
         points: np.ndarray | None,
+        drop_steering: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The mixture's update; keeps x(k|k) for :meth:`_weigh`."""
-        out = super()._update(x_pred, cov_pred, z, all_observed, log_w, points)
+        out = super()._update(x_pred, cov_pred, z, all_observed, log_w, points, drop_steering)
         self._posterior = out[0]
         return out
 

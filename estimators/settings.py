@@ -65,6 +65,7 @@ _SCHEMA = schema(
         "aim_offset_std": Field("number", unit="m", low=0.0, high=2.0),
         "aim_offset_time": _positive("s"),
         "aim_offset_limit": _positive(infinite=True),
+        "mismatch_drops_steering": Field("bool"),
     }
 )
 """What every field of :class:`FilterSettings` allows."""
@@ -217,6 +218,12 @@ class FilterSettings:
             hypothesis (a lane shift or change followed on purpose), so no lane-keeping
             steering model's evidence means anything there (:mod:`estimators.evidence`, the
             path rule; docs/design.md §8.24). ``math.inf``: off.
+        mismatch_drops_steering: while a run is in ``model_mismatch`` its steering reading
+            updates none of its states (its innovation is still scored, so the mismatch test
+            can end): the evidence rule has rejected the model there, and a reading it
+            mispredicts by many times its residual level would drag the lateral estimate
+            (docs/design.md §8.25). False: the steering updates the states throughout (the
+            filter before 2026-12-05).
     """
 
     speed_noise_std: float = 0.05
@@ -253,6 +260,7 @@ class FilterSettings:
     aim_offset_std: float = 0.3
     aim_offset_time: float = 10.0
     aim_offset_limit: float = 4.0
+    mismatch_drops_steering: bool = True
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and
