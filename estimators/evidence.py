@@ -118,13 +118,13 @@ Log-odds gathered under a larger bound are kept (the hypotheses are constant wit
 the cap never adds evidence and never turns it around (:func:`aim_capped_log_weights`).
 
 Path rule (``aim_offset_limit`` z_a, default 4; docs/design.md §8.24): the filter also keeps
-the largest |a_i| each hypothesis' average reached once it had averaged over one
-``aim_offset_time`` T (``_aim_reach``; before that the average still holds the start, which is
-where the car was put, not where a driver held it). A run in which every hypothesis' reach has
-passed ``z_a sigma_a`` (1.2 m by default) is refused as under the reversal rule below, for the
-rest of the run::
+the largest |a_i| each hypothesis' average reached while the car was held near *some*
+hypothesis' centre (``_aim_reach``; within half the limit: a car put far from every centre at
+the start, and driven back, has not followed a path). A run in which every hypothesis' reach
+has passed ``z_a sigma_a`` (1.2 m by default) is refused as under the reversal rule below, for
+the rest of the run::
 
-    reach_i(k) = max(reach_i(k-1), |a_i(k)|)  if k Ts >= T,  else 0
+    reach_i(k) = max(reach_i(k-1), |a_i(k)|)  if min_j |a_j(k)| <= z_a sigma_a / 2,  reach_i(0) = 0
     reach_i(k) >= z_a sigma_a  for every i   ->   weights = prior, "model_mismatch"
 
 The driver then held the car, for many seconds, where the aim prior puts no driver under any
@@ -423,53 +423,49 @@ AIM_OFFSET = "_aim_offset"
 state (kept by the filter when ``aim_offset_std`` > 0; :func:`_aim_capped`)."""
 
 AIM_REACH = "_aim_reach"
-"""The key of the per-run (R, C) largest |a_i| since the averages had averaged over one
-``aim_offset_time`` (kept with :data:`AIM_OFFSET`; the path rule, :func:`path_left`)."""
-
-AIM_AGE = "_aim_age"
-"""The key of the per-run (R,) time the averages have run, in units of ``aim_offset_time``."""
+"""The key of the per-run (R, C) largest |a_i| at the steps the car was held near some
+hypothesis' centre (kept with :data:`AIM_OFFSET`; the path rule, :func:`path_left`)."""
 
 
 def moved_aim_offsets(
-    state: dict[str, np.ndarray], lateral: np.ndarray, rate: float
+    state: dict[str, np.ndarray], lateral: np.ndarray, rate: float, near: float
 ) -> dict[str, np.ndarray]:
     """A copy of the rule's per-run arrays ``state`` with the aim cap's averages moved toward
-    the posterior lateral offsets ``lateral`` (R * C,), their age and their reach updated::
+    the posterior lateral offsets ``lateral`` (R * C,) and their reach updated::
 
-        a_i <- a_i + rate (y_i - a_i),   age <- age + rate
-        reach_i <- max(reach_i, |a_i|)   where age >= 1 (one aim_offset_time)
+        a_i <- a_i + rate (y_i - a_i)
+        reach_i <- max(reach_i, |a_i|)   where min_j |a_j| <= near (held near some centre)
 
-    ``rate`` = Ts / ``aim_offset_time`` (:func:`aim_offset_rate`)."""
+    ``rate`` = Ts / ``aim_offset_time`` (:func:`aim_offset_rate`); ``near`` (m): half the path
+    rule's limit (:attr:`EvidenceRule.aim_limit`)."""
     aim = state[AIM_OFFSET]
     moved = dict(state)
     if aim.shape[0] == 1:  # one run: in Python floats (the same operations)
         new = [a + rate * (y - a) for a, y in zip(aim[0].tolist(), lateral.tolist(), strict=True)]
-        age = state[AIM_AGE].item() + rate
         moved[AIM_OFFSET] = np.array([new])
-        moved[AIM_AGE] = np.array([age])
-        if age >= 1.0:
+        size = [abs(a) for a in new]
+        if min(size) <= near:
             old = state[AIM_REACH][0].tolist()
-            reach = [r if r >= abs(a) else abs(a) for r, a in zip(old, new, strict=True)]
+            reach = [r if r >= a else a for r, a in zip(old, size, strict=True)]
             moved[AIM_REACH] = np.array([reach])
         return moved
     new_aim = aim + rate * (lateral.reshape(aim.shape) - aim)
-    age = state[AIM_AGE] + rate
     moved[AIM_OFFSET] = new_aim
-    moved[AIM_AGE] = age
-    ripe = age >= 1.0
-    if any_true(ripe):
-        reach = np.maximum(state[AIM_REACH], np.abs(new_aim))
-        moved[AIM_REACH] = (
-            reach if all_true(ripe) else np.where(ripe[:, None], reach, state[AIM_REACH])
-        )
+    size = np.abs(new_aim)
+    held = size.min(axis=1) <= near
+    if any_true(held):
+        reach = np.maximum(state[AIM_REACH], size)
+        if not all_true(held):
+            reach = np.where(held[:, None], reach, state[AIM_REACH])
+        moved[AIM_REACH] = reach
     return moved
 
 
 def initial_aim_offsets(lateral: np.ndarray) -> dict[str, np.ndarray]:
     """The aim cap's per-run arrays at reset from the prior lateral offsets ``lateral``
-    (R, C): the averages start there, at age 0 and with no reach yet."""
+    (R, C): the averages start there, with no reach yet."""
     aim = np.array(lateral, dtype=np.float64, copy=True)
-    return {AIM_OFFSET: aim, AIM_REACH: np.zeros_like(aim), AIM_AGE: np.zeros(aim.shape[0])}
+    return {AIM_OFFSET: aim, AIM_REACH: np.zeros_like(aim)}
 
 
 def path_left(rule: EvidenceRule, state: dict[str, np.ndarray]) -> np.ndarray | None:

@@ -22,7 +22,6 @@ from scipy.special import logsumexp
 from estimators.arx_state_space import road_point_rows
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
-    AIM_AGE,
     AIM_OFFSET,
     AIM_REACH,
     DECIDED,
@@ -347,14 +346,12 @@ class FilterpyGMEKF:
         if self._aim_rate:  # the aim cap's average offsets move toward x(k|k)'s
             aim = self._evidence[AIM_OFFSET][r].copy()
             reach = self._evidence[AIM_REACH][r].copy()
-            age = self._evidence[AIM_AGE][r] + self._aim_rate
             for c, ekf in enumerate(bank):
                 if ekf is not None:
                     aim[c] += self._aim_rate * (ekf.x[1, 0] - aim[c])
-                    if age >= 1.0:
-                        reach[c] = max(reach[c], abs(aim[c]))
+            if np.abs(aim).min() <= 0.5 * self._rule.aim_limit:  # held near some centre
+                reach = np.maximum(reach, np.abs(aim))
             evidence[AIM_OFFSET], evidence[AIM_REACH] = aim[None], reach[None]
-            evidence[AIM_AGE] = np.array([age])
         new_log_w, evidence, stats = weigh_evidence(
             self._rule, log_w[None], log_lik[None], score[None], evidence
         )
