@@ -211,9 +211,9 @@ class FilterSettings:
             docs/design.md §8.23: a 2 s average follows the car's wander, and the cap's
             ratchet kept the largest bound any wander allowed).
         aim_offset_limit: with the aim cap on, a run in which the average offset of *every*
-            hypothesis has at some step (from one ``aim_offset_time`` after the start on)
-            passed ``aim_offset_limit * aim_offset_std`` (in units of sigma_a; default 4:
-            1.2 m) is refused as a model mismatch for the rest of the
+            hypothesis has passed ``aim_offset_limit * aim_offset_std`` (in units of sigma_a;
+            default 4: 1.2 m), at steps where the car was held within half that of some
+            hypothesis' centre, is refused as a model mismatch for the rest of the
             run: the driver held the car where the aim prior puts no driver under any
             hypothesis (a lane shift or change followed on purpose), so no lane-keeping
             steering model's evidence means anything there (:mod:`estimators.evidence`, the
