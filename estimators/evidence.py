@@ -443,11 +443,12 @@ def moved_aim_offsets(
     if aim.shape[0] == 1:  # one run: in Python floats (the same operations)
         new = [a + rate * (y - a) for a, y in zip(aim[0].tolist(), lateral.tolist(), strict=True)]
         moved[AIM_OFFSET] = np.array([new])
-        size = [abs(a) for a in new]
-        if min(size) <= near:
+        sizes = [abs(a) for a in new]
+        if min(sizes) <= near:
             old = state[AIM_REACH][0].tolist()
-            reach = [r if r >= a else a for r, a in zip(old, size, strict=True)]
-            moved[AIM_REACH] = np.array([reach])
+            moved[AIM_REACH] = np.array(
+                [[r if r >= a else a for r, a in zip(old, sizes, strict=True)]]
+            )
         return moved
     new_aim = aim + rate * (lateral.reshape(aim.shape) - aim)
     moved[AIM_OFFSET] = new_aim
