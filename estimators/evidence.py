@@ -330,6 +330,12 @@ class EvidenceRule:
         )
 
     @property
+    def aim_near(self) -> float:
+        """How near (m) some hypothesis' centre the car must be held for the path rule to
+        count the averages' reach: half its limit."""
+        return 0.5 * self.aim_limit
+
+    @property
     def holds(self) -> bool:
         """Whether the reversal rule or the path rule can change a run's weights."""
         return self.enabled and (math.isfinite(self.commit_steps) or math.isfinite(self.aim_limit))
@@ -436,8 +442,8 @@ def moved_aim_offsets(
         a_i <- a_i + rate (y_i - a_i)
         reach_i <- max(reach_i, |a_i|)   where min_j |a_j| <= near (held near some centre)
 
-    ``rate`` = Ts / ``aim_offset_time`` (:func:`aim_offset_rate`); ``near`` (m): half the path
-    rule's limit (:attr:`EvidenceRule.aim_limit`)."""
+    ``rate`` = Ts / ``aim_offset_time`` (:func:`aim_offset_rate`); ``near`` (m):
+    :attr:`EvidenceRule.aim_near`."""
     aim = state[AIM_OFFSET]
     moved = dict(state)
     if aim.shape[0] == 1:  # one run: in Python floats (the same operations)

@@ -639,18 +639,8 @@ class FilterMatrices:
                         x_post, cov_post, log_lik, innovation, s_diag, _, normalized = self._update(
                             x, cov, z, n_comp, False, points_b, linearized
                         )
-                    else:  # the update again on the rows of the runs that gated only (every
-                        # row's arithmetic is its own: the others' rows would not change)
-                        rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
-                        again = self._update(
-                            x[rows],
-                            cov[rows],
-                            z[runs],
-                            n_comp,
-                            False,
-                            None,
-                            (h[rows], jac[rows], jac_t[rows]),
-                        )
+                    else:  # the update again on the rows of the runs that gated only
+                        rows, again = self._update_runs(x, cov, z[runs], runs, n_comp, linearized)
                         updated = (x_post, cov_post, log_lik, innovation, s_diag)
                         for full, part in zip(updated, again[:5], strict=True):
                             full[rows] = part
@@ -681,16 +671,30 @@ class FilterMatrices:
         runs = np.flatnonzero(drop_steering & ~np.isnan(z[:, 2]))
         if runs.size == 0:
             return posterior
-        x_post, cov_post = posterior
-        x_post, cov_post = x_post.copy(), cov_post.copy()
-        rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
+        x_post, cov_post = posterior[0].copy(), posterior[1].copy()
         z_runs = z[runs].copy()
         z_runs[:, 2] = np.nan
+        rows, again = self._update_runs(x, cov, z_runs, runs, n_comp, linearized)
+        x_post[rows], cov_post[rows] = again[0], again[1]
+        return x_post, cov_post
+
+    def _update_runs(
+        self,
+        x: np.ndarray,
+        cov: np.ndarray,
+        z_runs: np.ndarray,
+        runs: np.ndarray,
+        n_comp: int,
+        linearized: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, tuple[Any, ...]]:
+        """The rows (B',) of the ``runs`` (R',) and :meth:`_update` of those rows alone with
+        their measurements ``z_runs`` (R', 3) (some missing) and their part of ``linearized``:
+        every row's arithmetic is its own, so the other rows would not change."""
+        rows = (runs[:, None] * n_comp + np.arange(n_comp)).ravel()
         h, jac, jac_t = linearized
         again = self._update(x[rows], cov[rows], z_runs, n_comp, False, None,
                              (h[rows], jac[rows], jac_t[rows]))  # fmt: skip
-        x_post[rows], cov_post[rows] = again[0], again[1]
-        return x_post, cov_post
+        return rows, again
 
     def _linearize(
         self, x: np.ndarray, points: np.ndarray | None

@@ -333,14 +333,12 @@ class FilterpyGMEKF:
             and int(self._stats["decision"][r]) == MODEL_MISMATCH
             and 2 in rows
         )
-        prior: list[tuple[np.ndarray, np.ndarray] | None] = []
-        if refused:  # scored, but no state update from the steering (FilterSettings)
-            prior = [None if ekf is None else (ekf.x.copy(), ekf.P.copy()) for ekf in bank]
+        # refused: scored, but no state update from the steering (FilterSettings)
+        saved = [(e.x.copy(), e.P.copy()) for e in bank if e is not None] if refused else None
         log_lik, score = self._update_bank(r, bank, z, rows, points)
-        if refused:
-            for ekf, before in zip(bank, prior, strict=True):
-                if ekf is not None and before is not None:
-                    ekf.x, ekf.P = before[0], before[1]
+        if saved is not None:
+            for ekf, (x, cov) in zip([e for e in bank if e is not None], saved, strict=True):
+                ekf.x, ekf.P = x, cov
             self._update_bank(r, bank, z, rows[rows != 2], points)
         evidence = {name: self._evidence[name][r : r + 1] for name in EVIDENCE_STATE}
         if self._aim_rate:  # the aim cap's average offsets move toward x(k|k)'s
@@ -349,7 +347,7 @@ class FilterpyGMEKF:
             for c, ekf in enumerate(bank):
                 if ekf is not None:
                     aim[c] += self._aim_rate * (ekf.x[1, 0] - aim[c])
-            if np.abs(aim).min() <= 0.5 * self._rule.aim_limit:  # held near some centre
+            if np.abs(aim).min() <= self._rule.aim_near:  # held near some centre
                 reach = np.maximum(reach, np.abs(aim))
             evidence[AIM_OFFSET], evidence[AIM_REACH] = aim[None], reach[None]
         new_log_w, evidence, stats = weigh_evidence(

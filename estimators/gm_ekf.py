@@ -315,7 +315,6 @@ class GaussianMixtureEKF:
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
         # the aim cap bounds the steering's lane evidence: without a steering model it is off
         self._aim_rate = aim_offset_rate(settings, self.model.dt, self.model.has_steering)
-        self._aim_near = 0.5 * self._rule.aim_limit  # (the path rule: held near a centre)
         if not self._aim_rate:
             self._rule = replace(self._rule, aim_variance=0.0)
         self._min_speed = settings.min_speed if self.model.has_steering else 0.0
@@ -664,7 +663,7 @@ class GaussianMixtureEKF:
             all_active,
             log_lik,
             normalized,
-            moved_aim_offsets(state.evidence, x_post[:, 1], self._aim_rate, self._aim_near)
+            moved_aim_offsets(state.evidence, x_post[:, 1], self._aim_rate, self._rule.aim_near)
             if self._aim_rate
             else None,
         )
