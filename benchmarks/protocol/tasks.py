@@ -655,7 +655,7 @@ def _estimation_rows(
     last = result.lengths - 1
     final_weight = true_weight[np.arange(len(refs)), last]
     final_decision = result.final_decision()
-    refused_by = result.refusal_reasons() if result.decision is not None else None
+    refused_by = result.refusal_reasons()
     wrong_confident = result.wrong_lane_confident(task.weight_threshold)
     wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
     wrong_decision = result.wrong_decision_ever(task.weight_threshold)
@@ -678,7 +678,7 @@ def _estimation_rows(
                 "true_lane_final": bool(final_true[j]),
                 "final_true_lane_weight": float(final_weight[j]),
                 "final_decision": str(final_decision[j]),
-                "refused_by": None if refused_by is None else str(refused_by[j]),
+                "refused_by": str(refused_by[j]),
                 "wrong_lane_confident": bool(wrong_confident[j]),
                 "wrong_lane_confident_share": float(wrong_share[j]),
                 "wrong_decision_ever": bool(wrong_decision[j]),
