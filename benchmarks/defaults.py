@@ -10,6 +10,7 @@ __all__ = [
     "DEFAULT_MODEL_TIME_LIMIT",
     "DEFAULT_SEEDS",
     "DEFAULT_TRAINING_DRIVERS",
+    "GENERALIZED_ORDERS",
     "NO_WORKER_TIMEOUT",
 ]
 
@@ -20,6 +21,12 @@ DEFAULT_TRAINING_DRIVERS = 8
 """Extra drivers of the population, one run each, that also train the models of a synthetic
 ``hasa-bench paper`` (docs/design.md §8.21; 0, the paper's one-run protocol, is
 ``--training-drivers 0``; recordings: always 0)."""
+
+GENERALIZED_ORDERS = ("paper", "bic")
+"""How ``hasa-bench`` chooses the orders of its built-in generalized model (docs/design.md
+§8.26): ``"paper"`` (the default) keeps the paper's (na=2, nb=4, nc=1, nd=2); ``"bic"``
+selects them on the training runs by BIC (:func:`hasa_env.steering.order.select_order`, its
+default grid), the paper's future work 1."""
 
 DEFAULT_MODEL_TIME_LIMIT = 600.0
 """Time limit in s of one call into a user model (import, a fit, a batch of runs)."""

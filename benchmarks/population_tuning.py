@@ -101,6 +101,7 @@ def evaluate(
             estimate=False,
             curved_runs=0,
             training_drivers=0,  # table 1 is of a fit on the illustrative participant
+            generalized_orders="paper",  # ... with the paper's orders
         )
         result = run_protocol(config, workers=workers)
     per_seed = []

@@ -97,10 +97,32 @@ def _training_runs(cfg: dict[str, Any]) -> str:
     return text
 
 
+def _generalized_orders(result: BenchmarkResult) -> str:
+    """How the built-in generalized model's orders were chosen, with the orders per seed:
+    "; generalized orders (na, nb, nc, nd) by BIC on them: (4, 6, 1, 0) on seeds 0, 2; ..."
+    ("" when no generalized model was fitted)."""
+    chosen: dict[tuple[int, ...], list[str]] = {}
+    for m in result.models:
+        if m.get("name") == "generalized" and m.get("kind") == "builtin" and m.get("structure"):
+            orders = tuple(int(m["structure"][k]) for k in ("na", "nb", "nc", "nd"))
+            chosen.setdefault(orders, []).append(str(m.get("seed")))
+    if not chosen:
+        return ""
+    how = "by BIC on them" if result.config.get("generalized_orders") == "bic" else "the paper's"
+    parts = [
+        f"({', '.join(map(str, orders))}) on seed{'s' if len(seeds) > 1 else ''} {', '.join(seeds)}"
+        for orders, seeds in chosen.items()
+    ]
+    return f"; generalized orders (na, nb, nc, nd) {how}: {'; '.join(parts)}"
+
+
 def format_tables(result: BenchmarkResult) -> str:
     """The result's tables as plain text (ours beside the paper's published values)."""
     cfg = result.config
-    parts = [f"hasa-bench: {_source(cfg)}; models fitted on {_training_runs(cfg)}"]
+    parts = [
+        f"hasa-bench: {_source(cfg)}; models fitted on {_training_runs(cfg)}"
+        + _generalized_orders(result)
+    ]
     for _, title, rows, columns, group in report_sections(result):
         parts.append("")
         parts.append(title)
@@ -202,7 +224,7 @@ def _findings(result: BenchmarkResult, markdown: bool) -> list[str]:
 # --------------------------------------------------------------------- markdown
 def markdown_report(result: BenchmarkResult, figures: dict[str, str]) -> str:
     """The Markdown report: configuration, tables, findings, figures, errors, versions."""
-    lines = _markdown_head(result.config)
+    lines = _markdown_head(result.config, _generalized_orders(result))
     for key, title, rows, columns, _ in report_sections(result):
         lines.append(f"## {key.replace('_', ' ').capitalize()}")
         lines.append("")
@@ -244,10 +266,11 @@ _INTRO = (
 )
 
 
-def _markdown_head(cfg: dict[str, Any]) -> list[str]:
-    """The report's title, what it compares, the data and the configuration."""
+def _markdown_head(cfg: dict[str, Any], orders: str = "") -> list[str]:
+    """The report's title, what it compares, the data (``orders``: :func:`_generalized_orders`)
+    and the configuration."""
     lines = [f"# {_TITLE}", "", _INTRO, ""]
-    lines.append(f"Data: {_source(cfg)}; models fitted on {_training_runs(cfg)}.")
+    lines.append(f"Data: {_source(cfg)}; models fitted on {_training_runs(cfg)}{orders}.")
     lines.append("")
     lines.append("## Configuration")
     lines.append("")
@@ -380,7 +403,8 @@ def _html_body(result: BenchmarkResult) -> list[str]:
     parts = [
         f"<h1>{_esc(_TITLE)}</h1>",
         f"<p>{_esc(_INTRO)}</p>",
-        f"<p>Data: {_esc(_source(cfg))}; models fitted on {_esc(_training_runs(cfg))}.</p>",
+        f"<p>Data: {_esc(_source(cfg))}; models fitted on "
+        f"{_esc(_training_runs(cfg) + _generalized_orders(result))}.</p>",
     ]
     for key, title, rows, columns, _ in report_sections(result):
         parts.append(f'<h2 id="{_esc(key)}">{_esc(key.replace("_", " ").capitalize())}</h2>')

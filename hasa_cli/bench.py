@@ -41,6 +41,7 @@ from benchmarks.defaults import (
     DEFAULT_MODEL_TIME_LIMIT,
     DEFAULT_SEEDS,
     DEFAULT_TRAINING_DRIVERS,
+    GENERALIZED_ORDERS,
     NO_WORKER_TIMEOUT,
 )
 from hasa_cli import (
@@ -223,6 +224,14 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
         help="also train the models on one extra run of the illustrative driver per start "
         "speed (m/s), scored nowhere (synthetic runs; the models are then trusted over those "
         "speeds too; default: none, the paper's protocol)",
+    )
+    rec.add_argument(
+        "--generalized-orders",
+        choices=GENERALIZED_ORDERS,
+        default=GENERALIZED_ORDERS[0],
+        help="the built-in generalized model's orders: 'paper' keeps the paper's (na=2, nb=4, "
+        "nc=1, nd=2; default); 'bic' selects them by BIC on the training runs (docs/design.md "
+        "§8.26)",
     )
     rec.add_argument(
         "--training-file",
@@ -456,6 +465,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
         training_runs=args.training_runs,
         training_drivers=args.training_drivers,
         training_speeds=args.training_speeds,
+        generalized_orders=args.generalized_orders,
         training_file=args.training_file,
         min_duration=args.min_duration,
         allow_incomplete=args.allow_incomplete,

@@ -7,7 +7,12 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from benchmarks.defaults import DEFAULT_MODEL_TIME_LIMIT, DEFAULT_SEEDS, DEFAULT_TRAINING_DRIVERS
+from benchmarks.defaults import (
+    DEFAULT_MODEL_TIME_LIMIT,
+    DEFAULT_SEEDS,
+    DEFAULT_TRAINING_DRIVERS,
+    GENERALIZED_ORDERS,
+)
 from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
 from hasa_env.scenarios import SCENARIOS
@@ -100,6 +105,10 @@ _SCHEMA = schema(
             "numbers", doc="Start speeds of extra training runs of the illustrative driver.",
             unit="m/s", low=1.0, high=150.0, unique=True,
         ),
+        "generalized_orders": Field(
+            "choice", doc="Orders of the built-in generalized model: 'bic' (selected on the "
+            "training runs) or 'paper' (na=2, nb=4, nc=1, nd=2).", choices=GENERALIZED_ORDERS,
+        ),
         "batch_size": _count("Runs per task.", 1),
         "ljung_box_lags": _count("Lags of the Ljung-Box test.", 1),
         "acf_lags": _count("Lags of the autocorrelation plot.", 1),
@@ -189,6 +198,12 @@ class ProtocolConfig:
             own seeds and scored nowhere (synthetic runs only): a model fitted at the
             speeds people drive is trusted there (the speed rule's range is that of every
             training run, :mod:`estimators.trust`). Empty: the paper's protocol.
+        generalized_orders: how the built-in generalized model's orders are chosen
+            (:data:`~benchmarks.defaults.GENERALIZED_ORDERS`): ``"paper"`` (the default):
+            the paper's orders (2, 4, 1, 2), as its table 1 fitted them; ``"bic"``
+            selects (na, nb, nc, nd) by BIC on the training runs, on the training side only
+            (:func:`hasa_env.steering.order.select_order`, its default grid up to (4, 6, 3, 3);
+            docs/design.md §8.26).
         batch_size: most runs per task, vectorized together; a seed's curved and
             validation runs together are cut into the fewest near-equal tasks (100: one
             task of the 4 curved and the 93 validation runs per seed, filtered in one
@@ -242,6 +257,7 @@ class ProtocolConfig:
     training_runs: int = 1
     training_drivers: int | None = None
     training_speeds: tuple[float, ...] = ()
+    generalized_orders: str = "paper"
     batch_size: int = 100
     ljung_box_lags: int = 20
     acf_lags: int = 50

@@ -49,6 +49,7 @@ from hasa_env.steering.loading import (
     model_spec_kind,
 )
 from hasa_env.steering.model_file import ModelFileError
+from hasa_env.steering.order import select_order
 
 __all__ = [
     "DEFAULT_MODEL_MEMORY_LIMIT",
@@ -233,6 +234,7 @@ def fit_models(
     sensor_std: float = 0.0,
     constant_speed_train: pd.DataFrame | None = None,
     time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
+    generalized_orders: str = "paper",
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
     """Fit every candidate on the training run (a seed's; or several runs, each a run of its
     own for the fit: lags never cross between them); the fitted models and their
@@ -254,6 +256,12 @@ def fit_models(
         if kind in ("builtin", "baseline") and abs(model.dt - dt) > 1e-12:
             model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
         own: pd.DataFrame | list[pd.DataFrame] = train
+        if (
+            kind == "builtin"
+            and isinstance(model, GeneralizedModel)
+            and generalized_orders == "bic"
+        ):
+            model, info["order_selection"] = with_selected_orders(model, train)
         if getattr(model, "training", "") == "constant_speed":
             if constant_speed_train is None:
                 raise BenchmarkError(f"stress model {name!r} needs a constant-speed training run")
@@ -302,6 +310,27 @@ def fit_models(
         fitted.append(FittedModel(name, kind, model_fitted, residual, training))
         infos.append(info)
     return fitted, infos
+
+
+def with_selected_orders(
+    model: GeneralizedModel, train: pd.DataFrame | list[pd.DataFrame]
+) -> tuple[GeneralizedModel, dict[str, Any]]:
+    """``model`` (unfitted) with its orders (na, nb, nc, nd) selected by BIC on the training
+    runs ``train`` (:func:`hasa_env.steering.order.select_order` with its default grid, from
+    (1, 1, 0, 0) to (4, 6, 3, 3), every candidate on one common sample; docs/design.md
+    §8.26), and what was selected: ``orders``, ``criterion``, ``n_common`` (samples) and
+    the ``candidates`` compared. The selection sees the training runs only."""
+    options = {k: v for k, v in model.common_kwargs().items() if k != "name"}
+    with warnings.catch_warnings():  # the candidates' fits: the chosen one is fitted (and
+        warnings.simplefilter("ignore")  # its warnings reported) by _fit_one
+        selection = select_order(train, **options)
+    chosen = GeneralizedModel(**selection.orders, **model.common_kwargs())
+    return chosen, {
+        "orders": dict(selection.orders),
+        "criterion": selection.criterion,
+        "n_common": int(selection.n_common),
+        "candidates": len(selection.table),
+    }
 
 
 def _fit_one(
@@ -363,6 +392,7 @@ def _fit_description(
     result = fitted.fit_result
     info: dict[str, Any] = {
         "model_type": getattr(fitted, "model_type", ""),
+        "structure": _structure(fitted),
         "parameters": fitted.parameters,
         "standard_errors": fitted.standard_errors,
         "training": None,
@@ -389,6 +419,17 @@ def _fit_description(
                 "message": result.identifiability.message,
             }
     return info
+
+
+def _structure(fitted: SteeringModel) -> dict[str, Any] | None:
+    """The model's structure (the generalized model's orders, ...) as JSON-able numbers and
+    strings; None when it has none or is not of that kind (a user model's)."""
+    try:
+        structure = dict(fitted.structure())
+    except Exception:  # noqa: BLE001 - a user model's structure() may raise anything
+        return None
+    plain = (int, float, str, bool, type(None))
+    return structure if all(isinstance(v, plain) for v in structure.values()) else None
 
 
 def _filter_residual(

@@ -399,6 +399,7 @@ def fit_and_check(
         sensor_std=sensor_std,
         constant_speed_train=constant_speed,
         time_limit=config.model_time_limit,
+        generalized_orders=config.generalized_orders,
     )
     if config.estimate:  # can each model drive? (no lane evidence from one that cannot)
         speed = plan.params[plan.illustrative].speed if seed is not None else SpeedProfile.hold()
