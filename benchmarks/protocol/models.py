@@ -243,7 +243,10 @@ def fit_models(
     A stress model that trains on a constant-speed run (``training =
     "constant_speed"``) gets ``constant_speed_train``; its filter's residual
     level still comes from ``train``. A user model gets its own copy of the
-    training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`)."""
+    training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`).
+    ``generalized_orders`` (:data:`~benchmarks.defaults.GENERALIZED_ORDERS`): ``"bic"``
+    selects the built-in generalized model's orders on ``train`` first
+    (:func:`with_selected_orders`); ``"paper"`` keeps the candidate's."""
     runs = [train] if isinstance(train, pd.DataFrame) else list(train)
     train = train if isinstance(train, pd.DataFrame) else runs  # a list: what the fit takes
     dt = steering_features(runs[0]).attrs.get("dt", 0.01)
