@@ -98,9 +98,11 @@ def _training_runs(cfg: dict[str, Any]) -> str:
 
 
 def _generalized_orders(result: BenchmarkResult) -> str:
-    """How the built-in generalized model's orders were chosen, with the orders per seed:
+    """The built-in generalized model's orders per seed when BIC selected them:
     "; generalized orders (na, nb, nc, nd) by BIC on them: (4, 6, 1, 0) on seeds 0, 2; ..."
-    ("" when no generalized model was fitted)."""
+    ("" with the paper's orders, or when no generalized model was fitted)."""
+    if result.config.get("generalized_orders") != "bic":
+        return ""
     chosen: dict[tuple[int, ...], list[str]] = {}
     for m in result.models:
         if m.get("name") == "generalized" and m.get("kind") == "builtin" and m.get("structure"):
@@ -108,12 +110,11 @@ def _generalized_orders(result: BenchmarkResult) -> str:
             chosen.setdefault(orders, []).append(str(m.get("seed")))
     if not chosen:
         return ""
-    how = "by BIC on them" if result.config.get("generalized_orders") == "bic" else "the paper's"
     parts = [
         f"({', '.join(map(str, orders))}) on seed{'s' if len(seeds) > 1 else ''} {', '.join(seeds)}"
         for orders, seeds in chosen.items()
     ]
-    return f"; generalized orders (na, nb, nc, nd) {how}: {'; '.join(parts)}"
+    return f"; generalized orders (na, nb, nc, nd) by BIC on them: {'; '.join(parts)}"
 
 
 def format_tables(result: BenchmarkResult) -> str:

@@ -64,7 +64,4 @@ def test_the_benchmark_fits_the_selected_orders_and_says_so(tmp_path: Path) -> N
     doc, model = _generalized(paper)
     assert doc["config"]["generalized_orders"] == "paper"
     assert model["structure"] == PAPER_ORDERS and "order_selection" not in model
-    assert (
-        "generalized orders (na, nb, nc, nd) the paper's: (2, 4, 1, 2) on seed 0"
-        in (paper / "report.md").read_text()
-    )
+    assert "generalized orders" not in (paper / "report.md").read_text()
