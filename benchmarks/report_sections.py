@@ -370,6 +370,47 @@ def _reliability_section(result: BenchmarkResult) -> Section:
     )
 
 
+_CHANNEL_COLUMNS = [
+    Column("model", "Estimator", left=True),
+    Column("runs", "runs"),
+    Column("steering_live_share", "live", percent),
+    Column("steering_off_share", "off (speed, curvature)", percent),
+    Column("steering_unused_share", "unused (missing, gated)", percent),
+    Column("steering_mismatch_share", "model mismatch", percent),
+    Column("steering_tempered_model_error_share", "tempered: model error", percent),
+    Column("steering_tempered_autocorrelation_share", "tempered: autocorrelation", percent),
+]
+
+
+def channel_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
+    """Per estimator with a steering channel, the mean over its main-track runs of each share
+    of :func:`estimators.calibration.steering_channel_shares` (the per-run columns of
+    ``runs_estimation``; rows from before these columns give none)."""
+    keys = [str(c.key) for c in _CHANNEL_COLUMNS[2:]]
+    frame = pd.DataFrame(result.runs_estimation)
+    if frame.empty or not set(keys) <= set(frame.columns):
+        return []
+    main = frame[(frame["track"] == result.config.get("track", "straight"))]
+    main = main[main["steering_live_share"].notna()]
+    table = main.groupby("model", sort=False)[keys].mean()
+    table.insert(0, "runs", main.groupby("model", sort=False).size())
+    return [{"model": model, **row} for model, row in table.to_dict("index").items()]
+
+
+def _channel_section(result: BenchmarkResult) -> Section:
+    return (
+        "steering_channel",
+        "Why the steering was or was not lane evidence (main track, mean over runs of each "
+        "run's share of its steps, docs/design.md §8.14): live (counted at half its weight or "
+        "more), off by the speed or curvature rule, unused (reading missing or gated), in "
+        "model mismatch, or tempered below half its weight by the model-error ratio lambda "
+        "alone or by the autocorrelation of the steering innovations",
+        channel_rows(result),
+        _CHANNEL_COLUMNS,
+        None,
+    )
+
+
 def _checks_section(result: BenchmarkResult) -> Section:
     return (
         "checks",
@@ -458,6 +499,7 @@ def report_sections(result: BenchmarkResult) -> list[Section]:
     return [
         *_verdict_sections(result),
         _reliability_section(result),
+        _channel_section(result),
         _checks_section(result),
         *_steering_sections(result),
         *_estimation_sections(result),

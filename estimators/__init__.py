@@ -33,6 +33,7 @@ from estimators.baselines import NoSteeringEKF, OracleEKF, SingleHypothesisEKF
 from estimators.calibration import (
     expected_calibration_error,
     lane_calibration_bins,
+    steering_channel_shares,
     steering_live_share,
 )
 from estimators.filter_matrices import FilterMatrices
@@ -58,6 +59,7 @@ __all__ = [
     "EstimationResult",
     "expected_calibration_error",
     "lane_calibration_bins",
+    "steering_channel_shares",
     "steering_live_share",
     "EstimatorInfoWrapper",
     "EstimatorObservationWrapper",

@@ -13,9 +13,22 @@ from estimators.offline import EstimationResult
 __all__ = [
     "CALIBRATION_BINS",
     "expected_calibration_error",
+    "STEERING_CHANNEL_STATES",
     "lane_calibration_bins",
+    "steering_channel_shares",
     "steering_live_share",
 ]
+
+STEERING_CHANNEL_STATES = (
+    "live",
+    "off",
+    "unused",
+    "mismatch",
+    "tempered_model_error",
+    "tempered_autocorrelation",
+)
+"""What the steering channel was at a valid step, one state each, in the order they are
+checked (:func:`steering_channel_shares`)."""
 
 CALIBRATION_BINS = 10
 """Bins of equal width on [0, 1] of the reliability diagram and the ECE."""
@@ -61,13 +74,51 @@ def steering_live_share(result: EstimationResult, max_scale: float = 2.0) -> np.
     evidence at no less than ``1 / max_scale`` of its weight: the channel was used (on,
     observed, not gated: a finite steering NIS), the run was not in ``model_mismatch``
     and the evidence scale tau was at most ``max_scale`` (NaN for an estimator that
-    reports no steering channel)."""
+    reports no steering channel). The ``live`` share of :func:`steering_channel_shares`."""
+    return steering_channel_shares(result, max_scale)["live"]
+
+
+def steering_channel_shares(
+    result: EstimationResult, max_scale: float = 2.0
+) -> dict[str, np.ndarray]:
+    """Why the steering was or was not lane evidence: per state of
+    :data:`STEERING_CHANNEL_STATES`, the (R,) share of each run's steps (of its length; the
+    states of a run's valid steps sum to its valid share) at which the channel was, checked in
+    this order (docs/design.md §8.14):
+
+    - ``off``: switched off by the speed or curvature rule (``low_speed``);
+    - ``unused``: on, but no steering entered the update (missing or gated: no finite NIS);
+    - ``mismatch``: used, the run in ``model_mismatch`` (its weights frozen);
+    - ``tempered_model_error``: the evidence scale tau above ``max_scale`` with the model-error
+      ratio max(1, lambda) alone above it (the model mispredicts here);
+    - ``tempered_autocorrelation``: tau above ``max_scale`` otherwise (the innovations'
+      autocorrelation, alone or with lambda);
+    - ``live``: the rest, counted at ``1 / max_scale`` of its weight or more.
+
+    Every state is NaN for an estimator that reports no steering channel."""
     if result.channel_nis is None or result.low_speed is None:
-        return np.full(result.num_runs, np.nan)
-    scale = np.ones_like(result.valid, dtype=np.float64)
+        return {name: np.full(result.num_runs, np.nan) for name in STEERING_CHANNEL_STATES}
+    valid = result.valid
+    scale = np.ones_like(valid, dtype=np.float64)
     if result.evidence_scale is not None:
         scale = np.where(np.isnan(result.evidence_scale), np.inf, result.evidence_scale)
-    live = result.valid & np.isfinite(result.channel_nis[..., 2]) & (scale <= max_scale)
+    error = np.ones_like(scale)
+    if result.model_error is not None:
+        error = np.maximum(1.0, np.nan_to_num(result.model_error, nan=1.0))
+    off = valid & result.low_speed
+    used = valid & ~off & np.isfinite(result.channel_nis[..., 2])
+    mismatch = np.zeros_like(valid)
     if result.decision is not None:
-        live &= result.decision != MODEL_MISMATCH  # the weights are frozen
-    return live.sum(axis=1) / np.maximum(result.lengths, 1)
+        mismatch = used & (result.decision == MODEL_MISMATCH)
+    counted = used & ~mismatch
+    tempered = counted & (scale > max_scale)
+    states = {
+        "live": counted & ~tempered,
+        "off": off,
+        "unused": valid & ~off & ~used,
+        "mismatch": mismatch,
+        "tempered_model_error": tempered & (error > max_scale),
+        "tempered_autocorrelation": tempered & ~(error > max_scale),
+    }
+    length = np.maximum(result.lengths, 1)
+    return {name: states[name].sum(axis=1) / length for name in STEERING_CHANNEL_STATES}

@@ -32,7 +32,11 @@ from benchmarks.protocol.models import (
 )
 from benchmarks.protocol.plan import RunRef, load_frames
 from estimators.baselines import NoSteeringEKF, OracleEKF
-from estimators.calibration import lane_calibration_bins, steering_live_share
+from estimators.calibration import (
+    STEERING_CHANNEL_STATES,
+    lane_calibration_bins,
+    steering_channel_shares,
+)
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.lane_centring import LaneCentringEKF, LaneCentringParams
 from estimators.offline import (
@@ -604,10 +608,12 @@ def _channel_diagnostics(result: Any, kind: str) -> dict[str, np.ndarray]:
     """(R,) per-run diagnostics of the steering channel, in the rows' order: the share of
     the steps it was off (NaN: no such rule), the share it was live
     (:func:`estimators.calibration.steering_live_share`; NaN for a steering-free
-    baseline), the median model-error ratio lambda and evidence scale tau (over the steps
+    baseline) and why it was not (``steering_<state>_share`` of
+    :func:`estimators.calibration.steering_channel_shares`), the median model-error ratio lambda and evidence scale tau (over the steps
     it was on), and the mean NIS of each channel."""
     n_runs = result.num_runs
     nan = np.full(n_runs, np.nan)
+    shares = steering_channel_shares(result)
     off = result.low_speed
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
@@ -625,7 +631,11 @@ def _channel_diagnostics(result: Any, kind: str) -> dict[str, np.ndarray]:
         "steering_off_share": nan
         if off is None
         else (off & result.valid).sum(axis=1) / result.lengths,
-        "steering_live_share": nan if kind == "baseline" else steering_live_share(result),
+        "steering_live_share": nan if kind == "baseline" else shares["live"],
+        **{
+            f"steering_{name}_share": nan if kind == "baseline" else shares[name]
+            for name in STEERING_CHANNEL_STATES[2:]
+        },
         "model_error_median": model_error,
         "evidence_scale_median": scale,
         "nis_speed": nis[:, 0],
