@@ -100,6 +100,7 @@ __all__ = [
     "PHYSICAL_STATE_NAMES",
     "MEASUREMENT_NAMES",
     "check_road_points",
+    "road_curvature_ahead",
     "road_point_rows",
 ]
 
@@ -149,6 +150,17 @@ def road_point_rows(road_points: np.ndarray | None, n_rows: int) -> np.ndarray |
     if points.shape != (n_rows, 4):
         raise ValueError(f"road_points must have shape (4,) or ({n_rows}, 4), got {points.shape}")
     return points
+
+
+def road_curvature_ahead(points: np.ndarray | None, n_rows: int) -> np.ndarray:
+    """(n_rows,) the road's curvature kappa (1/m, left positive) read from road points (R, 4)
+    (None or NaN: straight, 0): the circle tangent to the lane centre at the car's station
+    through the near point, ``kappa = 2 dy_near / (dx_near^2 + dy_near^2)``."""
+    if points is None:
+        return np.zeros(n_rows)
+    dx, dy = points[:, 0], points[:, 1]
+    kappa = 2.0 * dy / (dx * dx + dy * dy)
+    return np.where(np.isfinite(kappa), kappa, 0.0)
 
 
 @dataclass(frozen=True, eq=False, init=False)

@@ -19,7 +19,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.special import logsumexp
 
-from estimators.arx_state_space import road_point_rows
+from estimators.arx_state_space import road_curvature_ahead, road_point_rows
 from estimators.base import Estimate, reset_inputs
 from estimators.evidence import (
     AIM_OFFSET,
@@ -155,6 +155,7 @@ class FilterpyGMEKF:
         z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
         n_runs, n_comp = hyp.shape
         points = road_point_rows(road_points, n_runs)
+        z = self._without_feedforward(z, points)
         x0 = self.matrices.initial_state(z, hyp, road_points=points)
         banks = [self._new_bank(x0[r], log_w[r]) for r in range(n_runs)]
         steering = z[:, 2] * self.settings.steering_ratio
@@ -219,6 +220,16 @@ class FilterpyGMEKF:
                 self._last_x[r] = x0[j]
                 self._last_P[r] = self.matrices.initial_covariance
         return self.estimate()
+
+    def _without_feedforward(self, z: np.ndarray, points: np.ndarray | None) -> np.ndarray:
+        """The first measurements (R, 3) with the curvature feed-forward taken off the
+        steering (measured units; docs/design.md §8.28)."""
+        gain = self.settings.steering_curvature_feedforward
+        if not gain or points is None:
+            return z
+        z = z.copy()
+        z[:, 2] -= gain / self.settings.steering_ratio * road_curvature_ahead(points, len(z))
+        return z
 
     def step(
         self,
@@ -306,6 +317,9 @@ class FilterpyGMEKF:
         settings = self.settings
         z = z.copy()
         z[2] *= settings.steering_ratio
+        if settings.steering_curvature_feedforward and points is not None:
+            kappa = road_curvature_ahead(points[None, :], 1)[0]
+            z[2] -= settings.steering_curvature_feedforward * kappa
         z[~np.isfinite(z)] = np.nan  # NaN and +-inf are missing
         steering = z[2]
         acceleration = np.where(

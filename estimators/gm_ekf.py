@@ -31,6 +31,7 @@ import numpy as np
 from estimators.arx_state_space import (
     VX,
     VY,
+    road_curvature_ahead,
     road_point_rows,
 )
 from estimators.base import Estimate, reset_inputs
@@ -431,6 +432,7 @@ class GaussianMixtureEKF:
         z, single, hyp, log_w = reset_inputs(measurement, hypotheses, prior)
         n_runs, n_comp = hyp.shape
         points = road_point_rows(road_points, n_runs)
+        z = self._without_feedforward(z, points)
         state = self._initial_state(z, hyp, log_w, points)
         if runs is None:
             self._single = single
@@ -645,7 +647,7 @@ class GaussianMixtureEKF:
     ) -> MixtureState:
         """One step k-1 -> k of the runs of ``state``: the rules in order (class docstring);
         ``points`` are the road points at k (None: straight)."""
-        z, all_observed = self._observed(z)
+        z, all_observed = self._observed(self._without_feedforward(z, points))
         acc, missing_acc = _plausible_acceleration(acc, self.settings.max_acceleration)
         steering = z[:, 2]
         off = state.channel_off
@@ -696,6 +698,19 @@ class GaussianMixtureEKF:
             road_points=points,
             straight_points=state.straight_points,
         )
+
+    def _without_feedforward(self, z: np.ndarray, points: np.ndarray | None) -> np.ndarray:
+        """The measurements (R, 3) with the curvature feed-forward taken off the steering
+        (measured units): ``delta - G kappa / steering_ratio``, kappa of the road points
+        (``FilterSettings.steering_curvature_feedforward`` G; docs/design.md §8.28); ``z``
+        itself without it or on a straight road."""
+        gain = self.settings.steering_curvature_feedforward
+        if gain == 0.0 or points is None:
+            return z
+        z = np.array(z, dtype=np.float64, copy=True)
+        kappa = road_curvature_ahead(points, z.shape[0])
+        z[:, 2] -= (gain / self.settings.steering_ratio) * kappa
+        return z
 
     def _observed(self, z: np.ndarray) -> tuple[np.ndarray, bool]:
         """Missing measurements: ``z`` (R, 3) with the steering in model units

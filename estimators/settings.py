@@ -66,6 +66,8 @@ _SCHEMA = schema(
         "aim_offset_time": _positive("s"),
         "aim_offset_limit": _positive(infinite=True),
         "mismatch_drops_steering": Field("bool"),
+        "wheelbase": _positive("m"),
+        "steering_curvature_feedforward": Field("number", unit="rad m"),
     }
 )
 """What every field of :class:`FilterSettings` allows."""
@@ -224,6 +226,14 @@ class FilterSettings:
             mispredicts by many times its residual level would drag the lateral estimate
             (docs/design.md §8.25). False: the steering updates the states throughout (the
             filter before 2026-12-05).
+        wheelbase: the car's wheelbase L (m; the env's ``vehicle.wheelbase``).
+        steering_curvature_feedforward: G (model units per 1/m): the steering a driver
+            adds on a bend of curvature kappa beyond what the model's bearings explain; the
+            filter compares the model with ``steering_ratio * delta_measured - G kappa``,
+            kappa read from the road points (:func:`estimators.arx_state_space.road_curvature_ahead`).
+            0 (the default): none. The trust rule sets it for a model fitted on straight roads,
+            from its coefficients and L (:func:`estimators.trust.curvature_feedforward`;
+            docs/design.md §8.28).
     """
 
     speed_noise_std: float = 0.05
@@ -261,6 +271,8 @@ class FilterSettings:
     aim_offset_time: float = 10.0
     aim_offset_limit: float = 4.0
     mismatch_drops_steering: bool = True
+    wheelbase: float = 2.8
+    steering_curvature_feedforward: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and
@@ -295,8 +307,11 @@ class FilterSettings:
             "acceleration_noise_std": float(noise["imu"]),
             "steering_sensor_std": float(noise["steering"]),
         }
+        wheelbase = config.get("vehicle", {}).get("wheelbase")
         # a noise-free env would make R singular: keep a floor
         floored: dict[str, Any] = {k: max(v, 1e-6) for k, v in values.items()}
+        if wheelbase is not None:
+            floored["wheelbase"] = float(wheelbase)
         floored.update(overrides)
         return cls(**floored)
 

@@ -15,6 +15,12 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
   (its own record, else the training record's) plus
   :data:`~estimators.settings.STRAIGHT_CURVATURE` (:func:`~estimators.settings.steering_curvature_limit`);
   unknown: ``math.inf``.
+- ``steering_curvature_feedforward`` (model units per 1/m): for a model fitted on straight
+  roads only (its curvature limit is :data:`~estimators.settings.STRAIGHT_CURVATURE`) with a
+  stable autoregression, the steady-state steering on a bend that its bearings do not explain
+  (:func:`curvature_feedforward`, docs/design.md §8.28); the steering then counts on bends too
+  (``steering_curvature_limit`` ``math.inf``). A user's ``steering_curvature_feedforward = 0``
+  keeps the curvature limit instead.
 - ``min_speed`` / ``steering_max_speed`` (m/s): the speeds it was fitted at (its own record,
   else the training record's) widened by :data:`~estimators.settings.SPEED_MARGIN`, the lower end
   never below the base settings' ``min_speed`` (:func:`~estimators.settings.steering_speed_limits`).
@@ -52,7 +58,13 @@ from estimators.settings import (
 from estimators.tuning import PredictionCheck
 from hasa_env.steering.arx import ARXForm
 
-__all__ = ["TrainingRecord", "TrustedFilter", "model_limits", "trusted_filter"]
+__all__ = [
+    "TrainingRecord",
+    "TrustedFilter",
+    "curvature_feedforward",
+    "model_limits",
+    "trusted_filter",
+]
 
 
 @dataclass(frozen=True)
@@ -158,6 +170,24 @@ def model_limits(
     return steering_curvature_limit(curvature), steering_speed_limits(speeds)
 
 
+def curvature_feedforward(arx: ARXForm, wheelbase: float, steering_ratio: float = 1.0) -> float:
+    """G (model units per 1/m): the steering a driver adds on a bend beyond what the ARX
+    model's bearings explain, so that its steady state on a bend of curvature kappa, centred in
+    the lane and aligned with it, is the kinematic ``steering_ratio L kappa`` (docs/design.md
+    §8.28)::
+
+        bearings there:  phi = kappa near / 2,  Omega = kappa far / 2,  v_y = 0
+        model's steady steering:  (sum b near + sum c far) kappa / (2 (1 - sum a))
+        G = steering_ratio L - (sum b near + sum c far) / (2 (1 - sum a))
+
+    NaN when the autoregression has no steady state (no steering lags, or ``sum a >= 1``)."""
+    total_a = float(np.sum(arx.a))
+    if not len(arx.a) or total_a >= 1.0:
+        return math.nan
+    bearings = float(np.sum(arx.b)) * arx.near_distance + float(np.sum(arx.c)) * arx.far_distance
+    return steering_ratio * wheelbase - bearings / (2.0 * (1.0 - total_a))
+
+
 def trusted_filter(
     model: Any,
     base: FilterSettings | None = None,
@@ -201,11 +231,35 @@ def trusted_filter(
         rule["steering_curvature_limit"] = curvature
         rule["min_speed"] = max(settings.min_speed, low)
         rule["steering_max_speed"] = high
+    if not off:  # a model of straight roads, given the bends' steady steering (checked or not)
+        fitted_on = model_limits(model, training)[0]
+        feedforward = _feedforward(arx, settings, fitted_on, steering_ratio, overrides)
+        if feedforward is not None:
+            rule["steering_curvature_feedforward"] = feedforward
+            rule["steering_curvature_limit"] = math.inf
     settings = replace(settings, **{k: v for k, v in rule.items() if k not in overrides})
     if off:
         return TrustedFilter(settings, None, 0, off)
     reasons = _reasons(settings, model, training, overrides, checks)
     return TrustedFilter(settings, arx, int(getattr(model, "decision_lag", 1)), reasons)
+
+
+def _feedforward(
+    arx: ARXForm | None,
+    settings: FilterSettings,
+    curvature_limit: float,
+    steering_ratio: float,
+    overrides: Mapping[str, Any],
+) -> float | None:
+    """The curvature feed-forward the rule gives a model fitted on straight roads only (its
+    curvature limit :data:`STRAIGHT_CURVATURE`), None for any other (fitted on bends, unknown
+    roads, no steady state) or when the user set one."""
+    if arx is None or "steering_curvature_feedforward" in overrides:
+        return None
+    if not math.isclose(curvature_limit, STRAIGHT_CURVATURE, rel_tol=1e-9):
+        return None
+    gain = curvature_feedforward(arx, settings.wheelbase, steering_ratio)
+    return gain if math.isfinite(gain) else None
 
 
 def _switched_off(

@@ -1,0 +1,131 @@
+"""A model fitted on straight roads, given the steering a bend needs beyond what its bearings
+explain (``FilterSettings.steering_curvature_feedforward``, ``estimators.trust.
+curvature_feedforward``; docs/design.md §8.28), instead of being switched off on bends."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from benchmarks.protocol.config import ProtocolConfig
+from benchmarks.protocol.plan import load_frames, make_plan
+from estimators import FilterSettings, GaussianMixtureEKF
+from estimators.arx_state_space import road_curvature_ahead
+from estimators.filterpy_ekf import FilterpyGMEKF
+from estimators.offline import run_estimator
+from estimators.settings import STRAIGHT_CURVATURE
+from estimators.trust import TrainingRecord, curvature_feedforward, trusted_filter
+from estimators.tuning import steering_residual_std
+from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.models import GeneralizedModel
+
+
+def test_the_feedforward_is_the_kinematic_steering_less_what_the_bearings_explain() -> None:
+    arx = ARXForm(a=(0.3, 0.2), b=(0.1,), c=(0.2,), d=(), near_distance=5.0, far_distance=20.0)
+    # steady state centred on a bend: phi = kappa 5 / 2, Omega = kappa 20 / 2, delta = L kappa
+    expected = 2.8 - (0.1 * 5.0 + 0.2 * 20.0) / (2.0 * 0.5)
+    assert curvature_feedforward(arx, 2.8) == pytest.approx(expected)
+    assert curvature_feedforward(arx, 2.8, steering_ratio=15.0) == pytest.approx(
+        expected + 14 * 2.8
+    )
+    unstable = ARXForm(a=(1.0,), b=(0.1,), c=(), d=(), near_distance=5.0, far_distance=20.0)
+    assert math.isnan(curvature_feedforward(unstable, 2.8))
+
+
+def test_the_curvature_is_read_exactly_from_the_road_points_of_a_circle() -> None:
+    kappa, near = np.array([0.005, -0.002, 0.0008]), 6.2
+    points = np.column_stack([np.sin(kappa * near) / kappa, (1 - np.cos(kappa * near)) / kappa,
+                              np.full(3, 20.0), np.zeros(3)])  # fmt: skip
+    np.testing.assert_allclose(road_curvature_ahead(points, 3), kappa, rtol=1e-6, atol=1e-12)
+    np.testing.assert_array_equal(road_curvature_ahead(None, 2), np.zeros(2))
+
+
+def test_the_rule_gives_it_to_models_of_straight_roads_only() -> None:
+    model = GeneralizedModel.paper()  # fitted on the paper's straight track
+    arx = model.arx()
+    straight = trusted_filter(model, FilterSettings(), training=TrainingRecord(curvature=0.0))
+    assert straight.settings.steering_curvature_feedforward == pytest.approx(
+        curvature_feedforward(arx, 2.8)
+    )
+    assert math.isinf(straight.settings.steering_curvature_limit)
+    fitted = GeneralizedModel.from_arx(arx)  # no record of its roads
+    fitted.training_curvature = None
+    bends = trusted_filter(fitted, FilterSettings(), training=TrainingRecord(curvature=0.004))
+    assert bends.settings.steering_curvature_feedforward == 0.0
+    assert bends.settings.steering_curvature_limit == pytest.approx(0.004 + STRAIGHT_CURVATURE)
+    unknown = trusted_filter(fitted, FilterSettings(), training=TrainingRecord())
+    assert unknown.settings.steering_curvature_feedforward == 0.0
+    refused = trusted_filter(
+        model, FilterSettings(), overrides={"steering_curvature_feedforward": 0}
+    )
+    assert refused.settings.steering_curvature_limit == pytest.approx(STRAIGHT_CURVATURE)
+    assert FilterSettings.from_env_config(
+        {"noise": {"speed": 0.1, "camera": 0.1, "imu": 0.1, "steering": 1e-4},
+         "vehicle": {"wheelbase": 3.1}}
+    ).wheelbase == 3.1  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def bends():
+    """A generalized model fitted on two drivers' straight runs (seed 5131) and their runs on
+    the curved track."""
+    plan = make_plan(ProtocolConfig(seeds=(5131,), drivers=3, runs=2, ill_runs=2, duration=30.0,
+                                    training_drivers=0), 5131)  # fmt: skip
+    train = load_frames(plan.main[:4], "straight", plan.env_config, plan.params)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = GeneralizedModel().fit(train)
+    curved_plan = make_plan(ProtocolConfig(seeds=(5131,), drivers=3, runs=1, ill_runs=1,
+                                           duration=30.0, track="curved"), 5131)  # fmt: skip
+    curved = load_frames(curved_plan.main, "curved", curved_plan.env_config, curved_plan.params)
+    residual = steering_residual_std(model.arx(), train, decision_lag=model.decision_lag)
+    record = TrainingRecord(residual_std=residual, curvature=0.0)
+    return model, record, curved
+
+
+def test_the_fast_filter_equals_filterpy_with_the_feedforward(bends):
+    model, record, curved = bends
+    first = int(np.argmax(np.abs(curved[0]["road_curvature"].to_numpy()) > 1e-3))
+    frame = curved[0].iloc[first - 100 : first + 500]
+    trusted = trusted_filter(
+        model, FilterSettings.from_env_config(frame.attrs["config"]), training=record
+    )
+    assert trusted.settings.steering_curvature_feedforward != 0
+    settings, arx = trusted.settings, trusted.arx
+    fast = run_estimator(GaussianMixtureEKF(arx, settings), frame, store_components=True)
+    ref = run_estimator(FilterpyGMEKF(arx, settings), frame, store_components=True)
+    assert np.abs(frame["road_curvature"]).max() > 1e-3  # it runs on a bend
+    np.testing.assert_allclose(fast.component_means, ref.component_means, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(fast.weights, ref.weights, rtol=0, atol=1e-9)
+
+
+def _final_true_weight(result) -> np.ndarray:
+    """(R,) the weight of the true lane at each run's last step."""
+    last = result.weights[np.arange(result.num_runs), result.lengths - 1]  # (R, C)
+    return (last * result.true_lane_mask()).sum(axis=1)
+
+
+def test_with_it_the_steering_counts_on_bends_and_finds_the_lane_there(bends):
+    """Runs cut to start at their first bend: with the curvature rule the steering is off
+    there and the mixture stays at the prior (0.9 m off); with the feed-forward it counts and
+    the lane is found on the bend."""
+    model, record, curved = bends
+    cut = []
+    for frame in curved:
+        first = int(np.argmax(np.abs(frame["road_curvature"].to_numpy()) > 1e-3))
+        cut.append(frame.iloc[first:].reset_index(drop=True))
+    base = FilterSettings.from_env_config(curved[0].attrs["config"])
+    results = {}
+    for name, overrides in {
+        "feedforward": {},
+        "curvature rule": {"steering_curvature_feedforward": 0.0},
+    }.items():
+        est = trusted_filter(model, base, training=record, overrides=overrides).estimator()
+        results[name] = run_estimator(est, cut)
+    ff, rule = results["feedforward"], results["curvature rule"]
+    assert not ff.low_speed[ff.valid].any() and rule.low_speed[rule.valid].mean() > 0.3
+    assert np.all(_final_true_weight(ff) > 0.95)
+    assert np.all(ff.lateral_rmse() < 0.2) and np.all(rule.lateral_rmse() > 0.5)
