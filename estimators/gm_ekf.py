@@ -312,6 +312,7 @@ class GaussianMixtureEKF:
         threshold = settings.prune_threshold
         ratio = settings.steering_ratio if self.model.has_steering else np.nan
         self._measurement_scale = np.array([[1.0, 1.0, ratio]])  # (a row: cheaper for one run)
+        self._feedforward = self.settings.steering_curvature_feedforward
         self._log_prune_threshold = math.log(threshold) if threshold > 0 else None
         self._rule = EvidenceRule.from_settings(settings, self.model.dt)
         # the aim cap bounds the steering's lane evidence: without a steering model it is off
@@ -647,7 +648,9 @@ class GaussianMixtureEKF:
     ) -> MixtureState:
         """One step k-1 -> k of the runs of ``state``: the rules in order (class docstring);
         ``points`` are the road points at k (None: straight)."""
-        z, all_observed = self._observed(self._without_feedforward(z, points))
+        if self._feedforward and points is not None:
+            z = self._without_feedforward(z, points)
+        z, all_observed = self._observed(z)
         acc, missing_acc = _plausible_acceleration(acc, self.settings.max_acceleration)
         steering = z[:, 2]
         off = state.channel_off
@@ -704,12 +707,11 @@ class GaussianMixtureEKF:
         (measured units): ``delta - G kappa / steering_ratio``, kappa of the road points
         (``FilterSettings.steering_curvature_feedforward`` G; docs/design.md §8.28); ``z``
         itself without it or on a straight road."""
-        gain = self.settings.steering_curvature_feedforward
-        if gain == 0.0 or points is None:
+        if self._feedforward == 0.0 or points is None:
             return z
         z = np.array(z, dtype=np.float64, copy=True)
         kappa = road_curvature_ahead(points, z.shape[0])
-        z[:, 2] -= (gain / self.settings.steering_ratio) * kappa
+        z[:, 2] -= (self._feedforward / self.settings.steering_ratio) * kappa
         return z
 
     def _observed(self, z: np.ndarray) -> tuple[np.ndarray, bool]:
