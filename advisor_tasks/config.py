@@ -46,12 +46,12 @@ estimator.lane_check            refuse (ConfigError) a model that drives off the
                                 15 m/s (true)
 estimator.settings              further FilterSettings fields by name ({}); each one
                                 named wins over the rule of estimators.trust, which by
-                                default gives a model fitted on straight roads (presets
-                                and 'fit:' models) the bends' steady steering as a
-                                feed-forward, steering_curvature_feedforward, so its
-                                steering counts on bends (docs/design.md §8.28; 0: the
-                                curvature limit of its roads instead, no lane evidence
-                                on a bend, §8.11), and min_speed / steering_max_speed
+                                default sets steering_curvature_limit from the roads the
+                                model was fitted on (presets and 'fit:' models: straight,
+                                2e-4 1/m; no lane evidence from the steering on a bend,
+                                docs/design.md §8.11; a 'fit:' model whose fit pins it
+                                down gets the bends' steady steering as a feed-forward
+                                instead, §8.28), and min_speed / steering_max_speed
                                 from the speeds it was fitted at ('fit:' models; the
                                 presets' are unknown; :func:`trusted_estimator` gives the
                                 filter with the reasons)

@@ -17,7 +17,9 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
   unknown: ``math.inf``.
 - ``steering_curvature_feedforward`` (model units per 1/m): for a model fitted on straight
   roads only (its curvature limit is :data:`~estimators.settings.STRAIGHT_CURVATURE`) with a
-  stable autoregression, the steady-state steering on a bend that its bearings do not explain
+  stable autoregression and a fit that pins G down (:data:`FEEDFORWARD_PRECISION`;
+  :func:`curvature_feedforward_error`; none for presets and model files, whose fit is not
+  kept), the steady-state steering on a bend that its bearings do not explain
   (:func:`curvature_feedforward`, docs/design.md §8.28); the steering then counts on bends too
   (``steering_curvature_limit`` ``math.inf``). A user's ``steering_curvature_feedforward = 0``
   keeps the curvature limit instead.
@@ -61,7 +63,9 @@ from hasa_env.steering.arx import ARXForm
 __all__ = [
     "TrainingRecord",
     "TrustedFilter",
+    "FEEDFORWARD_PRECISION",
     "curvature_feedforward",
+    "curvature_feedforward_error",
     "model_limits",
     "trusted_filter",
 ]
@@ -130,8 +134,9 @@ class TrustedFilter:
         arx: the model's ARX form; None: no lane evidence from the steering (no model, no ARX
             form, or the model failed its lane-keeping check).
         decision_lag: the model's decision lag (samples; 0 without ``arx``).
-        reasons: one human-readable line per channel the rule switches off or tempers
-            (empty: the steering counts at every speed and on every road).
+        reasons: one human-readable line per channel the rule switches off or tempers, and
+            for a model fitted on straight roads whether it gets the curvature feed-forward
+            and why (empty: the steering counts at every speed and on every road as it is).
     """
 
     settings: FilterSettings
@@ -188,6 +193,36 @@ def curvature_feedforward(arx: ARXForm, wheelbase: float, steering_ratio: float 
     return steering_ratio * wheelbase - bearings / (2.0 * (1.0 - total_a))
 
 
+FEEDFORWARD_PRECISION = 0.25
+"""The largest standard error of G, relative to G, at which the rule gives a model the
+curvature feed-forward (docs/design.md §8.28): at 2 standard errors G is then within half of
+itself, so the correction removes at least half of the bend's bias."""
+
+
+def curvature_feedforward_error(model: Any) -> float:
+    """The standard error of :func:`curvature_feedforward` from the model's fit (the delta
+    method on its parameters' covariance, ``model.fit_result``; the parameters mapped to a, b,
+    c by their regressors' features ``delta``, ``phi``, ``omega``); NaN without a fit record
+    (a preset, a model file) or without a steady state."""
+    result = getattr(model, "fit_result", None)
+    arx = model.arx() if model is not None else None
+    if result is None or arx is None or not len(arx.a) or float(np.sum(arx.a)) >= 1.0:
+        return math.nan
+    features = {
+        name: r.feature for name, r in zip(model.parameter_names, model.regressors, strict=True)
+    }
+    total_b_c = float(np.sum(arx.b)) * arx.near_distance + float(np.sum(arx.c)) * arx.far_distance
+    rest = 1.0 - float(np.sum(arx.a))
+    slope = {
+        "delta": -total_b_c / (2.0 * rest * rest),
+        "phi": -arx.near_distance / (2.0 * rest),
+        "omega": -arx.far_distance / (2.0 * rest),
+    }
+    gradient = np.array([slope.get(features.get(name, ""), 0.0) for name in result.parameter_names])
+    variance = float(gradient @ np.asarray(result.covariance) @ gradient)
+    return math.sqrt(variance) if variance >= 0 else math.nan
+
+
 def trusted_filter(
     model: Any,
     base: FilterSettings | None = None,
@@ -233,7 +268,7 @@ def trusted_filter(
         rule["steering_max_speed"] = high
     if not off:  # a model of straight roads, given the bends' steady steering (checked or not)
         fitted_on = model_limits(model, training)[0]
-        feedforward = _feedforward(arx, settings, fitted_on, steering_ratio, overrides)
+        feedforward = _feedforward(model, arx, settings, fitted_on, steering_ratio, overrides)
         if feedforward is not None:
             rule["steering_curvature_feedforward"] = feedforward
             rule["steering_curvature_limit"] = math.inf
@@ -245,6 +280,7 @@ def trusted_filter(
 
 
 def _feedforward(
+    model: Any,
     arx: ARXForm | None,
     settings: FilterSettings,
     curvature_limit: float,
@@ -252,14 +288,57 @@ def _feedforward(
     overrides: Mapping[str, Any],
 ) -> float | None:
     """The curvature feed-forward the rule gives a model fitted on straight roads only (its
-    curvature limit :data:`STRAIGHT_CURVATURE`), None for any other (fitted on bends, unknown
-    roads, no steady state) or when the user set one."""
+    curvature limit :data:`STRAIGHT_CURVATURE`) whose fit pins G down (standard error at most
+    :data:`FEEDFORWARD_PRECISION` of G), None for any other (fitted on bends, unknown roads, no
+    steady state, no fit record, G too uncertain) or when the user set one."""
     if arx is None or "steering_curvature_feedforward" in overrides:
         return None
     if not math.isclose(curvature_limit, STRAIGHT_CURVATURE, rel_tol=1e-9):
         return None
-    gain = curvature_feedforward(arx, settings.wheelbase, steering_ratio)
-    return gain if math.isfinite(gain) else None
+    gain, error = _feedforward_fit(model, arx, settings.wheelbase, steering_ratio)
+    if not (math.isfinite(gain) and error <= FEEDFORWARD_PRECISION * abs(gain)):
+        return None  # (NaN error: no fit record, the precision unknown)
+    return gain
+
+
+def _feedforward_fit(
+    model: Any, arx: ARXForm, wheelbase: float, steering_ratio: float
+) -> tuple[float, float]:
+    """G and its standard error (NaN: no steady state / no fit record)."""
+    return curvature_feedforward(arx, wheelbase, steering_ratio), curvature_feedforward_error(model)
+
+
+def _feedforward_reason(model: Any, settings: FilterSettings, overrides: Mapping[str, Any]) -> str:
+    """Why a model of straight roads does or does not get the curvature feed-forward ('' for a
+    model that is not one, or when the user set the limit)."""
+    gain = settings.steering_curvature_feedforward
+    if gain != 0.0:
+        if "steering_curvature_feedforward" in overrides:
+            return f"on bends, the steering less G kappa: G = {gain:.3g} set by the user"
+        arx = model.arx()
+        error = _feedforward_fit(model, arx, settings.wheelbase, settings.steering_ratio)[1]
+        return (
+            f"on bends, the steering less the bend's steady steering G kappa: G = {gain:.3g} "
+            f"(standard error {error:.2g}), a model fitted on straight roads only "
+            "(docs/design.md §8.28)"
+        )
+    if "steering_curvature_limit" in overrides or "steering_curvature_feedforward" in overrides:
+        return ""
+    if not math.isclose(settings.steering_curvature_limit, STRAIGHT_CURVATURE, rel_tol=1e-9):
+        return ""
+    arx = model.arx()
+    gain, error = _feedforward_fit(model, arx, settings.wheelbase, settings.steering_ratio)
+    if not math.isfinite(gain):
+        return "no curvature feed-forward: its autoregression has no steady state"
+    if not math.isfinite(error):
+        return (
+            f"no curvature feed-forward (G = {gain:.3g}): its fit is not kept (a preset or a "
+            "model file), so whether the fit pins G down is unknown"
+        )
+    return (
+        f"no curvature feed-forward: its fit does not pin G down (G = {gain:.3g}, standard "
+        f"error {error:.2g}, more than {FEEDFORWARD_PRECISION:.0%} of G)"
+    )
 
 
 def _switched_off(
@@ -303,6 +382,9 @@ def _reasons(
             roads = limit - STRAIGHT_CURVATURE
             why = f"beyond the roads it was fitted on (|curvature| up to {roads:.3g} 1/m)"
         reasons.append(f"steering off where the road ahead curves more than {limit:.3g} 1/m: {why}")
+    feedforward = _feedforward_reason(model, settings, overrides)
+    if feedforward:
+        reasons.append(feedforward)
     speeds = getattr(model, "training_speed_range", None) or training.speed_range
     fitted = (
         f"outside the training speeds {speeds[0]:.1f}-{speeds[1]:.1f} m/s +- {SPEED_MARGIN:g}"

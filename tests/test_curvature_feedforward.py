@@ -17,7 +17,13 @@ from estimators.arx_state_space import road_curvature_ahead
 from estimators.filterpy_ekf import FilterpyGMEKF
 from estimators.offline import run_estimator
 from estimators.settings import STRAIGHT_CURVATURE
-from estimators.trust import TrainingRecord, curvature_feedforward, trusted_filter
+from estimators.trust import (
+    FEEDFORWARD_PRECISION,
+    TrainingRecord,
+    curvature_feedforward,
+    curvature_feedforward_error,
+    trusted_filter,
+)
 from estimators.tuning import steering_residual_std
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.models import GeneralizedModel
@@ -43,51 +49,77 @@ def test_the_curvature_is_read_exactly_from_the_road_points_of_a_circle() -> Non
     np.testing.assert_array_equal(road_curvature_ahead(None, 2), np.zeros(2))
 
 
-def test_the_rule_gives_it_to_models_of_straight_roads_only() -> None:
-    model = GeneralizedModel.paper()  # fitted on the paper's straight track
-    arx = model.arx()
-    straight = trusted_filter(model, FilterSettings(), training=TrainingRecord(curvature=0.0))
-    assert straight.settings.steering_curvature_feedforward == pytest.approx(
-        curvature_feedforward(arx, 2.8)
-    )
-    assert math.isinf(straight.settings.steering_curvature_limit)
-    fitted = GeneralizedModel.from_arx(arx)  # no record of its roads
-    fitted.training_curvature = None
-    bends = trusted_filter(fitted, FilterSettings(), training=TrainingRecord(curvature=0.004))
-    assert bends.settings.steering_curvature_feedforward == 0.0
-    assert bends.settings.steering_curvature_limit == pytest.approx(0.004 + STRAIGHT_CURVATURE)
-    unknown = trusted_filter(fitted, FilterSettings(), training=TrainingRecord())
-    assert unknown.settings.steering_curvature_feedforward == 0.0
-    refused = trusted_filter(
-        model, FilterSettings(), overrides={"steering_curvature_feedforward": 0}
-    )
-    assert refused.settings.steering_curvature_limit == pytest.approx(STRAIGHT_CURVATURE)
-    assert FilterSettings.from_env_config(
-        {"noise": {"speed": 0.1, "camera": 0.1, "imu": 0.1, "steering": 1e-4},
-         "vehicle": {"wheelbase": 3.1}}
-    ).wheelbase == 3.1  # fmt: skip
-
-
 @pytest.fixture(scope="module")
 def bends():
-    """A generalized model fitted on two drivers' straight runs (seed 5131) and their runs on
-    the curved track."""
-    plan = make_plan(ProtocolConfig(seeds=(5131,), drivers=3, runs=2, ill_runs=2, duration=30.0,
-                                    training_drivers=0), 5131)  # fmt: skip
-    train = load_frames(plan.main[:4], "straight", plan.env_config, plan.params)
+    """The generalized model fitted as the benchmark fits it (seed 5131: "Ill" and 8 training
+    drivers, 30 s straight runs each; its G pinned down), the same runs fitted with BIC's
+    orders (4, 6, 3, 3; G not pinned down), and 3 drivers' runs on the curved track."""
+    plan = make_plan(ProtocolConfig(seeds=(5131,), drivers=3, runs=1, ill_runs=1), 5131)
+    env = plan.training_env_config or plan.env_config
+    train = load_frames(plan.trainings(), "straight", env, plan.params)
+    extra = {p.name: p for p in plan.training_drivers}
+    train += load_frames(plan.driver_trainings(), "straight", env, extra)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = GeneralizedModel().fit(train)
+        loose = GeneralizedModel(4, 6, 3, 3).fit(train)
     curved_plan = make_plan(ProtocolConfig(seeds=(5131,), drivers=3, runs=1, ill_runs=1,
                                            duration=30.0, track="curved"), 5131)  # fmt: skip
     curved = load_frames(curved_plan.main, "curved", curved_plan.env_config, curved_plan.params)
     residual = steering_residual_std(model.arx(), train, decision_lag=model.decision_lag)
     record = TrainingRecord(residual_std=residual, curvature=0.0)
-    return model, record, curved
+    return model, record, curved, loose
+
+
+def test_the_standard_error_of_g_is_the_delta_method_on_the_fits_covariance(bends):
+    model = bends[0]
+    result = model.fit_result
+    params = np.asarray(result.parameters, dtype=np.float64)
+
+    def g_of(values: np.ndarray) -> float:
+        return curvature_feedforward(model.with_parameters(values).arx(), 2.8)
+
+    step = 1e-7
+    gradient = np.array([(g_of(params + step * e) - g_of(params - step * e)) / (2 * step)
+                         for e in np.eye(params.size)])  # fmt: skip
+    expected = math.sqrt(gradient @ np.asarray(result.covariance) @ gradient)
+    assert curvature_feedforward_error(model) == pytest.approx(expected, rel=1e-4)
+    assert math.isnan(curvature_feedforward_error(GeneralizedModel.paper()))  # no fit record
+
+
+def test_the_rule_gives_it_to_straight_road_fits_that_pin_it_down(bends):
+    model, record, _, loose = bends
+    gain = curvature_feedforward(model.arx(), 2.8)
+    assert curvature_feedforward_error(model) <= FEEDFORWARD_PRECISION * abs(gain)
+    straight = trusted_filter(model, FilterSettings(), training=record)
+    assert straight.settings.steering_curvature_feedforward == pytest.approx(gain)
+    assert math.isinf(straight.settings.steering_curvature_limit)
+    assert any(r.startswith("on bends, the steering less the bend's steady steering G kappa: "
+                            f"G = {gain:.3g} (standard error ") for r in straight.reasons)  # fmt: skip
+    loose_reasons = trusted_filter(loose, FilterSettings(), training=record).reasons
+    assert any(r.startswith("no curvature feed-forward: its fit does not pin G down")
+               for r in loose_reasons)  # fmt: skip
+    no_record = GeneralizedModel.from_arx(model.arx())  # fitted elsewhere, roads unknown
+    no_record.training_curvature = None
+    for other, training, limit in [
+        (loose, record, STRAIGHT_CURVATURE),  # G not pinned down by its fit
+        (GeneralizedModel.paper(), record, STRAIGHT_CURVATURE),  # a preset: no fit record
+        (no_record, TrainingRecord(curvature=0.004), 0.004 + STRAIGHT_CURVATURE),  # bends
+    ]:
+        settings = trusted_filter(other, FilterSettings(), training=training).settings
+        assert settings.steering_curvature_feedforward == 0.0
+        assert settings.steering_curvature_limit == pytest.approx(limit)
+    refused = trusted_filter(
+        model, FilterSettings(), training=record, overrides={"steering_curvature_feedforward": 0}
+    )
+    assert refused.settings.steering_curvature_limit == pytest.approx(STRAIGHT_CURVATURE)
+    noise = {"speed": 0.1, "camera": 0.1, "imu": 0.1, "steering": 1e-4}
+    config = {"noise": noise, "vehicle": {"wheelbase": 3.1}}
+    assert FilterSettings.from_env_config(config).wheelbase == 3.1
 
 
 def test_the_fast_filter_equals_filterpy_with_the_feedforward(bends):
-    model, record, curved = bends
+    model, record, curved, _ = bends
     first = int(np.argmax(np.abs(curved[0]["road_curvature"].to_numpy()) > 1e-3))
     frame = curved[0].iloc[first - 100 : first + 500]
     trusted = trusted_filter(
@@ -112,7 +144,7 @@ def test_with_it_the_steering_counts_on_bends_and_finds_the_lane_there(bends):
     """Runs cut to start at their first bend: with the curvature rule the steering is off
     there and the mixture stays at the prior (0.9 m off); with the feed-forward it counts and
     the lane is found on the bend."""
-    model, record, curved = bends
+    model, record, curved, _ = bends
     cut = []
     for frame in curved:
         first = int(np.argmax(np.abs(frame["road_curvature"].to_numpy()) > 1e-3))

@@ -13,7 +13,7 @@ import pytest
 from estimators.baselines import NoSteeringEKF
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.settings import STRAIGHT_CURVATURE, FilterSettings
-from estimators.trust import TrainingRecord, curvature_feedforward, trusted_filter
+from estimators.trust import TrainingRecord, trusted_filter
 from hasa_env.steering import GeneralizedModel
 
 SPEEDS = (15.2, 16.1)
@@ -110,11 +110,7 @@ def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording,
     expected = trusted_filter(model, FilterSettings.from_env_config(env.unwrapped.config))
     assert expected.settings.steering_max_speed == pytest.approx(SPEEDS[1] + 1.0)
     assert expected.settings.min_speed == pytest.approx(SPEEDS[0] - 1.0)
-    # fitted on straight roads: the bends' steady steering is a feed-forward (no curvature limit)
-    assert math.isinf(expected.settings.steering_curvature_limit)
-    assert expected.settings.steering_curvature_feedforward == pytest.approx(
-        curvature_feedforward(model.arx(), expected.settings.wheelbase)
-    )
+    assert expected.settings.steering_curvature_limit == STRAIGHT_CURVATURE
     # hasa-replay measures the residual level on the recording itself: all else is the same
     replay_level = filters["hasa-replay"].settings.steering_residual_std
     assert 0 < replay_level != level
@@ -223,15 +219,14 @@ def test_the_reasons_say_what_is_off_and_why() -> None:
     trusted = trusted_filter(_model())
     speeds = "outside the training speeds 15.2-16.1 m/s +- 1"
     assert trusted.reasons == (
+        "steering off where the road ahead curves more than 0.0002 1/m: beyond the roads it "
+        "was fitted on (|curvature| up to 0 1/m)",
+        "no curvature feed-forward (G = -29.4): its fit is not kept (a preset or a model file), "
+        "so whether the fit pins G down is unknown",
         f"steering off below 14.2 m/s: {speeds}",
         f"steering off above 17.1 m/s: {speeds}",
     )
     assert trusted.describe() == "; ".join(trusted.reasons)
-    no_feedforward = trusted_filter(_model(), overrides={"steering_curvature_feedforward": 0.0})
-    assert no_feedforward.reasons[0] == (
-        "steering off where the road ahead curves more than 0.0002 1/m: beyond the roads it "
-        "was fitted on (|curvature| up to 0 1/m)"
-    )
     model = GeneralizedModel.paper()
     model.training_curvature = None  # a model that does not say where it was fitted
     unknown = trusted_filter(model)
@@ -284,14 +279,7 @@ def test_a_training_run_stands_in_for_what_the_model_does_not_record() -> None:
     assert record.speed_range == (15.0, 16.0) and record.curvature == 0.01
     paper = GeneralizedModel.paper()  # keeps its roads (straight), not its speeds
     settings = trusted_filter(paper, training=record).settings
-    # its own record first: straight roads (a feed-forward on bends), not the run's bends
-    assert math.isinf(settings.steering_curvature_limit)
-    assert settings.steering_curvature_feedforward != 0.0
-    fitted = GeneralizedModel.from_arx(paper.arx())
-    fitted.training_curvature = None  # no record of its own: the run's bends
-    bends = trusted_filter(fitted, training=record).settings
-    assert bends.steering_curvature_limit == pytest.approx(0.01 + STRAIGHT_CURVATURE)
-    assert bends.steering_curvature_feedforward == 0.0
+    assert settings.steering_curvature_limit == STRAIGHT_CURVATURE  # its own record first
     assert (settings.min_speed, settings.steering_max_speed) == (14.0, 17.0)
     assert TrainingRecord.from_run(pd.DataFrame({"x": [1.0]})) == TrainingRecord()
 
@@ -319,6 +307,7 @@ def test_the_benchmark_describes_each_models_limits() -> None:
     infos = [{"name": "m"}, {"name": "road_blind"}]
     describe_trust(fitted, infos, {"min_speed": 5.0})
     assert infos[0]["steering_trust"] == [
+        *trusted_filter(_model()).reasons[:2],
         "steering off below 5.0 m/s: set by the user (min_speed)",
         "steering off above 17.1 m/s: outside the training speeds 15.2-16.1 m/s +- 1",
     ]

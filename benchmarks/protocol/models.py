@@ -558,7 +558,8 @@ def describe_trust(
 ) -> None:
     """Put in each estimated model's description (key ``steering_trust``) the reasons
     :func:`estimators.trust.trusted_filter` gives for every limit on its steering channel
-    (with the protocol's ``filter_settings`` as the user's ``overrides``)."""
+    (with the protocol's ``filter_settings`` as the user's ``overrides``), and the filter's
+    ``steering_curvature_limit`` (None: none) and ``steering_curvature_feedforward``."""
     described = {info["name"]: info for info in infos}
     for fm in fitted:
         info = described.get(fm.name)
@@ -566,3 +567,6 @@ def describe_trust(
             continue
         trust = trusted_filter(fm.model, training=fm.training, overrides=overrides)
         info["steering_trust"] = list(trust.reasons)
+        limit = trust.settings.steering_curvature_limit  # the filter's (the feed-forward lifts it)
+        info["steering_curvature_limit"] = limit if math.isfinite(limit) else None
+        info["steering_curvature_feedforward"] = trust.settings.steering_curvature_feedforward
