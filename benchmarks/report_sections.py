@@ -138,7 +138,20 @@ _CHECK_COLUMNS = [
     Column(lambda r: ", ".join(r.get("flags") or []) or "-", "flags", left=True),
     Column(lambda r: _lane_keeping_cell(r.get("lane_keeping")), "drives (closed loop)", left=True),
     Column(lambda r: _prediction_cell(r.get("prediction")), "predicts (vs own past)", left=True),
+    Column(lambda r: _bends_cell(r.get("bends")), "steering on bends", left=True),
 ]
+
+
+def _bends_cell(bends: tuple[Any, Any] | None) -> str:
+    """How the estimator uses the model's steering on bends, from its filter's
+    ``steering_curvature_feedforward`` and ``steering_curvature_limit`` (1/m; None: no limit):
+    "feed-forward G 2.1" (docs/design.md §8.28), "off above 0.0002 1/m" or "counts"."""
+    if bends is None or bends[0] is None:
+        return "-"
+    feedforward, limit = bends
+    if feedforward:
+        return f"feed-forward G {feedforward:.3g}"
+    return "counts" if limit is None else f"off above {limit:.2g} 1/m"
 
 
 def _prediction_cell(levels: tuple[float, float] | None) -> str:
@@ -251,10 +264,12 @@ def checks_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
         if m.get("error") or not (checks or m.get("lane_keeping")):
             continue
         levels = (m.get("prediction_residual_std"), m.get("lane_free_residual_std"))
+        bends = (m.get("steering_curvature_feedforward"), m.get("steering_curvature_limit"))
         rows.append(
             {"name": m["name"], "kind": m.get("kind"), "seed": m.get("seed"), **checks}
             | {"lane_keeping": m.get("lane_keeping")}
             | {"prediction": levels if None not in levels else None}
+            | {"bends": bends}
         )
     return rows
 
@@ -421,7 +436,9 @@ def _checks_section(result: BenchmarkResult) -> Section:
         "keeps them on the road (docs/design.md §8.11), and its one-step residual on the "
         "training run's steering over that of a lane-free autoregression of its order "
         "(docs/design.md §8.13.1); a model that does not drive, or predicts no better, gives "
-        "the estimator no lane evidence",
+        "the estimator no lane evidence; on bends, the estimator either takes the bend's steady "
+        "steering G kappa off the measured steering (a straight-road fit that pins G down, "
+        "docs/design.md §8.28) or switches the steering off above the curvature it was fitted on",
         checks_rows(result),
         _CHECK_COLUMNS,
         "name",

@@ -161,3 +161,31 @@ def test_with_it_the_steering_counts_on_bends_and_finds_the_lane_there(bends):
     assert not ff.low_speed[ff.valid].any() and rule.low_speed[rule.valid].mean() > 0.3
     assert np.all(_final_true_weight(ff) > 0.95)
     assert np.all(ff.lateral_rmse() < 0.2) and np.all(rule.lateral_rmse() > 0.5)
+
+
+def test_the_benchmark_reports_how_each_model_is_used_on_bends(bends):
+    from benchmarks.protocol.models import FittedModel, describe_trust
+    from benchmarks.report_sections import _bends_cell
+
+    model, record, _, loose = bends
+    refused = TrainingRecord(residual_std=record.residual_std, curvature=0.0, keeps_lane=False)
+    fitted = [
+        FittedModel("pinned", "builtin", model, record.residual_std, record),
+        FittedModel("loose", "builtin", loose, record.residual_std, record),
+        FittedModel("refused", "builtin", model, record.residual_std, refused),
+    ]
+    infos = [{"name": f.name} for f in fitted]
+    describe_trust(fitted, infos, {})
+    pinned, not_pinned, off = infos
+    gain = curvature_feedforward(model.arx(), 2.8)
+    assert pinned["steering_curvature_feedforward"] == pytest.approx(gain)
+    assert pinned["steering_curvature_limit"] is None  # lifted by the feed-forward
+    assert not_pinned["steering_curvature_feedforward"] == 0.0
+    assert not_pinned["steering_curvature_limit"] == pytest.approx(STRAIGHT_CURVATURE)
+    assert off["steering_curvature_feedforward"] is None  # its steering is not used at all
+    cells = [
+        _bends_cell((i["steering_curvature_feedforward"], i.get("steering_curvature_limit")))
+        for i in infos
+    ]
+    assert cells == [f"feed-forward G {gain:.3g}", "off above 0.0002 1/m", "-"]
+    assert _bends_cell((0.0, None)) == "counts"

@@ -559,7 +559,8 @@ def describe_trust(
     """Put in each estimated model's description (key ``steering_trust``) the reasons
     :func:`estimators.trust.trusted_filter` gives for every limit on its steering channel
     (with the protocol's ``filter_settings`` as the user's ``overrides``), and the filter's
-    ``steering_curvature_limit`` (None: none) and ``steering_curvature_feedforward``."""
+    ``steering_curvature_limit`` (None: none) and ``steering_curvature_feedforward`` (None: the
+    estimator uses none of the model's steering)."""
     described = {info["name"]: info for info in infos}
     for fm in fitted:
         info = described.get(fm.name)
@@ -567,6 +568,9 @@ def describe_trust(
             continue
         trust = trusted_filter(fm.model, training=fm.training, overrides=overrides)
         info["steering_trust"] = list(trust.reasons)
+        if trust.arx is None:  # no lane evidence from its steering anywhere
+            info["steering_curvature_feedforward"] = None
+            continue
         limit = trust.settings.steering_curvature_limit  # the filter's (the feed-forward lifts it)
         info["steering_curvature_limit"] = limit if math.isfinite(limit) else None
         info["steering_curvature_feedforward"] = trust.settings.steering_curvature_feedforward
