@@ -7,10 +7,12 @@ points at this tree so the code under test is the one that runs.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 ROOT = Path(__file__).resolve().parents[1]
 MODULES = {
@@ -48,3 +50,12 @@ def run_program(
         text=True,
         timeout=timeout,
     )
+
+
+def load_example(name: str) -> ModuleType:
+    """``examples/<name>.py``, imported afresh from its file (examples/ is no package)."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "examples" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

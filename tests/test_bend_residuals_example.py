@@ -3,23 +3,15 @@ feed-forward and the residual statistics it cites."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
-
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "bend_residuals.py"
+from _programs import load_example
 
 
 def _example() -> ModuleType:
-    """The example, imported afresh from its file (examples/ is no package)."""
-    spec = importlib.util.spec_from_file_location("bend_residuals", EXAMPLE)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_example("bend_residuals")
 
 
 def test_the_example_gives_one_row_per_seed_with_its_feedforward(capsys) -> None:

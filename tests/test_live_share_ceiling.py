@@ -3,22 +3,14 @@ driver, for the paper's steering autoregression and a longer one."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 from types import ModuleType
 
 import pytest
-
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "live_share_ceiling.py"
+from _programs import load_example
 
 
 def _example() -> ModuleType:
-    """The example, imported afresh from its file (examples/ is no package)."""
-    spec = importlib.util.spec_from_file_location("live_share_ceiling", EXAMPLE)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_example("live_share_ceiling")
 
 
 def test_the_ceiling_example_gives_one_live_share_per_driver() -> None:
