@@ -203,14 +203,20 @@ def curvature_feedforward_error(model: Any) -> float:
     """The standard error of :func:`curvature_feedforward` from the model's fit (the delta
     method on its parameters' covariance, ``model.fit_result``; the parameters mapped to a, b,
     c by their regressors' features ``delta``, ``phi``, ``omega``); NaN without a fit record
-    (a preset, a model file) or without a steady state."""
+    (a preset, a model file), without a steady state, or for a model that does not name its
+    parameters' regressors (``parameter_names``, ``regressors``) or whose covariance does not
+    match its parameters."""
     result = getattr(model, "fit_result", None)
     arx = model.arx() if model is not None else None
     if result is None or arx is None or not len(arx.a) or float(np.sum(arx.a)) >= 1.0:
         return math.nan
-    features = {
-        name: r.feature for name, r in zip(model.parameter_names, model.regressors, strict=True)
-    }
+    names = getattr(model, "parameter_names", None)
+    regressors = getattr(model, "regressors", None)
+    covariance = np.asarray(getattr(result, "covariance", None), dtype=np.float64)
+    n_params = len(getattr(result, "parameter_names", ()))
+    if names is None or regressors is None or covariance.shape != (n_params, n_params):
+        return math.nan  # a model that does not say which parameter is which: unknown
+    features = {name: getattr(r, "feature", "") for name, r in zip(names, regressors, strict=False)}
     total_b_c = float(np.sum(arx.b)) * arx.near_distance + float(np.sum(arx.c)) * arx.far_distance
     rest = 1.0 - float(np.sum(arx.a))
     slope = {
@@ -219,7 +225,7 @@ def curvature_feedforward_error(model: Any) -> float:
         "omega": -arx.far_distance / (2.0 * rest),
     }
     gradient = np.array([slope.get(features.get(name, ""), 0.0) for name in result.parameter_names])
-    variance = float(gradient @ np.asarray(result.covariance) @ gradient)
+    variance = float(gradient @ covariance @ gradient)
     return math.sqrt(variance) if variance >= 0 else math.nan
 
 

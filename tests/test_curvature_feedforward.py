@@ -189,3 +189,19 @@ def test_the_benchmark_reports_how_each_model_is_used_on_bends(bends):
     ]
     assert cells == [f"feed-forward G {gain:.3g}", "off above 0.0002 1/m", "-"]
     assert _bends_cell((0.0, None)) == "counts"
+
+
+def test_a_model_that_does_not_name_its_parameters_keeps_the_curvature_rule(bends):
+    """A duck-typed user model (``arx()`` and a fit record, no regressors) or a fit record whose
+    covariance does not match its parameters: G's precision is unknown, no feed-forward."""
+    from types import SimpleNamespace
+
+    model, record, _, _ = bends
+    duck = SimpleNamespace(arx=model.arx, fit_result=model.fit_result, decision_lag=1)
+    assert math.isnan(curvature_feedforward_error(duck))
+    wrong = GeneralizedModel.from_arx(model.arx())
+    wrong.fit_result = SimpleNamespace(parameter_names=("a1", "b1"), covariance=np.eye(3))
+    assert math.isnan(curvature_feedforward_error(wrong))
+    settings = trusted_filter(duck, FilterSettings(), training=record).settings
+    assert settings.steering_curvature_feedforward == 0.0
+    assert settings.steering_curvature_limit == pytest.approx(STRAIGHT_CURVATURE)
