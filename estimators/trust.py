@@ -18,8 +18,8 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
 - ``steering_curvature_feedforward`` (model units per 1/m): for a model fitted on straight
   roads only (its curvature limit is :data:`~estimators.settings.STRAIGHT_CURVATURE`) with a
   stable autoregression and a fit that pins G down (:data:`FEEDFORWARD_PRECISION`;
-  :func:`curvature_feedforward_error`; none for presets and model files, whose fit is not
-  kept), the steady-state steering on a bend that its bearings do not explain
+  :func:`curvature_feedforward_error`, from the covariance of its parameters, which a fit and
+  its model file keep; none for the presets), the steady-state steering on a bend that its bearings do not explain
   (:func:`curvature_feedforward`, docs/design.md §8.28); the steering then counts on bends too
   (``steering_curvature_limit`` ``math.inf``). A user's ``steering_curvature_feedforward = 0``
   keeps the curvature limit instead.
@@ -200,22 +200,29 @@ itself, so the correction removes at least half of the bend's bias."""
 
 
 def curvature_feedforward_error(model: Any) -> float:
-    """The standard error of :func:`curvature_feedforward` from the model's fit (the delta
-    method on its parameters' covariance, ``model.fit_result``; the parameters mapped to a, b,
-    c by their regressors' features ``delta``, ``phi``, ``omega``); NaN without a fit record
-    (a preset, a model file), without a steady state, or for a model that does not name its
-    parameters' regressors (``parameter_names``, ``regressors``) or whose covariance does not
-    match its parameters."""
-    result = getattr(model, "fit_result", None)
+    """The standard error of :func:`curvature_feedforward` from the model's fit: the delta
+    method on its parameters' covariance (``model.parameter_covariance``: the fit's, or the one
+    its model file kept; else a duck-typed model's ``fit_result.covariance``), the parameters
+    mapped to a, b, c by their regressors' features ``delta``, ``phi``, ``omega``. NaN without
+    a covariance (a preset, a model file written without one), without a steady state, or for
+    a model that does not name its parameters' regressors (``parameter_names``,
+    ``regressors``) or whose covariance does not match its parameters."""
     arx = model.arx() if model is not None else None
-    if result is None or arx is None or not len(arx.a) or float(np.sum(arx.a)) >= 1.0:
+    if arx is None or not len(arx.a) or float(np.sum(arx.a)) >= 1.0:
         return math.nan
     names = getattr(model, "parameter_names", None)
     regressors = getattr(model, "regressors", None)
-    covariance = np.asarray(getattr(result, "covariance", None), dtype=np.float64)
-    n_params = len(getattr(result, "parameter_names", ()))
-    if names is None or regressors is None or covariance.shape != (n_params, n_params):
-        return math.nan  # a model that does not say which parameter is which: unknown
+    covariance = getattr(model, "parameter_covariance", None)
+    order = names
+    if covariance is None:  # a model that is no SteeringModel: its fit record, if any
+        result = getattr(model, "fit_result", None)
+        covariance = getattr(result, "covariance", None)
+        order = getattr(result, "parameter_names", None)
+    if covariance is None or names is None or regressors is None or order is None:
+        return math.nan  # no covariance, or no saying which parameter is which: unknown
+    covariance = np.asarray(covariance, dtype=np.float64)
+    if covariance.shape != (len(order), len(order)):
+        return math.nan
     features = {name: getattr(r, "feature", "") for name, r in zip(names, regressors, strict=False)}
     total_b_c = float(np.sum(arx.b)) * arx.near_distance + float(np.sum(arx.c)) * arx.far_distance
     rest = 1.0 - float(np.sum(arx.a))
@@ -224,7 +231,7 @@ def curvature_feedforward_error(model: Any) -> float:
         "phi": -arx.near_distance / (2.0 * rest),
         "omega": -arx.far_distance / (2.0 * rest),
     }
-    gradient = np.array([slope.get(features.get(name, ""), 0.0) for name in result.parameter_names])
+    gradient = np.array([slope.get(features.get(name, ""), 0.0) for name in order])
     variance = float(gradient @ covariance @ gradient)
     return math.sqrt(variance) if variance >= 0 else math.nan
 
@@ -338,8 +345,9 @@ def _feedforward_reason(model: Any, settings: FilterSettings, overrides: Mapping
         return "no curvature feed-forward: its autoregression has no steady state"
     if not math.isfinite(error):
         return (
-            f"no curvature feed-forward (G = {gain:.3g}): its fit is not kept (a preset or a "
-            "model file), so whether the fit pins G down is unknown"
+            f"no curvature feed-forward (G = {gain:.3g}): the covariance of its parameters is "
+            "unknown (a preset, or a model file saved without one), so whether its fit pins G "
+            "down is unknown"
         )
     return (
         f"no curvature feed-forward: its fit does not pin G down (G = {gain:.3g}, standard "

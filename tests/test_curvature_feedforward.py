@@ -205,3 +205,24 @@ def test_a_model_that_does_not_name_its_parameters_keeps_the_curvature_rule(bend
     settings = trusted_filter(duck, FilterSettings(), training=record).settings
     assert settings.steering_curvature_feedforward == 0.0
     assert settings.steering_curvature_limit == pytest.approx(STRAIGHT_CURVATURE)
+
+
+def test_a_saved_fit_keeps_its_covariance_and_so_its_feedforward(bends, tmp_path):
+    """A model file keeps the fit's covariance: the model loaded from it gets the same G and
+    the same standard error as the model that was fitted (hasa-replay --model file.json)."""
+    from hasa_env.steering.base import SteeringModel
+
+    model, record, _, loose = bends
+    given = []
+    for fitted in (model, loose):
+        path = tmp_path / f"{fitted.name}-{len(fitted.parameter_names)}.json"
+        fitted.save(path)
+        loaded = SteeringModel.load(path)
+        assert loaded.fit_result is None and loaded.training_curvature == 0.0
+        error = curvature_feedforward_error(loaded)
+        assert error == pytest.approx(curvature_feedforward_error(fitted), rel=1e-12)
+        training = TrainingRecord(residual_std=record.residual_std)  # the file's own roads
+        settings = trusted_filter(loaded, FilterSettings(), training=training).settings
+        given.append(settings.steering_curvature_feedforward)
+    assert given[0] == pytest.approx(curvature_feedforward(model.arx(), 2.8))  # pinned down
+    assert given[1] == 0.0  # BIC's orders: not pinned down, as when fitted

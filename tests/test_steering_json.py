@@ -63,6 +63,77 @@ def test_save_and_load(tmp_path):
     assert document["parameters"]["a2"] == -0.51
 
 
+def _with_covariance() -> GeneralizedModel:
+    """The paper's preset with a covariance of its parameters, as a fit keeps it."""
+    model = GeneralizedModel.paper()
+    n = len(model.parameter_names)
+    root = np.linspace(1.0, 2.0, n * n).reshape(n, n) * 1e-3
+    covariance = root @ root.T
+    model = model.with_parameters(model.parameters, np.sqrt(np.diag(covariance)))
+    model.saved_covariance = covariance
+    return model
+
+
+def test_the_parameter_covariance_round_trips_exactly(tmp_path):
+    path = tmp_path / "model.json"
+    model = _with_covariance()
+    model.save(path)
+    loaded = SteeringModel.load(path)
+    np.testing.assert_array_equal(loaded.parameter_covariance, model.parameter_covariance)
+    document = json.loads(path.read_text())
+    names = list(model.parameter_names)
+    assert list(document["parameter_covariance"]) == names
+    assert list(document["parameter_covariance"]["a1"]) == names
+    assert GeneralizedModel.paper().parameter_covariance is None  # a preset: unknown
+    assert "parameter_covariance" not in GeneralizedModel.paper().to_dict()
+
+
+def _covariance_document():
+    return _with_covariance().to_dict()
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (
+            lambda d: d["parameter_covariance"].pop("b3"),
+            r"'parameter_covariance' must name every parameter in every row .*rows \[",
+        ),
+        (
+            lambda d: d["parameter_covariance"]["a1"].pop("b3"),
+            r"'parameter_covariance' must name every parameter in every row .*row 'a1' does not",
+        ),
+        (
+            lambda d: d["parameter_covariance"]["a1"].update(a2=1.0),
+            r"'parameter_covariance' is not symmetric",
+        ),
+        (
+            lambda d: d["parameter_covariance"]["a1"].update(a1=-1e-6),
+            r"'parameter_covariance' has a negative variance on its diagonal \('a1'",
+        ),
+        (
+            lambda d: d["parameter_covariance"]["a1"].update(a1=1.0),
+            r"'parameter_covariance' has a diagonal that is not the squared 'standard_errors'",
+        ),
+        (
+            lambda d: d["parameter_covariance"]["a1"].update(a2="big"),
+            r"field 'parameter_covariance.a1.a2' must be a finite number",
+        ),
+        (
+            lambda d: d.update(parameters=None, standard_errors=None),
+            r"'parameter_covariance' given without 'parameters'",
+        ),
+    ],
+)
+def test_a_bad_parameter_covariance_is_named(tmp_path, change, message):
+    document = _covariance_document()
+    change(document)
+    path = write(tmp_path, document)
+    with pytest.raises(ModelFileError, match=message) as info:
+        SteeringModel.load(path)
+    assert str(path) in str(info.value)
+
+
 def write(tmp_path, document, name="bad.json"):
     path = tmp_path / name
     path.write_text(document if isinstance(document, str) else json.dumps(document))

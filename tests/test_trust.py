@@ -221,8 +221,8 @@ def test_the_reasons_say_what_is_off_and_why() -> None:
     assert trusted.reasons == (
         "steering off where the road ahead curves more than 0.0002 1/m: beyond the roads it "
         "was fitted on (|curvature| up to 0 1/m)",
-        "no curvature feed-forward (G = -29.4): its fit is not kept (a preset or a model file), "
-        "so whether the fit pins G down is unknown",
+        "no curvature feed-forward (G = -29.4): the covariance of its parameters is unknown (a "
+        "preset, or a model file saved without one), so whether its fit pins G down is unknown",
         f"steering off below 14.2 m/s: {speeds}",
         f"steering off above 17.1 m/s: {speeds}",
     )

@@ -213,6 +213,10 @@ class SteeringModel(ABC):
         self._parameters = self._as_vector(parameters, "parameters")
         self._standard_errors = self._as_vector(standard_errors, "standard_errors")
         self.fit_result: FitResult | None = None
+        self.saved_covariance: np.ndarray | None = None
+        """The parameters' covariance read from a model file (p x p, in
+        :attr:`parameter_names` order); None: none was saved (see
+        :attr:`parameter_covariance`)."""
         self.training_curvature: float | None = None
         self.training_speed_range: tuple[float, float] | None = None
         """The largest |road curvature| (1/m) of the data the model was fitted on (0 for a
@@ -293,6 +297,16 @@ class SteeringModel(ABC):
         if self._standard_errors is None:
             return None
         return dict(zip(self.parameter_names, self._standard_errors.tolist(), strict=True))
+
+    @property
+    def parameter_covariance(self) -> np.ndarray | None:
+        """The parameters' covariance matrix (p x p, in :attr:`parameter_names` order): the
+        fit's (:attr:`fit_result`), else the one read from the model file
+        (:attr:`saved_covariance`); None: unknown (a preset, an older model file)."""
+        result = self.fit_result
+        if result is not None and tuple(result.parameter_names) == self.parameter_names:
+            return np.asarray(result.covariance, dtype=np.float64)
+        return self.saved_covariance
 
     @property
     def max_lag(self) -> int:
@@ -559,6 +573,13 @@ class SteeringModel(ABC):
             "parameters": self.parameters,
             "standard_errors": self.standard_errors,
         }
+        covariance = self.parameter_covariance if self._parameters is not None else None
+        if covariance is not None and np.all(np.isfinite(covariance)):
+            names = self.parameter_names
+            document["parameter_covariance"] = {
+                row: dict(zip(names, values, strict=True))
+                for row, values in zip(names, covariance.tolist(), strict=True)
+            }
         training: dict[str, float] = {}
         if self.training_curvature is not None:
             training["max_abs_road_curvature"] = self.training_curvature

@@ -7,7 +7,8 @@ object with ``format`` (= ``"hasa_env.steering_model"``), ``format_version``
 ``model_type`` in :data:`MODEL_TYPES` when it is defined), ``name``, ``dt``
 (s), ``features`` (near/far distances in m, decision lag, the regressors),
 ``structure`` (the model's keyword arguments, e.g. its orders),
-``parameters``, ``standard_errors`` and, optionally, ``class``
+``parameters``, ``standard_errors``, optionally ``parameter_covariance`` (the fit's
+covariance of the parameters, row name -> column name -> value) and, optionally, ``class``
 (``"package.module:ClassName"``: with ``trust_module=True``,
 :func:`hasa_env.steering.loading.load_model_file` imports a user type's
 module; never otherwise, since importing runs code). :func:`model_from_dict` validates every field through the shared
@@ -20,6 +21,8 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from typing import Any
+
+import numpy as np
 
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
 from hasa_env.validation import ANY_JSON, Field, schema, validate, version
@@ -87,6 +90,11 @@ _STANDARD_ERRORS = Field(
     optional=True,
 )  # fmt: skip
 
+_COVARIANCE = Field(
+    "mapping", None, "The fit's covariance of the parameters: row name -> column name -> value.",
+    each=Field("mapping", each=Field("number")), optional=True,
+)  # fmt: skip
+
 
 CLASS_PATH = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*")
 """What the ``class`` field holds: ``package.module:ClassName``."""
@@ -124,6 +132,7 @@ def _schema(cls: str | None = None) -> Field:
             "structure": Field("mapping", {}, "The model's keyword arguments.", each=ANY_JSON),
             "parameters": _PARAMETERS,
             "standard_errors": _STANDARD_ERRORS,
+            "parameter_covariance": _COVARIANCE,
             "training": Field(
                 "mapping", {}, "What the model was fitted on (optional).", fields=_TRAINING
             ),
@@ -142,7 +151,9 @@ def model_from_dict(
     ``decision_lag`` (int >= 0), ``steering_signal`` ("measured" or "applied"),
     ``regressors`` (optional; checked)},
     ``structure`` (the model's keyword arguments), ``parameters`` (name ->
-    number, or null), ``standard_errors`` (same, >= 0, or null) and, optionally,
+    number, or null), ``standard_errors`` (same, >= 0, or null), optionally
+    ``parameter_covariance`` (name -> name -> number: every parameter in each row, symmetric,
+    its diagonal the squared standard errors when those are given) and, optionally,
     ``training`` {``max_abs_road_curvature`` (1/m, >= 0, or null), ``min_speed`` and
     ``max_speed`` (m/s, both or neither)}.
 
@@ -216,6 +227,7 @@ def model_from_dict(
         standard_errors=values["standard_errors"],
         **common,
     )
+    model.saved_covariance = _covariance(doc["parameter_covariance"], names, values, source)
     model.training_curvature = doc["training"].get("max_abs_road_curvature")
     low, high = doc["training"].get("min_speed"), doc["training"].get("max_speed")
     if (low is None) != (high is None) or (low is not None and low > high):
@@ -225,3 +237,46 @@ def model_from_dict(
         )
     model.training_speed_range = None if low is None else (float(low), float(high))
     return model
+
+
+def _covariance(
+    raw: Mapping[str, Mapping[str, float]] | None,
+    names: tuple[str, ...],
+    values: Mapping[str, Any],
+    source: str,
+) -> np.ndarray | None:
+    """The ``parameter_covariance`` field as a (p, p) array in ``names`` order (None: not given),
+    checked: every parameter named in every row, symmetric, a non-negative diagonal that
+    matches the squared ``standard_errors`` when those are given."""
+    if raw is None:
+        return None
+    if values["parameters"] is None:
+        raise ModelFileError(f"{source}: field 'parameter_covariance' given without 'parameters'")
+    if set(raw) != set(names) or any(set(row) != set(names) for row in raw.values()):
+        bad = next(
+            (f"row {k!r}" for k, row in raw.items() if k in names and set(row) != set(names)),
+            f"rows {sorted(raw)}",
+        )
+        raise ModelFileError(
+            f"{source}: field 'parameter_covariance' must name every parameter in every row "
+            f"({list(names)}); {bad} does not"
+        )
+    matrix = np.array([[float(raw[r][c]) for c in names] for r in names], dtype=np.float64)
+    scale = max(float(np.max(np.abs(matrix))), 1e-300)
+    if not np.allclose(matrix, matrix.T, rtol=1e-9, atol=1e-12 * scale):
+        raise ModelFileError(f"{source}: field 'parameter_covariance' is not symmetric")
+    diagonal = np.diag(matrix)
+    if np.any(diagonal < 0):
+        raise ModelFileError(
+            f"{source}: field 'parameter_covariance' has a negative variance on its diagonal "
+            f"({names[int(np.argmin(diagonal))]!r}: {float(np.min(diagonal))!r})"
+        )
+    errors = values["standard_errors"]
+    if errors is not None:
+        expected = np.array([float(errors[n]) for n in names]) ** 2
+        if not np.allclose(diagonal, expected, rtol=1e-6, atol=1e-300):
+            raise ModelFileError(
+                f"{source}: field 'parameter_covariance' has a diagonal that is not the squared "
+                "'standard_errors'"
+            )
+    return matrix
