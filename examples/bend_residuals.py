@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.protocol.config import ProtocolConfig
-from benchmarks.protocol.plan import load_frames, make_plan
+from benchmarks.protocol.plan import load_frames, make_plan, training_frames
 from estimators.arx_state_space import road_curvature_ahead
 from estimators.road_geometry import lane_points_ahead
 from estimators.trust import curvature_feedforward, curvature_feedforward_error
@@ -47,11 +47,7 @@ LEADS = np.arange(-150, 151, 25)
 def fitted_model(seed: int) -> GeneralizedModel:
     """The generalized model of ``hasa-bench paper`` on ``seed``: fitted on the straight runs
     of "Ill" and of the training drivers."""
-    plan = make_plan(ProtocolConfig(seeds=(seed,)), seed)
-    env = plan.training_env_config or plan.env_config
-    train = load_frames(plan.trainings(), "straight", env, plan.params)
-    extra = {p.name: p for p in plan.training_drivers}
-    train += load_frames(plan.driver_trainings(), "straight", env, extra)
+    train = training_frames(make_plan(ProtocolConfig(seeds=(seed,)), seed))
     with warnings.catch_warnings():  # the fit's collinearity warnings: reported by hasa-bench
         warnings.simplefilter("ignore")
         return GeneralizedModel().fit(train)

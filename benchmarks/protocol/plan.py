@@ -22,6 +22,7 @@ from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_driv
 from hasa_env.recording import Recording, load_paths
 from hasa_env.recording.reader import load_any
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
+from hasa_env.sim.config import deep_merge
 
 PROTOCOL_DT = 0.01
 """Sample time (s) of the recordings the protocol scores: the paper's generalized preset's
@@ -37,6 +38,7 @@ __all__ = [
     "quality_problem",
     "recording_plan",
     "synthetic_plan",
+    "training_frames",
 ]
 
 
@@ -758,3 +760,16 @@ def load_frames(
         cars.append(drivers[ref.driver])
     seeds = [(int(r.env_seed), int(r.driver_seed)) for r in runs]  # type: ignore[arg-type]
     return run_drivers(cars, seeds, TRACK_ENV_IDS[track], dict(env_config))
+
+
+def training_frames(plan: Plan) -> list[pd.DataFrame]:
+    """Every run the models of ``plan`` are fitted on, in the order the benchmark fits them:
+    the illustrative driver's training runs, its extra runs at other start speeds
+    (``training_speeds``) and the training drivers' runs (none of them scored)."""
+    train_env = plan.training_env_config or plan.env_config
+    frames = load_frames(plan.trainings(), plan.track, train_env, plan.params)
+    for ref, start_speed in plan.speed_trainings():  # extra runs at other speeds (train only)
+        speed_env = deep_merge(train_env, {"initial_state": {"speed": start_speed}})
+        frames += load_frames([ref], plan.track, speed_env, plan.params)
+    extra = {p.name: p for p in plan.training_drivers}  # other drivers (train only)
+    return frames + load_frames(plan.driver_trainings(), plan.track, train_env, extra)

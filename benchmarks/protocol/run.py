@@ -113,15 +113,14 @@ from benchmarks.protocol.plan import (
     RunRef,
     chunks,
     constant_speed_run,
-    load_frames,
     make_plan,
+    training_frames,
 )
 from benchmarks.protocol.plots import plot_data
 from benchmarks.protocol.results import BenchmarkResult, versions
 from benchmarks.protocol.tasks import ChunkResult, ChunkTask, run_chunk
 from estimators.lane_centring import LaneCentringParams, fit_lane_centring
 from hasa_env.drivers import SpeedProfile
-from hasa_env.sim.config import deep_merge
 
 __all__ = [
     "FitJob",
@@ -377,12 +376,7 @@ def fit_and_check(
     say(f"seed {seed}: generating the training run and fitting the models" if seed is not None
         else "loading the training run and fitting the models", 0, 0)  # fmt: skip
     train_env = plan.training_env_config or plan.env_config
-    train_frames = load_frames(trainings, config.track, train_env, plan.params)
-    for ref, start_speed in plan.speed_trainings():  # extra runs at other speeds (train only)
-        speed_env = deep_merge(train_env, {"initial_state": {"speed": start_speed}})
-        train_frames += load_frames([ref], config.track, speed_env, plan.params)
-    extra = {p.name: p for p in plan.training_drivers}  # other drivers (train only)
-    train_frames += load_frames(plan.driver_trainings(), config.track, train_env, extra)
+    train_frames = training_frames(plan)
     train_frame = train_frames[0]
     t0 = time.perf_counter()
     sensor_std = float(train_frame.attrs["config"]["noise"]["steering"])
