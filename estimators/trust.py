@@ -279,16 +279,19 @@ def trusted_filter(
         rule["steering_curvature_limit"] = curvature
         rule["min_speed"] = max(settings.min_speed, low)
         rule["steering_max_speed"] = high
+    feedforward_why = ""
     if not off:  # a model of straight roads, given the bends' steady steering (checked or not)
         fitted_on = model_limits(model, training)[0]
-        feedforward = _feedforward(model, arx, settings, fitted_on, steering_ratio, overrides)
+        feedforward, feedforward_why = _feedforward(
+            model, arx, settings, fitted_on, steering_ratio, overrides
+        )
         if feedforward is not None:
             rule["steering_curvature_feedforward"] = feedforward
             rule["steering_curvature_limit"] = math.inf
     settings = replace(settings, **{k: v for k, v in rule.items() if k not in overrides})
     if off:
         return TrustedFilter(settings, None, 0, off)
-    reasons = _reasons(settings, model, training, overrides, checks)
+    reasons = _reasons(settings, model, training, overrides, checks, feedforward_why)
     return TrustedFilter(settings, arx, int(getattr(model, "decision_lag", 1)), reasons)
 
 
@@ -299,57 +302,41 @@ def _feedforward(
     curvature_limit: float,
     steering_ratio: float,
     overrides: Mapping[str, Any],
-) -> float | None:
+) -> tuple[float | None, str]:
     """The curvature feed-forward the rule gives a model fitted on straight roads only (its
     curvature limit :data:`STRAIGHT_CURVATURE`) whose fit pins G down (standard error at most
     :data:`FEEDFORWARD_PRECISION` of G), None for any other (fitted on bends, unknown roads, no
-    steady state, no fit record, G too uncertain) or when the user set one."""
-    if arx is None or "steering_curvature_feedforward" in overrides:
-        return None
+    steady state, no covariance, G too uncertain) or when the user set one; and the reason
+    line that says why ('' for a model that is not of straight roads, or when the user set
+    the curvature limit and the rule gives no feed-forward)."""
+    if arx is None:
+        return None, ""
+    if "steering_curvature_feedforward" in overrides:  # the user's, already in ``settings``
+        user = settings.steering_curvature_feedforward
+        if user == 0.0:
+            return None, ""
+        return None, f"on bends, the steering less G kappa: G = {user:.3g} set by the user"
     if not math.isclose(curvature_limit, STRAIGHT_CURVATURE, rel_tol=1e-9):
-        return None
-    gain, error = _feedforward_fit(model, arx, settings.wheelbase, steering_ratio)
-    if not (math.isfinite(gain) and error <= FEEDFORWARD_PRECISION * abs(gain)):
-        return None  # (NaN error: no fit record, the precision unknown)
-    return gain
-
-
-def _feedforward_fit(
-    model: Any, arx: ARXForm, wheelbase: float, steering_ratio: float
-) -> tuple[float, float]:
-    """G and its standard error (NaN: no steady state / no fit record)."""
-    return curvature_feedforward(arx, wheelbase, steering_ratio), curvature_feedforward_error(model)
-
-
-def _feedforward_reason(model: Any, settings: FilterSettings, overrides: Mapping[str, Any]) -> str:
-    """Why a model of straight roads does or does not get the curvature feed-forward ('' for a
-    model that is not one, or when the user set the limit)."""
-    gain = settings.steering_curvature_feedforward
-    if gain != 0.0:
-        if "steering_curvature_feedforward" in overrides:
-            return f"on bends, the steering less G kappa: G = {gain:.3g} set by the user"
-        arx = model.arx()
-        error = _feedforward_fit(model, arx, settings.wheelbase, settings.steering_ratio)[1]
-        return (
+        return None, ""
+    gain = curvature_feedforward(arx, settings.wheelbase, steering_ratio)
+    error = curvature_feedforward_error(model)
+    if math.isfinite(gain) and error <= FEEDFORWARD_PRECISION * abs(gain):
+        return gain, (
             f"on bends, the steering less the bend's steady steering G kappa: G = {gain:.3g} "
             f"(standard error {error:.2g}), a model fitted on straight roads only "
             "(docs/design.md §8.28)"
         )
-    if "steering_curvature_limit" in overrides or "steering_curvature_feedforward" in overrides:
-        return ""
-    if not math.isclose(settings.steering_curvature_limit, STRAIGHT_CURVATURE, rel_tol=1e-9):
-        return ""
-    arx = model.arx()
-    gain, error = _feedforward_fit(model, arx, settings.wheelbase, settings.steering_ratio)
+    if "steering_curvature_limit" in overrides:  # the user's limit says what happens on bends
+        return None, ""
     if not math.isfinite(gain):
-        return "no curvature feed-forward: its autoregression has no steady state"
+        return None, "no curvature feed-forward: its autoregression has no steady state"
     if not math.isfinite(error):
-        return (
+        return None, (
             f"no curvature feed-forward (G = {gain:.3g}): the covariance of its parameters is "
             "unknown (a preset, or a model file saved without one), so whether its fit pins G "
             "down is unknown"
         )
-    return (
+    return None, (
         f"no curvature feed-forward: its fit does not pin G down (G = {gain:.3g}, standard "
         f"error {error:.2g}, more than {FEEDFORWARD_PRECISION:.0%} of G)"
     )
@@ -383,8 +370,10 @@ def _reasons(
     training: TrainingRecord,
     overrides: Mapping[str, Any],
     checks: bool | None,
+    feedforward_why: str = "",
 ) -> tuple[str, ...]:
-    """One line per limit the settings put on the steering channel, and why."""
+    """One line per limit the settings put on the steering channel, and why, with the line
+    of :func:`_feedforward` (``feedforward_why``) after the curvature limit's."""
     if checks is False:
         return ("no trust rules: the evidence checks and the model's limits are off",)
     user = "set by the user"
@@ -396,9 +385,8 @@ def _reasons(
             roads = limit - STRAIGHT_CURVATURE
             why = f"beyond the roads it was fitted on (|curvature| up to {roads:.3g} 1/m)"
         reasons.append(f"steering off where the road ahead curves more than {limit:.3g} 1/m: {why}")
-    feedforward = _feedforward_reason(model, settings, overrides)
-    if feedforward:
-        reasons.append(feedforward)
+    if feedforward_why:
+        reasons.append(feedforward_why)
     speeds = getattr(model, "training_speed_range", None) or training.speed_range
     fitted = (
         f"outside the training speeds {speeds[0]:.1f}-{speeds[1]:.1f} m/s +- {SPEED_MARGIN:g}"
