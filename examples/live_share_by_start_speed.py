@@ -1,10 +1,10 @@
 """How often the benchmark's generalized model counts as lane evidence on runs that start at
 15-45 m/s (issue 25's live-share bar "on runs that start anywhere in 15-45 m/s").
 
-For each population seed: fit the generalized model on the runs ``hasa-bench paper`` fits it on
-(``benchmarks.protocol.plan.training_frames``), build its filter by the trust rule with the
-training runs' residual level, speeds and roads (``estimators.trust.trusted_filter``; the
-benchmark's lane-keeping and prediction checks are not run here), drive the illustrative
+For each population seed: fit and check the models as ``hasa-bench paper`` does
+(``benchmarks.protocol.run.fit_and_check``: the training runs, the prediction and lane-keeping
+checks), take the generalized model's filter as the benchmark builds it
+(``benchmarks.protocol.tasks.model_estimator``, the trust rule), drive the illustrative
 driver "Ill" from each start speed (the training run's conditions with ``initial_state.speed``
 set; the driver then keeps or changes speed as it does) and print per seed and start speed the
 mean speed, the share of the time the steering was live and why it was not
@@ -24,29 +24,25 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.protocol.config import ILLUSTRATIVE, ProtocolConfig
-from benchmarks.protocol.plan import make_plan, training_frames
+from benchmarks.protocol.models import load_models
+from benchmarks.protocol.plan import make_plan
+from benchmarks.protocol.run import fit_and_check
+from benchmarks.protocol.tasks import model_estimator
 from estimators import run_estimator
 from estimators.calibration import steering_channel_shares
 from estimators.settings import FilterSettings
-from estimators.trust import TrainingRecord, trusted_filter
-from estimators.tuning import steering_residual_std
 from hasa_env.drivers import SyntheticDriver, run_driver
-from hasa_env.steering.models import GeneralizedModel
 
 
 def seed_rows(seed: int, speeds: list[float], runs: int) -> list[dict[str, Any]]:
     """One row per start speed of ``seed``: the runs' mean speed, steering shares and error."""
     config = ProtocolConfig(seeds=(seed,))
     plan = make_plan(config, seed)
-    train = training_frames(plan)
+    errors: list = []
     with warnings.catch_warnings():  # the fit's collinearity warnings: reported by hasa-bench
         warnings.simplefilter("ignore")
-        model = GeneralizedModel().fit(train)
-    seen = TrainingRecord.from_run(pd.concat(train))
-    residual = steering_residual_std(model.arx(), train, decision_lag=model.decision_lag)
-    record = TrainingRecord(
-        residual_std=residual, speed_range=seen.speed_range, curvature=seen.curvature
-    )
+        fitted = fit_and_check(config, plan, load_models([], errors), errors, lambda *_: None)
+    (generalized,) = [fm for fm in fitted.models if fm.name == "generalized"]
     rows = []
     for speed in speeds:
         frames = run_driver(
@@ -56,7 +52,7 @@ def seed_rows(seed: int, speeds: list[float], runs: int) -> list[dict[str, Any]]
             config=config.training_speed_config(speed),
         )
         base = FilterSettings.from_env_config(frames[0].attrs["config"])
-        result = run_estimator(trusted_filter(model, base, training=record).estimator(), frames)
+        result = run_estimator(model_estimator(generalized, base), frames)
         shares = {k: float(np.nanmean(v)) for k, v in steering_channel_shares(result).items()}
         rows.append(
             {
