@@ -186,11 +186,21 @@ def curvature_feedforward(arx: ARXForm, wheelbase: float, steering_ratio: float 
         G = steering_ratio L - (sum b near + sum c far) / (2 (1 - sum a))
 
     NaN when the autoregression has no steady state (no steering lags, or ``sum a >= 1``)."""
+    steady = _steady_state(arx)
+    if steady is None:
+        return math.nan
+    bearings, rest = steady
+    return steering_ratio * wheelbase - bearings / (2.0 * rest)
+
+
+def _steady_state(arx: ARXForm) -> tuple[float, float] | None:
+    """``(sum b near + sum c far, 1 - sum a)`` of :func:`curvature_feedforward`; None when the
+    autoregression has no steady state (no steering lags, or ``sum a >= 1``)."""
     total_a = float(np.sum(arx.a))
     if not len(arx.a) or total_a >= 1.0:
-        return math.nan
+        return None
     bearings = float(np.sum(arx.b)) * arx.near_distance + float(np.sum(arx.c)) * arx.far_distance
-    return steering_ratio * wheelbase - bearings / (2.0 * (1.0 - total_a))
+    return bearings, 1.0 - total_a
 
 
 FEEDFORWARD_PRECISION = 0.25
@@ -208,7 +218,10 @@ def curvature_feedforward_error(model: Any) -> float:
     a model that does not name its parameters' regressors (``parameter_names``,
     ``regressors``) or whose covariance does not match its parameters."""
     arx = model.arx() if model is not None else None
-    if arx is None or not len(arx.a) or float(np.sum(arx.a)) >= 1.0:
+    if arx is None:
+        return math.nan
+    steady = _steady_state(arx)
+    if steady is None:
         return math.nan
     names = getattr(model, "parameter_names", None)
     regressors = getattr(model, "regressors", None)
@@ -224,8 +237,7 @@ def curvature_feedforward_error(model: Any) -> float:
     if covariance.shape != (len(order), len(order)):
         return math.nan
     features = {name: getattr(r, "feature", "") for name, r in zip(names, regressors, strict=False)}
-    total_b_c = float(np.sum(arx.b)) * arx.near_distance + float(np.sum(arx.c)) * arx.far_distance
-    rest = 1.0 - float(np.sum(arx.a))
+    total_b_c, rest = steady
     slope = {
         "delta": -total_b_c / (2.0 * rest * rest),
         "phi": -arx.near_distance / (2.0 * rest),
@@ -265,6 +277,7 @@ def trusted_filter(
     settings = FilterSettings.with_overrides(base, overrides)
     arx = None if model is None else model.arx()
     off = _switched_off(model, arx, training, checks)
+    limits = model_limits(model, training)  # (curvature 1/m, (low, high) m/s) it was fitted on
     rule: dict[str, Any] = {"steering_ratio": steering_ratio}
     if training.residual_std is not None:
         rule["steering_residual_std"] = max(float(training.residual_std), 1e-9)
@@ -275,15 +288,14 @@ def trusted_filter(
         rule["steering_curvature_limit"] = math.inf
         overrides.pop("steering_curvature_limit", None)
     elif not off:
-        curvature, (low, high) = model_limits(model, training)
+        curvature, (low, high) = limits
         rule["steering_curvature_limit"] = curvature
         rule["min_speed"] = max(settings.min_speed, low)
         rule["steering_max_speed"] = high
     feedforward_why = ""
     if not off:  # a model of straight roads, given the bends' steady steering (checked or not)
-        fitted_on = model_limits(model, training)[0]
         feedforward, feedforward_why = _feedforward(
-            model, arx, settings, fitted_on, steering_ratio, overrides
+            model, arx, settings, limits[0], steering_ratio, overrides
         )
         if feedforward is not None:
             rule["steering_curvature_feedforward"] = feedforward
