@@ -74,7 +74,7 @@ _PLAN_QUICK = {
     "ours_8": (40, 1, 1),
     "filterpy_2": (20, 1, 1),
     "filterpy_8": (10, 1, 1),
-    "batched_1000x2": (5, 1, 50),
+    "batched_1000x2": (5, 1, 1000),  # the full batch: the target is per run-step of 1000 runs
 }
 
 
