@@ -10,6 +10,7 @@ __all__ = [
     "DEFAULT_MODEL_TIME_LIMIT",
     "DEFAULT_SEEDS",
     "DEFAULT_TRAINING_DRIVERS",
+    "DEFAULT_EQUATION_ERROR_ORDER",
     "GENERALIZED_ORDERS",
     "NO_WORKER_TIMEOUT",
 ]
@@ -21,6 +22,11 @@ DEFAULT_TRAINING_DRIVERS = 8
 """Extra drivers of the population, one run each, that also train the models of a synthetic
 ``hasa-bench paper`` (docs/design.md §8.21; 0, the paper's one-run protocol, is
 ``--training-drivers 0``; recordings: always 0)."""
+
+DEFAULT_EQUATION_ERROR_ORDER = 2
+"""Lags of the autoregression the built-in generalized model's fit estimates for its equation
+error (docs/design.md §8.32; the estimator compares the steering whitened by it); 0 is the
+paper's white error (``--equation-error-order 0``)."""
 
 GENERALIZED_ORDERS = ("paper", "bic")
 """How ``hasa-bench`` chooses the orders of its built-in generalized model (docs/design.md

@@ -33,6 +33,13 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
   fitted on: its one-step residual at or above that of a lane-free autoregression of its
   order; docs/design.md §8.13.1; no check where the record has none). Its lane evidence would come from the errors of a model
   that does not describe this driver.
+- The ARX form the filter compares with the steering: the model's own, multiplied through
+  by its equation error's autoregression when the fit estimated one (``equation_error_ar``,
+  :func:`hasa_env.steering.equation_error.whitened_arx`, docs/design.md §8.32), so that the
+  filter's steering innovations are white where the model's residuals are not; the residual
+  level is then that of the whitened error, the record's (else the base settings')
+  ``steering_residual_std`` times ``sqrt(1 - sum_i r_i rho_i)`` (:func:`~hasa_env.steering.equation_error.innovation_variance_ratio`).
+  Every check above (prediction, lane keeping, G) reads the model's own form.
 - ``checks=False`` (the benchmark's unchecked comparison): ``evidence_checks`` off and none of
   the limits above (curvature limit ``math.inf`` even when the user set one).
 
@@ -59,6 +66,11 @@ from estimators.settings import (
 )
 from estimators.tuning import PredictionCheck
 from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.equation_error import (
+    check_equation_error_ar,
+    innovation_variance_ratio,
+    whitened_arx,
+)
 
 __all__ = [
     "TrainingRecord",
@@ -131,7 +143,8 @@ class TrustedFilter:
 
     Attributes:
         settings: the filter's :class:`FilterSettings`.
-        arx: the model's ARX form; None: no lane evidence from the steering (no model, no ARX
+        arx: the ARX form the filter compares with the steering (the model's own, multiplied
+            through by its equation error's autoregression when it has one); None: no lane evidence from the steering (no model, no ARX
             form, or the model failed its lane-keeping check).
         decision_lag: the model's decision lag (samples; 0 without ``arx``).
         reasons: one human-readable line per channel the rule switches off or tempers, and
@@ -279,8 +292,13 @@ def trusted_filter(
     off = _switched_off(model, arx, training, checks)
     limits = model_limits(model, training)  # (curvature 1/m, (low, high) m/s) it was fitted on
     rule: dict[str, Any] = {"steering_ratio": steering_ratio}
-    if training.residual_std is not None:
-        rule["steering_residual_std"] = max(float(training.residual_std), 1e-9)
+    noise = _equation_error(model, arx)
+    level = training.residual_std
+    if level is None and noise:  # the base settings' level stands in for the model's
+        level = settings.steering_residual_std
+    if level is not None:
+        level = float(level) * math.sqrt(innovation_variance_ratio(noise))
+        rule["steering_residual_std"] = max(level, 1e-9)
     if checks is not None:  # the caller's choice, over the user's
         rule["evidence_checks"] = checks
         overrides.pop("evidence_checks", None)
@@ -304,7 +322,28 @@ def trusted_filter(
     if off:
         return TrustedFilter(settings, None, 0, off)
     reasons = _reasons(settings, model, training, overrides, checks, feedforward_why)
-    return TrustedFilter(settings, arx, int(getattr(model, "decision_lag", 1)), reasons)
+    if noise:
+        listed = ", ".join(f"{r:.3g}" for r in noise)
+        reasons += (
+            f"the steering compared whitened by its equation error's autoregression "
+            f"r = ({listed}) (residual level x {math.sqrt(innovation_variance_ratio(noise)):.3f})",
+        )
+    assert arx is not None  # not off: the model has an ARX form
+    return TrustedFilter(
+        settings, whitened_arx(arx, noise), int(getattr(model, "decision_lag", 1)), reasons
+    )
+
+
+def _equation_error(model: Any, arx: ARXForm | None) -> tuple[float, ...]:
+    """The model's equation-error autoregression (``equation_error_ar``; ``()``: white, or no
+    ARX form); ValueError naming the problem when it is not a stationary one."""
+    if model is None or arx is None:
+        return ()
+    noise = getattr(model, "equation_error_ar", ()) or ()
+    try:
+        return check_equation_error_ar(noise)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"steering model {getattr(model, 'name', model)!r}: {exc}") from None
 
 
 def _feedforward(

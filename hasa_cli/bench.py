@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.defaults import (
+    DEFAULT_EQUATION_ERROR_ORDER,
     DEFAULT_MODEL_TIME_LIMIT,
     DEFAULT_SEEDS,
     DEFAULT_TRAINING_DRIVERS,
@@ -225,14 +226,7 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
         "speed (m/s), scored nowhere (synthetic runs; the models are then trusted over those "
         "speeds too; default: none, the paper's protocol)",
     )
-    rec.add_argument(
-        "--generalized-orders",
-        choices=GENERALIZED_ORDERS,
-        default=GENERALIZED_ORDERS[0],
-        help="the built-in generalized model's orders: 'paper' keeps the paper's (na=2, nb=4, "
-        "nc=1, nd=2; default); 'bic' selects them by BIC on the training runs (docs/design.md "
-        "§8.26)",
-    )
+    _add_generalized_options(rec)
     rec.add_argument(
         "--training-file",
         metavar="FILE",
@@ -249,6 +243,27 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
         "--allow-incomplete",
         action="store_true",
         help="also score recordings whose writer stopped early (crash, failed write)",
+    )
+
+
+def _add_generalized_options(group: argparse._ArgumentGroup) -> None:
+    """How the built-in generalized model is fitted: its equation error and its orders."""
+    group.add_argument(
+        "--equation-error-order",
+        type=int,
+        default=DEFAULT_EQUATION_ERROR_ORDER,
+        metavar="P",
+        help="lags of the autoregression the built-in generalized model's fit estimates for "
+        f"its equation error; the estimator compares the steering whitened by it (default "
+        f"{DEFAULT_EQUATION_ERROR_ORDER}; 0: white, the paper's model; docs/design.md §8.32)",
+    )
+    group.add_argument(
+        "--generalized-orders",
+        choices=GENERALIZED_ORDERS,
+        default=GENERALIZED_ORDERS[0],
+        help="the built-in generalized model's orders: 'paper' keeps the paper's (na=2, nb=4, "
+        "nc=1, nd=2; default); 'bic' selects them by BIC on the training runs (docs/design.md "
+        "§8.26)",
     )
 
 
@@ -466,6 +481,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
         training_drivers=args.training_drivers,
         training_speeds=args.training_speeds,
         generalized_orders=args.generalized_orders,
+        equation_error_order=args.equation_error_order,
         training_file=args.training_file,
         min_duration=args.min_duration,
         allow_incomplete=args.allow_incomplete,

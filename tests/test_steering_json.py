@@ -166,7 +166,7 @@ def good():
         (lambda d: d.pop("parameters"), r"field 'parameters' is missing"),
         (
             lambda d: d.update(colour="red"),
-            r"unknown field 'colour' \(allowed keys here: class, dt, features",
+            r"unknown field 'colour' \(allowed keys here: class, dt, equation_error, features",
         ),
         (lambda d: d.update(dt=-0.01), r"field 'dt' must be a finite positive number, got -0.01"),
         (lambda d: d.update(dt="fast"), r"field 'dt' must be a finite positive number"),

@@ -72,7 +72,10 @@ def _captured_runs(monkeypatch) -> list:
     return seen
 
 
-def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording, monkeypatch):
+@pytest.mark.parametrize("equation_error", [(), (0.3, 0.2)], ids=["white", "ar2"])
+def test_six_callers_get_the_same_filter_for_the_same_model(
+    tmp_path, recording, monkeypatch, equation_error
+):
     from advisor_tasks.config import estimator_factory, split_config
     from benchmarks.protocol.models import FittedModel
     from benchmarks.protocol.tasks import model_estimator
@@ -83,6 +86,7 @@ def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording,
     from hasa_env.envs.lane_keeping import LaneKeepingEnv
 
     model = _model()
+    model.equation_error_ar = equation_error  # saved in the model file, read back
     path = tmp_path / "model.json"
     model.save(path)
     env = LaneKeepingEnv()
@@ -107,7 +111,12 @@ def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording,
             FilterSettings.from_env_config(recording.config),
         ),
     }
-    expected = trusted_filter(model, FilterSettings.from_env_config(env.unwrapped.config))
+    expected = trusted_filter(
+        model,
+        FilterSettings.from_env_config(env.unwrapped.config),
+        training=TrainingRecord(residual_std=level),
+    )
+    assert (expected.arx == model.arx()) is not bool(equation_error)
     assert expected.settings.steering_max_speed == pytest.approx(SPEEDS[1] + 1.0)
     assert expected.settings.min_speed == pytest.approx(SPEEDS[0] - 1.0)
     assert expected.settings.steering_curvature_limit == STRAIGHT_CURVATURE
@@ -118,10 +127,12 @@ def test_six_callers_get_the_same_filter_for_the_same_model(tmp_path, recording,
         assert type(ekf) is GaussianMixtureEKF, caller
         settings = ekf.settings
         if caller == "hasa-replay":
-            settings = dataclasses.replace(settings, steering_residual_std=level)
+            settings = dataclasses.replace(
+                settings, steering_residual_std=expected.settings.steering_residual_std
+            )
         assert settings == expected.settings, caller
         assert ekf.decision_lag == model.decision_lag, caller
-        assert ekf.steering_model == model.arx(), caller
+        assert ekf.steering_model == expected.arx, caller
     assert lines == [f"hasa-drive: --estimator {path}: {expected.describe()}"]
 
 

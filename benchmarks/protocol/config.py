@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from benchmarks.defaults import (
+    DEFAULT_EQUATION_ERROR_ORDER,
     DEFAULT_MODEL_TIME_LIMIT,
     DEFAULT_SEEDS,
     DEFAULT_TRAINING_DRIVERS,
@@ -17,6 +18,7 @@ from estimators.settings import FilterSettings
 from hasa_env.drivers import POPULATIONS
 from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import ConfigError, deep_merge, make_config
+from hasa_env.steering.equation_error import MAX_EQUATION_ERROR_ORDER
 from hasa_env.validation import ABSENT, Field, did_you_mean, schema, validate_fields
 
 __all__ = [
@@ -104,6 +106,10 @@ _SCHEMA = schema(
         "training_speeds": Field(
             "numbers", doc="Start speeds of extra training runs of the illustrative driver.",
             unit="m/s", low=1.0, high=150.0, unique=True,
+        ),
+        "equation_error_order": Field(
+            "integer", doc="Lags of the built-in generalized model's equation-error "
+            "autoregression (0: white, the paper's).", low=0, high=MAX_EQUATION_ERROR_ORDER,
         ),
         "generalized_orders": Field(
             "choice", doc="Orders of the built-in generalized model: 'bic' (selected on the "
@@ -204,6 +210,10 @@ class ProtocolConfig:
             selects (na, nb, nc, nd) by BIC on the training runs, on the training side only
             (:func:`hasa_env.steering.order.select_order`, its default grid up to (4, 6, 3, 3);
             docs/design.md §8.26).
+        equation_error_order: lags of the autoregression the built-in generalized model's
+            fit estimates for its equation error (:data:`~benchmarks.defaults.DEFAULT_EQUATION_ERROR_ORDER`,
+            2); the estimator compares the steering whitened by it (docs/design.md §8.32). 0:
+            white, the paper's model as it is.
         batch_size: most runs per task, vectorized together; a seed's curved and
             validation runs together are cut into the fewest near-equal tasks (100: one
             task of the 4 curved and the 93 validation runs per seed, filtered in one
@@ -258,6 +268,7 @@ class ProtocolConfig:
     training_drivers: int | None = None
     training_speeds: tuple[float, ...] = ()
     generalized_orders: str = "paper"
+    equation_error_order: int = DEFAULT_EQUATION_ERROR_ORDER
     batch_size: int = 100
     ljung_box_lags: int = 20
     acf_lags: int = 50

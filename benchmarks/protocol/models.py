@@ -235,6 +235,7 @@ def fit_models(
     constant_speed_train: pd.DataFrame | None = None,
     time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
     generalized_orders: str = "paper",
+    equation_error_order: int = 0,
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
     """Fit every candidate on the training run (a seed's; or several runs, each a run of its
     own for the fit: lags never cross between them); the fitted models and their
@@ -246,7 +247,9 @@ def fit_models(
     training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`).
     ``generalized_orders`` (:data:`~benchmarks.defaults.GENERALIZED_ORDERS`): ``"bic"``
     selects the built-in generalized model's orders on ``train`` first
-    (:func:`with_selected_orders`); ``"paper"`` keeps the candidate's."""
+    (:func:`with_selected_orders`); ``"paper"`` keeps the candidate's. The built-in
+    generalized model's fit estimates an ``equation_error_order``-lag autoregression of its
+    equation error (0: white; docs/design.md §8.32)."""
     runs = [train] if isinstance(train, pd.DataFrame) else list(train)
     train = train if isinstance(train, pd.DataFrame) else runs  # a list: what the fit takes
     dt = steering_features(runs[0]).attrs.get("dt", 0.01)
@@ -259,12 +262,10 @@ def fit_models(
         if kind in ("builtin", "baseline") and abs(model.dt - dt) > 1e-12:
             model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
         own: pd.DataFrame | list[pd.DataFrame] = train
-        if (
-            kind == "builtin"
-            and isinstance(model, GeneralizedModel)
-            and generalized_orders == "bic"
-        ):
-            model, info["order_selection"] = with_selected_orders(model, train)
+        if kind == "builtin" and isinstance(model, GeneralizedModel):
+            model = _builtin_generalized(
+                model, train, generalized_orders, equation_error_order, info
+            )
         if getattr(model, "training", "") == "constant_speed":
             if constant_speed_train is None:
                 raise BenchmarkError(f"stress model {name!r} needs a constant-speed training run")
@@ -313,6 +314,22 @@ def fit_models(
         fitted.append(FittedModel(name, kind, model_fitted, residual, training))
         infos.append(info)
     return fitted, infos
+
+
+def _builtin_generalized(
+    model: GeneralizedModel,
+    train: pd.DataFrame | list[pd.DataFrame],
+    generalized_orders: str,
+    equation_error_order: int,
+    info: dict[str, Any],
+) -> GeneralizedModel:
+    """The built-in generalized model to fit: its orders selected by BIC on ``train``
+    (``generalized_orders == "bic"``, what was selected in ``info["order_selection"]``) or
+    kept, with ``equation_error_order`` lags of its equation error's autoregression."""
+    if generalized_orders == "bic":
+        model, info["order_selection"] = with_selected_orders(model, train)
+    structure = model.structure() | {"equation_error_order": equation_error_order}
+    return GeneralizedModel(**structure, **model.common_kwargs())
 
 
 def with_selected_orders(
@@ -403,6 +420,7 @@ def _fit_description(
         "checks": None,
         "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
         "refitted": not fixed,
+        "equation_error_ar": list(getattr(fitted, "equation_error_ar", ()) or ()),
     }
     if result is not None:
         info["training"] = {

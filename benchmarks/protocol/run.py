@@ -394,6 +394,7 @@ def fit_and_check(
         constant_speed_train=constant_speed,
         time_limit=config.model_time_limit,
         generalized_orders=config.generalized_orders,
+        equation_error_order=config.equation_error_order,
     )
     if config.estimate:  # can each model drive? (no lane evidence from one that cannot)
         speed = plan.params[plan.illustrative].speed if seed is not None else SpeedProfile.hold()

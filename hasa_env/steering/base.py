@@ -217,6 +217,11 @@ class SteeringModel(ABC):
         """The parameters' covariance read from a model file (p x p, in
         :attr:`parameter_names` order); None: none was saved (see
         :attr:`parameter_covariance`)."""
+        self.equation_error_ar: tuple[float, ...] = ()
+        """The fitted autoregression (r_1, ..., r_p) of the model's equation error
+        (:mod:`hasa_env.steering.equation_error`; set by :meth:`fit` when
+        :attr:`equation_error_order` > 0, saved in the model file); ``()``: white, as the
+        paper's."""
         self.training_curvature: float | None = None
         self.training_speed_range: tuple[float, float] | None = None
         """The largest |road curvature| (1/m) of the data the model was fitted on (0 for a
@@ -400,6 +405,12 @@ class SteeringModel(ABC):
         }
         return base
 
+    @property
+    def equation_error_order(self) -> int:
+        """Lags of the equation error's autoregression the fit estimates (0: white, the
+        paper's; a model type with the option overrides this)."""
+        return 0
+
     def common_kwargs(self) -> dict[str, Any]:
         """Constructor keywords shared by every model (distances, dt, lag, name)."""
         return {
@@ -580,6 +591,8 @@ class SteeringModel(ABC):
                 row: dict(zip(names, values, strict=True))
                 for row, values in zip(names, covariance.tolist(), strict=True)
             }
+        if self.equation_error_ar:
+            document["equation_error"] = {"autoregression": list(self.equation_error_ar)}
         training: dict[str, float] = {}
         if self.training_curvature is not None:
             training["max_abs_road_curvature"] = self.training_curvature

@@ -43,6 +43,7 @@ import pandas as pd
 from hasa_env.sim.road import Road, curvature_lookup_array
 from hasa_env.steering.design import SteeringModelLike as SteeringModel
 from hasa_env.steering.design import as_runs, lagged, r_squared
+from hasa_env.steering.equation_error import equation_error_autoregression
 from hasa_env.steering.identifiability import (
     STABILITY_TOLERANCE,
     IdentifiabilityReport,
@@ -290,7 +291,8 @@ def design_blocks(
 
     Each item has ``matrix`` (n_r, p), ``target`` (n_r,) (delta minus the
     model's fixed offset), ``delta`` (n_r,) and ``increment`` (n_r,), the
-    measured delta(k) - delta(k-1) (NaN where there is no previous sample).
+    measured delta(k) - delta(k-1) (NaN where there is no previous sample), and ``valid``
+    (the run's length,): which of the run's rows they are.
     """
     out = []
     for run in runs:
@@ -304,6 +306,7 @@ def design_blocks(
                 "target": design.target[valid] - design.offset[valid],
                 "delta": design.target[valid],
                 "increment": (design.target - previous)[valid],
+                "valid": valid,
             }
         )
     return out
@@ -434,9 +437,20 @@ def fit_model(
     fitted.fit_result = result
     fitted.training_curvature = training_curvature(runs, road)
     fitted.training_speed_range = training_speed_range(runs)
+    fitted.equation_error_ar = equation_error_autoregression(
+        [_run_residuals(block, fitted.parameter_vector) for block in blocks],
+        int(getattr(model, "equation_error_order", 0)),
+    )
     if warn:
         _warn_about_fit(model.name, report, checks)
     return fitted
+
+
+def _run_residuals(block: Mapping[str, np.ndarray], parameters: np.ndarray) -> np.ndarray:
+    """The fit's one-step residuals on one run's rows (NaN where the run has no design row)."""
+    out = np.full(block["valid"].size, np.nan)
+    out[block["valid"]] = block["target"] - block["matrix"] @ parameters
+    return out
 
 
 def _with_aim_offsets(blocks: Sequence[Mapping[str, np.ndarray]]) -> list[dict[str, np.ndarray]]:

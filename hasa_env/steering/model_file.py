@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
+from hasa_env.steering.equation_error import check_equation_error_ar
 from hasa_env.validation import ANY_JSON, Field, schema, validate, version
 
 __all__ = [
@@ -82,6 +83,11 @@ _TRAINING = {
         unit="m/s", low=0.0, optional=True,
     ),
 }  # fmt: skip
+_EQUATION_ERROR = {
+    "autoregression": Field(
+        "numbers", (), "Its autoregression r_1 .. r_p (stationary; empty: white).",
+    ),
+}  # fmt: skip
 _PARAMETERS = Field(
     "mapping", each=Field("number"), optional=True, doc="Parameter name -> value, or null."
 )
@@ -135,6 +141,9 @@ def _schema(cls: str | None = None) -> Field:
             "parameter_covariance": _COVARIANCE,
             "training": Field(
                 "mapping", {}, "What the model was fitted on (optional).", fields=_TRAINING
+            ),
+            "equation_error": Field(
+                "mapping", {}, "The equation error's model (optional).", fields=_EQUATION_ERROR
             ),
         }
     )
@@ -228,6 +237,14 @@ def model_from_dict(
         **common,
     )
     model.saved_covariance = _covariance(doc["parameter_covariance"], names, values, source)
+    _read_training(model, doc, source)
+    return model
+
+
+def _read_training(model: Any, doc: Mapping[str, Any], source: str) -> None:
+    """Set what the model file says of the model's fit beyond its parameters: the training
+    roads and speeds and its equation error's autoregression (ModelFileError naming the
+    field)."""
     model.training_curvature = doc["training"].get("max_abs_road_curvature")
     low, high = doc["training"].get("min_speed"), doc["training"].get("max_speed")
     if (low is None) != (high is None) or (low is not None and low > high):
@@ -236,7 +253,10 @@ def model_from_dict(
             f"with min_speed <= max_speed (got {low!r} and {high!r})"
         )
     model.training_speed_range = None if low is None else (float(low), float(high))
-    return model
+    try:
+        model.equation_error_ar = check_equation_error_ar(doc["equation_error"]["autoregression"])
+    except ValueError as exc:
+        raise ModelFileError(f"{source}: field 'equation_error.autoregression': {exc}") from None
 
 
 def _covariance(

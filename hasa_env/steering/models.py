@@ -17,6 +17,7 @@ import pandas as pd
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.base import SteeringModel
 from hasa_env.steering.design import Design, Regressor, lagged
+from hasa_env.steering.equation_error import MAX_EQUATION_ERROR_ORDER
 
 __all__ = [
     "TwoPointModel",
@@ -146,6 +147,10 @@ class GeneralizedModel(SteeringModel):
 
     Args:
         na, nb, nc, nd: the orders (0 .. 50 each).
+        equation_error_order: lags p of the equation error's autoregression the fit
+            estimates (0 .. 10; 0: white, as the paper's; docs/design.md §8.32): the estimator
+            then compares the steering whitened by it
+            (:mod:`hasa_env.steering.equation_error`).
         **kwargs: :class:`~hasa_env.steering.base.SteeringModel` options.
     """
 
@@ -157,10 +162,21 @@ class GeneralizedModel(SteeringModel):
         nb: int = PAPER_ORDERS["nb"],
         nc: int = PAPER_ORDERS["nc"],
         nd: int = PAPER_ORDERS["nd"],
+        equation_error_order: int = 0,
         **kwargs: Any,
     ) -> None:
         orders = {"na": na, "nb": nb, "nc": nc, "nd": nd}
         self.orders: dict[str, int] = {k: _check_order(k, v) for k, v in orders.items()}
+        if (
+            isinstance(equation_error_order, bool)
+            or not isinstance(equation_error_order, int | np.integer)
+            or not 0 <= equation_error_order <= MAX_EQUATION_ERROR_ORDER
+        ):
+            raise ValueError(
+                f"equation_error_order must be an integer in 0..{MAX_EQUATION_ERROR_ORDER}, "
+                f"got {equation_error_order!r}"
+            )
+        self._equation_error_order = int(equation_error_order)
         kwargs.setdefault("name", "generalized")
         super().__init__(**kwargs)
 
@@ -208,7 +224,14 @@ class GeneralizedModel(SteeringModel):
         return model
 
     def structure(self) -> dict[str, Any]:
-        return dict(self.orders)
+        out: dict[str, Any] = dict(self.orders)
+        if self._equation_error_order:  # left out when white: the paper's model as before
+            out["equation_error_order"] = self._equation_error_order
+        return out
+
+    @property
+    def equation_error_order(self) -> int:
+        return self._equation_error_order
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
