@@ -538,7 +538,7 @@ class GaussianMixtureEKF:
             log_w = state.log_w[0]
             w = np.exp(log_w)
             return Estimate.of_fields(
-                mean=w @ x,
+                mean=w.dot(x),
                 component_means=x,
                 component_covariances=state.P,
                 weights=w,
