@@ -329,13 +329,13 @@ class EvidenceRule:
             else math.inf,
         )
 
-    @property
+    @cached_property
     def aim_near(self) -> float:
         """How near (m) some hypothesis' centre the car must be held for the path rule to
         count the averages' reach: half its limit."""
         return 0.5 * self.aim_limit
 
-    @property
+    @cached_property
     def holds(self) -> bool:
         """Whether the reversal rule or the path rule can change a run's weights."""
         return self.enabled and (math.isfinite(self.commit_steps) or math.isfinite(self.aim_limit))
@@ -447,9 +447,12 @@ def moved_aim_offsets(
     aim = state[AIM_OFFSET]
     moved = dict(state)
     if aim.shape[0] == 1:  # one run: in Python floats (the same operations)
-        new = [a + rate * (y - a) for a, y in zip(aim[0].tolist(), lateral.tolist(), strict=True)]
+        new, sizes = [], []
+        for a, y in zip(aim[0].tolist(), lateral.tolist(), strict=True):
+            a += rate * (y - a)
+            new.append(a)
+            sizes.append(abs(a))
         moved[AIM_OFFSET] = np.array([new])
-        sizes = [abs(a) for a in new]
         if min(sizes) <= near:
             old = state[AIM_REACH][0].tolist()
             moved[AIM_REACH] = np.array(

@@ -304,6 +304,7 @@ class FilterMatrices:
         self._h_maps_t = np.ascontiguousarray(h_maps.transpose(0, 2, 1)).reshape(4, 3 * n)
         self._h_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._offsets_cache: dict[tuple[int, int], np.ndarray] = {}
+        self._run_of_row_cache: dict[tuple[int, int], np.ndarray] = {}
         self._none_gated_cache: np.ndarray | None = None
         self._measurement_var_column = self.measurement_var[:, None].copy()
         self._inverse_distance = np.array([1.0 / model.near_distance, 1.0 / model.far_distance])
@@ -340,8 +341,9 @@ class FilterMatrices:
         with the driver's preferred offset p. ``speed``: ``hypot(v_x, v_y)`` (B,) if known."""
         vx, vy = x[:, VX], x[:, VY]
         if x.shape[0] <= _MAX_ROWS_IN_FLOATS:
-            ratio_rows, inverse_rows = self._bearing_ratios_in_floats(x, points)
-            return _features_in_floats(vx, vy, ratio_rows, inverse_rows, speed)
+            rows = x.tolist()
+            ratio_rows, inverse_rows = self._bearing_ratios_in_floats(rows, points)
+            return _features_in_floats(vx, vy, rows, ratio_rows, inverse_rows, speed)
         lateral = x[:, Y, None]
         if self.model.preferred_offset:
             lateral = lateral - x[:, PREFERRED_OFFSET, None]
@@ -367,17 +369,17 @@ class FilterMatrices:
         return w, deriv
 
     def _bearing_ratios_in_floats(
-        self, x: np.ndarray, points: np.ndarray | None
+        self, rows: list[list[float]], points: np.ndarray | None
     ) -> tuple[list[float], list[float]]:
         """:meth:`_features`' ratios ``(y - dy_near) / dx_near, (y - dy_far) / dx_far`` (as
         ``(y - dy) * (1 / dx)``; y - p with the preferred offset p; dy = 0 and dx the
-        distances on a straight road) and inverses ``1 / dx`` of a few filters, flat (2 B)
-        lists, near and far of each filter in turn, in Python floats: the same operations
-        as the numpy path."""
+        distances on a straight road) and inverses ``1 / dx`` of a few filters (``rows``:
+        their states, ``x.tolist()``), flat (2 B) lists, near and far of each filter in turn,
+        in Python floats: the same operations as the numpy path."""
         if self.model.preferred_offset:
-            lateral = (x[:, Y] - x[:, PREFERRED_OFFSET]).tolist()
+            lateral = [row[Y] - row[PREFERRED_OFFSET] for row in rows]
         else:
-            lateral = x[:, Y].tolist()
+            lateral = [row[Y] for row in rows]
         ratios: list[float] = []
         if points is None:
             i_near, i_far = self._inverse_distance_list
@@ -468,7 +470,9 @@ class FilterMatrices:
                     drive += self._steering_gain_row * previous_steering.item()
                 else:
                     drive += previous_steering[:, None] * self.steering_gain
-        if n_comp == 1 or n_runs == 1:  # (one run: its row of drive, broadcast)
+        if x.shape[0] <= _MAX_ROWS_IN_FLOATS:  # each run's row of drive for its filters
+            x_new += drive.take(self._run_of_row(n_runs, n_comp), axis=0)
+        elif n_comp == 1 or n_runs == 1:  # (one run: its row of drive, broadcast)
             x_new += drive
         else:
             x_new = (x_new.reshape(n_runs, n_comp, n) + drive[:, None, :]).reshape(-1, n)
@@ -748,7 +752,9 @@ class FilterMatrices:
         known."""
         n_b = x.shape[0]
         h, jac, jac_t = self._linearize(x, points) if linearized is None else linearized
-        if n_comp > 1 and z.shape[0] > 1:
+        if n_b <= _MAX_ROWS_IN_FLOATS:  # each run's row of z for its filters
+            innovation = z.take(self._run_of_row(z.shape[0], n_comp), axis=0) - h
+        elif n_comp > 1 and z.shape[0] > 1:
             innovation = (z[:, None, :] - h.reshape(-1, n_comp, 3)).reshape(n_b, 3)
         else:  # (one run: its row of z, broadcast)
             innovation = z - h
@@ -818,6 +824,18 @@ class FilterMatrices:
             self._offsets_cache = {(n_runs, n_comp): cached}
         return cached
 
+    def _run_of_row(self, n_runs: int, n_comp: int) -> np.ndarray:
+        """``[0, .., 0, 1, .., 1, ...]`` (R C,): the run of each filter (row), to take a run's
+        row of an (R, m) operand for each of its filters (cached). For a few filters this
+        gather and an operation on equal shapes cost less than numpy's broadcasting of the
+        (R, m) operand; the same numbers."""
+        cached = self._run_of_row_cache.get((n_runs, n_comp))
+        if cached is None:
+            cached = np.repeat(np.arange(n_runs), n_comp)
+            cached.setflags(write=False)
+            self._run_of_row_cache = {(n_runs, n_comp): cached}
+        return cached
+
     def _none_gated(self, n_runs: int) -> np.ndarray:
         """(R, 3) False, read-only (cached): no channel gated."""
         cached = self._none_gated_cache
@@ -849,11 +867,13 @@ class FilterMatrices:
             np.divide(x[:, VX : VY + 1 : VY - VX], np.maximum(speed, 1e-6)[:, None], out=speed_row)
             jac_t[:n_b, 3 * VX : 3 * VY + 1 : 3 * (VY - VX)] = speed_row
             return jac_3d[:n_b], jac_t_3d[:n_b]
-        rows = zip(x[:, VX].tolist(), x[:, VY].tolist(), speed.tolist(), strict=True)
-        for b, (v_x, v_y, v) in enumerate(rows):
+        # H[b, 0, v] and H^T[b, v, 0] at their flat indices v and 3 v
+        for b, (row, v) in enumerate(zip(x.tolist(), speed.tolist(), strict=True)):
             v = v if not v < 1e-6 else 1e-6
-            jac_3d[b, 0, VX] = jac_t_3d[b, VX, 0] = v_x / v
-            jac_3d[b, 0, VY] = jac_t_3d[b, VY, 0] = v_y / v
+            jac[b, VX] = jac_t[b, 3 * VX] = row[VX] / v
+            jac[b, VY] = jac_t[b, 3 * VY] = row[VY] / v
+        if n_b == jac.shape[0]:
+            return jac_3d, jac_t_3d
         return jac_3d[:n_b], jac_t_3d[:n_b]
 
     def _measurement_jacobian_bases(self, n_b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -875,12 +895,14 @@ _COF_D = np.array([7, 8, 4, 8, 6, 5, 6, 7, 3])
 def _features_in_floats(
     vx: np.ndarray,
     vy: np.ndarray,
+    rows: list[list[float]],
     ratio: list[float],
     inverse: list[float],
     speed: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`FilterMatrices._features` of a few filters (B <= ``_MAX_ROWS_IN_FLOATS``) from
-    its ratios and inverses, flat (2 B) lists (:meth:`FilterMatrices._bearing_ratios_in_floats`):
+    """:meth:`FilterMatrices._features` of a few filters (B <= ``_MAX_ROWS_IN_FLOATS``;
+    ``rows``: their states, ``x.tolist()``, whose columns ``vx`` and ``vy`` are) from its
+    ratios and inverses, flat (2 B) lists (:meth:`FilterMatrices._bearing_ratios_in_floats`):
     the same numpy calls for atan (elementwise: a flat array gives each entry the bits of the
     (B, 2) one), atan2 and hypot, the same arithmetic in Python floats for the rest
     (``max(v^2, 1e-12)`` with a NaN kept, as ``numpy.maximum``)."""
@@ -889,9 +911,8 @@ def _features_in_floats(
     speed_list = (np.hypot(vx, vy) if speed is None else speed).tolist()
     w: list[float] = []
     deriv: list[float] = []
-    for b, (v_x, v_y, angle, v) in enumerate(
-        zip(vx.tolist(), vy.tolist(), theta, speed_list, strict=True)
-    ):
+    for b, (row, angle, v) in enumerate(zip(rows, theta, speed_list, strict=True)):
+        v_x, v_y = row[VX], row[VY]
         speed_sq = v * v
         if speed_sq < 1e-12:
             speed_sq = 1e-12

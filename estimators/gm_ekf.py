@@ -52,7 +52,14 @@ from estimators.evidence import (
 from estimators.filter_matrices import FilterMatrices, filter_model
 from estimators.road_geometry import straight_road_points
 from estimators.settings import FilterSettings
-from estimators.small_arrays import all_finite, all_true, all_within, any_true, min_below
+from estimators.small_arrays import (
+    all_finite,
+    all_true,
+    all_within,
+    any_equal,
+    any_true,
+    min_below,
+)
 from hasa_env.steering.arx import ARXForm
 
 __all__ = ["GaussianMixtureEKF", "FilterMatrices", "MixtureState"]
@@ -320,6 +327,8 @@ class GaussianMixtureEKF:
         if not self._aim_rate:
             self._rule = replace(self._rule, aim_variance=0.0)
         self._min_speed = settings.min_speed if self.model.has_steering else 0.0
+        self._drops_steering = settings.mismatch_drops_steering and self.model.has_steering
+        self._max_acceleration = settings.max_acceleration
         self._max_speed = settings.steering_max_speed if self.model.has_steering else math.inf
         self._curvature_limit = (
             settings.steering_curvature_limit if self.model.has_steering else math.inf
@@ -651,7 +660,7 @@ class GaussianMixtureEKF:
         if self._feedforward and points is not None:
             z = self._without_feedforward(z, points)
         z, all_observed = self._observed(z)
-        acc, missing_acc = _plausible_acceleration(acc, self.settings.max_acceleration)
+        acc, missing_acc = _plausible_acceleration(acc, self._max_acceleration)
         steering = z[:, 2]
         off = state.channel_off
         any_off = any_true(off)
@@ -789,10 +798,9 @@ class GaussianMixtureEKF:
     def _refused_steering(self, state: MixtureState) -> np.ndarray | None:
         """(R,) the runs in ``model_mismatch`` after the last step, whose steering updates no
         state (``FilterSettings.mismatch_drops_steering``; None: none, or the setting off)."""
-        if not self.settings.mismatch_drops_steering or not self.model.has_steering:
+        if not self._drops_steering or not any_equal(state.decision, MODEL_MISMATCH):
             return None
-        mismatched = state.decision == MODEL_MISMATCH
-        return mismatched if any_true(mismatched) else None
+        return state.decision == MODEL_MISMATCH
 
     def _weigh(
         self,

@@ -15,7 +15,16 @@ import math
 
 import numpy as np
 
-__all__ = ["SMALL_SIZE", "all_finite", "all_true", "all_within", "any_nan", "any_true", "min_below"]
+__all__ = [
+    "SMALL_SIZE",
+    "all_finite",
+    "all_true",
+    "all_within",
+    "any_equal",
+    "any_nan",
+    "any_true",
+    "min_below",
+]
 
 SMALL_SIZE = 16
 """Arrays of at most this many entries are tested in Python (one run's arrays: C <= 8)."""
@@ -26,6 +35,13 @@ def any_true(mask: np.ndarray) -> bool:
     if mask.size > SMALL_SIZE:
         return bool(mask.any())
     return True in mask.ravel().tolist()
+
+
+def any_equal(values: np.ndarray, value: float) -> bool:
+    """``(values == value).any()`` (``value`` not NaN)."""
+    if values.size > SMALL_SIZE:
+        return bool((values == value).any())
+    return value in values.ravel().tolist()
 
 
 def all_true(mask: np.ndarray) -> bool:

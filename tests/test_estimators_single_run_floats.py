@@ -38,6 +38,7 @@ from estimators.small_arrays import (
     all_finite,
     all_true,
     all_within,
+    any_equal,
     any_nan,
     any_true,
     min_below,
@@ -183,6 +184,8 @@ def test_small_array_tests_answer_as_numpy() -> None:
             assert min_below(values, -1.0) == bool(values.min() < -1.0)
             no_inf = np.where(np.isinf(values), 0.0, values)
             assert any_nan(no_inf) == bool(np.isnan(no_inf).any())
+            codes = rng.integers(-1, 3, size)
+            assert any_equal(codes, 2) == bool((codes == 2).any())
 
 
 @pytest.fixture(scope="module")
