@@ -452,11 +452,11 @@ def moved_aim_offsets(
             a += rate * (y - a)
             new.append(a)
             sizes.append(abs(a))
-        moved[AIM_OFFSET] = np.array([new])
+        moved[AIM_OFFSET] = np.array(new, ndmin=2)
         if min(sizes) <= near:
             old = state[AIM_REACH][0].tolist()
             moved[AIM_REACH] = np.array(
-                [[r if r >= a else a for r, a in zip(old, sizes, strict=True)]]
+                [r if r >= a else a for r, a in zip(old, sizes, strict=True)], ndmin=2
             )
         return moved
     new_aim = aim + rate * (lateral.reshape(aim.shape) - aim)
@@ -601,7 +601,7 @@ def _weigh_evidence_one(
         if decision != MODEL_MISMATCH:
             decision = DECIDED if max(lw) >= rule.log_decision_threshold else UNDECIDED
     if new_log_w is None:
-        new_log_w = np.array([lw])
+        new_log_w = np.array(lw, ndmin=2)
     if verified:
         new_state["_verified_log_w"] = new_log_w
     if rule.holds:
@@ -846,9 +846,10 @@ def _statistics_one(
         nis, lag = new_nis, new_lag
         new_state["_evidence_weight"] = np.array([weight])
         new_state["_evidence_weight_sq"] = np.array([weight_sq])
-        new_state["_nis"] = np.array([nis])
-        new_state["_lag_product"] = np.array([lag])
-        new_state["_last_score"] = np.array([u])
+        # (1, C) rows (``ndmin=2``: cheaper than numpy's reading of a nested list)
+        new_state["_nis"] = np.array(nis, ndmin=2)
+        new_state["_lag_product"] = np.array(lag, ndmin=2)
+        new_state["_last_score"] = np.array(u, ndmin=2)
     else:  # the statistics stay; the next lag product is 0 (a gap)
         new_state["_last_score"] = np.zeros((1, len(u)))
     best = -1
