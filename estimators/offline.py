@@ -35,7 +35,7 @@ from estimators.road_geometry import lane_points_ahead, look_ahead_distances, st
 from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time, recording_sample_time
 from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
-from estimators.tuning import steering_residual_std
+from estimators.tuning import steering_residual_std, whitened_residual_std
 from hasa_env.recording.format import Recording
 from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
@@ -711,18 +711,22 @@ def recording_filter(
     training = training or TrainingRecord()
     arx = steering_model.arx()
     level = training.residual_std if residual_std is None else residual_std
-    if arx is not None and level is None:
+    whitened = training.whitened_residual_std
+    if arx is not None and level is None:  # both levels on this recording's true states
         level = steering_residual_std(
             arx,
             recording.data,
             decision_lag=getattr(steering_model, "decision_lag", 1),
             steering_ratio=steering_ratio,
         )
+        whitened = whitened_residual_std(
+            steering_model, recording.data, steering_ratio=steering_ratio
+        )
     return trusted_filter(
         steering_model,
         FilterSettings.from_env_config(recording.config),
         steering_ratio=steering_ratio,
-        training=replace(training, residual_std=level),
+        training=replace(training, residual_std=level, whitened_residual_std=whitened),
         overrides=overrides,
     )
 

@@ -39,7 +39,10 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
   filter's steering innovations are white where the model's residuals are not; the residual
   level is then that of the whitened error, the record's (else the base settings')
   ``steering_residual_std`` times ``sqrt(1 - sum_i r_i rho_i)`` (:func:`~hasa_env.steering.equation_error.innovation_variance_ratio`).
-  Every check above (prediction, lane keeping, G) reads the model's own form.
+  Every check above (prediction, lane keeping, G) reads the model's own form. Where the record
+  measured it (``training.whitened_residual_std``, on the same data as its residual level), a
+  declared autoregression is taken only if the whitened form's one-step residual is below the
+  model's own (the level stays the one above).
 - ``checks=False`` (the benchmark's unchecked comparison): ``evidence_checks`` off and none of
   the limits above (curvature limit ``math.inf`` even when the user set one).
 
@@ -99,6 +102,10 @@ class TrainingRecord:
         keeps_lane: the outcome of its lane-keeping check
             (:func:`hasa_env.drivers.lane_keeping_check`); None: not checked.
         lane_check: that check's one-line summary (for the reason).
+        whitened_residual_std: the one-step residual level (rad, model units) of the model's
+            form whitened by its declared equation-error autoregression, on the same data as
+            ``residual_std`` (:func:`~estimators.tuning.whitened_residual_std`); None: not
+            measured (the declaration is then taken as it is).
     """
 
     residual_std: float | None = None
@@ -107,6 +114,7 @@ class TrainingRecord:
     speed_range: tuple[float, float] | None = None
     keeps_lane: bool | None = None
     lane_check: str = ""
+    whitened_residual_std: float | None = None
 
     @classmethod
     def from_run(cls, frame: Any, residual_std: float | None = None) -> TrainingRecord:
@@ -292,7 +300,7 @@ def trusted_filter(
     off = _switched_off(model, arx, training, checks)
     limits = model_limits(model, training)  # (curvature 1/m, (low, high) m/s) it was fitted on
     rule: dict[str, Any] = {"steering_ratio": steering_ratio}
-    noise = _equation_error(model, arx)
+    noise, noise_why = _equation_error(model, arx, training)
     level = training.residual_std
     if level is None and noise:  # the base settings' level stands in for the model's
         level = settings.steering_residual_std
@@ -322,28 +330,46 @@ def trusted_filter(
     if off:
         return TrustedFilter(settings, None, 0, off)
     reasons = _reasons(settings, model, training, overrides, checks, feedforward_why)
-    if noise:
-        listed = ", ".join(f"{r:.3g}" for r in noise)
-        reasons += (
-            f"the steering compared whitened by its equation error's autoregression "
-            f"r = ({listed}) (residual level x {math.sqrt(innovation_variance_ratio(noise)):.3f})",
-        )
+    if noise_why:
+        reasons += (noise_why,)
     assert arx is not None  # not off: the model has an ARX form
     return TrustedFilter(
         settings, whitened_arx(arx, noise), int(getattr(model, "decision_lag", 1)), reasons
     )
 
 
-def _equation_error(model: Any, arx: ARXForm | None) -> tuple[float, ...]:
-    """The model's equation-error autoregression (``equation_error_ar``; ``()``: white, or no
-    ARX form); ValueError naming the problem when it is not a stationary one."""
+def _equation_error(
+    model: Any, arx: ARXForm | None, training: TrainingRecord
+) -> tuple[tuple[float, ...], str]:
+    """The model's equation-error autoregression the filter whitens by (``()``: none) and the
+    reason line. A declared one (``equation_error_ar``) is taken unless the record measured
+    that it does not lower the one-step residual on the data (``whitened_residual_std`` at or
+    above ``residual_std``): a model of its error that predicts worse than none is not its
+    error's (docs/design.md §8.32). ValueError naming the problem when it is not a stationary
+    autoregression."""
     if model is None or arx is None:
-        return ()
+        return (), ""
     noise = getattr(model, "equation_error_ar", ()) or ()
     try:
-        return check_equation_error_ar(noise)
+        noise = check_equation_error_ar(noise)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"steering model {getattr(model, 'name', model)!r}: {exc}") from None
+    if not noise:
+        return (), ""
+    listed = ", ".join(f"{r:.3g}" for r in noise)
+    own, white = training.residual_std, training.whitened_residual_std
+    if own is not None and white is not None and not white < own:
+        return (), (
+            f"its equation error's autoregression r = ({listed}) ignored: whitened by it, the "
+            f"steering's one-step residual is {white:.3g} rad, not below its own {own:.3g} rad"
+        )
+    how = f"residual level x {math.sqrt(innovation_variance_ratio(noise)):.3f}"
+    if own is not None and white is not None:
+        how += f"; whitened, the one-step residual is {white:.3g} rad against {own:.3g} rad"
+    return noise, (
+        f"the steering compared whitened by its equation error's autoregression "
+        f"r = ({listed}) ({how})"
+    )
 
 
 def _feedforward(

@@ -18,11 +18,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.equation_error import check_equation_error_ar, whitened_arx
 from hasa_env.steering.features import steering_features
 
 __all__ = [
@@ -31,6 +33,7 @@ __all__ = [
     "prediction_check",
     "steering_residual_std",
     "steering_residuals",
+    "whitened_residual_std",
 ]
 
 LANE_FREE_FOLDS = 5
@@ -78,6 +81,32 @@ def steering_residual_std(
     if values.size == 0:
         raise ValueError("no residuals: the recordings are shorter than the model's memory")
     return float(np.sqrt(np.mean(values * values)))
+
+
+def whitened_residual_std(
+    model: Any,
+    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    *,
+    steering_ratio: float = 1.0,
+) -> float | None:
+    """:func:`steering_residual_std` of the model's ARX form whitened by its declared
+    equation-error autoregression (``model.equation_error_ar``,
+    :func:`hasa_env.steering.equation_error.whitened_arx`): what the trust rule compares with
+    the model's own level before it believes the declaration (docs/design.md §8.32). None: the
+    model has no ARX form or declares no autoregression (or one that is not stationary)."""
+    arx = model.arx() if model is not None else None
+    try:
+        noise = check_equation_error_ar(getattr(model, "equation_error_ar", ()) or ())
+    except (TypeError, ValueError):
+        return None
+    if arx is None or not noise:
+        return None
+    return steering_residual_std(
+        whitened_arx(arx, noise),
+        frames,
+        decision_lag=int(getattr(model, "decision_lag", 1)),
+        steering_ratio=steering_ratio,
+    )
 
 
 @dataclass(frozen=True)

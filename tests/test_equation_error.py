@@ -196,3 +196,69 @@ def test_the_benchmark_fits_its_generalized_model_with_the_configured_order() ->
     assert ProtocolConfig().equation_error_order == 2
     with pytest.raises(BenchmarkError, match="equation_error_order"):
         ProtocolConfig(equation_error_order=11)
+
+
+def test_a_declared_autoregression_that_predicts_worse_is_ignored(
+    fitted: GeneralizedModel,
+) -> None:
+    from estimators.tuning import whitened_residual_std
+
+    runs = _ararx_runs()
+    # features frames stand in for recordings here: score the forms directly
+    own = float(
+        np.sqrt(np.nanmean(np.concatenate([_residuals(fitted.arx(), f) for f in runs]) ** 2))
+    )
+    white = whitened_arx(fitted.arx(), fitted.equation_error_ar)
+    right = float(np.sqrt(np.nanmean(np.concatenate([_residuals(white, f) for f in runs]) ** 2)))
+    assert right < own  # the fitted autoregression lowers the one-step residual
+    trusted = trusted_filter(
+        fitted, training=TrainingRecord(residual_std=own, whitened_residual_std=right)
+    )
+    assert trusted.arx == white
+    ratio = innovation_variance_ratio(fitted.equation_error_ar)
+    assert trusted.settings.steering_residual_std == pytest.approx(own * math.sqrt(ratio))
+    assert right == pytest.approx(own * math.sqrt(ratio), rel=0.05)  # what Yule-Walker says
+    # a declaration of the wrong sign predicts worse: the filter keeps the model's own form
+    bogus = GeneralizedModel.paper()
+    bogus.equation_error_ar = (-0.6, 0.3)
+    wrong = trusted_filter(
+        bogus, training=TrainingRecord(residual_std=own, whitened_residual_std=2 * own)
+    )
+    assert wrong.arx == bogus.arx()
+    assert wrong.settings.steering_residual_std == pytest.approx(own)
+    assert any("autoregression r = (-0.6, 0.3) ignored" in r for r in wrong.reasons)
+    assert whitened_residual_std(GeneralizedModel.paper(), runs) is None  # none declared
+
+
+WRONG_SIGN_MODULE = """
+from hasa_env.steering import GeneralizedModel
+
+
+class WrongSignNoise(GeneralizedModel):
+    model_type = "test_wrong_sign_noise"
+
+    def fit(self, runs, road=None, **options):
+        fitted = super().fit(runs, road=road, **options)
+        fitted.equation_error_ar = (-0.6, 0.3)  # not its residuals' autoregression
+        return fitted
+"""
+
+
+def test_hasa_bench_ignores_a_user_models_wrong_declaration(tmp_path, monkeypatch) -> None:
+    from hasa_cli.bench import main
+
+    (tmp_path / "wrong_sign_noise.py").write_text(WRONG_SIGN_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    tiny = ["--seed", "0", "--population", "paper-pi", "--drivers", "2", "--runs", "1",
+            "--ill-runs", "2", "--duration", "6", "--curved-runs", "0",
+            "--training-drivers", "1", "--no-plots", "--quiet"]  # fmt: skip
+    out = tmp_path / "out"
+    assert main(["score", "wrong_sign_noise:WrongSignNoise", *tiny, "--out", str(out)]) == 0
+    doc = json.loads((out / "results.json").read_text())
+    models = {m["name"]: m for m in doc["models"]}
+    wrong = models["wrong_sign_noise:WrongSignNoise"]
+    assert wrong["whitened_residual_std"] > wrong["filter_residual_std"]
+    assert any("ignored" in reason for reason in wrong["steering_trust"])
+    own = models["generalized"]  # the built-in's fitted AR(2) lowers its residual: taken
+    assert own["whitened_residual_std"] < own["filter_residual_std"]
+    assert any("whitened by its equation error" in r for r in own["steering_trust"])

@@ -132,7 +132,10 @@ def test_six_callers_get_the_same_filter_for_the_same_model(
             )
         assert settings == expected.settings, caller
         assert ekf.decision_lag == model.decision_lag, caller
-        assert ekf.steering_model == expected.arx, caller
+        own_form = caller == "hasa-replay" and equation_error
+        # hasa-replay measures both levels on the recording, whose residuals are white (the
+        # model drives it): a declared autoregression predicts worse there, and is ignored
+        assert ekf.steering_model == (model.arx() if own_form else expected.arx), caller
     assert lines == [f"hasa-drive: --estimator {path}: {expected.describe()}"]
 
 

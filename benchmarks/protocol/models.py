@@ -32,7 +32,12 @@ from benchmarks.protocol.isolation import (
 )
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
-from estimators.tuning import PredictionCheck, prediction_check, steering_residual_std
+from estimators.tuning import (
+    PredictionCheck,
+    prediction_check,
+    steering_residual_std,
+    whitened_residual_std,
+)
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import (
     GeneralizedModel,
@@ -303,6 +308,7 @@ def fit_models(
             if candidate.fixed
             else TrainingRecord.from_run(own if isinstance(own, pd.DataFrame) else pd.concat(own))
         )
+        training = replace(training, whitened_residual_std=info_fit["whitened_residual_std"])
         if residual is not None and not candidate.fixed:  # the trust rule's prediction check
             check = PredictionCheck(  # on the run it was fitted on (not a saved model's: §8.13.1)
                 info_fit["prediction_residual_std"], info_fit["lane_free_residual_std"]
@@ -389,9 +395,10 @@ def _fit_one(
         ) from None
     fitted.name = name
     info = _fit_description(fitted, fixed, caught)
-    has_arx, residual, prediction = _filter_residual(
+    has_arx, residual, prediction, whitened = _filter_residual(
         name, fitted, train if residual_on is None else residual_on
     )
+    info["whitened_residual_std"] = whitened
     info["arx"] = has_arx
     info["filter_residual_std"] = residual
     info["prediction_residual_std"] = None if prediction is None else prediction.residual_std
@@ -455,27 +462,31 @@ def _structure(fitted: SteeringModel) -> dict[str, Any] | None:
 
 def _filter_residual(
     name: str, fitted: SteeringModel, run: pd.DataFrame | list[pd.DataFrame]
-) -> tuple[bool, float | None, PredictionCheck | None]:
+) -> tuple[bool, float | None, PredictionCheck | None, float | None]:
     """Whether the model has an ARX form, the filter's steering-residual level on ``run``
-    (:func:`estimators.tuning.steering_residual_std`) and the trust rule's prediction check
-    there (:func:`estimators.tuning.prediction_check`), both None without ARX form;
-    ModelError if the ARX form fails or predicts non-finite steering."""
+    (:func:`estimators.tuning.steering_residual_std`), the trust rule's prediction check
+    there (:func:`estimators.tuning.prediction_check`), both None without ARX form, and the
+    level of its form whitened by its declared equation-error autoregression
+    (:func:`estimators.tuning.whitened_residual_std`; None: none declared); ModelError if a
+    form fails or predicts non-finite steering."""
     try:
         arx = fitted.arx()
     except Exception as exc:  # noqa: BLE001
         raise ModelError(name, "fit", f"arx() raised {describe(exc)}") from None
     if arx is None:
-        return False, None, None
+        return False, None, None, None
     try:
         residual = steering_residual_std(arx, run, decision_lag=fitted.decision_lag)
         prediction = prediction_check(arx, run, decision_lag=fitted.decision_lag)
+        whitened = whitened_residual_std(fitted, run)
     except Exception as exc:  # noqa: BLE001
         raise ModelError(
             name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
         ) from None
-    if not (math.isfinite(residual) and residual >= 0):
-        raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({residual})")
-    return True, residual, prediction
+    for level in (residual, whitened):
+        if level is not None and not (math.isfinite(level) and level >= 0):
+            raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({level})")
+    return True, residual, prediction, whitened
 
 
 def _fit_note(fixed: bool, has_arx: bool) -> str:
@@ -584,7 +595,8 @@ def describe_trust(
         info = described.get(fm.name)
         if fm.residual_std is None or info is None:
             continue
-        trust = trusted_filter(fm.model, training=fm.training, overrides=overrides)
+        training = replace(fm.training, residual_std=fm.residual_std)  # as the filter's
+        trust = trusted_filter(fm.model, training=training, overrides=overrides)
         info["steering_trust"] = list(trust.reasons)
         if trust.arx is None:  # no lane evidence from its steering anywhere
             info["steering_curvature_feedforward"] = None
