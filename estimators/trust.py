@@ -300,13 +300,12 @@ def trusted_filter(
     off = _switched_off(model, arx, training, checks)
     limits = model_limits(model, training)  # (curvature 1/m, (low, high) m/s) it was fitted on
     rule: dict[str, Any] = {"steering_ratio": steering_ratio}
-    noise, noise_why = _equation_error(model, arx, training)
+    noise, white_scale, noise_why = _equation_error(model, arx, training)
     level = training.residual_std
     if level is None and noise:  # the base settings' level stands in for the model's
         level = settings.steering_residual_std
     if level is not None:
-        level = float(level) * math.sqrt(innovation_variance_ratio(noise))
-        rule["steering_residual_std"] = max(level, 1e-9)
+        rule["steering_residual_std"] = max(float(level) * white_scale, 1e-9)
     if checks is not None:  # the caller's choice, over the user's
         rule["evidence_checks"] = checks
         overrides.pop("evidence_checks", None)
@@ -340,35 +339,45 @@ def trusted_filter(
 
 def _equation_error(
     model: Any, arx: ARXForm | None, training: TrainingRecord
-) -> tuple[tuple[float, ...], str]:
-    """The model's equation-error autoregression the filter whitens by (``()``: none) and the
-    reason line. A declared one (``equation_error_ar``) is taken unless the record measured
+) -> tuple[tuple[float, ...], float, str]:
+    """The model's equation-error autoregression the filter whitens by (``()``: none), the
+    factor ``sqrt(1 - sum_i r_i rho_i)`` from its error's level to that of the whitened one
+    (1 without) and the reason line. A declared one (``equation_error_ar``) is taken unless the record measured
     that it does not lower the one-step residual on the data (``whitened_residual_std`` at or
     above ``residual_std``): a model of its error that predicts worse than none is not its
     error's (docs/design.md §8.32). ValueError naming the problem when it is not a stationary
     autoregression."""
     if model is None or arx is None:
-        return (), ""
+        return (), 1.0, ""
     noise = getattr(model, "equation_error_ar", ()) or ()
     try:
         noise = check_equation_error_ar(noise)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"steering model {getattr(model, 'name', model)!r}: {exc}") from None
     if not noise:
-        return (), ""
+        return (), 1.0, ""
     listed = ", ".join(f"{r:.3g}" for r in noise)
     own, white = training.residual_std, training.whitened_residual_std
     if own is not None and white is not None and not white < own:
-        return (), (
-            f"its equation error's autoregression r = ({listed}) ignored: whitened by it, the "
-            f"steering's one-step residual is {white:.3g} rad, not below its own {own:.3g} rad"
+        return (
+            (),
+            1.0,
+            (
+                f"its equation error's autoregression r = ({listed}) ignored: whitened by it, the "
+                f"steering's one-step residual is {white:.3g} rad, not below its own {own:.3g} rad"
+            ),
         )
-    how = f"residual level x {math.sqrt(innovation_variance_ratio(noise)):.3f}"
+    scale = math.sqrt(innovation_variance_ratio(noise))
+    how = f"residual level x {scale:.3f}"
     if own is not None and white is not None:
         how += f"; whitened, the one-step residual is {white:.3g} rad against {own:.3g} rad"
-    return noise, (
-        f"the steering compared whitened by its equation error's autoregression "
-        f"r = ({listed}) ({how})"
+    return (
+        noise,
+        scale,
+        (
+            f"the steering compared whitened by its equation error's autoregression "
+            f"r = ({listed}) ({how})"
+        ),
     )
 
 

@@ -93,12 +93,14 @@ def whitened_residual_std(
     equation-error autoregression (``model.equation_error_ar``,
     :func:`hasa_env.steering.equation_error.whitened_arx`): what the trust rule compares with
     the model's own level before it believes the declaration (docs/design.md §8.32). None: the
-    model has no ARX form or declares no autoregression (or one that is not stationary)."""
+    model has no ARX form or declares no autoregression.
+
+    Raises:
+        ValueError: the declaration is not a stationary autoregression
+            (:func:`hasa_env.steering.equation_error.check_equation_error_ar`).
+    """
     arx = model.arx() if model is not None else None
-    try:
-        noise = check_equation_error_ar(getattr(model, "equation_error_ar", ()) or ())
-    except (TypeError, ValueError):
-        return None
+    noise = check_equation_error_ar(getattr(model, "equation_error_ar", ()) or ())
     if arx is None or not noise:
         return None
     return steering_residual_std(

@@ -152,7 +152,9 @@ def test_the_model_file_keeps_it_and_names_a_bad_one(fitted: GeneralizedModel, t
     # the paper's white error: no key, the file as before
     assert "equation_error" not in GeneralizedModel.paper().to_dict()
     assert "equation_error_order" not in GeneralizedModel().structure()
-    with pytest.raises(ValueError, match="equation_error_order must be an integer in 0..10"):
+    with pytest.raises(
+        ValueError, match=r"equation_error_order must be an integer in \[0, 10\], got 11"
+    ):
         GeneralizedModel(equation_error_order=11)
 
 
@@ -262,3 +264,36 @@ def test_hasa_bench_ignores_a_user_models_wrong_declaration(tmp_path, monkeypatc
     own = models["generalized"]  # the built-in's fitted AR(2) lowers its residual: taken
     assert own["whitened_residual_std"] < own["filter_residual_std"]
     assert any("whitened by its equation error" in r for r in own["steering_trust"])
+
+
+NON_STATIONARY_MODULE = """
+from hasa_env.steering import GeneralizedModel
+
+
+class NonStationaryNoise(GeneralizedModel):
+    model_type = "test_non_stationary_noise"
+
+    def fit(self, runs, road=None, **options):
+        fitted = super().fit(runs, road=road, **options)
+        fitted.equation_error_ar = (1.5,)  # no autoregression of a stationary error
+        return fitted
+"""
+
+
+def test_hasa_bench_names_and_skips_a_non_stationary_declaration(tmp_path, monkeypatch) -> None:
+    from hasa_cli import EXIT_PARTIAL
+    from hasa_cli.bench import main
+
+    (tmp_path / "non_stationary_noise.py").write_text(NON_STATIONARY_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    tiny = ["--seed", "0", "--population", "paper-pi", "--drivers", "2", "--runs", "1",
+            "--ill-runs", "2", "--duration", "6", "--curved-runs", "0",
+            "--training-drivers", "1", "--no-plots", "--quiet"]  # fmt: skip
+    out = tmp_path / "out"
+    spec = "non_stationary_noise:NonStationaryNoise"
+    assert main(["score", spec, *tiny, "--out", str(out)]) == EXIT_PARTIAL
+    doc = json.loads((out / "results.json").read_text())
+    (error,) = doc["errors"]
+    assert error["model"] == spec and error["stage"] == "fit"
+    assert "autoregression (1.5,) is not stationary" in error["message"]
+    assert {r["model"] for r in doc["estimation"]} >= {"generalized", "two_point"}

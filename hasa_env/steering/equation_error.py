@@ -71,10 +71,9 @@ def equation_error_autoregression(residuals: Sequence[np.ndarray], order: int) -
         return ()
     ar = solve_toeplitz(covariances[:order], covariances[1:])
     try:
-        check_equation_error_ar(ar)
+        return check_equation_error_ar(ar)
     except ValueError:
         return ()
-    return tuple(float(v) for v in ar)
 
 
 def check_equation_error_ar(ar: Sequence[float]) -> tuple[float, ...]:

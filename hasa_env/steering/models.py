@@ -37,14 +37,10 @@ ROAD_BLIND_ORDER = 2
 _MAX_ORDER = 50
 
 
-def _check_order(key: str, value: object) -> int:
-    """``value`` as an order in [0, 50]; ValueError naming ``key`` otherwise."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | np.integer)
-        or not 0 <= value <= _MAX_ORDER
-    ):
-        raise ValueError(f"order {key} must be an integer in [0, {_MAX_ORDER}], got {value!r}")
+def _check_order(name: str, value: object, high: int = _MAX_ORDER) -> int:
+    """``value`` as an order in [0, ``high``]; ValueError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 0 <= value <= high:
+        raise ValueError(f"{name} must be an integer in [0, {high}], got {value!r}")
     return int(value)
 
 
@@ -166,17 +162,10 @@ class GeneralizedModel(SteeringModel):
         **kwargs: Any,
     ) -> None:
         orders = {"na": na, "nb": nb, "nc": nc, "nd": nd}
-        self.orders: dict[str, int] = {k: _check_order(k, v) for k, v in orders.items()}
-        if (
-            isinstance(equation_error_order, bool)
-            or not isinstance(equation_error_order, int | np.integer)
-            or not 0 <= equation_error_order <= MAX_EQUATION_ERROR_ORDER
-        ):
-            raise ValueError(
-                f"equation_error_order must be an integer in 0..{MAX_EQUATION_ERROR_ORDER}, "
-                f"got {equation_error_order!r}"
-            )
-        self._equation_error_order = int(equation_error_order)
+        self.orders: dict[str, int] = {k: _check_order(f"order {k}", v) for k, v in orders.items()}
+        self._equation_error_order = _check_order(
+            "equation_error_order", equation_error_order, MAX_EQUATION_ERROR_ORDER
+        )
         kwargs.setdefault("name", "generalized")
         super().__init__(**kwargs)
 
@@ -308,7 +297,7 @@ class RoadBlindModel(SteeringModel):
     model_type = "road_blind"
 
     def __init__(self, na: int = ROAD_BLIND_ORDER, **kwargs: Any) -> None:
-        self.na = _check_order("na", na)
+        self.na = _check_order("order na", na)
         kwargs.setdefault("name", "road-blind")
         super().__init__(**kwargs)
 
