@@ -124,7 +124,9 @@ class PreparedModel:
     def trust(self) -> TrustedFilter:
         """Where the estimator trusts the model's steering, and why not elsewhere
         (:func:`estimators.trust.trusted_filter`; the reasons do not depend on the
-        recording)."""
+        recording, except whether a declared equation-error autoregression is taken: each
+        recording's filter takes it only where it lowers the model's one-step residual there,
+        docs/design.md §8.32)."""
         return trusted_filter(self.model, steering_ratio=self.steering_ratio)
 
 
