@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from estimators.offline import EstimatorRun, estimate_recording
-from estimators.trust import TrustedFilter, trusted_filter
+from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.drivers import require_lane_keeping
 from hasa_env.recording import check_replay
 from hasa_env.render.frames import write_frames
@@ -43,8 +43,10 @@ __all__ = [
     "PreparedModel",
     "RecordingOutcome",
     "ReplayCheck",
+    "TrustLines",
     "check_recordings",
     "describe_estimate",
+    "describe_trust",
     "estimate_recordings",
     "prepare_model",
     "render_recordings",
@@ -122,11 +124,13 @@ class PreparedModel:
     fitted_on: Path | None = None
 
     def trust(self) -> TrustedFilter:
-        """Where the estimator trusts the model's steering, and why not elsewhere
-        (:func:`estimators.trust.trusted_filter`; the reasons do not depend on the
-        recording, except whether a declared equation-error autoregression is taken: each
-        recording's filter takes it only where it lowers the model's one-step residual there,
-        docs/design.md §8.32)."""
+        """Where the estimator would trust the model's steering without a recording, and why
+        not elsewhere (:func:`estimators.trust.trusted_filter` on the default settings). Not
+        the filter a recording gets: that one measures the model's residual levels on the
+        recording, and takes a declared equation-error autoregression only where it lowers
+        the model's one-step residual there (docs/design.md §8.32), which this one takes as
+        declared. What each recording's filter said is in its run
+        (:attr:`~estimators.offline.EstimatorRun.trust`; :func:`describe_trust`)."""
         return trusted_filter(self.model, steering_ratio=self.steering_ratio)
 
 
@@ -234,6 +238,60 @@ def estimate_recordings(
             continue
         out.append(RecordingOutcome(i, rec.path, value=run))
     return out
+
+
+@dataclass(frozen=True)
+class TrustLines:
+    """Where the estimator trusted a model's steering on the recordings it ran on, in the
+    lines ``hasa-replay`` prints (:func:`describe_trust`).
+
+    Attributes:
+        model: the reasons that the filters of all those recordings share, in one line
+            (None: no filter to describe);
+        recordings: by recording index, the reasons of that recording's filter that
+            ``model`` does not hold, in one line (absent: none). A declared equation-error
+            autoregression's line (taken or ignored, by that recording's data) is always
+            here, never in ``model``.
+    """
+
+    model: str | None
+    recordings: dict[int, str]
+
+
+def describe_trust(prepared: PreparedModel, outcomes: Sequence[RecordingOutcome]) -> TrustLines:
+    """The trust lines of the filters :func:`estimate_recordings` ran (``outcomes``; each
+    run keeps its filter, :attr:`~estimators.offline.EstimatorRun.trust`, so none is made
+    again). When none ran (every recording failed), ``model`` is the line of
+    :meth:`PreparedModel.trust` without its equation-error line, or None when the trust rule
+    refuses the model (each recording's error already says why)."""
+    filters = {
+        o.index: o.value.trust
+        for o in outcomes
+        if o.error is None and getattr(o.value, "trust", None) is not None
+    }
+    trusts = list(filters.values())
+    if not trusts:
+        try:
+            trusts = [prepared.trust()]
+        except ValueError:  # e.g. a non-stationary autoregression, named per recording
+            return TrustLines(None, {})
+    first, *rest = trusts
+    shared = [
+        r
+        for r in first.reasons
+        if r != first.equation_error_reason and all(r in t.reasons for t in rest)
+    ]
+    lines, limited = {}, False
+    for index, trust in filters.items():
+        extra = [r for r in trust.reasons if r not in shared]
+        if extra:
+            lines[index] = "; ".join(extra)
+        limited |= trust.arx is None or any(r != trust.equation_error_reason for r in extra)
+    if shared:
+        model = "; ".join(shared)
+    else:  # nothing shared: everywhere, unless some recording's filter has a limit
+        model = "as each recording's line says" if limited else STEERING_EVERYWHERE
+    return TrustLines(model, lines)
 
 
 def describe_estimate(run: EstimatorRun) -> str:

@@ -671,6 +671,8 @@ class EstimatorRun:
             or ``"model_mismatch"``; :mod:`estimators.evidence`).
         refused_by: for a run that ends in ``model_mismatch``, why
             (:meth:`EstimationResult.refusal_reasons`); ``""`` otherwise.
+        trust: the filter that ran (:func:`recording_filter`): its settings, the form it
+            compared with the steering and its reasons (:meth:`TrustedFilter.describe`).
     """
 
     weights: np.ndarray
@@ -682,6 +684,7 @@ class EstimatorRun:
     trusted_from: float
     final_decision: str = ""
     refused_by: str = ""
+    trust: TrustedFilter | None = None
 
 
 def recording_filter(
@@ -745,7 +748,7 @@ def estimate_recording(
     Through :func:`estimators.offline.run_estimator`: it sees what the car's
     sensors recorded (speed, biased camera, steering, IMU), with the
     hypotheses of the recording's config and the filter of :func:`recording_filter`
-    (same arguments).
+    (same arguments), which the run keeps (:attr:`EstimatorRun.trust`).
     """
     data = recording.data
     cfg = recording.config
@@ -766,9 +769,10 @@ def estimate_recording(
     true_y = data["lateral_offset"].to_numpy(dtype=np.float64)
     rmse = float(np.sqrt(np.mean((lateral - true_y) ** 2)))
     true_index = int(data["bias_index"].iloc[0])
-    outcome = {
+    outcome: dict[str, Any] = {
         "final_decision": str(result.final_decision()[0]),
         "refused_by": str(result.refusal_reasons()[0]),
+        "trust": trust,
     }
     if not 0 <= true_index < hypotheses.size:
         matches = np.flatnonzero(np.isclose(hypotheses, float(data["bias"].iloc[0])))

@@ -76,6 +76,7 @@ from hasa_env.steering.equation_error import (
 )
 
 __all__ = [
+    "STEERING_EVERYWHERE",
     "TrainingRecord",
     "TrustedFilter",
     "FEEDFORWARD_PRECISION",
@@ -145,6 +146,11 @@ def _finite_range(values: Any) -> tuple[float, float] | None:
     return (float(finite.min()), float(finite.max())) if finite.size else None
 
 
+STEERING_EVERYWHERE = "the steering counts at every speed and on every road"
+"""What :meth:`TrustedFilter.describe` says of a filter that listens to the steering without
+any limit or reason."""
+
+
 @dataclass(frozen=True)
 class TrustedFilter:
     """The filter :func:`trusted_filter` makes of a steering model.
@@ -158,12 +164,18 @@ class TrustedFilter:
         reasons: one human-readable line per channel the rule switches off or tempers, and
             for a model fitted on straight roads whether it gets the curvature feed-forward
             and why (empty: the steering counts at every speed and on every road as it is).
+        equation_error_reason: the line of ``reasons`` that says whether the model's declared
+            equation-error autoregression is taken (the form whitened by it) or ignored, the
+            one reason decided by the data the training record measured its levels on
+            (``hasa-replay``: each recording); ``""`` when the model declares none or gives
+            no lane evidence.
     """
 
     settings: FilterSettings
     arx: ARXForm | None
     decision_lag: int
     reasons: tuple[str, ...] = ()
+    equation_error_reason: str = ""
 
     def estimator(self, dt: float | None = None) -> GaussianMixtureEKF:
         """A fresh filter (sample time ``dt`` s; None: the filter's default): the mixture EKF
@@ -176,7 +188,7 @@ class TrustedFilter:
     def describe(self) -> str:
         """The reasons in one line."""
         if self.arx is not None and not self.reasons:
-            return "the steering counts at every speed and on every road"
+            return STEERING_EVERYWHERE
         return "; ".join(self.reasons)
 
 
@@ -333,7 +345,11 @@ def trusted_filter(
         reasons += (noise_why,)
     assert arx is not None  # not off: the model has an ARX form
     return TrustedFilter(
-        settings, whitened_arx(arx, noise), int(getattr(model, "decision_lag", 1)), reasons
+        settings,
+        whitened_arx(arx, noise),
+        int(getattr(model, "decision_lag", 1)),
+        reasons,
+        noise_why,
     )
 
 

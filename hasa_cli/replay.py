@@ -20,8 +20,11 @@ recording in a directory and its subdirectories) it:
    steering model over the recorded sensors and prints its lateral RMSE, the
    final weight of the true lane hypothesis and when it was first trusted
    (:func:`estimators.offline.estimate_recording`), after one line saying where the
-   estimator does not listen to the model's steering, and why
-   (:func:`estimators.trust.trusted_filter`: e.g. above its training speeds);
+   filters of all the recordings do not listen to the model's steering, and why
+   (:func:`estimators.trust.trusted_filter`: e.g. above its training speeds); what a
+   recording's own filter adds to that line (whether a declared equation-error
+   autoregression is taken, decided by that recording's data) is printed just before its
+   result (:func:`benchmarks.recordings.describe_trust`);
 4. optionally writes PNG frames (``--frames DIR``) of the driver's or the
    top-down view, with the estimator's live weights in the HUD when it ran,
    and a video (``--video FILE.mp4``) if ``imageio`` with ffmpeg is
@@ -58,6 +61,7 @@ from benchmarks.recordings import (
     PreparedModel,
     check_recordings,
     describe_estimate,
+    describe_trust,
     estimate_recordings,
     prepare_model,
     render_recordings,
@@ -219,6 +223,32 @@ def _prepare_and_score(
     return prepared
 
 
+def _estimate(
+    prepared: PreparedModel, recordings: Sequence[Any], problems: list[str]
+) -> dict[int, Any]:
+    """Run the estimator over every recording and print where it trusted the model's
+    steering (one line of what every recording's filter shares, then beside a recording's
+    result what its own filter adds, e.g. whether a declared equation-error autoregression
+    is taken there) and its result (a recording it cannot run on named on stderr and added
+    to ``problems``). Returns the weights by recording index."""
+    outcomes = estimate_recordings(prepared, recordings)
+    trust = describe_trust(prepared, outcomes)
+    if trust.model is not None:
+        print(printable(f"model {prepared.spec}: estimator trust: {trust.model}"))
+    weights = {}
+    for outcome in outcomes:
+        if outcome.error is not None:
+            error(PROG, f"{outcome.path}: cannot run the estimator: {outcome.error}")
+            problems.append(outcome.error)
+            continue
+        weights[outcome.index] = outcome.value.weights
+        own = trust.recordings.get(outcome.index)
+        if own is not None:
+            print(printable(f"{outcome.path}: estimator trust: {own}"))
+        print(printable(f"{outcome.path}: estimator: {describe_estimate(outcome.value)}"))
+    return weights
+
+
 @console_script(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``hasa-replay`` (see the module docstring)."""
@@ -270,14 +300,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)
-        print(f"model {prepared.spec}: estimator trust: {prepared.trust().describe()}")
-        for outcome in estimate_recordings(prepared, recordings):
-            if outcome.error is not None:
-                error(PROG, f"{outcome.path}: cannot run the estimator: {outcome.error}")
-                problems.append(outcome.error)
-                continue
-            weights[outcome.index] = outcome.value.weights
-            print(printable(f"{outcome.path}: estimator: {describe_estimate(outcome.value)}"))
+        weights = _estimate(prepared, recordings, problems)
 
     if args.frames is not None or args.video is not None:
         options = {"every": args.frame_every, "view": args.view, "size": args.size,
