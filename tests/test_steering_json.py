@@ -1,6 +1,8 @@
 """Model files: exact JSON round trip and clear errors for bad files."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -272,3 +274,41 @@ def test_the_custom_model_example_runs(capsys):
     out = capsys.readouterr().out
     assert "saved and loaded near_far_pd.json" in out and "identical model" in out
     assert "left the road: False" in out
+
+
+def _fresh_process(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=False, timeout=120
+    )
+
+
+def test_load_in_a_fresh_process_that_imported_only_steering_model(tmp_path) -> None:
+    """The README's ``from hasa_env.steering import SteeringModel``, then
+    ``SteeringModel.load(path)``, reads a built-in model's file in a process that imported
+    nothing else (the built-in types used to be unregistered there, and reading failed with an
+    internal error about an empty 'choice' field)."""
+    path = tmp_path / "model.json"
+    GeneralizedModel.paper().save(path)
+    out = _fresh_process(
+        "from hasa_env.steering import SteeringModel\n"
+        f"print(type(SteeringModel.load({str(path)!r})).__name__)\n"
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "GeneralizedModel"
+
+
+def test_load_before_any_type_is_defined_says_what_to_import(tmp_path) -> None:
+    """Only hasa_env.steering.base imported: no type is registered yet, and the error says so
+    (a ModelFileError naming the file), not an internal one."""
+    path = tmp_path / "model.json"
+    GeneralizedModel.paper().save(path)
+    out = _fresh_process(
+        "from hasa_env.steering.base import SteeringModel\n"
+        "from hasa_env.steering.model_file import ModelFileError\n"
+        "try:\n"
+        f"    SteeringModel.load({str(path)!r})\n"
+        "except ModelFileError as exc:\n"
+        "    print(exc)\n"
+    )
+    assert out.returncode == 0, out.stderr
+    assert f"{path}: no steering model type is defined yet: import hasa_env.steering" in out.stdout

@@ -62,7 +62,6 @@ __all__ = [
 _SUBMODULES = {
     "design": ("Design", "Regressor", "lagged"),
     "model_file": ("ModelFileError",),
-    "base": ("SteeringModel",),
     "features": ("near_far_bearings", "steering_features"),
     "fitting": ("FitChecks", "FitResult", "fit_model"),
     "identifiability": (
@@ -85,7 +84,9 @@ _SUBMODULES = {
         "score_runs",
     ),
     "order": ("OrderSelection", "select_order"),
-    "models": ("GeneralizedModel", "RoadBlindModel", "TwoPointModel"),
+    # SteeringModel (defined in base) through models, which registers the built-in types, so
+    # that SteeringModel.load reads their files whatever else was imported.
+    "models": ("GeneralizedModel", "RoadBlindModel", "SteeringModel", "TwoPointModel"),
 }
 __getattr__, __dir__ = lazy_attributes(
     __name__,

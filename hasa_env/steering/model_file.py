@@ -173,6 +173,11 @@ def model_from_dict(
     def fail(path: str, message: str) -> ModelFileError:
         return ModelFileError(f"{source}: {message}")
 
+    if not MODEL_TYPES:  # only hasa_env.steering.base imported: no type is defined yet
+        raise ModelFileError(
+            f"{source}: no steering model type is defined yet: import hasa_env.steering (the "
+            "built-in models register there) or your model's module before reading a model file"
+        )
     cls = document.get("class") if isinstance(document, Mapping) else None
     doc = validate(
         document,
