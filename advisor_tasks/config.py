@@ -59,10 +59,12 @@ estimator.settings              further FilterSettings fields by name ({}); each
 
 Why the generalized preset by default: with the "paper" population, a lane keeper on
 the true state driving and the human advising, its estimate is the best of the four
-(lateral RMSE 0.035 m over six 30 s episodes, true lane always found; fitted
-generalized 0.155 m; fitted two-point 0.44 m; two-point preset 0.80 m, refused by
-``estimator.lane_check`` since it cannot keep the car on the road), and with the
-human driving 0.069 m (docs/design.md §12.4, ``examples/advisor_estimators.py``).
+(lateral RMSE 0.035 m over six 30 s episodes, all six decided for the true lane; fitted
+generalized 0.191 m, six; fitted two-point 0.437 m, four, two undecided; two-point preset
+0.803 m, none decided, refused by ``estimator.lane_check`` since it cannot keep the car
+on the road), and with the human driving 0.070 m, six (fitted generalized 0.539 m, three,
+three refused by the reversal rule; docs/design.md §12.4, ``examples/advisor_estimators.py``,
+which before 2026-12-06 counted a refused episode's tie at 0.5 / 0.5 as the true lane).
 """
 
 from __future__ import annotations

@@ -166,6 +166,7 @@ __all__ = [
     "EvidenceRule",
     "decision_names",
     "initial_evidence_state",
+    "refusal_reasons",
     "weigh_evidence",
 ]
 
@@ -1065,3 +1066,17 @@ def decision_names(codes: np.ndarray | int) -> np.ndarray | str:
     codes = np.asarray(codes)
     names = np.asarray(DECISIONS)[codes]
     return str(names) if names.ndim == 0 else names
+
+
+def refusal_reasons(decisions: np.ndarray | str, codes: np.ndarray | int | None) -> np.ndarray:
+    """Why each run whose decision state is ``"model_mismatch"`` is in it: ``"reversal rule"``
+    or ``"path rule"`` (:data:`REFUSALS` by ``codes``, the filter's ``refusal_codes``), or
+    ``"mismatch test"`` (code 0, or ``codes`` None: an estimator without those rules; the model
+    does not fit the steering now); ``""`` for the runs in another state. ``decisions``: decision
+    state names (:data:`DECISIONS`), the shape of ``codes``; a str array of that shape."""
+    decisions = np.asarray(decisions)
+    if codes is None:
+        codes = np.zeros(decisions.shape, dtype=np.int64)
+    names = np.asarray(REFUSALS, dtype=object)[np.asarray(codes, dtype=np.int64)]
+    names[names == ""] = "mismatch test"
+    return np.where(decisions == "model_mismatch", names, "").astype(str)

@@ -28,7 +28,7 @@ import pandas as pd
 from estimators.arx_state_space import PHYSICAL_STATE_NAMES, check_road_points
 from estimators.base import ACCELERATION_KEYS, MEASUREMENT_KEYS, Estimate, LaneEstimator
 from estimators.baselines import NoSteeringEKF
-from estimators.evidence import DECISIONS, REFUSALS
+from estimators.evidence import DECISIONS, refusal_reasons
 from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.mixture_trace import MixtureTrace
 from estimators.road_geometry import lane_points_ahead, look_ahead_distances, straight_road_points
@@ -179,13 +179,7 @@ class EstimationResult:
         left every hypothesis' centre), ``"reversal rule"`` (a decision was contradicted) or
         ``"mismatch test"`` (the model does not fit the steering now; :mod:`estimators.evidence`);
         ``""`` for the runs that end otherwise."""
-        final = self.final_decision()
-        codes = (
-            np.zeros(self.num_runs, dtype=np.int64) if self.refused_by is None else self.refused_by
-        )
-        names = np.asarray(REFUSALS, dtype=object)[codes]
-        names[names == ""] = "mismatch test"
-        return np.where(final == "model_mismatch", names, "").astype(str)
+        return refusal_reasons(self.final_decision(), self.refused_by)
 
     def wrong_lane_confident(self, threshold: float = 0.95) -> np.ndarray:
         """(R,) runs that end with more than ``threshold`` weight on a single wrong lane."""

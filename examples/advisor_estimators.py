@@ -4,8 +4,19 @@ For each model, six 30 s episodes of ``hasa_env/LaneKeepingAdvisor-v0`` (the "pa
 population, a random advisor per episode, random start, each lane hypothesis three
 times) with a lane keeper on the *true* state driving at 100 Hz, so the estimate is
 judged on the same driving for every model. Prints the lateral RMSE of the estimate
-against the true offset, the episodes whose estimate ends on the true lane, and the
+against the true offset, how each episode ended (:func:`episode_outcome`) and the
 samples whose steering reading the estimator gated as an outlier.
+
+How an episode ended is read from the estimator's decision state at its last step
+(:data:`estimators.evidence.DECISIONS`): ``true lane`` / ``wrong lane`` when it is
+``decided`` (one lane's weight at the estimator's ``decision_threshold``, 0.95 by
+default, or above), ``undecided`` below it, ``refused`` in ``model_mismatch``, with the
+reason (:func:`estimators.evidence.refusal_reasons`: the reversal rule, the path rule or
+the mismatch test). An episode that ends with more than the threshold on a wrong lane
+counts as ``wrong lane`` in any state, as hasa-bench's "confident wrong lane" does. Before,
+the count was of episodes whose *most likely* lane at the end was the true one: a refused
+episode, back at the prior's 0.5 / 0.5, counted as the true lane whenever that was index 0
+(the tie's argmax), and an undecided one whenever it leaned the right way.
 
 ``--policy aggressive``: instead, twelve episodes of a jerky, high-gain lane keeper at
 10 Hz that throws the wheel +-0.15 rad at random for the first 6 s (as a policy still
@@ -24,14 +35,19 @@ Usage::
 from __future__ import annotations
 
 import argparse
+from collections import Counter
+from collections.abc import Sequence
+from typing import cast
 
 import gymnasium as gym
 import numpy as np
 
-import advisor_tasks  # noqa: F401 - registers the advisor ids (and hasa_env's)
+import advisor_tasks  # registers the advisor ids (and hasa_env's)
+from estimators.evidence import DECISIONS, refusal_reasons
 from hasa_env import ConfigError
 
 START = {"initial_state": {"lateral_offset_std": 0.5, "heading_std": 0.02}}
+OUTCOMES = ("true lane", "wrong lane", "undecided", "refused")
 
 
 def lane_keeper(info: dict) -> np.ndarray:
@@ -47,11 +63,53 @@ def aggressive(info: dict, rng: np.random.Generator, step: int) -> np.ndarray:
     return np.array([np.clip(steering / 0.5, -1.0, 1.0)], dtype=np.float32)
 
 
+def episode_outcome(
+    decision: str,
+    weights: Sequence[float] | np.ndarray,
+    true_index: int,
+    threshold: float,
+    refusal_code: int = 0,
+) -> tuple[str, str]:
+    """How an episode ended, from the estimate at its last step: (one of :data:`OUTCOMES`,
+    the reason of a refusal or ``""``).
+
+    ``decision``: the decision state (:data:`estimators.evidence.DECISIONS`); ``weights``:
+    the lane weights; ``true_index``: the true lane's index; ``threshold``: the estimator's
+    ``decision_threshold``; ``refusal_code``: the filter's ``refusal_codes`` entry. The lane
+    counts only when the estimator decided it (the most likely lane of an episode sent back
+    to its prior is the tie's argmax, index 0); more than ``threshold`` on a wrong lane is
+    ``wrong lane`` in any state (hasa-bench's ``wrong_lane_confident``: weights the mismatch
+    test froze there)."""
+    if decision not in DECISIONS:
+        raise ValueError(f"unknown decision state {decision!r} (one of {DECISIONS})")
+    w = np.asarray(weights, dtype=np.float64)
+    wrong = np.delete(w, true_index)
+    if decision == "decided":
+        return ("true lane" if int(np.argmax(w)) == true_index else "wrong lane"), ""
+    if wrong.size and float(wrong.max()) > threshold:
+        return "wrong lane", ""
+    if decision == "undecided":
+        return "undecided", ""
+    return "refused", str(refusal_reasons(np.array([decision]), np.array([refusal_code]))[0])
+
+
+def tally(outcomes: Sequence[tuple[str, str]]) -> tuple[dict[str, int], str]:
+    """Episodes per outcome (every one of :data:`OUTCOMES`) and the refusals' reasons as
+    ``"reversal rule 3, mismatch test 1"`` (``""`` without refusals)."""
+    counts = Counter(outcome for outcome, _ in outcomes)
+    unknown = set(counts) - set(OUTCOMES)
+    if unknown:
+        raise ValueError(f"unknown outcomes {sorted(unknown)} (one of {OUTCOMES})")
+    reasons = Counter(reason for outcome, reason in outcomes if outcome == "refused")
+    why = ", ".join(f"{reason} {n}" for reason, n in sorted(reasons.items()))
+    return {outcome: counts[outcome] for outcome in OUTCOMES}, why
+
+
 def score(
     model: str, drives: str, episodes: int, policy: str, gate: bool, lane_check: bool = True
-) -> tuple[float, int, int]:
-    """(mean lateral RMSE of the estimate (m), episodes ending on the true lane, gated
-    steering samples)."""
+) -> tuple[float, list[tuple[str, str]], int]:
+    """(mean lateral RMSE of the estimate (m), each episode's :func:`episode_outcome`,
+    gated steering samples)."""
     config = {
         **START,
         "estimator": {"steering_model": model, "outlier_gate": gate, "lane_check": lane_check},
@@ -59,7 +117,10 @@ def score(
         "action_repeat": 10 if policy == "aggressive" else 1,
     }
     env = gym.make("hasa_env/LaneKeepingAdvisor-v0", config=config)
-    rmse, true_lane, gated = [], 0, 0
+    estimator = cast(advisor_tasks.LaneKeepingAdvisorEnv, env.unwrapped).estimator
+    rmse: list[float] = []
+    outcomes: list[tuple[str, str]] = []
+    gated = 0
     for episode in range(episodes):
         seed = episode if policy == "lane-keeper" else 100 + episode
         _, info = env.reset(seed=seed, options={"bias_index": episode % 2})
@@ -77,9 +138,17 @@ def score(
             done = terminated or truncated
             step += 1
         rmse.append(float(np.sqrt(np.mean(np.square(errors)))))
-        true_lane += int(info["estimate_lane_index"] == info["bias_index"])
-        gated += int(env.unwrapped.estimator.gated_counts[0, 2])
-    return float(np.mean(rmse)), true_lane, gated
+        outcomes.append(
+            episode_outcome(
+                info["estimate_decision"],
+                info["estimate_weights"],
+                info["bias_index"],
+                estimator.settings.decision_threshold,
+                int(estimator.refusal_codes[0]),
+            )
+        )
+        gated += int(estimator.gated_counts[0, 2])
+    return float(np.mean(rmse)), outcomes, gated
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -94,16 +163,19 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     episodes = args.episodes or (6 if args.policy == "lane-keeper" else 12)
-    print(f"{'model':<18} {'lateral RMSE (m)':>17} {'true lane':>10} {'gated steering':>15}")
+    columns = "".join(f"{name:>12}" for name in OUTCOMES)
+    print(f"{'model':<18} {'lateral RMSE (m)':>17}{columns} {'gated steering':>15}  refused by")
     for model in args.models.split(","):
         try:
-            rmse, true_lane, gated = score(
+            rmse, outcomes, gated = score(
                 model, args.drives, episodes, args.policy, args.gate, not args.no_lane_check
             )
         except ConfigError as exc:
             print(f"{model:<18} refused: {exc}")
             continue
-        print(f"{model:<18} {rmse:>17.3f} {true_lane:>6}/{episodes:<3} {gated:>15}")
+        counts, why = tally(outcomes)
+        cells = "".join(f"{f'{counts[name]}/{episodes}':>12}" for name in OUTCOMES)
+        print(f"{model:<18} {rmse:>17.3f}{cells} {gated:>15}  {why}".rstrip())
     return 0
 
 
