@@ -161,11 +161,17 @@ class EstimationResult:
         return np.einsum("rtc,rc->rt", self.weights, self.true_lane_mask().astype(np.float64))
 
     def picked_true_lane(self, at: int = -1) -> np.ndarray:
-        """(R,) whether the most likely hypothesis at step ``at`` (default: each
-        run's last valid step) has the true bias."""
+        """(R,) whether the true lane is the most likely at step ``at`` (default: each run's
+        last valid step): the weight of the hypotheses with the true bias above every other
+        hypothesis' weight. A tie is not the true lane: a run refused back to a uniform prior
+        (0.5 / 0.5) did not pick it, whichever index the true lane has."""
         steps = self.lengths - 1 if at == -1 else np.minimum(at, self.lengths - 1)
         rows = np.arange(self.num_runs)
-        return self.true_lane_mask()[rows, self.most_likely[rows, steps]]
+        weights = self.weights[rows, steps]  # (R, C)
+        truth = self.true_lane_mask()
+        true_weight = np.where(truth, weights, 0.0).sum(axis=1)
+        other = np.where(truth, -np.inf, weights).max(axis=1)
+        return true_weight > other
 
     def final_decision(self) -> np.ndarray:
         """(R,) decision state name at each run's last valid step."""

@@ -82,3 +82,20 @@ def test_steering_live_share_counts_used_unmismatched_weakly_tempered_steps() ->
     )
     assert steering_live_share(result)[0] == pytest.approx(2 / 5)  # steps 0 and 3
     assert math.isnan(steering_live_share(_result(weights, np.array([0.0])))[0])
+
+
+def test_a_tie_at_the_end_is_not_the_true_lane() -> None:
+    """A run refused back to a uniform prior ends at 0.5 / 0.5: the benchmark's "true lane at
+    end" (EstimationResult.picked_true_lane) does not count it, whichever index is true (it
+    used to take the argmax, index 0). A lean and a decision count as before."""
+    weights = np.array(
+        [
+            [[0.9, 0.1], [0.5, 0.5]],  # true 0, refused to the prior at the end
+            [[0.1, 0.9], [0.5, 0.5]],  # true -1.8, the same
+            [[0.5, 0.5], [0.6, 0.4]],  # true 0, leaning right
+            [[0.5, 0.5], [0.02, 0.98]],  # true 0, decided wrong
+        ]
+    )
+    result = _result(weights, np.array([0.0, -1.8, 0.0, 0.0]))
+    np.testing.assert_array_equal(result.picked_true_lane(), [False, False, True, False])
+    np.testing.assert_array_equal(result.picked_true_lane(at=0), [True, True, False, False])
