@@ -2,7 +2,7 @@
 on the run itself, would give (docs/design.md §8.33; issue 25's live-share bar).
 
 The benchmark's generalized model (fitted and checked as ``hasa-bench paper`` does,
-``benchmarks.protocol.run.fit_and_check``) has one equation error for every speed: the level
+``benchmarks.protocol.run.builtin_model``) has one equation error for every speed: the level
 and the AR(2) of its one-step residuals pooled over its training runs (§8.32). The population's
 drivers add their command noise before the neuromuscular lag scaled by ``(15 / v)^2``, the
 steering a given lateral acceleration needs (§7.2), and their remnant after it unscaled; so the
@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import warnings
 from dataclasses import replace
 from typing import Any
 
@@ -40,9 +39,9 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.protocol.config import ILLUSTRATIVE, ProtocolConfig
-from benchmarks.protocol.models import FittedModel, load_models
-from benchmarks.protocol.plan import load_frames, make_plan
-from benchmarks.protocol.run import fit_and_check
+from benchmarks.protocol.models import FittedModel
+from benchmarks.protocol.plan import load_frames
+from benchmarks.protocol.run import builtin_model
 from benchmarks.protocol.tasks import model_estimator
 from estimators import run_estimator
 from estimators.calibration import (
@@ -58,18 +57,6 @@ from hasa_env.steering.equation_error import equation_error_autoregression
 
 ORDER = 2
 """Lags of the equation error's AR measured at a speed or on a run (the benchmark's)."""
-
-
-def generalized(seed: int, scenario: str = "paper") -> tuple[ProtocolConfig, Any, FittedModel]:
-    """The protocol's config, plan and fitted, checked generalized model of ``seed``."""
-    config = ProtocolConfig(seeds=(seed,), scenario=scenario)
-    plan = make_plan(config, seed)
-    errors: list = []
-    with warnings.catch_warnings():  # the fit's collinearity warnings: reported by hasa-bench
-        warnings.simplefilter("ignore")
-        fitted = fit_and_check(config, plan, load_models([], errors), errors, lambda *_: None)
-    (model,) = [fm for fm in fitted.models if fm.name == "generalized"]
-    return config, plan, model
 
 
 def residuals(fm: FittedModel, frames: list[pd.DataFrame]) -> list[np.ndarray]:
@@ -132,7 +119,7 @@ def ill_runs(
 
 def speed_rows(seed: int, speeds: list[float], runs: int) -> list[dict[str, Any]]:
     """Per start speed of ``seed``: the residuals' statistics, then pooled vs at speed."""
-    config, plan, fm = generalized(seed)
+    config, plan, fm = builtin_model(seed)
     rows = []
     for speed in speeds:
         test = ill_runs(config, plan, seed, speed, runs, 0)
@@ -167,7 +154,7 @@ def speed_rows(seed: int, speeds: list[float], runs: int) -> list[dict[str, Any]
 
 def own_run_rows(seed: int, scenario: str, runs: int) -> list[dict[str, Any]]:
     """``scenario``'s first ``runs`` scored runs of ``seed``: pooled vs each run's own."""
-    _, plan, fm = generalized(seed, scenario)
+    _, plan, fm = builtin_model(seed, "generalized", scenario)
     frames = load_frames(plan.main[:runs], plan.track, plan.env_config, plan.params)
     base = FilterSettings.from_env_config(frames[0].attrs["config"])
     pooled = [run_estimator(model_estimator(fm, base), frames)]

@@ -2,7 +2,7 @@
 15-45 m/s (issue 25's live-share bar "on runs that start anywhere in 15-45 m/s").
 
 For each population seed: fit and check the models as ``hasa-bench paper`` does
-(``benchmarks.protocol.run.fit_and_check``: the training runs, the prediction and lane-keeping
+(``benchmarks.protocol.run.builtin_model``: the training runs, the prediction and lane-keeping
 checks), take the generalized model's filter as the benchmark builds it
 (``benchmarks.protocol.tasks.model_estimator``, the trust rule), drive the illustrative
 driver "Ill" from each start speed (the training run's conditions with ``initial_state.speed``
@@ -17,16 +17,13 @@ Run:  python examples/live_share_by_start_speed.py [--seeds 8300,8301] [--speeds
 from __future__ import annotations
 
 import argparse
-import warnings
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from benchmarks.protocol.config import ILLUSTRATIVE, ProtocolConfig
-from benchmarks.protocol.models import load_models
-from benchmarks.protocol.plan import make_plan
-from benchmarks.protocol.run import fit_and_check
+from benchmarks.protocol.config import ILLUSTRATIVE
+from benchmarks.protocol.run import builtin_model
 from benchmarks.protocol.tasks import model_estimator
 from estimators import run_estimator
 from estimators.calibration import steering_channel_shares
@@ -36,13 +33,7 @@ from hasa_env.drivers import SyntheticDriver, run_driver
 
 def seed_rows(seed: int, speeds: list[float], runs: int) -> list[dict[str, Any]]:
     """One row per start speed of ``seed``: the runs' mean speed, steering shares and error."""
-    config = ProtocolConfig(seeds=(seed,))
-    plan = make_plan(config, seed)
-    errors: list = []
-    with warnings.catch_warnings():  # the fit's collinearity warnings: reported by hasa-bench
-        warnings.simplefilter("ignore")
-        fitted = fit_and_check(config, plan, load_models([], errors), errors, lambda *_: None)
-    (generalized,) = [fm for fm in fitted.models if fm.name == "generalized"]
+    config, plan, generalized = builtin_model(seed)
     rows = []
     for speed in speeds:
         frames = run_driver(

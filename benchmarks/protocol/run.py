@@ -77,6 +77,7 @@ scored.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -127,6 +128,7 @@ __all__ = [
     "FittedPlan",
     "Schedule",
     "aggregate_result",
+    "builtin_model",
     "chunk_tasks",
     "fit_and_check",
     "fit_job",
@@ -414,6 +416,24 @@ def fit_and_check(
         plan, training, validation, train_frame, fitted, fit_info, seconds, lane_centring,
         baseline_info,
     )  # fmt: skip
+
+
+def builtin_model(
+    seed: int, name: str = "generalized", scenario: str = "paper"
+) -> tuple[ProtocolConfig, Plan, FittedModel]:
+    """The protocol's default config and plan of population ``seed`` in ``scenario``, and its
+    built-in model ``name`` fitted and checked as ``hasa-bench paper`` does
+    (:func:`fit_and_check`; the fit's collinearity warnings silenced: hasa-bench reports them
+    in its results). For examples and studies of one model
+    (``benchmarks.protocol.tasks.model_estimator`` gives its filter)."""
+    config = ProtocolConfig(seeds=(seed,), scenario=scenario)
+    plan = make_plan(config, seed)
+    errors: list[ModelError] = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = fit_and_check(config, plan, load_models([], errors), errors, lambda *_: None)
+    (model,) = [fm for fm in fitted.models if fm.name == name]
+    return config, plan, model
 
 
 def _fit_baselines(
