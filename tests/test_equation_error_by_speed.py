@@ -31,3 +31,13 @@ def test_own_run_equation_error_per_scenario() -> None:
     assert list(table["runs"]) == [2, 2] and set(table["scenario"]) == {"close_hypotheses"}
     assert ((table["lane_ece"] >= 0) & (table["lane_ece"] <= 1)).all()
     assert (table["ends_wrong"] <= 2).all()
+
+
+@pytest.mark.slow  # fits the models (about 10 s)
+def test_builtin_model_names_what_it_fits_when_asked_for_another() -> None:
+    from benchmarks.protocol.run import builtin_model
+
+    with pytest.raises(
+        ValueError, match=r"no built-in model 'nope' \(the protocol fits: .*generalized"
+    ):
+        builtin_model(8300, "nope")

@@ -432,8 +432,11 @@ def builtin_model(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fitted = fit_and_check(config, plan, load_models([], errors), errors, lambda *_: None)
-    (model,) = [fm for fm in fitted.models if fm.name == name]
-    return config, plan, model
+    named = [fm for fm in fitted.models if fm.name == name]
+    if not named:
+        known = ", ".join(fm.name for fm in fitted.models)
+        raise ValueError(f"no built-in model {name!r} (the protocol fits: {known})")
+    return config, plan, named[0]
 
 
 def _fit_baselines(
