@@ -300,6 +300,17 @@ def _model_items(result: BenchmarkResult) -> list[tuple[str, str, list[str]]]:
             sub.append(
                 f"filter steering-residual std (training run): {m['filter_residual_std']:.3g} rad"
             )
+        by_speed = m.get("residual_by_speed") or []
+        if by_speed:
+            sub.append(
+                "steering residual by speed (training runs; m/s: RMS rad, lag-1 "
+                "autocorrelation): "
+                + "; ".join(
+                    f"{b['speed_low']:g}-{b['speed_high']:g}: {b['residual_rms']:.2g}, "
+                    f"{b['lag1_autocorrelation']:.2f}"
+                    for b in by_speed
+                )
+            )
         if m.get("note"):
             sub.append(str(m["note"]))
         sub.extend(f"warning: {w}" for w in m.get("warnings") or [])

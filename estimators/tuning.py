@@ -16,6 +16,7 @@ learned nothing of the lane that holds on these data.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -33,8 +34,15 @@ __all__ = [
     "prediction_check",
     "steering_residual_std",
     "steering_residuals",
+    "steering_residuals_by_speed",
     "whitened_residual_std",
 ]
+
+SPEED_BIN_WIDTH = 5.0
+"""Width (m/s) of :func:`steering_residuals_by_speed`'s speed bins."""
+
+SPEED_BIN_MIN_SAMPLES = 200
+"""Fewest residuals a speed bin of :func:`steering_residuals_by_speed` reports (2 s at 100 Hz)."""
 
 LANE_FREE_FOLDS = 5
 """Contiguous blocks of :func:`prediction_check`'s cross-validation."""
@@ -81,6 +89,79 @@ def steering_residual_std(
     if values.size == 0:
         raise ValueError("no residuals: the recordings are shorter than the model's memory")
     return float(np.sqrt(np.mean(values * values)))
+
+
+def steering_residuals_by_speed(
+    arx: ARXForm,
+    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    *,
+    decision_lag: int = 1,
+    steering_ratio: float = 1.0,
+    bin_width: float = SPEED_BIN_WIDTH,
+    min_samples: int = SPEED_BIN_MIN_SAMPLES,
+) -> list[dict[str, float | int]]:
+    """The one-step residuals of :func:`steering_residuals` by the car's speed (the runs'
+    ``speed`` column, m/s) in bins ``[k w, (k + 1) w)`` of width ``w`` = ``bin_width``: per bin
+    with at least ``min_samples`` residuals, ``speed_low`` and ``speed_high`` (m/s),
+    ``samples``, ``residual_rms`` (rad, model units; the filter's one level is the RMS over
+    every bin) and ``lag1_autocorrelation``, ``sum e(k) e(k-1) / sum e(k)^2`` over the pairs
+    of consecutive samples of one run that are both in the bin (NaN without any). Whether a
+    model's error changes with speed, which one level and one equation-error autoregression
+    cannot follow (docs/design.md §8.33)."""
+    if not (math.isfinite(bin_width) and bin_width > 0):
+        raise ValueError(f"bin_width must be a finite number > 0 m/s, got {bin_width!r}")
+    if isinstance(frames, pd.DataFrame):
+        frames = [frames]
+    parts = []
+    for run, frame in enumerate(frames):
+        if "speed" not in frame:
+            raise ValueError(f"run {run} has no 'speed' column")
+        delta, predicted = _predicted(arx, frame, decision_lag, steering_ratio, "applied")
+        residual = delta - predicted
+        speed_bin = np.floor(frame["speed"].to_numpy(dtype=np.float64) / bin_width)
+        previous = np.concatenate([[np.nan], residual[:-1]])
+        previous_bin = np.concatenate([[np.nan], speed_bin[:-1]])
+        parts.append(
+            pd.DataFrame(
+                {
+                    "bin": speed_bin,
+                    "square": residual * residual,
+                    "product": np.where(previous_bin == speed_bin, residual * previous, np.nan),
+                    "pair_square": np.where(
+                        np.isfinite(previous) & (previous_bin == speed_bin),
+                        residual * residual,
+                        np.nan,
+                    ),
+                }
+            )
+        )
+    table = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+    table = table[np.isfinite(table["square"]) & np.isfinite(table["bin"])] if parts else table
+    rows: list[dict[str, float | int]] = []
+    if table.empty:
+        return rows
+    grouped = table.groupby("bin").agg(
+        samples=("square", "size"),
+        mean_square=("square", "mean"),
+        products=("product", "sum"),
+        pair_squares=("pair_square", "sum"),
+    )
+    lows = grouped.index.to_numpy(dtype=np.float64) * bin_width
+    for low, row in zip(lows.tolist(), grouped.itertuples(index=False), strict=True):
+        if row.samples < min_samples:
+            continue
+        rows.append(
+            {
+                "speed_low": low,
+                "speed_high": low + bin_width,
+                "samples": int(row.samples),
+                "residual_rms": math.sqrt(float(row.mean_square)),
+                "lag1_autocorrelation": float(row.products / row.pair_squares)
+                if row.pair_squares > 0
+                else math.nan,
+            }
+        )
+    return rows
 
 
 def whitened_residual_std(

@@ -264,6 +264,9 @@ def test_hasa_bench_ignores_a_user_models_wrong_declaration(tmp_path, monkeypatc
     own = models["generalized"]  # the built-in's fitted AR(2) lowers its residual: taken
     assert own["whitened_residual_std"] < own["filter_residual_std"]
     assert any("whitened by its equation error" in r for r in own["steering_trust"])
+    by_speed = own["residual_by_speed"]  # on the same training runs as filter_residual_std
+    assert by_speed and all(b["samples"] >= 200 and b["residual_rms"] > 0 for b in by_speed)
+    assert "steering residual by speed (training runs" in (out / "report.md").read_text()
 
 
 NON_STATIONARY_MODULE = """
@@ -297,3 +300,56 @@ def test_hasa_bench_names_and_skips_a_non_stationary_declaration(tmp_path, monke
     assert error["model"] == spec and error["stage"] == "fit"
     assert "autoregression (1.5,) is not stationary" in error["message"]
     assert {r["model"] for r in doc["estimation"]} >= {"generalized", "two_point"}
+
+
+@pytest.fixture(scope="module")
+def slow_and_fast_runs() -> list[pd.DataFrame]:
+    """One run of a population driver that holds 15 m/s and one that holds 40 m/s."""
+    from hasa_env.drivers import SyntheticDriver, population, run_driver
+
+    (params,) = population("paper", 3, 1)
+    return [
+        run_driver(
+            SyntheticDriver(params),
+            runs=1,
+            seed=seed,
+            config={"initial_state": {"speed": speed}, "time_limit": 20.0},
+        )[0]
+        for seed, speed in ((1, 15.0), (2, 40.0))
+    ]
+
+
+def test_residuals_by_speed_bin_them_and_agree_with_the_one_level(slow_and_fast_runs) -> None:
+    """estimators.tuning.steering_residuals_by_speed (results.json models[].residual_by_speed,
+    design §8.33): the slow run's residuals are larger than the fast one's (the population's
+    command noise scales by (15 / v)^2); one bin over every speed gives the filter's one level
+    and the lag-1 autocorrelation of the residuals themselves."""
+    from estimators.tuning import (
+        steering_residual_std,
+        steering_residuals,
+        steering_residuals_by_speed,
+    )
+
+    arx = GeneralizedModel.paper().arx()
+    runs = slow_and_fast_runs
+    bins = steering_residuals_by_speed(arx, runs, steering_ratio=15.0)
+    assert [b["speed_low"] for b in bins][0] < 20.0 and bins[-1]["speed_low"] >= 35.0
+    assert all(b["speed_high"] == b["speed_low"] + 5.0 for b in bins)
+    slow = max(b["residual_rms"] for b in bins if b["speed_high"] <= 20.0)
+    fast = max(b["residual_rms"] for b in bins if b["speed_low"] >= 35.0)
+    assert slow > 1.3 * fast  # 1.7x with the preset (its own mismatch at every speed)
+    (one,) = steering_residuals_by_speed(arx, runs, steering_ratio=15.0, bin_width=1000.0)
+    residuals = [steering_residuals(arx, r, steering_ratio=15.0) for r in runs]
+    assert one["samples"] == sum(r.size for r in residuals)
+    assert one["residual_rms"] == pytest.approx(
+        steering_residual_std(arx, runs, steering_ratio=15.0), rel=1e-12
+    )
+    lag1 = sum(float(r[1:] @ r[:-1]) for r in residuals) / sum(
+        float(r[1:] @ r[1:]) for r in residuals
+    )
+    assert one["lag1_autocorrelation"] == pytest.approx(lag1, rel=1e-9)
+    assert steering_residuals_by_speed(arx, runs, steering_ratio=15.0, min_samples=10**9) == []
+    with pytest.raises(ValueError, match="bin_width must be a finite number > 0 m/s, got 0"):
+        steering_residuals_by_speed(arx, runs, bin_width=0.0)
+    with pytest.raises(ValueError, match="run 1 has no 'speed' column"):
+        steering_residuals_by_speed(arx, [runs[0], runs[1].drop(columns="speed")])

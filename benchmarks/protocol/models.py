@@ -36,6 +36,7 @@ from estimators.tuning import (
     PredictionCheck,
     prediction_check,
     steering_residual_std,
+    steering_residuals_by_speed,
     whitened_residual_std,
 )
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
@@ -395,10 +396,11 @@ def _fit_one(
         ) from None
     fitted.name = name
     info = _fit_description(fitted, fixed, caught)
-    has_arx, residual, prediction, whitened = _filter_residual(
+    has_arx, residual, prediction, whitened, by_speed = _filter_residual(
         name, fitted, train if residual_on is None else residual_on
     )
     info["whitened_residual_std"] = whitened
+    info["residual_by_speed"] = by_speed
     info["arx"] = has_arx
     info["filter_residual_std"] = residual
     info["prediction_residual_std"] = None if prediction is None else prediction.residual_std
@@ -462,23 +464,25 @@ def _structure(fitted: SteeringModel) -> dict[str, Any] | None:
 
 def _filter_residual(
     name: str, fitted: SteeringModel, run: pd.DataFrame | list[pd.DataFrame]
-) -> tuple[bool, float | None, PredictionCheck | None, float | None]:
+) -> tuple[bool, float | None, PredictionCheck | None, float | None, list[dict[str, Any]]]:
     """Whether the model has an ARX form, the filter's steering-residual level on ``run``
     (:func:`estimators.tuning.steering_residual_std`), the trust rule's prediction check
-    there (:func:`estimators.tuning.prediction_check`), both None without ARX form, and the
+    there (:func:`estimators.tuning.prediction_check`), both None without ARX form, the
     level of its form whitened by its declared equation-error autoregression
-    (:func:`estimators.tuning.whitened_residual_std`; None: none declared); ModelError if a
-    form fails or predicts non-finite steering."""
+    (:func:`estimators.tuning.whitened_residual_std`; None: none declared) and its residuals
+    by speed (:func:`estimators.tuning.steering_residuals_by_speed`; [] without ARX form);
+    ModelError if a form fails or predicts non-finite steering."""
     try:
         arx = fitted.arx()
     except Exception as exc:  # noqa: BLE001
         raise ModelError(name, "fit", f"arx() raised {describe(exc)}") from None
     if arx is None:
-        return False, None, None, None
+        return False, None, None, None, []
     try:
         residual = steering_residual_std(arx, run, decision_lag=fitted.decision_lag)
         prediction = prediction_check(arx, run, decision_lag=fitted.decision_lag)
         whitened = whitened_residual_std(fitted, run)
+        by_speed = steering_residuals_by_speed(arx, run, decision_lag=fitted.decision_lag)
     except Exception as exc:  # noqa: BLE001
         raise ModelError(
             name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
@@ -486,7 +490,7 @@ def _filter_residual(
     for level in (residual, whitened):
         if level is not None and not (math.isfinite(level) and level >= 0):
             raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({level})")
-    return True, residual, prediction, whitened
+    return True, residual, prediction, whitened, by_speed
 
 
 def _fit_note(fixed: bool, has_arx: bool) -> str:
