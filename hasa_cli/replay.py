@@ -30,6 +30,22 @@ recording in a directory and its subdirectories) it:
    and a video (``--video FILE.mp4``) if ``imageio`` with ffmpeg is
    installed (skipped with a message otherwise).
 
+With ``--json FILE`` it also writes what it found as one JSON document
+(:class:`benchmarks.recordings.ReplayDocument`; ``"format": "hasa_replay.results"``):
+``version`` and ``versions`` (as hasa-bench's results.json), ``arguments`` (paths, atol,
+model, fit, steering, steering_ratio, estimator, lane_check), ``model`` (spec, steering ratio
+used, fitted_on), ``estimator_trust``, ``load_errors`` (``path``, ``message``), per recording
+(``recordings``) its ``path``, ``label``, ``steps``, ``complete``, its replay check
+(``replay``: ``matches``, ``text``, ``divergence``: ``row``, ``time``, ``column``,
+``recorded``, ``replayed`` or null) and, where those steps ran, ``model`` (``scores``),
+``estimator`` (lateral_rmse, hypotheses, final_weights, true_index, true_lane_weight,
+trusted_from, final_decision, refused_by, trust_reasons) and ``frames``, each ``{"error": ...}``
+where the step failed; then ``error`` (why the run ended early, else null) and
+``exit_status``. NaN and infinities are null. It is written atomically after the run, also
+when the run ends early after loading (no recording loads, the model is refused, Ctrl-C),
+so what was done is kept. A ``FILE`` whose folder is missing or not writable is a usage
+error before any work; ``-`` is refused (standard output carries the printed lines).
+
 The work is done by :mod:`benchmarks.recordings`; this module parses the
 arguments, calls it and prints.
 
@@ -59,6 +75,7 @@ from benchmarks.recordings import (
     LaneKeepingError,
     ModelSetupError,
     PreparedModel,
+    ReplayDocument,
     check_recordings,
     describe_estimate,
     describe_trust,
@@ -69,6 +86,7 @@ from benchmarks.recordings import (
 )
 from hasa_cli import (
     EXIT_ENVIRONMENT,
+    EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_PARTIAL,
     EXIT_USAGE,
@@ -78,6 +96,7 @@ from hasa_cli import (
     console_script,
     error,
     printable,
+    report_write_failure,
 )
 from hasa_env.recording.reader import load_paths
 
@@ -186,15 +205,54 @@ def build_parser() -> argparse.ArgumentParser:
         "--size", type=_size, default=(1280, 720), help="frame size WIDTHxHEIGHT (default 1280x720)"
     )
     p.add_argument("--show-points", action="store_true", help="draw the near and far points")
+    p.add_argument(
+        "--json",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="also write the results as one JSON document to FILE (atomically; written too "
+        "when the run ends early after loading)",
+    )
     return p
 
 
+def _json_target_problem(path: Path) -> str | None:
+    """Why ``--json path`` cannot be written (checked before any work), or None."""
+    if str(path) == "-":
+        return "--json -: standard output carries the printed results; give a file name"
+    parent = path.parent
+    if not parent.is_dir():
+        return f"--json {path}: directory {parent} does not exist"
+    if path.is_dir():
+        return f"--json {path}: is a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"--json {path}: directory {parent} is not writable"
+    return None
+
+
+def _arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The arguments that shape the results, for the JSON document."""
+    return {
+        "paths": list(args.paths),
+        "atol": args.atol,
+        "model": args.model,
+        "fit": args.fit,
+        "steering": args.steering,
+        "steering_ratio": args.steering_ratio,
+        "estimator": args.estimator,
+        "lane_check": args.estimator and not args.no_lane_check,
+    }
+
+
 def _prepare_and_score(
-    args: argparse.Namespace, recordings: Sequence[Any], problems: list[str]
+    args: argparse.Namespace,
+    recordings: Sequence[Any],
+    problems: list[str],
+    report: ReplayDocument,
 ) -> PreparedModel:
     """The model of ``--model`` (default generalized) prepared; with ``--model`` its scores on
     every recording printed (a recording it cannot score named on stderr and added to
-    ``problems``).
+    ``problems``). Both are added to ``report``.
 
     Raises:
         LaneKeepingError, ModelSetupError: as :func:`benchmarks.recordings.prepare_model`.
@@ -212,8 +270,11 @@ def _prepare_and_score(
         say=lambda message: print(printable(message)),
         trust_module=args.trust_model_module,
     )
+    report.add_model(prepared)
     if args.model is not None:
-        for outcome in score_recordings(prepared, recordings):
+        outcomes = score_recordings(prepared, recordings)
+        report.add_outcomes("model", outcomes)
+        for outcome in outcomes:
             if outcome.error is not None:
                 error(PROG, f"{outcome.path}: cannot score model {spec}: {outcome.error}")
                 problems.append(outcome.error)
@@ -224,15 +285,17 @@ def _prepare_and_score(
 
 
 def _estimate(
-    prepared: PreparedModel, recordings: Sequence[Any], problems: list[str]
+    prepared: PreparedModel, recordings: Sequence[Any], problems: list[str], report: ReplayDocument
 ) -> dict[int, Any]:
     """Run the estimator over every recording and print where it trusted the model's
     steering (one line of what every recording's filter shares, then beside a recording's
     result what its own filter adds, e.g. whether a declared equation-error autoregression
     is taken there) and its result (a recording it cannot run on named on stderr and added
-    to ``problems``). Returns the weights by recording index."""
+    to ``problems``); both added to ``report``. Returns the weights by recording index."""
     outcomes = estimate_recordings(prepared, recordings)
+    report.add_outcomes("estimator", outcomes)
     trust = describe_trust(prepared, outcomes)
+    report.estimator_trust = trust.model
     if trust.model is not None:
         print(printable(f"model {prepared.spec}: estimator trust: {trust.model}"))
     weights = {}
@@ -247,6 +310,64 @@ def _estimate(
             print(printable(f"{outcome.path}: estimator trust: {own}"))
         print(printable(f"{outcome.path}: estimator: {describe_estimate(outcome.value)}"))
     return weights
+
+
+def _run(
+    args: argparse.Namespace, recordings: Sequence[Any], problems: list[str], report: ReplayDocument
+) -> int:
+    """Every step after loading (module docstring), each recorded in ``report`` as it ends;
+    a run that ends early says why in ``report.error``. Returns the exit status."""
+    checks = check_recordings(recordings, args.atol)
+    report.add_checks(checks)
+    for check in checks:
+        print(printable(check.describe()))
+    diverged = sum(not check.matches for check in checks)
+
+    prepared = None
+    if args.model is not None or args.estimator:
+        try:
+            prepared = _prepare_and_score(args, recordings, problems, report)
+        except LaneKeepingError as exc:
+            report.error = f"--estimator: {exc}; --no-lane-check runs it anyway"
+            error(PROG, report.error)
+            return EXIT_USAGE
+        except ModelSetupError as exc:
+            report.error = str(exc)
+            error(PROG, report.error)
+            return EXIT_USAGE
+
+    weights: dict[int, Any] = {}
+    if args.estimator and prepared is not None:  # (loaded above with --estimator)
+        weights = _estimate(prepared, recordings, problems, report)
+
+    if args.frames is not None or args.video is not None:
+        options = {"every": args.frame_every, "view": args.view, "size": args.size,
+                   "show_points": args.show_points}  # fmt: skip
+        outcomes = render_recordings(recordings, args.frames, args.video, weights, **options)
+        report.add_outcomes("frames", outcomes)
+        for outcome in outcomes:
+            if outcome.error is not None:
+                error(PROG, f"{outcome.path}: cannot write frames: {outcome.error}")
+                problems.append(outcome.error)
+                continue
+            written, frames_dir = outcome.value
+            if written:
+                print(printable(f"{outcome.path}: wrote {len(written)} frames to {frames_dir}"))
+    return EXIT_PARTIAL if problems or diverged else EXIT_OK
+
+
+def _write_report(path: Path | None, report: ReplayDocument, status: int) -> int:
+    """Write ``report`` with ``status`` to ``path`` (None: not asked for). Returns ``status``,
+    or that of the write failure (named on stderr)."""
+    if path is None:
+        return status
+    report.exit_status = status
+    try:
+        report.write(path)
+    except OSError as exc:
+        failed = report_write_failure(PROG, exc, path, "the results are printed above")
+        return status if failed is None else max(status, failed)
+    return status
 
 
 @console_script(PROG)
@@ -268,6 +389,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"--steering-ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
             f"road-wheel rad), got {ratio!r}"
         )
+    unwritable = None if args.json is None else _json_target_problem(args.json)
+    if unwritable is not None:
+        p.error(unwritable)
     if args.video is not None:
         missing = _video_unavailable(args.video)
         if missing is not None:
@@ -275,45 +399,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_ENVIRONMENT
 
     recordings = load_paths(args.paths)
+    report = ReplayDocument(_arguments(args))
+    report.add_load_errors(recordings.errors)
     problems = [str(e) for e in recordings.errors]
     for msg in problems:
         error(PROG, f"cannot load: {msg}")
     if not recordings:
-        error(PROG, "no recordings to replay")
-        return EXIT_USAGE
-
-    checks = check_recordings(recordings, args.atol)
-    for check in checks:
-        print(printable(check.describe()))
-    diverged = sum(not check.matches for check in checks)
-
-    prepared = None
-    if args.model is not None or args.estimator:
-        try:
-            prepared = _prepare_and_score(args, recordings, problems)
-        except LaneKeepingError as exc:
-            error(PROG, f"--estimator: {exc}; --no-lane-check runs it anyway")
-            return EXIT_USAGE
-        except ModelSetupError as exc:
-            error(PROG, str(exc))
-            return EXIT_USAGE
-
-    weights: dict[int, Any] = {}
-    if args.estimator and prepared is not None:  # (loaded above with --estimator)
-        weights = _estimate(prepared, recordings, problems)
-
-    if args.frames is not None or args.video is not None:
-        options = {"every": args.frame_every, "view": args.view, "size": args.size,
-                   "show_points": args.show_points}  # fmt: skip
-        for outcome in render_recordings(recordings, args.frames, args.video, weights, **options):
-            if outcome.error is not None:
-                error(PROG, f"{outcome.path}: cannot write frames: {outcome.error}")
-                problems.append(outcome.error)
-                continue
-            written, frames_dir = outcome.value
-            if written:
-                print(printable(f"{outcome.path}: wrote {len(written)} frames to {frames_dir}"))
-    return EXIT_PARTIAL if problems or diverged else EXIT_OK
+        report.error = "no recordings to replay"
+        error(PROG, report.error)
+        return _write_report(args.json, report, EXIT_USAGE)
+    try:
+        status = _run(args, recordings, problems, report)
+    except KeyboardInterrupt:  # keep what was done (console_script says "interrupted")
+        report.error = "interrupted"
+        _write_report(args.json, report, EXIT_INTERRUPTED)
+        raise
+    return _write_report(args.json, report, status)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,154 @@
+"""hasa-replay --json: the results as one JSON document, written atomically, kept when the
+run ends early after loading."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import hasa_cli.replay as replay
+from benchmarks.recordings import REPLAY_FORMAT
+from hasa_cli import EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_USAGE
+from hasa_cli.replay import main
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, Path]:
+    """Two 8 s runs of a synthetic driver (``runs/``), ``broken/`` with a copy of the first
+    run's CSV without its sidecar (it cannot be loaded), ``tampered/`` with a copy of both
+    runs whose second run's lateral offset is changed at row 400, and ``model.json``: a
+    generalized model fitted on the first run."""
+    from hasa_env.drivers import SyntheticDriver, population, run_driver, save_runs
+    from hasa_env.steering import GeneralizedModel
+
+    root = tmp_path_factory.mktemp("replay_json")
+    runs = run_driver(SyntheticDriver(population("paper", seed=0)[0]), runs=2, seed=0,
+                      config={"time_limit": 8.0})  # fmt: skip
+    save_runs(runs, root / "runs")
+    (root / "broken").mkdir()
+    shutil.copy(root / "runs" / "run_000.csv", root / "broken" / "run_000.csv")
+    shutil.copytree(root / "runs", root / "tampered")
+    csv = root / "tampered" / "run_001.csv"
+    lines = csv.read_text().split("\n")
+    col = lines[0].split(",").index("lateral_offset")
+    fields = lines[1 + 400].split(",")
+    fields[col] = repr(float(fields[col]) + 1e-6)
+    lines[1 + 400] = ",".join(fields)
+    csv.write_text("\n".join(lines))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        GeneralizedModel(equation_error_order=0).fit(runs[0]).save(root / "model.json")
+    return {name: root / name for name in ("runs", "broken", "tampered", "model.json")}
+
+
+def _replay(capsys, out: Path, *argv: object) -> tuple[int, dict[str, Any], list[str], str]:
+    code = main([*map(str, argv), "--json", str(out)])
+    captured = capsys.readouterr()
+    return code, json.loads(out.read_text()), captured.out.splitlines(), captured.err
+
+
+def test_two_good_recordings_and_one_that_does_not_load(files, tmp_path, capsys) -> None:
+    out = tmp_path / "replay.json"
+    code, doc, lines, err = _replay(capsys, out, files["runs"], files["broken"])
+    assert code == EXIT_PARTIAL and doc["exit_status"] == EXIT_PARTIAL
+    assert doc["format"] == REPLAY_FORMAT and doc["version"] == doc["versions"]["hasa-env"]
+    assert doc["arguments"]["atol"] == 0.0 and doc["arguments"]["model"] is None
+    assert doc["arguments"]["estimator"] is False and doc["model"] is None
+    (bad,) = doc["load_errors"]
+    assert bad["path"] == str(files["broken"] / "run_000.json")  # the missing sidecar
+    assert "missing sidecar" in bad["message"] and bad["message"] in err
+    paths = [r["path"] for r in doc["recordings"]]
+    assert paths == [str(files["runs"] / f"run_00{i}.csv") for i in (0, 1)]
+    for rec in doc["recordings"]:
+        assert rec["label"] == "synthetic" and rec["complete"] is True and rec["steps"] == 800
+        assert rec["replay"]["matches"] is True and rec["replay"]["divergence"] is None
+        assert f"{rec['path']}: synthetic, 800 steps: {rec['replay']['text']}" in lines
+        assert "model" not in rec and "estimator" not in rec
+    assert doc["error"] is None
+    assert [p.name for p in tmp_path.iterdir()] == ["replay.json"]  # no temporary file left
+
+
+def test_where_a_recording_diverges(files, tmp_path, capsys) -> None:
+    code, doc, lines, _ = _replay(capsys, tmp_path / "r.json", files["tampered"])
+    assert code == EXIT_PARTIAL and doc["load_errors"] == []
+    first, second = doc["recordings"]
+    assert first["replay"]["matches"] is True
+    assert second["replay"]["matches"] is False
+    where = second["replay"]["divergence"]
+    assert (where["row"], where["time"], where["column"]) == (400, pytest.approx(4.0),
+                                                              "lateral_offset")  # fmt: skip
+    assert where["recorded"] == pytest.approx(where["replayed"] + 1e-6)
+    assert f"{second['path']}: synthetic, 800 steps: {second['replay']['text']}" in lines
+    assert "DIVERGES at row 400 (t = 4.00 s), column 'lateral_offset'" in second["replay"]["text"]
+
+
+def test_model_scores_and_estimator_results_are_those_printed(files, tmp_path, capsys) -> None:
+    code, doc, lines, _ = _replay(capsys, tmp_path / "r.json", files["runs"], "--model",
+                                  files["model.json"], "--estimator", "--no-lane-check")  # fmt: skip
+    assert code == EXIT_OK and doc["exit_status"] == EXIT_OK
+    spec = str(files["model.json"])
+    assert doc["arguments"] | {"paths": None} == {
+        "paths": None, "atol": 0.0, "model": spec, "fit": False, "steering": None,
+        "steering_ratio": None, "estimator": True, "lane_check": False,
+    }  # fmt: skip
+    assert doc["model"] == {"spec": spec, "steering_ratio": 1.0, "fitted_on": None}
+    shared = next(ln for ln in lines if ln.startswith(f"model {spec}: estimator trust: "))
+    assert shared.endswith(f"estimator trust: {doc['estimator_trust']}")
+    for rec in doc["recordings"]:
+        scores = rec["model"]["scores"]
+        assert set(scores) == {"rmse", "r2", "r2_increments", "ljung_box_p"}
+        printed = next(ln for ln in lines if ln.startswith(f"{rec['path']}: model {spec}: rmse"))
+        assert f"rmse {scores['rmse']:.4g}, r2 {scores['r2']:.4g}" in printed
+        est = rec["estimator"]
+        printed = next(ln for ln in lines if ln.startswith(f"{rec['path']}: estimator: "))
+        assert f"lateral RMSE {est['lateral_rmse']:.3f} m" in printed
+        assert f"ends {est['final_decision']}" in printed
+        assert len(est["hypotheses"]) == len(est["final_weights"]) >= 2
+        assert sum(est["final_weights"]) == pytest.approx(1.0)
+        assert est["true_lane_weight"] == est["final_weights"][est["true_index"]]
+        assert est["trusted_from"] is None or est["trusted_from"] >= 0.0
+        assert isinstance(est["refused_by"], str) and isinstance(est["trust_reasons"], list)
+        assert "; ".join(est["trust_reasons"]) or doc["estimator_trust"]
+
+
+def test_a_missing_parent_directory_or_stdout_is_a_usage_error(files, tmp_path, capsys) -> None:
+    target = tmp_path / "no_such_dir" / "r.json"
+    with pytest.raises(SystemExit) as stop:
+        main([str(files["runs"]), "--json", str(target)])
+    captured = capsys.readouterr()
+    assert stop.value.code == EXIT_USAGE and captured.out == ""  # before any work
+    assert f"--json {target}: directory {target.parent} does not exist" in captured.err
+    with pytest.raises(SystemExit) as stop:
+        main([str(files["runs"]), "--json", "-"])
+    assert stop.value.code == EXIT_USAGE and "--json -:" in capsys.readouterr().err
+
+
+def test_a_run_that_ends_early_keeps_the_replay_checks(files, tmp_path, capsys) -> None:
+    # the paper's two-point model drives off the road: the lane check refuses the estimator
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"], files["broken"],
+                                "--model", "two-point", "--estimator")  # fmt: skip
+    assert code == EXIT_USAGE and doc["exit_status"] == EXIT_USAGE
+    assert "drives off the road" in doc["error"] and doc["error"] in err
+    assert [r["replay"]["matches"] for r in doc["recordings"]] == [True, True]
+    assert len(doc["load_errors"]) == 1
+    # nothing loads: the load errors are kept
+    code, doc, _, _ = _replay(capsys, tmp_path / "r.json", files["broken"])
+    assert code == EXIT_USAGE and doc["recordings"] == [] and len(doc["load_errors"]) == 1
+    assert doc["error"] == "no recordings to replay"
+
+
+def test_an_interrupted_run_keeps_what_was_done(files, tmp_path, capsys, monkeypatch) -> None:
+    def interrupt(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(replay, "prepare_model", interrupt)
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"], "--model",
+                                "two-point")  # fmt: skip
+    assert code == EXIT_INTERRUPTED and doc["exit_status"] == EXIT_INTERRUPTED
+    assert doc["error"] == "interrupted" and "interrupted" in err
+    assert [r["replay"]["matches"] for r in doc["recordings"]] == [True, True]
