@@ -152,3 +152,16 @@ def test_an_interrupted_run_keeps_what_was_done(files, tmp_path, capsys, monkeyp
     assert code == EXIT_INTERRUPTED and doc["exit_status"] == EXIT_INTERRUPTED
     assert doc["error"] == "interrupted" and "interrupted" in err
     assert [r["replay"]["matches"] for r in doc["recordings"]] == [True, True]
+
+
+def test_a_document_written_among_the_recordings_is_not_taken_for_a_sidecar(
+    files, tmp_path, capsys
+) -> None:
+    """Its ``format`` says it is no recording's sidecar: a later run over the folder skips it."""
+    folder = tmp_path / "runs"
+    shutil.copytree(files["runs"], folder)
+    code, _, _, _ = _replay(capsys, folder / "replay.json", folder)
+    assert code == EXIT_OK
+    again, doc, _, err = _replay(capsys, tmp_path / "again.json", folder)
+    assert again == EXIT_OK and doc["load_errors"] == [] and err == ""
+    assert len(doc["recordings"]) == 2
