@@ -52,6 +52,7 @@ __all__ = [
     "console_script",
     "error",
     "os_error_behind",
+    "output_file_problem",
     "report_write_failure",
     "stop_on_signals",
     "printable",
@@ -129,6 +130,23 @@ def os_error_behind(exc: BaseException) -> OSError | None:
             return current
         seen.add(id(current))
         current = current.__cause__ or current.__context__
+    return None
+
+
+def output_file_problem(option: str, path: str | os.PathLike[str]) -> str | None:
+    """Why the output file ``path`` of ``option`` (e.g. ``--json``) cannot be written, checked
+    before any work (its folder missing or not writable, a folder in its place, ``-``), or
+    None."""
+    shown = os.fspath(path)
+    if shown == "-":
+        return f"{option} -: standard output carries the printed results; give a file name"
+    parent = os.path.dirname(os.path.abspath(shown))
+    if not os.path.isdir(parent):
+        return f"{option} {shown}: directory {parent} does not exist"
+    if os.path.isdir(shown):
+        return f"{option} {shown}: is a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"{option} {shown}: directory {parent} is not writable"
     return None
 
 

@@ -55,10 +55,13 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    output_file_problem,
     printable,
+    report_write_failure,
     stop_on_signals,
     warn,
 )
+from hasa_env.atomic import write_atomic
 from hasa_env.scenarios import SCENARIOS
 from hasa_env.sim.config import ConfigError, make_config
 
@@ -712,15 +715,23 @@ def _perf(args: argparse.Namespace) -> int:
     except ValueError as exc:
         error(f"{PROG} perf", str(exc))
         return EXIT_USAGE
+    unwritable = None if args.json is None else output_file_problem("--json", args.json)
+    if unwritable is not None:  # before minutes of measuring
+        error(f"{PROG} perf", unwritable)
+        return EXIT_USAGE
     measured = run_benchmarks(names, args.quick, lambda message: print(message, file=sys.stderr))
     print(format_perf_table(measured.rows))
     if args.quick:
         print("(quick mode: few steps, rough numbers)")
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
-            doc = {"rows": measured.rows, "benchmarks": measured.benchmarks}
-            json.dump(doc, fh, indent=2, default=str)
-            fh.write("\n")
+        doc = {"rows": measured.rows, "benchmarks": measured.benchmarks}
+        try:  # atomically: an interrupted write leaves no half file
+            write_atomic(args.json, json.dumps(doc, indent=2, default=str) + "\n")
+        except OSError as exc:
+            failed = report_write_failure(
+                f"{PROG} perf", exc, args.json, "the table is printed above"
+            )
+            return EXIT_PARTIAL if failed is None else failed
     if measured.failed or (args.strict and measured.any_target_failed()):
         return EXIT_PARTIAL
     return EXIT_OK

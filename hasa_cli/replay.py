@@ -95,6 +95,7 @@ from hasa_cli import (
     add_version,
     console_script,
     error,
+    output_file_problem,
     printable,
     report_write_failure,
 )
@@ -214,20 +215,6 @@ def build_parser() -> argparse.ArgumentParser:
         "when the run ends early after loading)",
     )
     return p
-
-
-def _json_target_problem(path: Path) -> str | None:
-    """Why ``--json path`` cannot be written (checked before any work), or None."""
-    if str(path) == "-":
-        return "--json -: standard output carries the printed results; give a file name"
-    parent = path.parent
-    if not parent.is_dir():
-        return f"--json {path}: directory {parent} does not exist"
-    if path.is_dir():
-        return f"--json {path}: is a directory"
-    if not os.access(parent, os.W_OK | os.X_OK):
-        return f"--json {path}: directory {parent} is not writable"
-    return None
 
 
 def _arguments(args: argparse.Namespace) -> dict[str, Any]:
@@ -389,7 +376,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"--steering-ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
             f"road-wheel rad), got {ratio!r}"
         )
-    unwritable = None if args.json is None else _json_target_problem(args.json)
+    unwritable = None if args.json is None else output_file_problem("--json", args.json)
     if unwritable is not None:
         p.error(unwritable)
     if args.video is not None:

@@ -671,6 +671,24 @@ def test_cli_perf_quick_runs_a_real_benchmark(
     assert doc["rows"] and all(r["benchmark"] == "perf_estimators" for r in doc["rows"])
 
 
+def test_cli_perf_refuses_an_unwritable_json_before_measuring(
+    capsys: pytest.CaptureFixture, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A --json whose folder is missing is named at once (exit 2), not after minutes of
+    measuring with a traceback; the file is written atomically when it can be."""
+    import benchmarks.perf
+
+    def measured(*_: object) -> None:
+        raise AssertionError("measured before the output was checked")
+
+    monkeypatch.setattr(benchmarks.perf, "run_benchmarks", measured)
+    target = tmp_path / "missing" / "perf.json"
+    assert main(["perf", "--quick", "--json", str(target)]) == 2
+    assert f"--json {target}: directory {target.parent} does not exist" in capsys.readouterr().err
+    assert main(["perf", "--quick", "--json", "-"]) == 2
+    assert not target.parent.exists()
+
+
 def test_python_dash_m_benchmarks_is_the_cli() -> None:
     import subprocess
 
