@@ -53,6 +53,7 @@ from estimators.offline import EstimationResult
 from estimators.settings import FilterSettings
 from estimators.tuning import steering_residuals
 from hasa_env.drivers import SyntheticDriver, run_driver
+from hasa_env.scenarios import SCENARIOS
 from hasa_env.steering.equation_error import equation_error_autoregression
 
 ORDER = 2
@@ -180,13 +181,25 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
         "--runs", type=int, default=None, help="runs per speed (6) / per scenario (all)"
     )
     args = parser.parse_args(argv)
-    seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
+    try:
+        seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
+        speeds = [float(v) for v in args.speeds.split(",") if v.strip()]
+    except ValueError as exc:
+        parser.error(f"--seeds are integers and --speeds numbers (m/s), comma-separated: {exc}")
     scenarios = [s for s in args.scenarios.split(",") if s.strip()]
+    unknown = sorted(set(scenarios) - set(SCENARIOS))
+    if unknown:
+        parser.error(f"unknown scenario(s) {unknown}; known: {', '.join(SCENARIOS)}")
+    if not seeds or (not scenarios and not speeds):
+        parser.error("give at least one seed and one start speed (or --scenarios)")
+    if not all(0.0 < v <= 60.0 for v in speeds):
+        parser.error(f"start speeds must be in (0, 60] m/s, got {speeds}")
+    if args.runs is not None and args.runs < 1:
+        parser.error(f"--runs must be at least 1, got {args.runs}")
     if scenarios:
         runs = 10**6 if args.runs is None else args.runs
         rows = [r for s in scenarios for seed in seeds for r in own_run_rows(seed, s, runs)]
     else:
-        speeds = [float(v) for v in args.speeds.split(",") if v.strip()]
         runs = 6 if args.runs is None else args.runs
         rows = [r for seed in seeds for r in speed_rows(seed, speeds, runs)]
     table = pd.DataFrame(rows)

@@ -41,3 +41,20 @@ def test_builtin_model_names_what_it_fits_when_asked_for_another() -> None:
         ValueError, match=r"no built-in model 'nope' \(the protocol fits: .*generalized"
     ):
         builtin_model(8300, "nope")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--runs", "0"], "--runs must be at least 1, got 0"),
+        (["--speeds", "fast"], "--seeds are integers and --speeds numbers"),
+        (["--speeds", "-5"], "start speeds must be in (0, 60] m/s"),
+        (["--scenarios", "paper,nowhere"], "unknown scenario(s) ['nowhere']"),
+        (["--seeds", ""], "give at least one seed"),
+    ],
+)
+def test_bad_arguments_are_named(argv, message, capsys) -> None:
+    module = load_example("equation_error_by_speed")
+    with pytest.raises(SystemExit) as exit_info:
+        module.main(argv)
+    assert exit_info.value.code == 2 and message in capsys.readouterr().err
