@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _recording_files import tamper
 
 from hasa_cli.replay import main
 from hasa_env.recording import check_replay, load_recording
@@ -64,12 +65,7 @@ def test_hasa_replay_says_where_a_tampered_recording_diverges(tmp_path, capsys):
 
 def test_hasa_replay_detects_a_changed_action(tmp_path, capsys):
     csv = _copy_sample(tmp_path)
-    lines = csv.read_text().split("\n")
-    col = lines[0].split(",").index("steering")
-    fields = lines[1 + 700].split(",")
-    fields[col] = repr(float(fields[col]) + 1e-3)
-    lines[1 + 700] = ",".join(fields)
-    csv.write_text("\n".join(lines))
+    tamper(csv, 700, "steering", 1e-3)
     assert main([str(tmp_path)]) == 1
     out = capsys.readouterr().out
     # row k's steering is the action over the step that ended at row k: replaying the tampered

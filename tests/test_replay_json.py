@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from _recording_files import tamper
 
 import hasa_cli.replay as replay
 from benchmarks.recordings import REPLAY_FORMAT
@@ -33,13 +34,7 @@ def files(tmp_path_factory) -> dict[str, Path]:
     (root / "broken").mkdir()
     shutil.copy(root / "runs" / "run_000.csv", root / "broken" / "run_000.csv")
     shutil.copytree(root / "runs", root / "tampered")
-    csv = root / "tampered" / "run_001.csv"
-    lines = csv.read_text().split("\n")
-    col = lines[0].split(",").index("lateral_offset")
-    fields = lines[1 + 400].split(",")
-    fields[col] = repr(float(fields[col]) + 1e-6)
-    lines[1 + 400] = ",".join(fields)
-    csv.write_text("\n".join(lines))
+    tamper(root / "tampered" / "run_001.csv", 400, "lateral_offset", 1e-6)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         GeneralizedModel(equation_error_order=0).fit(runs[0]).save(root / "model.json")
