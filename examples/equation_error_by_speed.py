@@ -52,6 +52,7 @@ from estimators.calibration import (
 from estimators.offline import EstimationResult
 from estimators.settings import FilterSettings
 from estimators.tuning import steering_residuals
+from hasa_cli import seed_list, speed_list
 from hasa_env.drivers import SyntheticDriver, run_driver
 from hasa_env.scenarios import SCENARIOS
 from hasa_env.steering.equation_error import equation_error_autoregression
@@ -172,8 +173,13 @@ def own_run_rows(seed: int, scenario: str, runs: int) -> list[dict[str, Any]]:
 
 def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", default="8700,8701", help="population seeds (8700,8701)")
-    parser.add_argument("--speeds", default="15,25,35,45", help="start speeds, m/s (15,25,35,45)")
+    parser.add_argument(
+        "--seeds", type=seed_list, default=(8700, 8701), help="population seeds (8700,8701)"
+    )
+    parser.add_argument(
+        "--speeds", type=speed_list, default=(15.0, 25.0, 35.0, 45.0),
+        help="start speeds, m/s (15,25,35,45)",
+    )  # fmt: skip
     parser.add_argument(
         "--scenarios", default="", help="filter each scored run with its own equation error"
     )
@@ -181,19 +187,11 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
         "--runs", type=int, default=None, help="runs per speed (6) / per scenario (all)"
     )
     args = parser.parse_args(argv)
-    try:
-        seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
-        speeds = [float(v) for v in args.speeds.split(",") if v.strip()]
-    except ValueError as exc:
-        parser.error(f"--seeds are integers and --speeds numbers (m/s), comma-separated: {exc}")
+    seeds, speeds = list(args.seeds), list(args.speeds)
     scenarios = [s for s in args.scenarios.split(",") if s.strip()]
     unknown = sorted(set(scenarios) - set(SCENARIOS))
     if unknown:
         parser.error(f"unknown scenario(s) {unknown}; known: {', '.join(SCENARIOS)}")
-    if not seeds or (not scenarios and not speeds):
-        parser.error("give at least one seed and one start speed (or --scenarios)")
-    if not all(0.0 < v <= 60.0 for v in speeds):
-        parser.error(f"start speeds must be in (0, 60] m/s, got {speeds}")
     if args.runs is not None and args.runs < 1:
         parser.error(f"--runs must be at least 1, got {args.runs}")
     if scenarios:

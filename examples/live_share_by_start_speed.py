@@ -28,6 +28,7 @@ from benchmarks.protocol.tasks import model_estimator
 from estimators import run_estimator
 from estimators.calibration import steering_channel_shares
 from estimators.settings import FilterSettings
+from hasa_cli import seed_list, speed_list
 from hasa_env.drivers import SyntheticDriver, run_driver
 
 
@@ -59,12 +60,18 @@ def seed_rows(seed: int, speeds: list[float], runs: int) -> list[dict[str, Any]]
 
 def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", default="8300,8301", help="population seeds (8300,8301)")
-    parser.add_argument("--speeds", default="15,25,35,45", help="start speeds, m/s (15,25,35,45)")
+    parser.add_argument(
+        "--seeds", type=seed_list, default=(8300, 8301), help="population seeds (8300,8301)"
+    )
+    parser.add_argument(
+        "--speeds", type=speed_list, default=(15.0, 25.0, 35.0, 45.0),
+        help="start speeds, m/s (15,25,35,45)",
+    )  # fmt: skip
     parser.add_argument("--runs", type=int, default=6, help="runs of 'Ill' per speed (6)")
     args = parser.parse_args(argv)
-    seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
-    speeds = [float(v) for v in args.speeds.split(",") if v.strip()]
+    if args.runs < 1:
+        parser.error(f"--runs must be at least 1, got {args.runs}")
+    seeds, speeds = list(args.seeds), list(args.speeds)
     table = pd.DataFrame([row for seed in seeds for row in seed_rows(seed, speeds, args.runs)])
     with pd.option_context("display.width", 220, "display.float_format", "{:.3g}".format):
         print(table.to_string(index=False))

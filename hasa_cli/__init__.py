@@ -29,6 +29,7 @@ import contextlib
 import difflib
 import errno
 import functools
+import math
 import os
 import re
 import signal
@@ -54,6 +55,8 @@ __all__ = [
     "os_error_behind",
     "output_file_problem",
     "report_write_failure",
+    "seed_list",
+    "speed_list",
     "stop_on_signals",
     "printable",
     "warn",
@@ -148,6 +151,38 @@ def output_file_problem(option: str, path: str | os.PathLike[str]) -> str | None
     if not os.access(parent, os.W_OK | os.X_OK):
         return f"{option} {shown}: directory {parent} is not writable"
     return None
+
+
+def seed_list(text: str) -> tuple[int, ...]:
+    """An argparse type: comma-separated population seeds, integers >= 0 (``--seeds``)."""
+    try:
+        seeds = tuple(int(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"seeds must be comma-separated integers >= 0, e.g. 0,1,2, got {text!r}"
+        ) from None
+    if not seeds or any(s < 0 for s in seeds):
+        raise argparse.ArgumentTypeError(f"seeds must be integers >= 0, got {text!r}")
+    return seeds
+
+
+def speed_list(text: str) -> tuple[float, ...]:
+    """An argparse type (``--training-speeds``, the examples' ``--speeds``): comma-separated finite speeds in m/s, each in [1, 150], no repeats
+    (the env's own limits, e.g. vehicle.max_speed, are checked with the protocol settings)."""
+    try:
+        speeds = tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        speeds = ()
+    if (
+        not speeds
+        or not all(math.isfinite(v) and 1.0 <= v <= 150.0 for v in speeds)
+        or len(set(speeds)) != len(speeds)
+    ):
+        raise argparse.ArgumentTypeError(
+            f"speeds must be comma-separated distinct numbers in m/s within [1, 150], e.g. "
+            f"15,25,35, got {printable(text)!r}"
+        )
+    return speeds
 
 
 def report_write_failure(prog: str, exc: BaseException, output: object, kept: str) -> int | None:

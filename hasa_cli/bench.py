@@ -58,6 +58,8 @@ from hasa_cli import (
     output_file_problem,
     printable,
     report_write_failure,
+    seed_list,
+    speed_list,
     stop_on_signals,
     warn,
 )
@@ -90,7 +92,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     seeds = data.add_mutually_exclusive_group()
     seeds.add_argument(
         "--seeds",
-        type=_seed_list,
+        type=seed_list,
         default=None,
         metavar="S,S,...",
         help="population seeds: the protocol runs once per seed (drivers and runs drawn from "
@@ -222,7 +224,7 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
     )
     rec.add_argument(
         "--training-speeds",
-        type=_speed_list,
+        type=speed_list,
         default=(),
         metavar="V,V,...",
         help="also train the models on one extra run of the illustrative driver per start "
@@ -363,37 +365,6 @@ def _positive_seconds(text: str) -> float:
 def _time_limit(text: str) -> float | None:
     value = _seconds(text)
     return None if value == 0 else value
-
-
-def _seed_list(text: str) -> tuple[int, ...]:
-    try:
-        seeds = tuple(int(part) for part in text.split(",") if part.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"seeds must be comma-separated integers >= 0, e.g. 0,1,2, got {text!r}"
-        ) from None
-    if not seeds or any(s < 0 for s in seeds):
-        raise argparse.ArgumentTypeError(f"seeds must be integers >= 0, got {text!r}")
-    return seeds
-
-
-def _speed_list(text: str) -> tuple[float, ...]:
-    """``--training-speeds``: comma-separated finite speeds in m/s, each in [1, 150], no repeats
-    (the env's own limits, e.g. vehicle.max_speed, are checked with the protocol settings)."""
-    try:
-        speeds = tuple(float(part) for part in text.split(",") if part.strip())
-    except ValueError:
-        speeds = ()
-    if (
-        not speeds
-        or not all(math.isfinite(v) and 1.0 <= v <= 150.0 for v in speeds)
-        or len(set(speeds)) != len(speeds)
-    ):
-        raise argparse.ArgumentTypeError(
-            f"speeds must be comma-separated distinct numbers in m/s within [1, 150], e.g. "
-            f"15,25,35, got {printable(text)!r}"
-        )
-    return speeds
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -47,10 +47,10 @@ def test_builtin_model_names_what_it_fits_when_asked_for_another() -> None:
     ("argv", "message"),
     [
         (["--runs", "0"], "--runs must be at least 1, got 0"),
-        (["--speeds", "fast"], "--seeds are integers and --speeds numbers"),
-        (["--speeds", "-5"], "start speeds must be in (0, 60] m/s"),
+        (["--speeds", "fast"], "speeds must be comma-separated distinct numbers in m/s"),
+        (["--speeds", "-5"], "speeds must be comma-separated distinct numbers in m/s"),
         (["--scenarios", "paper,nowhere"], "unknown scenario(s) ['nowhere']"),
-        (["--seeds", ""], "give at least one seed"),
+        (["--seeds", ""], "seeds must be integers >= 0"),
     ],
 )
 def test_bad_arguments_are_named(argv, message, capsys) -> None:
