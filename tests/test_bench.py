@@ -723,3 +723,25 @@ def test_findings_name_estimators_confidently_wrong_in_more_than_one_percent() -
         "bad 5/485 (1.0%)",
         "straight_only 2/100 (2.0%)",
     ]
+
+
+def test_versions_say_whether_the_tree_had_changes(tmp_path: Path, monkeypatch) -> None:
+    """results.json's versions: git_commit alone does not say what ran; git_tree does."""
+    import subprocess
+
+    from benchmarks.protocol import results
+
+    out = results.versions()
+    if "git_commit" in out:  # a git checkout (CI: a clean clone)
+        assert out["git_tree"] in ("clean", "modified")
+    calls = []
+
+    def fake_run(argv, **_):
+        calls.append(argv)
+        text = "abc123\n" if "rev-parse" in argv else " M benchmarks/report.py\n"
+        return subprocess.CompletedProcess(argv, 0, stdout=text, stderr="")
+
+    monkeypatch.setattr(results.subprocess, "run", fake_run)
+    faked = results.versions()
+    assert faked["git_commit"] == "abc123" and faked["git_tree"] == "modified"
+    assert any("--porcelain" in argv for argv in calls)

@@ -169,5 +169,14 @@ def versions() -> dict[str, str]:
         ).stdout.strip()
         if commit:
             out["git_commit"] = commit
+            changed = subprocess.run(
+                ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True,
+                text=True,
+                timeout=5,
+                check=False,
+            )
+            if changed.returncode == 0:  # the commit alone does not say what ran
+                out["git_tree"] = "modified" if changed.stdout.strip() else "clean"
     out["cpus"] = str(os.cpu_count())
     return out
