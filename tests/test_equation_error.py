@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -232,33 +233,46 @@ def test_a_declared_autoregression_that_predicts_worse_is_ignored(
     assert whitened_residual_std(GeneralizedModel.paper(), runs) is None  # none declared
 
 
-WRONG_SIGN_MODULE = """
+DECLARING_MODULE = """
 from hasa_env.steering import GeneralizedModel
 
 
-class WrongSignNoise(GeneralizedModel):
-    model_type = "test_wrong_sign_noise"
+class {name}(GeneralizedModel):
+    model_type = "test_{module}"
 
     def fit(self, runs, road=None, **options):
         fitted = super().fit(runs, road=road, **options)
-        fitted.equation_error_ar = (-0.6, 0.3)  # not its residuals' autoregression
+        fitted.equation_error_ar = {ar!r}  # not its residuals' autoregression
         return fitted
 """
+"""A user model that declares an equation-error autoregression its fit did not estimate."""
+
+TINY_BENCH = ["--seed", "0", "--population", "paper-pi", "--drivers", "2", "--runs", "1",
+              "--ill-runs", "2", "--duration", "6", "--curved-runs", "0",
+              "--training-drivers", "1", "--no-plots", "--quiet"]  # fmt: skip
+
+
+def _score_declaring_model(
+    tmp_path, monkeypatch, module: str, name: str, ar: tuple[float, ...]
+) -> tuple[int, str, dict, Path]:
+    """``hasa-bench score`` of a :data:`DECLARING_MODULE` model on a tiny protocol: (exit
+    status, its spec, results.json, the output folder)."""
+    from hasa_cli.bench import main
+
+    (tmp_path / f"{module}.py").write_text(DECLARING_MODULE.format(name=name, module=module, ar=ar))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    out, spec = tmp_path / "out", f"{module}:{name}"
+    code = main(["score", spec, *TINY_BENCH, "--out", str(out)])
+    return code, spec, json.loads((out / "results.json").read_text()), out
 
 
 def test_hasa_bench_ignores_a_user_models_wrong_declaration(tmp_path, monkeypatch) -> None:
-    from hasa_cli.bench import main
-
-    (tmp_path / "wrong_sign_noise.py").write_text(WRONG_SIGN_MODULE)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    tiny = ["--seed", "0", "--population", "paper-pi", "--drivers", "2", "--runs", "1",
-            "--ill-runs", "2", "--duration", "6", "--curved-runs", "0",
-            "--training-drivers", "1", "--no-plots", "--quiet"]  # fmt: skip
-    out = tmp_path / "out"
-    assert main(["score", "wrong_sign_noise:WrongSignNoise", *tiny, "--out", str(out)]) == 0
-    doc = json.loads((out / "results.json").read_text())
+    code, spec, doc, out = _score_declaring_model(
+        tmp_path, monkeypatch, "wrong_sign_noise", "WrongSignNoise", (-0.6, 0.3)
+    )
+    assert code == 0
     models = {m["name"]: m for m in doc["models"]}
-    wrong = models["wrong_sign_noise:WrongSignNoise"]
+    wrong = models[spec]
     assert wrong["whitened_residual_std"] > wrong["filter_residual_std"]
     assert any("ignored" in reason for reason in wrong["steering_trust"])
     own = models["generalized"]  # the built-in's fitted AR(2) lowers its residual: taken
@@ -269,33 +283,13 @@ def test_hasa_bench_ignores_a_user_models_wrong_declaration(tmp_path, monkeypatc
     assert "steering residual by speed (training runs" in (out / "report.md").read_text()
 
 
-NON_STATIONARY_MODULE = """
-from hasa_env.steering import GeneralizedModel
-
-
-class NonStationaryNoise(GeneralizedModel):
-    model_type = "test_non_stationary_noise"
-
-    def fit(self, runs, road=None, **options):
-        fitted = super().fit(runs, road=road, **options)
-        fitted.equation_error_ar = (1.5,)  # no autoregression of a stationary error
-        return fitted
-"""
-
-
 def test_hasa_bench_names_and_skips_a_non_stationary_declaration(tmp_path, monkeypatch) -> None:
     from hasa_cli import EXIT_PARTIAL
-    from hasa_cli.bench import main
 
-    (tmp_path / "non_stationary_noise.py").write_text(NON_STATIONARY_MODULE)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    tiny = ["--seed", "0", "--population", "paper-pi", "--drivers", "2", "--runs", "1",
-            "--ill-runs", "2", "--duration", "6", "--curved-runs", "0",
-            "--training-drivers", "1", "--no-plots", "--quiet"]  # fmt: skip
-    out = tmp_path / "out"
-    spec = "non_stationary_noise:NonStationaryNoise"
-    assert main(["score", spec, *tiny, "--out", str(out)]) == EXIT_PARTIAL
-    doc = json.loads((out / "results.json").read_text())
+    code, spec, doc, _ = _score_declaring_model(
+        tmp_path, monkeypatch, "non_stationary_noise", "NonStationaryNoise", (1.5,)
+    )
+    assert code == EXIT_PARTIAL
     (error,) = doc["errors"]
     assert error["model"] == spec and error["stage"] == "fit"
     assert "autoregression (1.5,) is not stationary" in error["message"]
