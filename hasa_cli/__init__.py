@@ -167,8 +167,9 @@ def seed_list(text: str) -> tuple[int, ...]:
 
 
 def speed_list(text: str) -> tuple[float, ...]:
-    """An argparse type (``--training-speeds``, the examples' ``--speeds``): comma-separated finite speeds in m/s, each in [1, 150], no repeats
-    (the env's own limits, e.g. vehicle.max_speed, are checked with the protocol settings)."""
+    """An argparse type (``--training-speeds``, the examples' ``--speeds``): comma-separated
+    finite speeds in m/s, each in [1, 150], no repeats (the env's own limits, e.g.
+    vehicle.max_speed, are checked with the protocol settings)."""
     try:
         speeds = tuple(float(part) for part in text.split(",") if part.strip())
     except ValueError:

@@ -154,28 +154,23 @@ def json_clean(value: Any) -> Any:
     return value
 
 
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """``git -C root args`` (5 s at most), its output captured."""
+    return subprocess.run(
+        ["git", "-C", str(root), *args], capture_output=True, text=True, timeout=5, check=False
+    )
+
+
 def versions() -> dict[str, str]:
     names = ("hasa-env", "numpy", "scipy", "pandas", "gymnasium", "statsmodels", "matplotlib",
              "distributed")  # fmt: skip
     out = installed_versions({name: name for name in names}) | {"platform": platform.platform()}
     with contextlib.suppress(OSError, subprocess.SubprocessError):
         root = Path(__file__).resolve().parent.parent
-        commit = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=5,
-            check=False,
-        ).stdout.strip()
+        commit = _git(root, "rev-parse", "HEAD").stdout.strip()
         if commit:
             out["git_commit"] = commit
-            changed = subprocess.run(
-                ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                capture_output=True,
-                text=True,
-                timeout=5,
-                check=False,
-            )
+            changed = _git(root, "status", "--porcelain", "--untracked-files=no")
             if changed.returncode == 0:  # the commit alone does not say what ran
                 out["git_tree"] = "modified" if changed.stdout.strip() else "clean"
     out["cpus"] = str(os.cpu_count())
