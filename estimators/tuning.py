@@ -120,23 +120,23 @@ def steering_residuals_by_speed(
         residual = delta - predicted
         speed_bin = np.floor(frame["speed"].to_numpy(dtype=np.float64) / bin_width)
         previous = np.concatenate([[np.nan], residual[:-1]])
-        previous_bin = np.concatenate([[np.nan], speed_bin[:-1]])
+        same_bin = np.concatenate([[False], speed_bin[1:] == speed_bin[:-1]])
+        product = np.where(same_bin, residual * previous, np.nan)  # NaN: no pair
+        square = residual * residual
         parts.append(
             pd.DataFrame(
                 {
                     "bin": speed_bin,
-                    "square": residual * residual,
-                    "product": np.where(previous_bin == speed_bin, residual * previous, np.nan),
-                    "pair_square": np.where(
-                        np.isfinite(previous) & (previous_bin == speed_bin),
-                        residual * residual,
-                        np.nan,
-                    ),
+                    "square": square,
+                    "product": product,
+                    "pair_square": np.where(np.isfinite(product), square, np.nan),
                 }
             )
         )
-    table = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
-    table = table[np.isfinite(table["square"]) & np.isfinite(table["bin"])] if parts else table
+    if not parts:
+        return []
+    table = pd.concat(parts, ignore_index=True)
+    table = table[np.isfinite(table["square"]) & np.isfinite(table["bin"])]
     rows: list[dict[str, float | int]] = []
     if table.empty:
         return rows
