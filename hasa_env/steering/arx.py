@@ -26,12 +26,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARXForm", "NEAR_POINT_DISTANCE", "FAR_POINT_DISTANCE"]
+__all__ = ["ARXForm", "NEAR_POINT_DISTANCE", "FAR_POINT_DISTANCE", "autoregression_roots"]
 
 NEAR_POINT_DISTANCE = 6.2
 """Default near-point look-ahead (m), Salvucci & Gray (docs/design.md §5.1)."""
 FAR_POINT_DISTANCE = 20.0
 """Default far-point look-ahead (m) (docs/design.md §5.1)."""
+
+
+def autoregression_roots(coefficients: tuple[float, ...] | np.ndarray) -> np.ndarray:
+    """Roots of ``z^n - c_1 z^(n-1) - ... - c_n`` for an autoregression ``x(k) = sum_i c_i
+    x(k-i) + ...`` (complex, shape (n,); empty without coefficients): stable (stationary)
+    when every modulus is below 1."""
+    if not len(coefficients):
+        return np.zeros(0, dtype=complex)
+    return np.roots(np.concatenate([[1.0], -np.asarray(coefficients, dtype=np.float64)])).astype(
+        complex
+    )
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.linalg import solve_toeplitz
 from statsmodels.tsa.arima_process import arma_acf
 
-from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.arx import ARXForm, autoregression_roots
 
 __all__ = [
     "MAX_EQUATION_ERROR_ORDER",
@@ -89,11 +89,11 @@ def check_equation_error_ar(ar: Sequence[float]) -> tuple[float, ...]:
     if not all(np.isfinite(values)):
         raise ValueError(f"the equation error's autoregression {values} is not finite")
     if values:
-        roots = np.roots(np.r_[1.0, -np.asarray(values)])
-        if np.max(np.abs(roots)) >= 1.0:
+        largest = float(np.max(np.abs(autoregression_roots(values))))
+        if largest >= 1.0:
             raise ValueError(
                 f"the equation error's autoregression {values} is not stationary "
-                f"(largest root modulus {np.max(np.abs(roots)):.4g}, must be < 1)"
+                f"(largest root modulus {largest:.4g}, must be < 1)"
             )
     return values
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hasa_env.steering.arx import ARXForm
+from hasa_env.steering.arx import ARXForm, autoregression_roots
 from hasa_env.steering.design import SteeringModelLike as SteeringModel
 
 __all__ = [
@@ -56,9 +56,7 @@ class StabilityWarning(SteeringFitWarning):
 def ar_poles(arx: ARXForm) -> np.ndarray:
     """Poles of the AR part ``delta(k) = sum_i a_i delta(k-i) + ...``: the roots of
     ``z^n - a_1 z^(n-1) - ... - a_n`` (complex, shape (n,); empty without an AR part)."""
-    if not arx.a:
-        return np.zeros(0, dtype=complex)
-    return np.roots(np.concatenate([[1.0], -np.asarray(arx.a, dtype=np.float64)])).astype(complex)
+    return autoregression_roots(arx.a)
 
 
 @dataclass(frozen=True)
