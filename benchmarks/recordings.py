@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from benchmarks.protocol.results import json_clean, versions
+from benchmarks.documents import json_clean, versions
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.atomic import write_atomic

@@ -34,9 +34,9 @@ from typing import Any
 
 import pandas as pd
 
+from benchmarks.documents import json_clean
 from benchmarks.figures import write_figures
 from benchmarks.protocol import BenchmarkResult
-from benchmarks.protocol.results import json_clean
 from benchmarks.report_sections import checks_rows, pooled, report_sections
 from benchmarks.schema import ResultsSchemaError, results_problems
 from benchmarks.tables import (

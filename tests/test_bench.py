@@ -729,9 +729,9 @@ def test_versions_say_whether_the_tree_had_changes(tmp_path: Path, monkeypatch) 
     """results.json's versions: git_commit alone does not say what ran; git_tree does."""
     import subprocess
 
-    from benchmarks.protocol import results
+    from benchmarks import documents
 
-    out = results.versions()
+    out = documents.versions()
     if "git_commit" in out:  # a git checkout (CI: a clean clone)
         assert out["git_tree"] in ("clean", "modified")
     calls = []
@@ -741,7 +741,7 @@ def test_versions_say_whether_the_tree_had_changes(tmp_path: Path, monkeypatch) 
         text = "abc123\n" if "rev-parse" in argv else " M benchmarks/report.py\n"
         return subprocess.CompletedProcess(argv, 0, stdout=text, stderr="")
 
-    monkeypatch.setattr(results.subprocess, "run", fake_run)
-    faked = results.versions()
+    monkeypatch.setattr(documents.subprocess, "run", fake_run)
+    faked = documents.versions()
     assert faked["git_commit"] == "abc123" and faked["git_tree"] == "modified"
     assert any("--porcelain" in argv for argv in calls)
