@@ -18,7 +18,8 @@ each take a list of loaded recordings (:func:`hasa_env.recording.load_paths`):
 
 A recording that fails a step is reported with its reason and the others go on.
 :class:`ReplayDocument` collects what the steps found as one JSON document
-(``hasa-replay --json``), written atomically.
+(``hasa-replay --json``), written atomically, with the warnings they raised
+(:class:`WarningLog`: each step given one says which recording a warning arose on).
 """
 
 from __future__ import annotations
@@ -26,7 +27,9 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,6 +55,7 @@ __all__ = [
     "ReplayCheck",
     "ReplayDocument",
     "TrustLines",
+    "WarningLog",
     "check_recordings",
     "describe_estimate",
     "describe_trust",
@@ -67,6 +71,70 @@ in degrees is about 15 x 57 = 860 per road-wheel rad."""
 
 SCORE_KEYS = ("rmse", "r2", "r2_increments", "ljung_box_p")
 """The scores :func:`score_recordings` keeps (of :func:`hasa_env.steering.score`)."""
+
+
+@dataclass
+class WarningLog:
+    """The warnings shown while it listens (:meth:`listen`), each kept with where it arose
+    (:meth:`about`) and still shown as before.
+
+    Attributes:
+        entries: in the order shown, ``{"recording", "step", "category", "message"}`` each:
+            the recording's path (None: not one recording's, e.g. loading a model), the step
+            (``"load"``, ``"replay"``, ``"model"``, ``"estimator"``, ``"frames"``; None: none
+            said), the warning's class name (e.g. ``"IdentifiabilityWarning"``) and its text.
+    """
+
+    entries: list[dict[str, Any]] = field(default_factory=list)
+    _where: tuple[str | None, str | None] = (None, None)
+
+    @contextmanager
+    def listen(self) -> Iterator[None]:
+        """Keep every warning the block shows: those the warning filters let through (not an
+        ignored one, nor a repeat they hide), shown at once by the :func:`warnings.showwarning`
+        in place (hasa-replay's one-line ``warning:`` format), so stderr is unchanged."""
+        with warnings.catch_warnings():
+            shown = warnings.showwarning
+
+            def show(
+                message: Warning | str,
+                category: type[Warning],
+                filename: str,
+                lineno: int,
+                file: Any = None,
+                line: str | None = None,
+            ) -> None:
+                recording, step = self._where
+                self.entries.append(
+                    {
+                        "recording": recording,
+                        "step": step,
+                        "category": category.__name__,
+                        "message": str(message),
+                    }
+                )
+                shown(message, category, filename, lineno, file, line)
+
+            warnings.showwarning = show
+            yield
+
+    @contextmanager
+    def about(self, recording: str | os.PathLike[str] | None, step: str) -> Iterator[None]:
+        """Warnings shown in the block arose on ``recording`` (None: on no one recording) in
+        ``step``; an inner :meth:`about` says more."""
+        before = self._where
+        self._where = (None if recording is None else str(recording), step)
+        try:
+            yield
+        finally:
+            self._where = before
+
+
+def _about(
+    log: WarningLog | None, recording: str | os.PathLike[str] | None, step: str
+) -> AbstractContextManager[None]:
+    """``log.about(recording, step)``, or nothing without a log."""
+    return nullcontext() if log is None else log.about(recording, step)
 
 
 @dataclass(frozen=True)
@@ -108,15 +176,19 @@ class ReplayCheck:
         return f"{self.path}: {self.label}, {self.steps} steps{complete}: {self.text}"
 
 
-def check_recordings(recordings: Sequence[Any], atol: float = 0.0) -> list[ReplayCheck]:
+def check_recordings(
+    recordings: Sequence[Any], atol: float = 0.0, log: WarningLog | None = None
+) -> list[ReplayCheck]:
     """Replay every recording and compare the replayed trajectory with the recorded one
-    (``|replayed - recorded| <= atol``; 0: bit for bit)."""
+    (``|replayed - recorded| <= atol``; 0: bit for bit). ``log``: the warnings shown are each
+    the recording's (step ``"replay"``)."""
     checks = []
     for rec in recordings:
         label = "synthetic" if (rec.meta.get("metadata") or {}).get("synthetic") else "recorded"
         divergence, time = None, math.nan
         try:
-            check = check_replay(rec, atol)
+            with _about(log, rec.path, "replay"):
+                check = check_replay(rec, atol)
             matches, text = bool(check.matches), check.describe(atol)
             divergence, time = check.divergence, check.time
         except ValueError as exc:
@@ -170,6 +242,7 @@ def prepare_model(
     lane_check: bool = False,
     say: Callable[[str], None] = lambda message: None,
     trust_module: bool = False,
+    log: WarningLog | None = None,
 ) -> PreparedModel:
     """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
     first recording (its ``steering`` signal: "measured" or "applied"; None: the model's);
@@ -179,7 +252,9 @@ def prepare_model(
     (:func:`hasa_env.drivers.require_lane_keeping`: 4 cars, 30 s, the straight track).
     ``say`` hears what was fitted and the ratio used. ``trust_module``: a model file of a
     type not registered yet imports the module its ``"class"`` names
-    (:func:`hasa_env.steering.loading.load_model_file`).
+    (:func:`hasa_env.steering.loading.load_model_file`). ``log``: the warnings shown by the fit
+    are the first recording's (step ``"model"``; e.g. an
+    :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`).
 
     Raises:
         ModelSetupError: the model does not load, has no parameters and ``fit`` is off, or
@@ -206,7 +281,8 @@ def prepare_model(
     fitted_on = None
     if fit:
         try:
-            model = model.fit(recordings[0].data, road)
+            with _about(log, recordings[0].path, "model"):
+                model = model.fit(recordings[0].data, road)
         except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
             raise ModelSetupError(f"cannot fit {spec} on {recordings[0].path}: {exc}") from None
         fitted_on = recordings[0].path
@@ -231,16 +307,20 @@ class RecordingOutcome:
     error: str | None = None
 
 
-def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list[RecordingOutcome]:
+def score_recordings(
+    prepared: PreparedModel, recordings: Sequence[Any], log: WarningLog | None = None
+) -> list[RecordingOutcome]:
     """Per recording the model's one-step-ahead scores of :data:`SCORE_KEYS` (steering in
     model units: the recorded steering times the ratio): outcomes whose ``value`` is the
     scores' dict, or whose ``error`` says why it cannot be scored (e.g. a recording sampled
-    at another rate than the model's coefficients belong to)."""
+    at another rate than the model's coefficients belong to). ``log``: the warnings shown
+    are each the recording's (step ``"model"``)."""
     out = []
     for i, rec in enumerate(recordings):
         try:
-            frame = in_model_units(rec.data, prepared.steering_ratio)
-            scores = score(prepared.model, frame, rec.road)
+            with _about(log, rec.path, "model"):
+                frame = in_model_units(rec.data, prepared.steering_ratio)
+                scores = score(prepared.model, frame, rec.road)
         except ValueError as exc:
             out.append(RecordingOutcome(i, rec.path, error=str(exc)))
             continue
@@ -250,15 +330,17 @@ def score_recordings(prepared: PreparedModel, recordings: Sequence[Any]) -> list
 
 
 def estimate_recordings(
-    prepared: PreparedModel, recordings: Sequence[Any]
+    prepared: PreparedModel, recordings: Sequence[Any], log: WarningLog | None = None
 ) -> list[RecordingOutcome]:
     """The Gaussian-mixture EKF with the model over each recording: outcomes whose ``value``
     is an :class:`~estimators.offline.EstimatorRun`, or whose ``error`` says why it could not
-    run (e.g. a recording sampled at another rate than the model)."""
+    run (e.g. a recording sampled at another rate than the model). ``log``: the warnings
+    shown (the trust rule's included) are each the recording's (step ``"estimator"``)."""
     out = []
     for i, rec in enumerate(recordings):
         try:
-            run: EstimatorRun = estimate_recording(rec, prepared.model, prepared.steering_ratio)
+            with _about(log, rec.path, "estimator"):
+                run: EstimatorRun = estimate_recording(rec, prepared.model, prepared.steering_ratio)
         except ValueError as exc:
             out.append(RecordingOutcome(i, rec.path, error=str(exc)))
             continue
@@ -338,13 +420,15 @@ def render_recordings(
     frames: Path | None,
     video: Path | None,
     weights: dict[int, Any],
+    log: WarningLog | None = None,
     **options: Any,
 ) -> list[RecordingOutcome]:
     """PNG frames into ``frames`` and/or a video ``video`` of every recording (several
     recordings: a subfolder per recording, ``<video stem>_<recording stem>`` videos), the
     estimator's ``weights`` (by recording index) in the HUD. ``options``: those of
     :func:`hasa_env.render.frames.write_frames` (``every``, ``view``, ``size``,
-    ``show_points``). Outcomes: ``value`` (frames written, folder) or the write error."""
+    ``show_points``). Outcomes: ``value`` (frames written, folder) or the write error.
+    ``log``: the warnings shown are each the recording's (step ``"frames"``)."""
     out = []
     several = len(recordings) > 1
     for i, rec in enumerate(recordings):
@@ -354,7 +438,10 @@ def render_recordings(
         if target is not None and several:
             target = target.with_name(f"{target.stem}_{stem}{target.suffix}")
         try:
-            written = write_frames(rec, frames_dir, weights=weights.get(i), video=target, **options)
+            with _about(log, rec.path, "frames"):
+                written = write_frames(
+                    rec, frames_dir, weights=weights.get(i), video=target, **options
+                )
         except OSError as exc:  # a read-only or full output folder
             out.append(RecordingOutcome(i, rec.path, error=str(exc)))
             continue
@@ -398,6 +485,8 @@ class ReplayDocument:
         model: the model used (``spec``, ``steering_ratio``, ``fitted_on``), None before
             (or without) one.
         estimator_trust: the trust line shared by every recording's filter (None: none).
+        warnings: the warnings shown while it listened (:meth:`WarningLog.listen`; the steps
+            given it say on which recording each arose), the document's ``warnings``.
         error: why the run ended early (None: it did not).
         exit_status: the program's exit status.
     """
@@ -407,6 +496,7 @@ class ReplayDocument:
     recordings: list[dict[str, Any]] = field(default_factory=list)
     model: dict[str, Any] | None = None
     estimator_trust: str | None = None
+    warnings: WarningLog = field(default_factory=WarningLog)
     error: str | None = None
     exit_status: int | None = None
 
@@ -452,13 +542,15 @@ class ReplayDocument:
     def to_dict(self) -> dict[str, Any]:
         """The document: ``format``, ``version`` (hasa-env's), ``versions`` (as hasa-bench's
         results.json), ``arguments``, ``model``, ``estimator_trust``, ``load_errors``,
-        ``recordings``, ``error``, ``exit_status``; NaN and infinities as None."""
+        ``recordings``, ``warnings`` (:attr:`WarningLog.entries`), ``error``, ``exit_status``;
+        NaN and infinities as None."""
         found = versions()
         return json_clean({
             "format": REPLAY_FORMAT, "version": found.get("hasa-env"), "versions": found,
             "arguments": self.arguments, "model": self.model,
             "estimator_trust": self.estimator_trust, "load_errors": self.load_errors,
-            "recordings": self.recordings, "error": self.error, "exit_status": self.exit_status,
+            "recordings": self.recordings, "warnings": self.warnings.entries,
+            "error": self.error, "exit_status": self.exit_status,
         })  # fmt: skip
 
     def write(self, path: str | os.PathLike[str]) -> None:

@@ -256,10 +256,11 @@ def _prepare_and_score(
         lane_check=args.estimator and not args.no_lane_check,
         say=lambda message: print(printable(message)),
         trust_module=args.trust_model_module,
+        log=report.warnings,
     )
     report.add_model(prepared)
     if args.model is not None:
-        outcomes = score_recordings(prepared, recordings)
+        outcomes = score_recordings(prepared, recordings, report.warnings)
         report.add_outcomes("model", outcomes)
         for outcome in outcomes:
             if outcome.error is not None:
@@ -279,7 +280,7 @@ def _estimate(
     result what its own filter adds, e.g. whether a declared equation-error autoregression
     is taken there) and its result (a recording it cannot run on named on stderr and added
     to ``problems``); both added to ``report``. Returns the weights by recording index."""
-    outcomes = estimate_recordings(prepared, recordings)
+    outcomes = estimate_recordings(prepared, recordings, report.warnings)
     report.add_outcomes("estimator", outcomes)
     trust = describe_trust(prepared, outcomes)
     report.estimator_trust = trust.model
@@ -304,7 +305,7 @@ def _run(
 ) -> int:
     """Every step after loading (module docstring), each recorded in ``report`` as it ends;
     a run that ends early says why in ``report.error``. Returns the exit status."""
-    checks = check_recordings(recordings, args.atol)
+    checks = check_recordings(recordings, args.atol, report.warnings)
     report.add_checks(checks)
     for check in checks:
         print(printable(check.describe()))
@@ -313,7 +314,8 @@ def _run(
     prepared = None
     if args.model is not None or args.estimator:
         try:
-            prepared = _prepare_and_score(args, recordings, problems, report)
+            with report.warnings.about(None, "model"):
+                prepared = _prepare_and_score(args, recordings, problems, report)
         except LaneKeepingError as exc:
             report.error = f"--estimator: {exc}; --no-lane-check runs it anyway"
             error(PROG, report.error)
@@ -325,12 +327,15 @@ def _run(
 
     weights: dict[int, Any] = {}
     if args.estimator and prepared is not None:  # (loaded above with --estimator)
-        weights = _estimate(prepared, recordings, problems, report)
+        with report.warnings.about(None, "estimator"):
+            weights = _estimate(prepared, recordings, problems, report)
 
     if args.frames is not None or args.video is not None:
         options = {"every": args.frame_every, "view": args.view, "size": args.size,
                    "show_points": args.show_points}  # fmt: skip
-        outcomes = render_recordings(recordings, args.frames, args.video, weights, **options)
+        outcomes = render_recordings(
+            recordings, args.frames, args.video, weights, report.warnings, **options
+        )
         report.add_outcomes("frames", outcomes)
         for outcome in outcomes:
             if outcome.error is not None:
@@ -355,6 +360,28 @@ def _write_report(path: Path | None, report: ReplayDocument, status: int) -> int
         failed = report_write_failure(PROG, exc, path, "the results are printed above")
         return status if failed is None else max(status, failed)
     return status
+
+
+def _load_and_run(args: argparse.Namespace, report: ReplayDocument) -> int:
+    """Load the recordings, run every step (:func:`_run`) and write ``report`` (also when
+    the run ends early after loading). Returns the exit status."""
+    with report.warnings.about(None, "load"):
+        recordings = load_paths(args.paths)
+    report.add_load_errors(recordings.errors)
+    problems = [str(e) for e in recordings.errors]
+    for msg in problems:
+        error(PROG, f"cannot load: {msg}")
+    if not recordings:
+        report.error = "no recordings to replay"
+        error(PROG, report.error)
+        return _write_report(args.json, report, EXIT_USAGE)
+    try:
+        status = _run(args, recordings, problems, report)
+    except KeyboardInterrupt:  # keep what was done (console_script says "interrupted")
+        report.error = "interrupted"
+        _write_report(args.json, report, EXIT_INTERRUPTED)
+        raise
+    return _write_report(args.json, report, status)
 
 
 @console_script(PROG)
@@ -385,23 +412,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             error(PROG, missing)
             return EXIT_ENVIRONMENT
 
-    recordings = load_paths(args.paths)
     report = ReplayDocument(_arguments(args))
-    report.add_load_errors(recordings.errors)
-    problems = [str(e) for e in recordings.errors]
-    for msg in problems:
-        error(PROG, f"cannot load: {msg}")
-    if not recordings:
-        report.error = "no recordings to replay"
-        error(PROG, report.error)
-        return _write_report(args.json, report, EXIT_USAGE)
-    try:
-        status = _run(args, recordings, problems, report)
-    except KeyboardInterrupt:  # keep what was done (console_script says "interrupted")
-        report.error = "interrupted"
-        _write_report(args.json, report, EXIT_INTERRUPTED)
-        raise
-    return _write_report(args.json, report, status)
+    with report.warnings.listen():  # each kept in the document, shown as before
+        return _load_and_run(args, report)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 from _recording_files import tamper
 
+import benchmarks.recordings as recordings_module
 import hasa_cli.replay as replay
 from benchmarks.recordings import REPLAY_FORMAT
 from hasa_cli import EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_USAGE
@@ -160,3 +161,76 @@ def test_a_document_written_among_the_recordings_is_not_taken_for_a_sidecar(
     again, doc, _, err = _replay(capsys, tmp_path / "again.json", folder)
     assert again == EXIT_OK and doc["load_errors"] == [] and err == ""
     assert len(doc["recordings"]) == 2
+
+
+def _warning_lines(err: str) -> list[str]:
+    return [ln for ln in err.splitlines() if ln.startswith("hasa-replay: warning: ")]
+
+
+def test_a_fit_warning_is_kept_with_the_recording_fitted_on(files, tmp_path, capsys) -> None:
+    """The paper's generalized model fitted on an 8 s run: its lane-offset gain is not
+    identified (an IdentifiabilityWarning); stderr says so as before, the document too."""
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"], "--model",
+                                "generalized", "--fit")  # fmt: skip
+    assert code == EXIT_OK
+    first = str(files["runs"] / "run_000.csv")
+    assert doc["model"]["fitted_on"] == first
+    (fit,) = [w for w in doc["warnings"] if w["category"] == "IdentifiabilityWarning"]
+    assert fit["recording"] == first and fit["step"] == "model"
+    assert fit["message"].startswith("generalized (paper) fit: ")
+    assert f"hasa-replay: warning: {fit['message']}" in err  # still printed, as before
+    shown = _warning_lines(err)
+    assert [f"hasa-replay: warning: {w['message']}" for w in doc["warnings"]] == shown
+
+
+def test_a_warning_is_kept_with_the_recording_it_arose_on(
+    files, tmp_path, capsys, monkeypatch
+) -> None:
+    """A warning of the estimator on the second recording only names that recording; one of
+    the trust lines (no one recording's) names none."""
+    second = files["runs"] / "run_001.csv"
+    estimate, trust = recordings_module.estimate_recording, recordings_module.describe_trust
+
+    def estimate_warning(rec: Any, *args: Any, **kwargs: Any) -> Any:
+        if rec.path == second:
+            warnings.warn("a warning on the second run", RuntimeWarning, stacklevel=2)
+        return estimate(rec, *args, **kwargs)
+
+    def trust_warning(*args: Any, **kwargs: Any) -> Any:
+        warnings.warn("a warning of the trust lines", UserWarning, stacklevel=2)
+        return trust(*args, **kwargs)
+
+    monkeypatch.setattr(recordings_module, "estimate_recording", estimate_warning)
+    monkeypatch.setattr(replay, "describe_trust", trust_warning)
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"], "--model",
+                                files["model.json"], "--estimator", "--no-lane-check")  # fmt: skip
+    assert code == EXIT_OK
+    assert doc["warnings"] == [
+        {"recording": str(second), "step": "estimator", "category": "RuntimeWarning",
+         "message": "a warning on the second run"},
+        {"recording": None, "step": "estimator", "category": "UserWarning",
+         "message": "a warning of the trust lines"},
+    ]  # fmt: skip
+    assert _warning_lines(err) == [
+        "hasa-replay: warning: a warning on the second run",
+        "hasa-replay: warning: a warning of the trust lines",
+    ]
+
+
+def test_a_run_that_ends_early_keeps_its_warnings(files, tmp_path, capsys, monkeypatch) -> None:
+    def interrupt(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(replay, "estimate_recordings", interrupt)
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"], "--model",
+                                "generalized", "--fit", "--estimator", "--no-lane-check")  # fmt: skip
+    assert code == EXIT_INTERRUPTED and doc["error"] == "interrupted"
+    first = str(files["runs"] / "run_000.csv")
+    assert any(w["recording"] == first and w["category"] == "IdentifiabilityWarning"
+               for w in doc["warnings"])  # fmt: skip
+    assert len(doc["warnings"]) == len(_warning_lines(err))
+
+
+def test_a_run_without_warnings_has_an_empty_list(files, tmp_path, capsys) -> None:
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"])
+    assert code == EXIT_OK and doc["warnings"] == [] and _warning_lines(err) == []
