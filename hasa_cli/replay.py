@@ -40,11 +40,16 @@ used, fitted_on), ``estimator_trust``, ``load_errors`` (``path``, ``message``), 
 ``recorded``, ``replayed`` or null) and, where those steps ran, ``model`` (``scores``),
 ``estimator`` (lateral_rmse, hypotheses, final_weights, true_index, true_lane_weight,
 trusted_from, final_decision, refused_by, trust_reasons) and ``frames``, each ``{"error": ...}``
-where the step failed; then ``error`` (why the run ended early, else null) and
-``exit_status``. NaN and infinities are null. It is written atomically after the run, also
-when the run ends early after loading (no recording loads, the model is refused, Ctrl-C),
-so what was done is kept. A ``FILE`` whose folder is missing or not writable is a usage
-error before any work; ``-`` is refused (standard output carries the printed lines).
+where the step failed; ``warnings``: each warning the run printed on stderr (still printed
+there), as ``recording`` (the path of the recording it arose on, null when none: loading,
+the model's lane check, the trust lines), ``step`` (``load``, ``replay``, ``model``,
+``estimator``, ``frames``), ``category`` (e.g. ``IdentifiabilityWarning``, a fit on the
+first recording that cannot tell the lanes apart) and ``message``; then ``error`` (why the
+run ended early, else null) and ``exit_status``. NaN and infinities are null. It is written
+atomically after the run, also when the run ends early after loading (no recording loads,
+the model is refused, Ctrl-C), so what was done is kept. A ``FILE`` whose folder is missing
+or not writable is a usage error before any work; ``-`` is refused (standard output carries
+the printed lines).
 
 The work is done by :mod:`benchmarks.recordings`; this module parses the
 arguments, calls it and prints.
