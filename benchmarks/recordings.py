@@ -1,7 +1,8 @@
 """Recordings checked and analysed one by one: replay, a steering model's scores, the estimator.
 
 The library side of ``hasa-replay`` (:mod:`hasa_cli.replay`), in four steps that
-each take a list of loaded recordings (:func:`hasa_env.recording.load_paths`):
+each take a list of loaded recordings (:func:`hasa_env.recording.load_paths`; what loading
+repaired or tolerated in each is shown by :func:`warn_load_notes`):
 
 1. :func:`check_recordings`: replay each recording's actions through the env
    (:func:`hasa_env.recording.check_replay`) and compare, bit for bit or within
@@ -39,7 +40,7 @@ from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.atomic import write_atomic
 from hasa_env.drivers import require_lane_keeping
-from hasa_env.recording import check_replay
+from hasa_env.recording import RecordingWarning, check_replay
 from hasa_env.render.frames import write_frames
 from hasa_env.steering import SteeringModel, score
 from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
@@ -63,6 +64,7 @@ __all__ = [
     "prepare_model",
     "render_recordings",
     "score_recordings",
+    "warn_load_notes",
 ]
 
 MAX_STEERING_RATIO = 1e4
@@ -135,6 +137,19 @@ def _about(
 ) -> AbstractContextManager[None]:
     """``log.about(recording, step)``, or nothing without a log."""
     return nullcontext() if log is None else log.about(recording, step)
+
+
+def warn_load_notes(recordings: Sequence[Any], log: WarningLog | None = None) -> None:
+    """Show each recording's notes from loading (:attr:`hasa_env.recording.Recording.warnings`:
+    what was repaired or tolerated, e.g. the partly written last line of a crashed recording
+    dropped), in order, as :class:`~hasa_env.recording.RecordingWarning` naming the file (the
+    loaders keep them quiet). ``log``: each the recording's (step ``"load"``)."""
+    for rec in recordings:
+        for note in rec.warnings:
+            if rec.path is not None and not note.startswith(f"{rec.path}: "):
+                note = f"{rec.path}: {note}"
+            with _about(log, rec.path, "load"):
+                warnings.warn(note, RecordingWarning, stacklevel=2)
 
 
 @dataclass(frozen=True)

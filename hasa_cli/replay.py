@@ -88,6 +88,7 @@ from benchmarks.recordings import (
     prepare_model,
     render_recordings,
     score_recordings,
+    warn_load_notes,
 )
 from hasa_cli import (
     EXIT_ENVIRONMENT,
@@ -372,6 +373,7 @@ def _load_and_run(args: argparse.Namespace, report: ReplayDocument) -> int:
     the run ends early after loading). Returns the exit status."""
     with report.warnings.about(None, "load"):
         recordings = load_paths(args.paths)
+        warn_load_notes(recordings, report.warnings)  # e.g. a crashed recording's cut line
     report.add_load_errors(recordings.errors)
     problems = [str(e) for e in recordings.errors]
     for msg in problems:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 
@@ -14,3 +15,15 @@ def tamper(csv: Path, row: int, column: str, delta: float) -> None:
     fields[col] = repr(float(fields[col]) + delta)
     lines[1 + row] = ",".join(fields)
     csv.write_text("\n".join(lines))
+
+
+def crash(csv: Path) -> None:
+    """Make ``csv`` a recording whose writer crashed while writing its last line, in place: its
+    sidecar says it is incomplete, and the CSV ends inside that line (no final newline); it
+    should still load, that line dropped with a note (the recording's ``warnings``)."""
+    sidecar = csv.with_suffix(".json")
+    meta = json.loads(sidecar.read_text())
+    meta.update(complete=False, steps=None, end_reason=None, finished=None)
+    sidecar.write_text(json.dumps(meta))
+    text = csv.read_text()
+    csv.write_text(text[: text.rindex(",", 0, len(text) - 10)])  # the line being written

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from _recording_files import tamper
+from _recording_files import crash, tamper
 
 import benchmarks.recordings as recordings_module
 import hasa_cli.replay as replay
@@ -23,8 +23,9 @@ from hasa_cli.replay import main
 def files(tmp_path_factory) -> dict[str, Path]:
     """Two 8 s runs of a synthetic driver (``runs/``), ``broken/`` with a copy of the first
     run's CSV without its sidecar (it cannot be loaded), ``tampered/`` with a copy of both
-    runs whose second run's lateral offset is changed at row 400, and ``model.json``: a
-    generalized model fitted on the first run."""
+    runs whose second run's lateral offset is changed at row 400, ``crashed/`` with a copy of
+    both runs whose second run's writer crashed inside its last line (it loads, that line
+    dropped with a note), and ``model.json``: a generalized model fitted on the first run."""
     from hasa_env.drivers import SyntheticDriver, population, run_driver, save_runs
     from hasa_env.steering import GeneralizedModel
 
@@ -36,10 +37,13 @@ def files(tmp_path_factory) -> dict[str, Path]:
     shutil.copy(root / "runs" / "run_000.csv", root / "broken" / "run_000.csv")
     shutil.copytree(root / "runs", root / "tampered")
     tamper(root / "tampered" / "run_001.csv", 400, "lateral_offset", 1e-6)
+    shutil.copytree(root / "runs", root / "crashed")
+    crash(root / "crashed" / "run_001.csv")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         GeneralizedModel(equation_error_order=0).fit(runs[0]).save(root / "model.json")
-    return {name: root / name for name in ("runs", "broken", "tampered", "model.json")}
+    names = ("runs", "broken", "tampered", "crashed", "model.json")
+    return {name: root / name for name in names}
 
 
 def _replay(capsys, out: Path, *argv: object) -> tuple[int, dict[str, Any], list[str], str]:
@@ -234,3 +238,34 @@ def test_a_run_that_ends_early_keeps_its_warnings(files, tmp_path, capsys, monke
 def test_a_run_without_warnings_has_an_empty_list(files, tmp_path, capsys) -> None:
     code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["runs"])
     assert code == EXIT_OK and doc["warnings"] == [] and _warning_lines(err) == []
+
+
+def test_a_repaired_recording_says_so_on_stderr_and_in_the_document(
+    files, tmp_path, capsys
+) -> None:
+    """A study session's last recording, its writer crashed inside its last line: it loads
+    without that line and replays; the note of its loading is printed once on stderr naming
+    the file, and kept in the document's warnings with the recording's path (step "load")."""
+    crashed = str(files["crashed"] / "run_001.csv")
+    code, doc, lines, err = _replay(capsys, tmp_path / "r.json", files["crashed"])
+    assert code == EXIT_OK and doc["load_errors"] == []
+    first, second = doc["recordings"]
+    assert second["path"] == crashed and second["complete"] is False
+    assert second["replay"]["matches"] is True
+    assert any(ln.startswith(f"{crashed}: synthetic, ") for ln in lines)  # it replayed
+    (note,) = doc["warnings"]
+    assert note["recording"] == second["path"] and note["step"] == "load"
+    assert note["category"] == "RecordingWarning"
+    assert note["message"].startswith(f"{crashed}: dropped the partly written line ")
+    assert _warning_lines(err) == [f"hasa-replay: warning: {note['message']}"]  # once
+
+
+def test_a_repaired_recording_says_so_once_per_file_given(files, tmp_path, capsys) -> None:
+    """Named as a file (not a folder) too; the complete recording beside it adds nothing."""
+    crashed = files["crashed"] / "run_001.csv"
+    code, doc, _, err = _replay(capsys, tmp_path / "r.json", files["crashed"] / "run_000.csv",
+                                crashed)  # fmt: skip
+    assert code == EXIT_OK
+    assert [(w["recording"], w["step"]) for w in doc["warnings"]] == [(str(crashed), "load")]
+    (shown,) = _warning_lines(err)
+    assert shown.startswith(f"hasa-replay: warning: {crashed}: dropped the partly written line")
