@@ -30,6 +30,9 @@ recording in a directory and its subdirectories) it:
    and a video (``--video FILE.mp4``) if ``imageio`` with ffmpeg is
    installed (skipped with a message otherwise).
 
+What loading repaired or tolerated in a recording (e.g. the partly written last line of a
+crashed recording, dropped) is printed on stderr first, a ``warning:`` line naming the file.
+
 With ``--json FILE`` it also writes what it found as one JSON document
 (:class:`benchmarks.recordings.ReplayDocument`; ``"format": "hasa_replay.results"``):
 ``version`` and ``versions`` (as hasa-bench's results.json), ``arguments`` (paths, atol,
@@ -41,10 +44,11 @@ used, fitted_on), ``estimator_trust``, ``load_errors`` (``path``, ``message``), 
 ``estimator`` (lateral_rmse, hypotheses, final_weights, true_index, true_lane_weight,
 trusted_from, final_decision, refused_by, trust_reasons) and ``frames``, each ``{"error": ...}``
 where the step failed; ``warnings``: each warning the run printed on stderr (still printed
-there), as ``recording`` (the path of the recording it arose on, null when none: loading,
-the model's lane check, the trust lines), ``step`` (``load``, ``replay``, ``model``,
+there), as ``recording`` (the path of the recording it arose on, null when none: the
+model's lane check, the trust lines), ``step`` (``load``, ``replay``, ``model``,
 ``estimator``, ``frames``), ``category`` (e.g. ``IdentifiabilityWarning``, a fit on the
-first recording that cannot tell the lanes apart) and ``message``; then ``error`` (why the
+first recording that cannot tell the lanes apart; ``RecordingWarning``, step ``load``, what
+loading repaired in that recording) and ``message``; then ``error`` (why the
 run ended early, else null) and ``exit_status``. NaN and infinities are null. It is written
 atomically after the run, also when the run ends early after loading (no recording loads,
 the model is refused, Ctrl-C), so what was done is kept. A ``FILE`` whose folder is missing
