@@ -79,6 +79,7 @@ from hasa_env.files import read_bounded_text
 from hasa_env.sim.road import Road
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE, ARXForm
 from hasa_env.steering.design import FEATURE_NAMES, Design, Regressor, lagged
+from hasa_env.steering.equation_error import SpeedScaledError
 from hasa_env.steering.features import STEERING_SIGNALS, is_feature_frame, steering_features
 from hasa_env.steering.fitting import FitResult, fit_model
 from hasa_env.steering.model_file import (
@@ -222,6 +223,12 @@ class SteeringModel(ABC):
         (:mod:`hasa_env.steering.equation_error`; set by :meth:`fit` when
         :attr:`equation_error_order` > 0, saved in the model file); ``()``: white, as the
         paper's."""
+        self.equation_error_speed_scaled: SpeedScaledError | None = None
+        """The equation error as a coloured part scaled by the speed plus a white part
+        (:class:`hasa_env.steering.equation_error.SpeedScaledError`, docs/design.md §8.34; set
+        by whoever fits it, e.g. ``hasa-bench``, saved in the model file); None: none. An
+        estimator then carries the coloured part as a state instead of whitening by
+        :attr:`equation_error_ar`."""
         self.training_curvature: float | None = None
         self.training_speed_range: tuple[float, float] | None = None
         """The largest |road curvature| (1/m) of the data the model was fitted on (0 for a
@@ -591,8 +598,13 @@ class SteeringModel(ABC):
                 row: dict(zip(names, values, strict=True))
                 for row, values in zip(names, covariance.tolist(), strict=True)
             }
+        equation_error: dict[str, Any] = {}
         if self.equation_error_ar:
-            document["equation_error"] = {"autoregression": list(self.equation_error_ar)}
+            equation_error["autoregression"] = list(self.equation_error_ar)
+        if self.equation_error_speed_scaled is not None:
+            equation_error["speed_scaled"] = self.equation_error_speed_scaled.to_dict()
+        if equation_error:
+            document["equation_error"] = equation_error
         training: dict[str, float] = {}
         if self.training_curvature is not None:
             training["max_abs_road_curvature"] = self.training_curvature

@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from hasa_env.steering.arx import FAR_POINT_DISTANCE, NEAR_POINT_DISTANCE
-from hasa_env.steering.equation_error import check_equation_error_ar
-from hasa_env.validation import ANY_JSON, Field, schema, validate, version
+from hasa_env.steering.equation_error import SpeedScaledError, check_equation_error_ar
+from hasa_env.validation import ABSENT, ANY_JSON, REQUIRED, Field, schema, validate, version
 
 __all__ = [
     "MAX_MODEL_FILE_BYTES",
@@ -83,9 +83,39 @@ _TRAINING = {
         unit="m/s", low=0.0, optional=True,
     ),
 }  # fmt: skip
+_SPEED_SCALED = {
+    "coloured_std": Field(
+        "number",
+        REQUIRED,
+        "Stationary std of the coloured part at the reference speed.",
+        unit="rad",
+        low=0.0,
+    ),
+    "correlation": Field(
+        "number",
+        REQUIRED,
+        "The coloured part's correlation per sample.",
+        low=0.0,
+        high=1.0,
+        high_open=True,
+    ),
+    "white_std": Field("number", REQUIRED, "Std of the white part.", unit="rad", low=0.0),
+    "reference_speed": Field(
+        "number",
+        15.0,
+        "The speed the coloured std is quoted at.",
+        unit="m/s",
+        low=0.0,
+        low_open=True,
+    ),
+}
 _EQUATION_ERROR = {
     "autoregression": Field(
         "numbers", (), "Its autoregression r_1 .. r_p (stationary; empty: white).",
+    ),
+    "speed_scaled": Field(
+        "mapping", ABSENT, "A coloured part scaled by (v_ref / v)^2 plus a white part "
+        "(docs/design.md §8.34; optional).", fields=_SPEED_SCALED, optional=True,
     ),
 }  # fmt: skip
 _PARAMETERS = Field(
@@ -262,6 +292,8 @@ def _read_training(model: Any, doc: Mapping[str, Any], source: str) -> None:
         model.equation_error_ar = check_equation_error_ar(doc["equation_error"]["autoregression"])
     except ValueError as exc:
         raise ModelFileError(f"{source}: field 'equation_error.autoregression': {exc}") from None
+    scaled = doc["equation_error"].get("speed_scaled")
+    model.equation_error_speed_scaled = None if scaled is None else SpeedScaledError(**scaled)
 
 
 def _covariance(
