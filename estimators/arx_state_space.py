@@ -31,6 +31,18 @@ as well as the true one with p off by d: what tells the lanes apart is p's prior
 N(0, sigma_p^2), transients and the road's curvature, so the evidence of a sustained offset
 is bounded by the prior instead of growing with time.
 
+Coloured equation error (``coloured_error_correlation=rho``; docs/design.md §8.34). A driver's
+command noise that enters before the neuromuscular lag leaves a model of the steering with an
+equation error that is autocorrelated and scales with the speed (the steering a given lateral
+acceleration needs goes as ``1 / v^2``). With the option the equation error is
+``e(k) = epsilon(k) + w(k)``, w white, and epsilon a state after the bias (and p)::
+
+    x = [v_x, y, v_y, b, (p,) epsilon, m_1, ..., m_n],   epsilon(k+1) = rho epsilon(k) + eta(k)
+
+``eta``'s variance is set per sample by the filter (``(v_ref / v)^4`` times its level at the
+reference speed, :func:`hasa_env.steering.equation_error.speed_scale` squared). epsilon enters the steering as e does: ``h3 = m_n + beta_0 . u + epsilon``,
+and each memory state receives ``a_{n-i+1} epsilon(k)`` with ``a_{n-i+1} delta(k)``.
+
 Visual features of a state (docs/design.md §5.1 and §5.2). With the road points
 ``p = (dx_near, dy_near, dx_far, dy_far)`` (m) of the lane centre ahead in
 the road-tangent frame at the car (:mod:`estimators.road_geometry`; a known
@@ -180,6 +192,8 @@ class ARXStateSpace:
             (beta'_{j+lag} = beta_j), adding ``decision_lag`` memory states.
         preferred_offset: add the driver's preferred offset p as a state (after the
             bias; module docstring); the bearings are taken from y - p.
+        coloured_error_correlation: rho of a coloured equation error carried as a state
+            epsilon (module docstring); None: none (the equation error is white).
 
     Attributes:
         lagged_arx: the ARX description with the decision lag applied (the
@@ -200,6 +214,7 @@ class ARXStateSpace:
     dt: float
     decision_lag: int = 0
     preferred_offset: bool = False
+    coloured_error_correlation: float | None = None
     lagged_arx: ARXForm | None = field(init=False, repr=False)
     n_memory: int = field(init=False)
     feedback: np.ndarray = field(init=False, repr=False)
@@ -215,6 +230,7 @@ class ARXStateSpace:
         dt: float | None = None,
         decision_lag: int = 0,
         preferred_offset: bool = False,
+        coloured_error_correlation: float | None = None,
     ) -> None:
         if dt is None:
             dt = arx.dt if arx is not None else 0.01
@@ -224,6 +240,15 @@ class ARXStateSpace:
         object.__setattr__(self, "dt", float(dt))
         object.__setattr__(self, "decision_lag", decision_lag)
         object.__setattr__(self, "preferred_offset", bool(preferred_offset))
+        if coloured_error_correlation is not None:
+            rho = float(coloured_error_correlation)
+            if arx is None or not (0.0 <= rho < 1.0):
+                raise ValueError(
+                    "coloured_error_correlation must be in [0, 1) and needs a steering model, "
+                    f"got {coloured_error_correlation!r}"
+                )
+            coloured_error_correlation = rho
+        object.__setattr__(self, "coloured_error_correlation", coloured_error_correlation)
         lag = decision_lag
         if isinstance(lag, bool) or not isinstance(lag, int | np.integer) or lag < 0:
             raise ValueError(f"decision_lag must be a non-negative integer, got {lag!r}")
@@ -270,7 +295,19 @@ class ARXStateSpace:
     # ------------------------------------------------------------ structure
     @property
     def n_physical(self) -> int:
-        """States before the memory: 4, or 5 with the preferred offset."""
+        """States before the memory: 4, plus one for the preferred offset and one for the
+        coloured equation error."""
+        return N_PHYSICAL + int(self.preferred_offset) + int(self.coloured_error)
+
+    @property
+    def coloured_error(self) -> bool:
+        """True when the equation error has a coloured part carried as a state."""
+        return self.coloured_error_correlation is not None
+
+    @property
+    def coloured_error_index(self) -> int:
+        """Where epsilon lies in the state vector (the state before the memory); only with
+        :attr:`coloured_error`."""
         return N_PHYSICAL + int(self.preferred_offset)
 
     @property
@@ -290,11 +327,22 @@ class ARXStateSpace:
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        """Names of the states: the four physical ones, ``preferred_offset`` when the model
-        has it, then ``memory_1`` .. ``memory_n``."""
-        extra = ("preferred_offset",) if self.preferred_offset else ()
+        """Names of the states: the four physical ones, ``preferred_offset`` and
+        ``coloured_error`` when the model has them, then ``memory_1`` .. ``memory_n``."""
+        extra: tuple[str, ...] = ("preferred_offset",) if self.preferred_offset else ()
+        extra += ("coloured_error",) if self.coloured_error else ()
         memory = tuple(f"memory_{i}" for i in range(1, self.n_memory + 1))
         return PHYSICAL_STATE_NAMES + extra + memory
+
+    def steering_state_row(self) -> np.ndarray:
+        """(n_states,): the states h3 reads linearly, each with coefficient 1: the last memory
+        state m_n and, with the coloured equation error, epsilon (zeros without a model)."""
+        row = np.zeros(self.n_states)
+        if self.has_steering and self.n_memory:
+            row[-1] = 1.0
+        if self.coloured_error:
+            row[self.coloured_error_index] = 1.0
+        return row
 
     def transition_matrix_template(self) -> np.ndarray:
         """The state-independent part of dF/dx (paper eq. 13) as an (n, n) array."""
@@ -303,6 +351,10 @@ class ARXStateSpace:
         out[Y, VY] = self.dt
         mem = self.memory_slice
         out[mem, mem] = self.memory_matrix
+        if self.coloured_error:
+            eps = self.coloured_error_index
+            out[eps, eps] = self.coloured_error_correlation
+            out[mem, eps] = self.feedback
         return out
 
     def held_memory_transition_matrix(self) -> np.ndarray:
@@ -314,6 +366,8 @@ class ARXStateSpace:
         out = self.transition_matrix_template()
         mem = self.memory_slice
         out[mem, mem] = np.eye(self.n_memory)
+        if self.coloured_error:
+            out[mem, self.coloured_error_index] = 0.0
         return out
 
     def input_matrix(self) -> np.ndarray:
@@ -408,10 +462,15 @@ class ARXStateSpace:
         out[..., BIAS] = x[..., BIAS]
         if self.preferred_offset:
             out[..., PREFERRED_OFFSET] = x[..., PREFERRED_OFFSET]
+        if self.coloured_error:
+            eps = self.coloured_error_index
+            out[..., eps] = self.coloured_error_correlation * x[..., eps]
         if self.n_memory:
             u = self.bearings(x, road_points=road_points)
             mem = self.memory_slice
             out[..., mem] = x[..., mem] @ self.memory_matrix.T + u @ self.bearing_gain.T
+            if self.coloured_error:
+                out[..., mem] += x[..., self.coloured_error_index, None] * self.feedback
         return out
 
     def transition_jacobian(
@@ -448,12 +507,14 @@ class ARXStateSpace:
     def predicted_steering(
         self, x: np.ndarray, road_points: np.ndarray | None = None
     ) -> np.ndarray:
-        """h3(x) = m_n + beta_0 . u(x) (rad, model units), shape (...)."""
+        """h3(x) = m_n + beta_0 . u(x) (+ epsilon) (rad, model units), shape (...)."""
         if not self.has_steering:
             return np.zeros(x.shape[:-1])
         value = self.bearings(x, road_points=road_points) @ self.output_gain
         if self.n_memory:
             value = value + x[..., -1]
+        if self.coloured_error:
+            value = value + x[..., self.coloured_error_index]
         return value
 
     def measurement_jacobian(
@@ -477,6 +538,8 @@ class ARXStateSpace:
                 out[..., 2, PREFERRED_OFFSET] = -out[..., 2, Y]
             if self.n_memory:
                 out[..., 2, -1] = 1.0
+            if self.coloured_error:
+                out[..., 2, self.coloured_error_index] = 1.0
         return out
 
     # --------------------------------------------------------------- memory

@@ -35,6 +35,7 @@ from estimators.arx_state_space import (
 )
 from estimators.settings import FilterSettings
 from estimators.small_arrays import any_nan, any_true
+from hasa_env.steering.equation_error import MIN_SCALE_SPEED
 
 __all__ = ["FilterMatrices", "filter_model"]
 
@@ -55,12 +56,18 @@ def filter_model(
 ) -> ARXStateSpace:
     """The filters' state-space model of ``steering_model`` (an ARXForm, or None): with the
     driver's preferred offset as a state when the model steers and
-    ``settings.preferred_offset_std > 0``."""
+    ``settings.preferred_offset_std > 0``, and the coloured equation error when it steers
+    and ``settings.steering_coloured_error_std > 0``."""
+    steers = steering_model is not None
+    coloured = steers and settings.steering_coloured_error_std > 0
     return ARXStateSpace(
         steering_model,
         dt,
         decision_lag,
-        preferred_offset=steering_model is not None and settings.preferred_offset_std > 0,
+        preferred_offset=steers and settings.preferred_offset_std > 0,
+        coloured_error_correlation=(
+            settings.steering_coloured_error_correlation if coloured else None
+        ),
     )
 
 
@@ -154,6 +161,19 @@ class FilterMatrices:
         p0[Y, BIAS] = p0[BIAS, Y] = -(s.bias_std**2)  # y_i = camera - b_i
         if model.preferred_offset:
             p0[PREFERRED_OFFSET, PREFERRED_OFFSET] = s.preferred_offset_std**2
+        self.coloured_error_index: int | None = None
+        self._coloured_step_var_at_1_mps = 0.0
+        if model.coloured_error:  # stationary at the reference speed; eta's added per step
+            self.coloured_error_index = model.coloured_error_index
+            p0[model.coloured_error_index, model.coloured_error_index] = (
+                s.steering_coloured_error_std**2
+            )
+            rho = s.steering_coloured_error_correlation
+            self._coloured_step_var_at_1_mps = (
+                s.steering_coloured_error_std**2
+                * (1.0 - rho * rho)
+                * s.steering_coloured_error_speed**4
+            )
         self.initial_covariance = self.restart_memory_covariance(p0[None])[0]
         self._build_fast_path(input_matrix)
         for arr in (
@@ -167,6 +187,17 @@ class FilterMatrices:
             self.initial_covariance,
         ):
             arr.setflags(write=False)
+
+    def coloured_error_process_var(self, speed: np.ndarray) -> np.ndarray:
+        """Var(eta) (rad^2, model units) of the coloured equation error's step at the speeds
+        ``speed`` (m/s; each row's v_x): ``sigma_c^2 (1 - rho^2) (v_ref / v)^4``, v floored at
+        :data:`~hasa_env.steering.equation_error.MIN_SCALE_SPEED` (the square of
+        :func:`~hasa_env.steering.equation_error.speed_scale`). Zeros without it."""
+        if self.coloured_error_index is None:
+            return np.zeros(np.shape(speed))
+        floored = np.maximum(np.abs(np.asarray(speed, dtype=np.float64)), MIN_SCALE_SPEED)
+        squared = floored * floored
+        return self._coloured_step_var_at_1_mps / (squared * squared)
 
     def restart_memory_covariance(self, cov: np.ndarray) -> np.ndarray:
         """The covariances (B, n, n) of states whose memory restarts at the constant-past
@@ -245,9 +276,7 @@ class FilterMatrices:
         base_a = model.transition_matrix_template()
         gains = np.zeros((n, 3))
         gains[mem] = model.bearing_gain * sign
-        last = np.zeros(n)
-        if model.n_memory:
-            last[-1] = 1.0
+        last = model.steering_state_row()
         variants = {"full": (base_a, gains)}
         if self.decorrelates:
             variants["decorrelated"] = (
@@ -284,9 +313,8 @@ class FilterMatrices:
         if model.has_steering:
             linear[2, VY] = beta0[2]
             h_base[2, VY] = beta0[2]
-            if model.n_memory:
-                linear[2, -1] = 1.0
-                h_base[2, -1] = 1.0
+            linear[2] += last
+            h_base[2] += last
             both = beta0[0] + beta0[1]
             h_maps[0, 2, VX] = both
             h_maps[1, 2, VY] = both
@@ -485,7 +513,22 @@ class FilterMatrices:
         # F P F^T = F (F P)^T: P is exactly symmetric (symmetrized after each update)
         cov_new = jac @ (jac @ cov).transpose(0, 2, 1)
         cov_new += q
+        if self.coloured_error_index is not None:
+            self._add_coloured_error_noise(cov_new, x)
         return x_new, cov_new
+
+    def _add_coloured_error_noise(self, cov: np.ndarray, x: np.ndarray) -> None:
+        """``cov[:, eps, eps] += Var(eta)`` at each row's v_x (:meth:`coloured_error_process_var`;
+        for a few rows in Python floats, the same IEEE operations)."""
+        eps = self.coloured_error_index
+        if x.shape[0] > _MAX_ROWS_IN_FLOATS:
+            cov[:, eps, eps] += self.coloured_error_process_var(x[:, VX])
+            return
+        level = self._coloured_step_var_at_1_mps
+        for row, speed in enumerate(x[:, VX].tolist()):
+            floored = max(abs(speed), MIN_SCALE_SPEED)
+            squared = floored * floored
+            cov[row, eps, eps] += level / (squared * squared)
 
     def _propagate_mixed(
         self,

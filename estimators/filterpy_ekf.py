@@ -85,6 +85,10 @@ class ARXExtendedKalmanFilter(ExtendedKalmanFilter):
                 q = mats.process_noise_decorrelated
         if missing_acc:
             q = q + mats.process_noise_missing_acceleration
+        if mats.coloured_error_index is not None:
+            q = q.copy()
+            eps = mats.coloured_error_index
+            q[eps, eps] += float(mats.coloured_error_process_var(np.array(x[0])))
         self.F = jac
         self.Q = q
         self.x = x_new[:, None]

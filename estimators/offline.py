@@ -35,7 +35,7 @@ from estimators.road_geometry import lane_points_ahead, look_ahead_distances, st
 from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time, recording_sample_time
 from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
-from estimators.tuning import steering_residual_std, whitened_residual_std
+from estimators.tuning import speed_scaled_gain, steering_residual_std, whitened_residual_std
 from hasa_env.recording.format import Recording
 from hasa_env.sim.road import Road
 from hasa_env.steering.design import SteeringModelLike
@@ -707,7 +707,9 @@ def recording_filter(
     given, but cannot recover evidence a level set far too high hides. The trust rule's
     prediction check is made only where ``training`` carries it (made on the data the model
     was fitted on): on a recording of another driver a model is not compared with an
-    autoregression fitted to that driver (docs/design.md §8.13.1). ``training``,
+    autoregression fitted to that driver (docs/design.md §8.13.1). A declared speed-scaled
+    equation error is checked on this recording unless ``training`` measured it
+    (:func:`estimators.tuning.speed_scaled_gain`, docs/design.md §8.34). ``training``,
     ``overrides``: as :func:`~estimators.trust.trusted_filter` takes them (the model's own
     record of its training roads and speeds limits where its steering counts).
     """
@@ -725,11 +727,16 @@ def recording_filter(
         whitened = whitened_residual_std(
             steering_model, recording.data, steering_ratio=steering_ratio
         )
+    gain = training.speed_scaled_gain
+    if arx is not None and gain is None:  # a declared speed-scaled error, on this recording
+        gain = speed_scaled_gain(steering_model, recording.data, steering_ratio=steering_ratio)
     return trusted_filter(
         steering_model,
         FilterSettings.from_env_config(recording.config),
         steering_ratio=steering_ratio,
-        training=replace(training, residual_std=level, whitened_residual_std=whitened),
+        training=replace(
+            training, residual_std=level, whitened_residual_std=whitened, speed_scaled_gain=gain
+        ),
         overrides=overrides,
     )
 

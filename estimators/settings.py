@@ -68,6 +68,9 @@ _SCHEMA = schema(
         "mismatch_drops_steering": Field("bool"),
         "wheelbase": _positive("m"),
         "steering_curvature_feedforward": Field("number", unit="rad m"),
+        "steering_coloured_error_std": _non_negative("rad"),
+        "steering_coloured_error_correlation": Field("number", low=0.0, high=1.0, high_open=True),
+        "steering_coloured_error_speed": _positive("m/s"),
     }
 )
 """What every field of :class:`FilterSettings` allows."""
@@ -234,6 +237,16 @@ class FilterSettings:
             0 (the default): none. The trust rule sets it for a model fitted on straight roads,
             from its coefficients and L (:func:`estimators.trust.curvature_feedforward`;
             docs/design.md §8.28).
+        steering_coloured_error_std: the stationary std (rad, model units) at
+            ``steering_coloured_error_speed`` of a coloured part of the equation error whose
+            level scales with the speed as ``(v_ref / v)^2``: the steering a given lateral
+            acceleration needs (docs/design.md §8.34). When > 0 every hypothesis carries it as
+            a state epsilon (:mod:`estimators.arx_state_space`) and
+            ``steering_residual_std`` is the white rest of the error. 0 (the default): none.
+        steering_coloured_error_correlation: rho, epsilon's correlation from one sample to
+            the next (``epsilon(k+1) = rho epsilon(k) + eta(k)``), in [0, 1).
+        steering_coloured_error_speed: v_ref (m/s), the speed at which epsilon's stationary
+            std is ``steering_coloured_error_std``.
     """
 
     speed_noise_std: float = 0.05
@@ -273,6 +286,9 @@ class FilterSettings:
     mismatch_drops_steering: bool = True
     wheelbase: float = 2.8
     steering_curvature_feedforward: float = 0.0
+    steering_coloured_error_std: float = 0.0
+    steering_coloured_error_correlation: float = 0.0
+    steering_coloured_error_speed: float = 15.0
 
     def __post_init__(self) -> None:
         """Validate every field (:mod:`hasa_env.validation`; ValueError naming the field and

@@ -43,6 +43,14 @@ The rule, field by field (a field the user names in ``overrides`` is the user's,
   measured it (``training.whitened_residual_std``, on the same data as its residual level), a
   declared autoregression is taken only if the whitened form's one-step residual is below the
   model's own (the level stays the one above).
+- The equation error scaled by the speed (docs/design.md §8.34): a model that declares one
+  (``equation_error_speed_scaled``, :class:`~hasa_env.steering.equation_error.SpeedScaledError`)
+  gets a filter that carries its coloured part as a state (``steering_coloured_error_std``,
+  ``_correlation``, ``_speed``), with ``steering_residual_std`` its white part's std and the
+  model's own ARX form (no whitening by the autoregression above). Where the record measured
+  it (``training.speed_scaled_gain``), a declaration that describes the one-step residuals no
+  better than one white level is ignored with a reason (the autoregression is then taken as
+  above).
 - ``checks=False`` (the benchmark's unchecked comparison): ``evidence_checks`` off and none of
   the limits above (curvature limit ``math.inf`` even when the user set one).
 
@@ -70,6 +78,7 @@ from estimators.settings import (
 from estimators.tuning import PredictionCheck
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.equation_error import (
+    SpeedScaledError,
     check_equation_error_ar,
     innovation_variance_ratio,
     whitened_arx,
@@ -107,6 +116,10 @@ class TrainingRecord:
             form whitened by its declared equation-error autoregression, on the same data as
             ``residual_std`` (:func:`~estimators.tuning.whitened_residual_std`); None: not
             measured (the declaration is then taken as it is).
+        speed_scaled_gain: how much better (nats per residual) the model's declared
+            speed-scaled equation error describes its one-step residuals on the same data than
+            one white level does (:func:`~estimators.tuning.speed_scaled_gain`); None: not
+            measured (the declaration is then taken as it is).
     """
 
     residual_std: float | None = None
@@ -116,6 +129,7 @@ class TrainingRecord:
     keeps_lane: bool | None = None
     lane_check: str = ""
     whitened_residual_std: float | None = None
+    speed_scaled_gain: float | None = None
 
     @classmethod
     def from_run(cls, frame: Any, residual_std: float | None = None) -> TrainingRecord:
@@ -313,10 +327,20 @@ def trusted_filter(
     limits = model_limits(model, training)  # (curvature 1/m, (low, high) m/s) it was fitted on
     rule: dict[str, Any] = {"steering_ratio": steering_ratio}
     noise, white_scale, noise_why = _equation_error(model, arx, training)
+    speed_scaled, scaled_why = _speed_scaled(model, arx, training)
+    if speed_scaled is not None:  # the coloured part a state of the filter, no whitening
+        noise, white_scale, noise_why = (), 1.0, scaled_why
+        rule["steering_coloured_error_std"] = speed_scaled.coloured_std
+        rule["steering_coloured_error_correlation"] = speed_scaled.correlation
+        rule["steering_coloured_error_speed"] = speed_scaled.reference_speed
+    elif scaled_why:
+        noise_why = "; ".join(why for why in (scaled_why, noise_why) if why)
     level = training.residual_std
     if level is None and noise:  # the base settings' level stands in for the model's
         level = settings.steering_residual_std
-    if level is not None:
+    if speed_scaled is not None:
+        rule["steering_residual_std"] = max(speed_scaled.white_std, 1e-9)
+    elif level is not None:
         rule["steering_residual_std"] = max(float(level) * white_scale, 1e-9)
     if checks is not None:  # the caller's choice, over the user's
         rule["evidence_checks"] = checks
@@ -394,6 +418,34 @@ def _equation_error(
             f"the steering compared whitened by its equation error's autoregression "
             f"r = ({listed}) ({how})"
         ),
+    )
+
+
+def _speed_scaled(
+    model: Any, arx: ARXForm | None, training: TrainingRecord
+) -> tuple[SpeedScaledError | None, str]:
+    """The model's declared speed-scaled equation error the filter carries (None: none, or
+    ignored) and the reason line. Taken unless the record measured that it describes the
+    residuals no better than one white level (``speed_scaled_gain`` not above 0)."""
+    declared = getattr(model, "equation_error_speed_scaled", None) if arx is not None else None
+    if declared is None:
+        return None, ""
+    gain = training.speed_scaled_gain
+    described = (
+        f"a coloured part of std {declared.coloured_std:.3g} rad at "
+        f"{declared.reference_speed:g} m/s scaled by (v_ref / v)^2, rho "
+        f"{declared.correlation:.3f} per sample, and a white part of std "
+        f"{declared.white_std:.3g} rad"
+    )
+    if gain is not None and not gain > 0:
+        return None, (
+            f"its speed-scaled equation error ({described}) ignored: it describes the "
+            f"steering's one-step residuals no better than one white level "
+            f"({gain:+.3g} nats per sample)"
+        )
+    how = "" if gain is None else f"; {gain:+.3g} nats per sample over one white level"
+    return declared, (
+        f"the steering's equation error carried as {described} (docs/design.md §8.34{how})"
     )
 
 

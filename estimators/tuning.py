@@ -17,7 +17,7 @@ learned nothing of the lane that holds on these data.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +25,13 @@ import numpy as np
 import pandas as pd
 
 from hasa_env.steering.arx import ARXForm
-from hasa_env.steering.equation_error import check_equation_error_ar, whitened_arx
+from hasa_env.steering.equation_error import (
+    SpeedScaledError,
+    check_equation_error_ar,
+    speed_scaled_error,
+    speed_scaled_log_likelihood,
+    whitened_arx,
+)
 from hasa_env.steering.features import steering_features
 
 __all__ = [
@@ -35,6 +41,10 @@ __all__ = [
     "steering_residual_std",
     "steering_residuals",
     "steering_residuals_by_speed",
+    "held_out_speed_scaled_error",
+    "residuals_and_speeds",
+    "speed_scaled_equation_error",
+    "speed_scaled_gain",
     "whitened_residual_std",
 ]
 
@@ -190,6 +200,89 @@ def whitened_residual_std(
         decision_lag=int(getattr(model, "decision_lag", 1)),
         steering_ratio=steering_ratio,
     )
+
+
+def residuals_and_speeds(
+    model: Any, frames: pd.DataFrame | Sequence[pd.DataFrame], steering_ratio: float
+) -> tuple[list[np.ndarray], list[np.ndarray]] | None:
+    """The model's one-step residuals (rad, model units; ``steering_ratio`` times the applied
+    steering less the model's prediction from the true states) and the speeds (m/s) per run;
+    None without an ARX form or a ``speed`` column."""
+    arx = model.arx() if model is not None else None
+    runs = [frames] if isinstance(frames, pd.DataFrame) else list(frames)
+    if arx is None or not runs or any("speed" not in run for run in runs):
+        return None
+    lag = int(getattr(model, "decision_lag", 1))
+    residuals = []
+    for run in runs:
+        delta, predicted = _predicted(arx, run, lag, steering_ratio, "applied")
+        residuals.append(delta - predicted)
+    return residuals, [run["speed"].to_numpy(dtype=np.float64) for run in runs]
+
+
+def speed_scaled_equation_error(
+    model: Any,
+    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    *,
+    steering_ratio: float = 1.0,
+) -> SpeedScaledError | None:
+    """The :class:`~hasa_env.steering.equation_error.SpeedScaledError` of the model's one-step
+    residuals on ``frames`` (the runs' ``speed`` column; maximum likelihood,
+    :func:`hasa_env.steering.equation_error.speed_scaled_error`; docs/design.md §8.34). None:
+    no ARX form, no ``speed`` column, too few residuals, or no convergence."""
+    found = residuals_and_speeds(model, frames, steering_ratio)
+    return None if found is None else speed_scaled_error(*found)
+
+
+def held_out_speed_scaled_error(
+    fitted: Any,
+    runs: Sequence[pd.DataFrame],
+    refit: Callable[[list[pd.DataFrame]], Any],
+) -> tuple[SpeedScaledError | None, bool]:
+    """The speed-scaled equation error of a model fitted on ``runs`` (docs/design.md §8.34),
+    estimated on held-out residuals: each run's residuals from ``refit(the other runs)`` (the
+    model's own fit), so that its levels are those of a driver the fit has not seen, not its
+    in-sample ones. With one run: ``fitted``'s in-sample residuals on it. Returns the error
+    (None: none found) and whether it was held out."""
+    runs = list(runs)
+    if len(runs) < 2:
+        return speed_scaled_equation_error(fitted, runs), False
+    residuals: list[np.ndarray] = []
+    speeds: list[np.ndarray] = []
+    for j, run in enumerate(runs):
+        found = residuals_and_speeds(refit(runs[:j] + runs[j + 1 :]), run, 1.0)
+        if found is None:
+            return None, True
+        residuals += found[0]
+        speeds += found[1]
+    return speed_scaled_error(residuals, speeds), True
+
+
+def speed_scaled_gain(
+    model: Any,
+    frames: pd.DataFrame | Sequence[pd.DataFrame],
+    *,
+    steering_ratio: float = 1.0,
+) -> float | None:
+    """How much better the model's declared speed-scaled equation error
+    (``model.equation_error_speed_scaled``) describes its one-step residuals on ``frames``
+    than one white level does: the Gaussian log-likelihood per residual under the declaration
+    less that under N(0, RMS^2) of the same residuals (nats per sample). What the trust rule
+    reads before it believes the declaration (docs/design.md §8.34). None: no declaration, no
+    ARX form, no ``speed`` column or no residuals."""
+    declared = getattr(model, "equation_error_speed_scaled", None)
+    found = None if declared is None else residuals_and_speeds(model, frames, steering_ratio)
+    if declared is None or found is None:
+        return None
+    log_likelihood, count = speed_scaled_log_likelihood(declared, *found)
+    if not count:
+        return None
+    values = np.concatenate(
+        [e[np.isfinite(e) & np.isfinite(v)] for e, v in zip(*found, strict=True)]
+    )  # the residuals scored above
+    variance = float(np.mean(values * values))
+    white = -0.5 * count * (math.log(2.0 * math.pi * variance) + 1.0)
+    return (log_likelihood - white) / count
 
 
 @dataclass(frozen=True)
