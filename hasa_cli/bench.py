@@ -263,6 +263,15 @@ def _add_generalized_options(group: argparse._ArgumentGroup) -> None:
         f"{DEFAULT_EQUATION_ERROR_ORDER}; 0: white, the paper's model; docs/design.md §8.32)",
     )
     group.add_argument(
+        "--speed-scaled-error",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="fit the built-in generalized model's equation error as a coloured part scaled "
+        "by (15 / v)^2 plus a white part, which its filter carries as a state in place of the "
+        "whitening above (default; --no-speed-scaled-error: the whitening; docs/design.md "
+        "§8.34)",
+    )
+    group.add_argument(
         "--generalized-orders",
         choices=GENERALIZED_ORDERS,
         default=GENERALIZED_ORDERS[0],
@@ -456,6 +465,7 @@ def _config(args: argparse.Namespace, scenario: str = "paper") -> Any:
         training_speeds=args.training_speeds,
         generalized_orders=args.generalized_orders,
         equation_error_order=args.equation_error_order,
+        speed_scaled_error=args.speed_scaled_error,
         training_file=args.training_file,
         min_duration=args.min_duration,
         allow_incomplete=args.allow_incomplete,

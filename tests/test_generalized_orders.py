@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.protocol import BenchmarkError, ProtocolConfig
-from benchmarks.protocol.models import with_selected_orders
+from benchmarks.protocol.builtin_fit import with_selected_orders
 from hasa_cli.bench import main
 from hasa_env.drivers import SyntheticDriver, population, run_driver
 from hasa_env.steering import GeneralizedModel

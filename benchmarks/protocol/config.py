@@ -111,6 +111,11 @@ _SCHEMA = schema(
             "integer", doc="Lags of the built-in generalized model's equation-error "
             "autoregression (0: white, the paper's).", low=0, high=MAX_EQUATION_ERROR_ORDER,
         ),
+        "speed_scaled_error": Field(
+            "bool", doc="Fit the built-in generalized model's equation error as a coloured "
+            "part scaled by (15 / v)^2 plus a white part, carried as a filter state "
+            "(docs/design.md §8.34).",
+        ),
         "generalized_orders": Field(
             "choice", doc="Orders of the built-in generalized model: 'bic' (selected on the "
             "training runs) or 'paper' (na=2, nb=4, nc=1, nd=2).", choices=GENERALIZED_ORDERS,
@@ -214,6 +219,10 @@ class ProtocolConfig:
             fit estimates for its equation error (:data:`~benchmarks.defaults.DEFAULT_EQUATION_ERROR_ORDER`,
             2); the estimator compares the steering whitened by it (docs/design.md §8.32). 0:
             white, the paper's model as it is.
+        speed_scaled_error: the built-in generalized model's equation error fitted as a
+            coloured part scaled by ``(15 / v)^2`` plus a white part, the coloured part a state
+            of its filter (docs/design.md §8.34); it replaces the whitening by the
+            autoregression above in the filter.
         batch_size: most runs per task, vectorized together; a seed's curved and
             validation runs together are cut into the fewest near-equal tasks (100: one
             task of the 4 curved and the 93 validation runs per seed, filtered in one
@@ -269,6 +278,7 @@ class ProtocolConfig:
     training_speeds: tuple[float, ...] = ()
     generalized_orders: str = "paper"
     equation_error_order: int = DEFAULT_EQUATION_ERROR_ORDER
+    speed_scaled_error: bool = True
     batch_size: int = 100
     ljung_box_lags: int = 20
     acf_lags: int = 50

@@ -16,6 +16,11 @@ from typing import Any
 
 import pandas as pd
 
+from benchmarks.protocol.builtin_fit import (
+    add_speed_scaled_error,
+    builtin_generalized,
+    speed_scaled_description,
+)
 from benchmarks.protocol.config import (
     BASELINES,
     BUILTIN_MODELS,
@@ -35,6 +40,7 @@ from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import (
     PredictionCheck,
     prediction_check,
+    speed_scaled_gain,
     steering_residual_std,
     steering_residuals_by_speed,
     whitened_residual_std,
@@ -55,7 +61,6 @@ from hasa_env.steering.loading import (
     model_spec_kind,
 )
 from hasa_env.steering.model_file import ModelFileError
-from hasa_env.steering.order import select_order
 
 __all__ = [
     "DEFAULT_MODEL_MEMORY_LIMIT",
@@ -242,6 +247,7 @@ def fit_models(
     time_limit: float | None = DEFAULT_MODEL_TIME_LIMIT,
     generalized_orders: str = "paper",
     equation_error_order: int = 0,
+    speed_scaled_error: bool = False,
 ) -> tuple[list[FittedModel], list[dict[str, Any]]]:
     """Fit every candidate on the training run (a seed's; or several runs, each a run of its
     own for the fit: lags never cross between them); the fitted models and their
@@ -253,9 +259,11 @@ def fit_models(
     training run and is fitted isolated with ``time_limit`` (:func:`run_isolated`).
     ``generalized_orders`` (:data:`~benchmarks.defaults.GENERALIZED_ORDERS`): ``"bic"``
     selects the built-in generalized model's orders on ``train`` first
-    (:func:`with_selected_orders`); ``"paper"`` keeps the candidate's. The built-in
+    (:func:`~benchmarks.protocol.builtin_fit.with_selected_orders`); ``"paper"`` keeps the candidate's. The built-in
     generalized model's fit estimates an ``equation_error_order``-lag autoregression of its
-    equation error (0: white; docs/design.md §8.32)."""
+    equation error (0: white; docs/design.md §8.32); with ``speed_scaled_error`` its error's
+    speed-scaled coloured part is fitted on ``train`` too, and its filter carries it as a state
+    instead (docs/design.md §8.34)."""
     runs = [train] if isinstance(train, pd.DataFrame) else list(train)
     train = train if isinstance(train, pd.DataFrame) else runs  # a list: what the fit takes
     dt = steering_features(runs[0]).attrs.get("dt", 0.01)
@@ -269,7 +277,7 @@ def fit_models(
             model = type(model)(**model.structure(), **(model.common_kwargs() | {"dt": dt}))
         own: pd.DataFrame | list[pd.DataFrame] = train
         if kind == "builtin" and isinstance(model, GeneralizedModel):
-            model = _builtin_generalized(
+            model = builtin_generalized(
                 model, train, generalized_orders, equation_error_order, info
             )
         if getattr(model, "training", "") == "constant_speed":
@@ -298,23 +306,15 @@ def fit_models(
             info["error"] = str(exc)
             infos.append(info)
             continue
+        if speed_scaled_error and kind == "builtin" and isinstance(model, GeneralizedModel):
+            add_speed_scaled_error(model, model_fitted, runs, sensor_std, info_fit)
         info.update(info_fit)
         info["error"] = None
         # the road-blind baseline is a steering reference only: it has no lane information
         residual = None if kind == "baseline" else info_fit["filter_residual_std"]
         # trusted on roads and at speeds like those it was fitted on: its own record (fit,
         # model file), else the training run's for a model the benchmark fitted
-        training = (
-            TrainingRecord()
-            if candidate.fixed
-            else TrainingRecord.from_run(own if isinstance(own, pd.DataFrame) else pd.concat(own))
-        )
-        training = replace(training, whitened_residual_std=info_fit["whitened_residual_std"])
-        if residual is not None and not candidate.fixed:  # the trust rule's prediction check
-            check = PredictionCheck(  # on the run it was fitted on (not a saved model's: §8.13.1)
-                info_fit["prediction_residual_std"], info_fit["lane_free_residual_std"]
-            )
-            training = replace(training, prediction=check)
+        training = _training_record(candidate.fixed, own, info_fit, residual is not None)
         limit, speeds = model_limits(model_fitted, training)
         info["steering_curvature_limit"] = limit
         info["steering_speed_limits"] = [speeds[0], speeds[1] if math.isfinite(speeds[1]) else None]
@@ -323,41 +323,29 @@ def fit_models(
     return fitted, infos
 
 
-def _builtin_generalized(
-    model: GeneralizedModel,
-    train: pd.DataFrame | list[pd.DataFrame],
-    generalized_orders: str,
-    equation_error_order: int,
-    info: dict[str, Any],
-) -> GeneralizedModel:
-    """The built-in generalized model to fit: its orders selected by BIC on ``train``
-    (``generalized_orders == "bic"``, what was selected in ``info["order_selection"]``) or
-    kept, with ``equation_error_order`` lags of its equation error's autoregression."""
-    if generalized_orders == "bic":
-        model, info["order_selection"] = with_selected_orders(model, train)
-    structure = model.structure() | {"equation_error_order": equation_error_order}
-    return GeneralizedModel(**structure, **model.common_kwargs())
-
-
-def with_selected_orders(
-    model: GeneralizedModel, train: pd.DataFrame | list[pd.DataFrame]
-) -> tuple[GeneralizedModel, dict[str, Any]]:
-    """``model`` (unfitted) with its orders (na, nb, nc, nd) selected by BIC on the training
-    runs ``train`` (:func:`hasa_env.steering.order.select_order` with its default grid, from
-    (1, 1, 0, 0) to (4, 6, 3, 3), every candidate on one common sample; docs/design.md
-    §8.26), and what was selected: ``orders``, ``criterion``, ``n_common`` (samples) and
-    the ``candidates`` compared. The selection sees the training runs only."""
-    options = {k: v for k, v in model.common_kwargs().items() if k != "name"}
-    with warnings.catch_warnings():  # the candidates' fits: the chosen one is fitted (and
-        warnings.simplefilter("ignore")  # its warnings reported) by _fit_one
-        selection = select_order(train, **options)
-    chosen = GeneralizedModel(**selection.orders, **model.common_kwargs())
-    return chosen, {
-        "orders": dict(selection.orders),
-        "criterion": selection.criterion,
-        "n_common": int(selection.n_common),
-        "candidates": len(selection.table),
-    }
+def _training_record(
+    fixed: bool, own: pd.DataFrame | list[pd.DataFrame], info_fit: dict[str, Any], lanes: bool
+) -> TrainingRecord:
+    """What the trust rule knows of a fitted model's training: the roads and speeds of the
+    runs it was fitted on (none for a ``fixed`` model: its own record counts), the levels its
+    declarations were checked by, and (``lanes``: it gives lane evidence) its prediction check,
+    made on the run it was fitted on (not a saved model's: docs/design.md §8.13.1)."""
+    training = (
+        TrainingRecord()
+        if fixed
+        else TrainingRecord.from_run(own if isinstance(own, pd.DataFrame) else pd.concat(own))
+    )
+    training = replace(
+        training,
+        whitened_residual_std=info_fit["whitened_residual_std"],
+        speed_scaled_gain=info_fit["speed_scaled_gain"],
+    )
+    if lanes and not fixed:
+        check = PredictionCheck(
+            info_fit["prediction_residual_std"], info_fit["lane_free_residual_std"]
+        )
+        training = replace(training, prediction=check)
+    return training
 
 
 def _fit_one(
@@ -396,10 +384,11 @@ def _fit_one(
         ) from None
     fitted.name = name
     info = _fit_description(fitted, fixed, caught)
-    has_arx, residual, prediction, whitened, by_speed = _filter_residual(
+    has_arx, residual, prediction, whitened, by_speed, gain = _filter_residual(
         name, fitted, train if residual_on is None else residual_on
     )
     info["whitened_residual_std"] = whitened
+    info["speed_scaled_gain"] = gain
     info["residual_by_speed"] = by_speed
     info["arx"] = has_arx
     info["filter_residual_std"] = residual
@@ -430,6 +419,7 @@ def _fit_description(
         "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
         "refitted": not fixed,
         "equation_error_ar": list(getattr(fitted, "equation_error_ar", ()) or ()),
+        "speed_scaled_error": speed_scaled_description(fitted),
     }
     if result is not None:
         info["training"] = {
@@ -464,25 +454,30 @@ def _structure(fitted: SteeringModel) -> dict[str, Any] | None:
 
 def _filter_residual(
     name: str, fitted: SteeringModel, run: pd.DataFrame | list[pd.DataFrame]
-) -> tuple[bool, float | None, PredictionCheck | None, float | None, list[dict[str, Any]]]:
+) -> tuple[
+    bool, float | None, PredictionCheck | None, float | None, list[dict[str, Any]], float | None
+]:
     """Whether the model has an ARX form, the filter's steering-residual level on ``run``
     (:func:`estimators.tuning.steering_residual_std`), the trust rule's prediction check
     there (:func:`estimators.tuning.prediction_check`), both None without ARX form, the
     level of its form whitened by its declared equation-error autoregression
     (:func:`estimators.tuning.whitened_residual_std`; None: none declared) and its residuals
-    by speed (:func:`estimators.tuning.steering_residuals_by_speed`; [] without ARX form);
-    ModelError if a form fails or predicts non-finite steering."""
+    by speed (:func:`estimators.tuning.steering_residuals_by_speed`; [] without ARX form) and
+    what its declared speed-scaled equation error gains over one white level
+    (:func:`estimators.tuning.speed_scaled_gain`; None: none declared); ModelError if a form
+    fails or predicts non-finite steering."""
     try:
         arx = fitted.arx()
     except Exception as exc:  # noqa: BLE001
         raise ModelError(name, "fit", f"arx() raised {describe(exc)}") from None
     if arx is None:
-        return False, None, None, None, []
+        return False, None, None, None, [], None
     try:
         residual = steering_residual_std(arx, run, decision_lag=fitted.decision_lag)
         prediction = prediction_check(arx, run, decision_lag=fitted.decision_lag)
         whitened = whitened_residual_std(fitted, run)
         by_speed = steering_residuals_by_speed(arx, run, decision_lag=fitted.decision_lag)
+        gain = speed_scaled_gain(fitted, run)
     except Exception as exc:  # noqa: BLE001
         raise ModelError(
             name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
@@ -490,7 +485,7 @@ def _filter_residual(
     for level in (residual, whitened):
         if level is not None and not (math.isfinite(level) and level >= 0):
             raise ModelError(name, "fit", f"its ARX form predicts non-finite steering ({level})")
-    return True, residual, prediction, whitened, by_speed
+    return True, residual, prediction, whitened, by_speed, gain
 
 
 def _fit_note(fixed: bool, has_arx: bool) -> str:

@@ -397,6 +397,7 @@ def fit_and_check(
         time_limit=config.model_time_limit,
         generalized_orders=config.generalized_orders,
         equation_error_order=config.equation_error_order,
+        speed_scaled_error=config.speed_scaled_error,
     )
     if config.estimate:  # can each model drive? (no lane evidence from one that cannot)
         speed = plan.params[plan.illustrative].speed if seed is not None else SpeedProfile.hold()
