@@ -40,7 +40,7 @@ from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.atomic import write_atomic
 from hasa_env.drivers import require_lane_keeping
-from hasa_env.recording import RecordingWarning, check_replay
+from hasa_env.recording import RecordingWarning, check_replay, load_notes
 from hasa_env.render.frames import write_frames
 from hasa_env.steering import SteeringModel, score
 from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
@@ -143,11 +143,10 @@ def warn_load_notes(recordings: Sequence[Any], log: WarningLog | None = None) ->
     """Show each recording's notes from loading (:attr:`hasa_env.recording.Recording.warnings`:
     what was repaired or tolerated, e.g. the partly written last line of a crashed recording
     dropped), in order, as :class:`~hasa_env.recording.RecordingWarning` naming the file (the
-    loaders keep them quiet). ``log``: each the recording's (step ``"load"``)."""
+    loaders keep them quiet; :func:`hasa_env.recording.load_notes`). ``log``: each the
+    recording's (step ``"load"``)."""
     for rec in recordings:
-        for note in rec.warnings:
-            if rec.path is not None and not note.startswith(f"{rec.path}: "):
-                note = f"{rec.path}: {note}"
+        for note in load_notes(rec):
             with _about(log, rec.path, "load"):
                 warnings.warn(note, RecordingWarning, stacklevel=2)
 

@@ -19,7 +19,13 @@ from hasa_env.recording.format import (
     RecordingList,
     RecordingWarning,
 )
-from hasa_env.recording.reader import load_paths, load_recording, load_recordings
+from hasa_env.recording.reader import (
+    load_notes,
+    load_paths,
+    load_recording,
+    load_recordings,
+    warn_load_notes,
+)
 from hasa_env.recording.replay import (
     ReplayCheck,
     check_replay,
@@ -40,10 +46,12 @@ __all__ = [
     "ReplayCheck",
     "check_replay",
     "compare_recordings",
+    "load_notes",
     "load_paths",
     "load_recording",
     "load_recordings",
     "replay",
     "replay_actions",
     "save_recording",
+    "warn_load_notes",
 ]

@@ -11,7 +11,7 @@ import os
 import re
 import stat
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,11 +43,13 @@ from hasa_env.sim.setup import RECORDING_COLUMNS
 __all__ = [
     "PARQUET_METADATA_KEY",
     "load_any",
+    "load_notes",
     "load_paths",
     "load_recording",
     "load_recordings",
     "read_parquet",
     "require_pyarrow",
+    "warn_load_notes",
 ]
 
 
@@ -413,6 +415,24 @@ def load_any(path: str | os.PathLike[str]) -> Recording:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RecordingWarning)
         return load_recording(p)
+
+
+def load_notes(rec: Recording) -> list[str]:
+    """What loading ``rec`` repaired or tolerated (:attr:`Recording.warnings`, e.g. the partly
+    written last line of a crashed recording dropped), in order, each naming the file."""
+    if rec.path is None:
+        return list(rec.warnings)
+    prefix = f"{rec.path}: "
+    return [note if note.startswith(prefix) else prefix + note for note in rec.warnings]
+
+
+def warn_load_notes(recordings: Iterable[Recording]) -> None:
+    """Show each recording's :func:`load_notes` as a :class:`RecordingWarning`, in order: what
+    the quiet loaders (:func:`load_paths`, :func:`load_any`) kept in the recordings'
+    ``warnings``. The programs that load recordings call it once per loaded recording."""
+    for rec in recordings:
+        for note in load_notes(rec):
+            warnings.warn(note, RecordingWarning, stacklevel=2)
 
 
 # -------------------------------------------------------------------- Parquet
