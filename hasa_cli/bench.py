@@ -17,7 +17,10 @@ partial: a user model failed, or recordings were skipped or runs left out
 as degenerate (each named on stderr and in results.json; every other result
 is written); 2 invalid arguments or data, a user model that does not
 import, an output folder that exists (nothing run, nothing written); 3 the
-Dask scheduler cannot be reached.
+Dask scheduler cannot be reached. What loading repaired in a recording of
+``--recordings`` (a crashed recording's partly written last line, dropped) is a
+``hasa-bench: warning:`` line naming it, with ``--quiet`` too, and a note in
+results.json; it does not change the exit status.
 
 Why this module is long: it is the argument parser and the output of three
 subcommands (paper, score, perf) with their options, each documented at

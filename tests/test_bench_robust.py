@@ -20,6 +20,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from _recording_files import crash
 
 from benchmarks.executor import SchedulerError, check_scheduler
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
@@ -208,6 +209,33 @@ def test_recordings_quality_gates_curved_runs_and_degenerate_runs(recordings, tm
     assert {r["driver"] for r in doc["curved"]} == {"1"}
     assert any("trained on" in n and "a_000.csv" in n for n in doc["notes"])
     assert (out / "report.html").is_file() and folder_problems(out) == []
+
+
+def test_a_repaired_recording_is_named_once_on_stderr_and_in_the_notes(tmp_path, capsys):
+    """A folder of two recordings, the second's writer crashed inside its last line: it loads
+    without that line and is scored (--allow-incomplete); what loading repaired is one warning
+    line naming the file, --quiet or not, and a note of results.json; the complete recording
+    beside it adds nothing."""
+    (ill,) = population("paper-pi", seed=0, size=1)
+    runs = run_population([ill], runs=2, seed=0, config={"time_limit": 3.0})["Ill"]
+    good, crashed = save_runs(runs, tmp_path / "recs", "a")
+    crash(crashed)
+    out = tmp_path / "out"
+    code = main(["paper", "--recordings", str(tmp_path / "recs"), "--min-duration", "2",
+                 "--allow-incomplete", "--out", str(out), "--workers", "1", "--quiet",
+                 "--no-plots"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 0, err
+    (warning,) = [ln for ln in err.splitlines() if ln.startswith("hasa-bench: warning: ")]
+    assert warning.startswith(f"hasa-bench: warning: {crashed}: dropped the partly written line ")
+    assert str(good) not in err
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["skipped"] == [] and sorted(doc["drivers"][0]["recordings"]) == [
+        str(good),
+        str(crashed),
+    ]
+    repaired = [n for n in doc["notes"] if "dropped the partly written line" in n]
+    assert repaired == [warning.removeprefix("hasa-bench: warning: ")]
 
 
 def test_the_training_file_can_be_chosen_and_a_bad_one_is_refused(recordings):

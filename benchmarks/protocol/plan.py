@@ -19,7 +19,7 @@ import pandas as pd
 
 from benchmarks.protocol.config import ILLUSTRATIVE, TRACK_ENV_IDS, BenchmarkError, ProtocolConfig
 from hasa_env.drivers import SpeedProfile, SyntheticDriver, population, run_drivers, run_seeds
-from hasa_env.recording import Recording, load_paths
+from hasa_env.recording import Recording, load_notes, load_paths, warn_load_notes
 from hasa_env.recording.reader import load_any
 from hasa_env.session.session_file import SessionError, SessionFile, find_session_files
 from hasa_env.sim.config import deep_merge
@@ -476,11 +476,18 @@ class _Scan:
     """Each found recording's scenario (its env config's; ``paper`` when it has none)."""
     rates: dict[Path, tuple[float, int]] = field(default_factory=dict)
     """Each found recording's (``sim_frequency`` (Hz), ``action_repeat``)."""
+    load_notes: list[str] = field(default_factory=list)
+    """What loading repaired or tolerated in the recordings (:func:`hasa_env.recording.
+    load_notes`: e.g. a crashed recording's partly written last line dropped), each naming
+    its file."""
 
 
 def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | None) -> _Scan:
-    """Load and check every recording under ``root`` (quality gates, study sessions)."""
+    """Load and check every recording under ``root`` (quality gates, study sessions); what
+    loading repaired in each is shown as a :class:`~hasa_env.recording.RecordingWarning`
+    (:func:`hasa_env.recording.warn_load_notes`) and kept in the scan's ``load_notes``."""
     loaded = load_paths([root])
+    warn_load_notes(loaded)  # e.g. a crashed recording's cut last line, dropped
     skipped = [
         {"file": str(e.path) if e.path is not None else str(root), "reason": e.reason or str(e)}
         for e in loaded.errors
@@ -518,7 +525,10 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
                 + "\n".join(f"  {s['file']}: {s['reason']}" for s in skipped)
             )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
-    return _Scan(found, skipped, training, session_details, session_notes, scenarios, rates)
+    repaired = [note for rec in loaded for note in load_notes(rec)]
+    return _Scan(
+        found, skipped, training, session_details, session_notes, scenarios, rates, repaired
+    )
 
 
 def _keep_one_scenario(
@@ -626,7 +636,9 @@ def recording_plan(config: ProtocolConfig) -> Plan:
     is skipped and listed, with its reason, in the plan's ``skipped``
     (``{"file", "reason"}``). Curved-track recordings of every driver are
     scored on steering (the curved table); recordings of a track the protocol
-    does not score are listed in the notes.
+    does not score are listed in the notes. What loading repaired in a file (a
+    crashed recording's partly written last line, dropped) is shown as a
+    :class:`~hasa_env.recording.RecordingWarning` and kept in the notes, naming it.
 
     Folders with a study session file (``session.json`` of ``hasa-drive
     study``) contribute their completed measured runs only: practice runs and
@@ -691,6 +703,7 @@ def recording_plan(config: ProtocolConfig) -> Plan:
             "(--track chooses the main track)"
         )
     notes += scan.session_notes
+    notes += scan.load_notes
     notes += [f"skipped {s['file']}: {s['reason']}" for s in scan.skipped]
     wanted = range(training_index, training_index + config.training_runs)
     notes += _training_notes(
