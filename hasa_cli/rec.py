@@ -10,7 +10,9 @@ Exit status (:mod:`hasa_cli`): 0 success; 1 partial: some input was invalid
 (each named on stderr by file, line and column) or a target existed, the
 valid ones were processed; 2 usage errors or nothing to do (no input is
 valid); 3 a missing optional dependency (pyarrow, minari) or an export that
-failed while reading or writing (a full disk; nothing is kept).
+failed while reading or writing (a full disk; nothing is kept). What loading
+repaired in a recording ``convert`` converts (a crashed recording's partly
+written last line, dropped) is named in a ``hasa-rec: warning:`` line.
 """
 
 from __future__ import annotations
@@ -32,7 +34,13 @@ from hasa_cli import (
     error,
     printable,
 )
-from hasa_env.recording import Recording, RecordingError, RecordingWarning, load_recordings
+from hasa_env.recording import (
+    Recording,
+    RecordingError,
+    RecordingWarning,
+    load_recordings,
+    warn_load_notes,
+)
 from hasa_env.recording.export import export_minari
 from hasa_env.recording.parquet import require_pyarrow, to_parquet
 from hasa_env.recording.reader import load_any
@@ -124,6 +132,7 @@ def _convert(args: argparse.Namespace) -> int:
     if not targets and not errors:
         _err(f"no recordings (*.csv with a .json sidecar) in {src}")
         return EXIT_USAGE
+    warn_load_notes(rec for rec, _ in targets)  # e.g. a crashed recording's cut line, dropped
     problems = [str(e) for e in errors]
     written = 0
     for rec, target in targets:

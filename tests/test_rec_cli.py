@@ -7,6 +7,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from _recording_files import crash
 
 import hasa_env  # noqa: F401 - registers the ids
 from hasa_cli.rec import main
@@ -125,6 +126,32 @@ def test_convert_folder_skips_corrupt_files(tmp_path, capsys):
     # default output: next to the CSVs
     assert main(["convert", str(recs / "run_000.csv")]) == 0
     assert (recs / "run_000.parquet").is_file()
+
+
+def _warning_lines(err: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith("hasa-rec: warning: ")]
+
+
+def test_convert_says_what_loading_repaired_once_naming_the_file(tmp_path, capsys):
+    """A folder whose second recording's writer crashed inside its last line: both convert
+    (that line dropped); the note of its loading is one warning line naming the file, and
+    the complete recording beside it adds none. Converted alone, the same."""
+    pytest.importorskip("pyarrow")
+    recs = tmp_path / "recs"
+    record(recs, 1)
+    crashed = record(recs, 2)
+    crash(crashed)
+    assert main(["convert", str(recs), "-o", str(tmp_path / "pq")]) == 0
+    captured = capsys.readouterr()
+    assert sorted(p.name for p in (tmp_path / "pq").iterdir()) == [
+        "run_000.parquet",
+        "run_001.parquet",
+    ]
+    (note,) = _warning_lines(captured.err)
+    assert note.startswith(f"hasa-rec: warning: {crashed}: dropped the partly written line ")
+    assert main(["convert", str(crashed), "-o", str(tmp_path / "one.parquet")]) == 0
+    assert _warning_lines(capsys.readouterr().err) == [note]
+    assert read_parquet(tmp_path / "one.parquet").complete is False
 
 
 def test_convert_errors(tmp_path, capsys, monkeypatch):
