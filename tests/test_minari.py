@@ -6,9 +6,16 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from _recording_files import crash
 
 import hasa_env  # noqa: F401 - registers the ids
-from hasa_env.recording import RecordingWrapper, load_recording, load_recordings, save_recording
+from hasa_env.recording import (
+    RecordingWarning,
+    RecordingWrapper,
+    load_recording,
+    load_recordings,
+    save_recording,
+)
 from hasa_env.recording.export import action_columns, export_minari, observations, require_minari
 from hasa_env.sim.config import deep_merge
 
@@ -116,6 +123,24 @@ def test_corrupt_recording_is_reported_by_name_and_the_rest_exported(tmp_path, m
     assert set(skipped) == {"run_001.csv", "orphan.csv"}
     assert "line 6" in skipped["run_001.csv"] and "oops" in skipped["run_001.csv"]
     assert minari.load_dataset("hasa/partial-v0").total_episodes == 2
+
+
+def test_what_loading_repaired_is_warned_naming_the_file(tmp_path, minari_root):
+    """A recording whose writer crashed inside its last line is exported without that line;
+    what loading repaired is one RecordingWarning naming the file, from a folder and from a
+    list of paths alike; the complete recording beside it adds none."""
+    recs_dir = tmp_path / "recs"
+    record(recs_dir, 1)
+    record(recs_dir, 2)
+    crashed = recs_dir / "run_001.csv"
+    crash(crashed)
+    for source, name in ((recs_dir, "hasa/repaired-v0"), ([crashed], "hasa/repaired-v1")):
+        with pytest.warns(RecordingWarning) as caught:
+            result = export_minari(source, name)
+        notes = [str(w.message) for w in caught if issubclass(w.category, RecordingWarning)]
+        assert len(notes) == 1, notes
+        assert notes[0].startswith(f"{crashed}: dropped the partly written line ")
+        assert crashed in result.exported and crashed in result.cut and result.skipped == []
 
 
 def test_mismatched_config_and_empty_recordings_are_skipped(tmp_path, minari_root):

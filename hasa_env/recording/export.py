@@ -44,7 +44,7 @@ from hasa_env.recording.format import (
     RecordingError,
     RecordingWarning,
 )
-from hasa_env.recording.reader import load_recording, load_recordings
+from hasa_env.recording.reader import load_recording, load_recordings, warn_load_notes
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.sensors import SENSOR_NAMES
 from hasa_env.sim.setup import INFO_KEYS, STATE_NAMES, EnvSetup, build_setup
@@ -265,7 +265,11 @@ def _comparable(config: Mapping[str, Any]) -> dict[str, Any]:
 def _load_sources(
     source: str | os.PathLike[str] | Sequence[Recording | str | os.PathLike[str]],
 ) -> tuple[list[Recording], list[tuple[Path | None, str]]]:
-    """Recordings from a folder or a list (of Recordings or paths), plus the corrupt ones."""
+    """Recordings from a folder or a list (of Recordings or paths), plus the corrupt ones.
+
+    Loaded quietly (:func:`export_minari` warns once about each corrupt one, as not
+    exported); what loading repaired in a recording loaded here is shown by
+    :func:`warn_load_notes`."""
     skipped: list[tuple[Path | None, str]] = []
     if isinstance(source, str | os.PathLike):
         root = Path(source)
@@ -274,6 +278,7 @@ def _load_sources(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RecordingWarning)
             loaded = load_recordings(root)
+        warn_load_notes(loaded)  # e.g. a crashed recording's cut last line, dropped
         for err in loaded.errors:
             skipped.append((err.path, err.reason if err.line is None else str(err)))
         return list(loaded), skipped
@@ -285,9 +290,12 @@ def _load_sources(
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RecordingWarning)
-                recordings.append(load_recording(item))
+                rec = load_recording(item)
         except RecordingError as err:
             skipped.append((err.path or Path(item), str(err)))
+            continue
+        warn_load_notes([rec])
+        recordings.append(rec)
     return recordings, skipped
 
 
@@ -432,7 +440,10 @@ def export_minari(
     The first recording (in name order) fixes the config; recordings whose
     config differs from it (apart from ``render``) are skipped, like corrupt
     recordings and recordings without steps; each is listed with its reason in
-    :attr:`ExportResult.skipped` and with a warning. The dataset's env spec is
+    :attr:`ExportResult.skipped` and with a warning. What loading repaired in a
+    recording read from a path (a crashed recording's partly written last line,
+    dropped) is shown as a :class:`~hasa_env.recording.RecordingWarning` naming the
+    file (:func:`hasa_env.recording.warn_load_notes`). The dataset's env spec is
     the registered id with ``kwargs={"config": <that config>}``, so
     ``dataset.recover_environment()`` is ``gym.make`` of exactly that env.
 
