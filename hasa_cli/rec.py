@@ -11,8 +11,9 @@ Exit status (:mod:`hasa_cli`): 0 success; 1 partial: some input was invalid
 valid ones were processed; 2 usage errors or nothing to do (no input is
 valid); 3 a missing optional dependency (pyarrow, minari) or an export that
 failed while reading or writing (a full disk; nothing is kept). What loading
-repaired in a recording ``convert`` converts (a crashed recording's partly
-written last line, dropped) is named in a ``hasa-rec: warning:`` line.
+repaired in a recording ``convert`` converts or ``export-minari`` exports (a
+crashed recording's partly written last line, dropped) is named in a
+``hasa-rec: warning:`` line; ``info`` lists it in the file's summary.
 """
 
 from __future__ import annotations
@@ -166,7 +167,9 @@ def _export(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RecordingWarning)
+            # each skipped recording is named below (result.skipped); what loading repaired in
+            # a recording (hasa_env.recording.warn_load_notes) is shown as a warning: line
+            warnings.filterwarnings("ignore", "not exported: ", RecordingWarning)
             result = export_minari(
                 root,
                 args.name,

@@ -227,6 +227,29 @@ def test_export_minari_command(tmp_path, capsys, monkeypatch):
     assert "malformed" in capsys.readouterr().err
 
 
+def test_export_minari_says_what_loading_repaired_once_naming_the_file(tmp_path, capsys):
+    """A folder of a complete recording, one whose writer crashed inside its last line and a
+    corrupt one: the first two are exported (that line dropped), the corrupt one named and
+    skipped once; what loading repaired is one warning line naming the crashed file."""
+    pytest.importorskip("minari")
+    pytest.importorskip("pyarrow")
+    recs = tmp_path / "recs"
+    record(recs, 1)
+    crashed = record(recs, 2)
+    crash(crashed)
+    bad = record(recs, 3)
+    corrupt(bad, 10)
+    argv = ["export-minari", str(recs), "hasa/cut-v0", "--data-path", str(tmp_path / "store")]
+    assert main(argv) == 1  # exported, but one file skipped
+    captured = capsys.readouterr()
+    assert "exported 2 recording(s), 99 steps" in captured.out
+    assert f"note: {crashed} ended without termination or truncation" in captured.out
+    (note,) = _warning_lines(captured.err)
+    assert note.startswith(f"hasa-rec: warning: {crashed}: dropped the partly written line ")
+    (skipped,) = [line for line in captured.err.splitlines() if str(bad) in line]
+    assert skipped.startswith(f"hasa-rec: error: skipped {bad}: ") and "line 10" in skipped
+
+
 def test_usage_errors(capsys):
     with pytest.raises(SystemExit) as exc:
         main([])
