@@ -83,7 +83,7 @@ def test_info_flags_an_incomplete_recording(tmp_path, capsys):
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "INCOMPLETE" in out and "5 env steps" in out
-    assert "warning" in out and "partly written line 8" in out
+    assert f"warning        {path}: dropped the partly written line 8 " in out
 
 
 def test_info_missing_sidecar(tmp_path, capsys):
