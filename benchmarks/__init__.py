@@ -7,6 +7,8 @@
 - :mod:`benchmarks.output`: the result folder of ``hasa-bench``, replaced only when complete.
 - :mod:`benchmarks.recordings`: recordings replayed and checked, a steering model and
   the estimator scored on them (``hasa-replay``).
+- :mod:`benchmarks.speed_scaled`: a fitted generalized model's speed-scaled equation error,
+  fitted on held-out residuals (``hasa-bench`` and ``hasa-replay --fit``).
 - :mod:`benchmarks.executor`: independent tasks on local processes or Dask.
 - :mod:`benchmarks.paper_values`: the paper's published numbers.
 - :mod:`benchmarks.perf`: performance benchmarks (env, estimators, views,
