@@ -8,7 +8,8 @@ repaired or tolerated in each is shown by :func:`warn_load_notes`):
    (:func:`hasa_env.recording.check_replay`) and compare, bit for bit or within
    ``atol``;
 2. :func:`prepare_model`: a steering model (:func:`hasa_env.steering.loading.load_model`),
-   optionally fitted on the first recording, with its steering ratio (model units
+   optionally fitted on the first recordings (a generalized model with its speed-scaled
+   equation error, as ``hasa-bench`` fits it), with its steering ratio (model units
    per recorded road-wheel rad) and where the estimator trusts it (:meth:`PreparedModel.trust`), and
    :func:`score_recordings`: its one-step-ahead scores on every recording
    (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the increments, Ljung-Box p);
@@ -36,18 +37,21 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.documents import json_clean, versions
+from benchmarks.speed_scaled import add_speed_scaled_error
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.atomic import write_atomic
 from hasa_env.drivers import require_lane_keeping
 from hasa_env.recording import RecordingWarning, check_replay, load_notes
 from hasa_env.render.frames import write_frames
-from hasa_env.steering import SteeringModel, score
+from hasa_env.sim.road import Road
+from hasa_env.steering import GeneralizedModel, SteeringModel, score
 from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
 
 __all__ = [
     "MAX_STEERING_RATIO",
     "SCORE_KEYS",
+    "SPEED_SCALED_KEYS",
     "LaneKeepingError",
     "ModelSetupError",
     "PreparedModel",
@@ -59,6 +63,7 @@ __all__ = [
     "WarningLog",
     "check_recordings",
     "describe_estimate",
+    "describe_speed_scaled",
     "describe_trust",
     "estimate_recordings",
     "prepare_model",
@@ -73,6 +78,11 @@ in degrees is about 15 x 57 = 860 per road-wheel rad."""
 
 SCORE_KEYS = ("rmse", "r2", "r2_increments", "ljung_box_p")
 """The scores :func:`score_recordings` keeps (of :func:`hasa_env.steering.score`)."""
+
+SPEED_SCALED_KEYS = ("speed_scaled_error", "speed_scaled_held_out", "speed_scaled_gain")
+"""What fitting a model's speed-scaled equation error records
+(:func:`benchmarks.speed_scaled.add_speed_scaled_error`; hasa-bench's results.json has the
+same keys), kept in the ``--json`` document's ``model``."""
 
 
 @dataclass
@@ -227,13 +237,19 @@ class PreparedModel:
     Attributes:
         spec: how it was named (a preset, a model file, ``package.module:Class``);
         model: the model (fitted); steering_ratio: model units per recorded road-wheel
-        rad; fitted_on: the recording it was fitted on (None: as loaded).
+        rad; fitted_on: the recordings it was fitted on, in order, each a run of its own
+        (empty: as loaded); speed_scaled: what fitting its speed-scaled equation error
+        found (:func:`benchmarks.speed_scaled.add_speed_scaled_error`: ``speed_scaled_error``,
+        its numbers or None when none was found; ``speed_scaled_held_out``;
+        ``speed_scaled_gain`` on the recordings fitted on), None when it was not fitted
+        (no fit, turned off, or not a generalized model).
     """
 
     spec: str
     model: SteeringModel
     steering_ratio: float
-    fitted_on: Path | None = None
+    fitted_on: tuple[Path | None, ...] = ()
+    speed_scaled: dict[str, Any] | None = None
 
     def trust(self) -> TrustedFilter:
         """Where the estimator would trust the model's steering without a recording, and why
@@ -251,6 +267,8 @@ def prepare_model(
     recordings: Sequence[Any],
     *,
     fit: bool = False,
+    fit_on: int = 1,
+    speed_scaled_error: bool = True,
     steering: str | None = None,
     steering_ratio: float | None = None,
     lane_check: bool = False,
@@ -259,19 +277,26 @@ def prepare_model(
     log: WarningLog | None = None,
 ) -> PreparedModel:
     """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
-    first recording (its ``steering`` signal: "measured" or "applied"; None: the model's);
-    the steering ratio is ``steering_ratio`` or the default of the spec
-    (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
+    first ``fit_on`` recordings, each a run of its own (their ``steering`` signal: "measured"
+    or "applied"; None: the model's); a generalized model (:class:`GeneralizedModel`, not a
+    user subclass) fitted so gets its speed-scaled equation error (``speed_scaled_error``;
+    docs/design.md §8.34) as ``hasa-bench`` fits its built-in one
+    (:func:`benchmarks.speed_scaled.add_speed_scaled_error`: on held-out residuals when
+    ``fit_on`` >= 2, else in-sample). The steering ratio is ``steering_ratio`` or the default
+    of the spec (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
     ``lane_check`` the model must keep a lane when it steers itself
     (:func:`hasa_env.drivers.require_lane_keeping`: 4 cars, 30 s, the straight track).
-    ``say`` hears what was fitted and the ratio used. ``trust_module``: a model file of a
+    ``say`` hears what was fitted (the recordings, the speed-scaled error's numbers and whether
+    held out, or that none was found) and the ratio used. ``trust_module``: a model file of a
     type not registered yet imports the module its ``"class"`` names
     (:func:`hasa_env.steering.loading.load_model_file`). ``log``: the warnings shown by the fit
-    are the first recording's (step ``"model"``; e.g. an
-    :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`).
+    are the recording's fitted on (step ``"model"``; e.g. an
+    :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`), or no one
+    recording's when fitted on several.
 
     Raises:
-        ModelSetupError: the model does not load, has no parameters and ``fit`` is off, or
+        ModelSetupError: the model does not load, has no parameters and ``fit`` is off,
+            ``fit_on`` is not an integer from 1 to the number of recordings, or
             ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
@@ -279,6 +304,12 @@ def prepare_model(
         raise ModelSetupError(
             f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
             f"road-wheel rad), got {steering_ratio!r}"
+        )
+    if fit and (isinstance(fit_on, bool) or not isinstance(fit_on, int)
+                or not 1 <= fit_on <= len(recordings)):  # fmt: skip
+        raise ModelSetupError(
+            f"--fit-on must be an integer from 1 to {len(recordings)} (the recordings loaded), "
+            f"got {fit_on!r}"
         )
     try:
         model = load_model(spec, recordings[0].dt, trust_module=trust_module)
@@ -289,18 +320,13 @@ def prepare_model(
             f"model {spec!r} has no parameters: add --fit to fit it on the first "
             "recording, or give a saved model file (model.save('model.json'))"
         )
-    road = recordings[0].road
     if steering is not None:
         model.steering_signal = steering
-    fitted_on = None
+    fitted_on: tuple[Path | None, ...] = ()
+    found = None
     if fit:
-        try:
-            with _about(log, recordings[0].path, "model"):
-                model = model.fit(recordings[0].data, road)
-        except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
-            raise ModelSetupError(f"cannot fit {spec} on {recordings[0].path}: {exc}") from None
-        fitted_on = recordings[0].path
-        say(f"model {spec}: fitted on {fitted_on}")
+        model, found = _fit(spec, model, recordings[:fit_on], speed_scaled_error, say, log)
+        fitted_on = tuple(rec.path for rec in recordings[:fit_on])
     ratio = default_steering_ratio(spec, fit) if steering_ratio is None else steering_ratio
     say(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
     if lane_check:
@@ -308,7 +334,74 @@ def prepare_model(
             require_lane_keeping(model, steering_ratio=ratio, what=f"model {spec!r}")
         except ValueError as exc:
             raise LaneKeepingError(str(exc)) from None
-    return PreparedModel(spec, model, ratio, fitted_on)
+    return PreparedModel(spec, model, ratio, fitted_on, found)
+
+
+def _fit(
+    spec: str,
+    model: SteeringModel,
+    recordings: Sequence[Any],
+    speed_scaled_error: bool,
+    say: Callable[[str], None],
+    log: WarningLog | None,
+) -> tuple[SteeringModel, dict[str, Any] | None]:
+    """``model`` fitted on ``recordings`` (each a run of its own; on their road when they
+    share one, else each run's from its metadata) as :func:`prepare_model` says, and what
+    fitting its speed-scaled equation error found (None: not fitted)."""
+    runs = [rec.data for rec in recordings]
+    road = _shared_road(recordings)
+    where = recordings[0].path if len(recordings) == 1 else None
+    names = ", ".join(str(rec.path) for rec in recordings)
+    with _about(log, where, "model"):
+        try:
+            fitted = model.fit(runs[0] if len(runs) == 1 else runs, road)
+        except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
+            raise ModelSetupError(f"cannot fit {spec} on {names}: {exc}") from None
+        each = "" if len(runs) == 1 else f" ({len(runs)} recordings, each a run of its own)"
+        say(f"model {spec}: fitted on {names}{each}")
+        if type(model) is not GeneralizedModel or fitted.arx() is None:
+            return fitted, None  # the built-in generalized model's error only, as hasa-bench
+        if not speed_scaled_error:
+            say(f"model {spec}: speed-scaled equation error not fitted (--no-speed-scaled-error)")
+            return fitted, None
+        found: dict[str, Any] = {}
+        add_speed_scaled_error(model, fitted, runs, 0.0, found, road=road)
+    say(f"model {spec}: {describe_speed_scaled(found)}")
+    return fitted, found
+
+
+def _shared_road(recordings: Sequence[Any]) -> Road | None:
+    """The road of ``recordings`` when they were all made on the same track and lane width
+    (what a fit's features read of it), else None (each run's from its metadata)."""
+    roads = {(rec.config["track"], rec.config["road"]["lane_width"]) for rec in recordings}
+    return recordings[0].road if len(roads) == 1 else None
+
+
+def describe_speed_scaled(found: dict[str, Any]) -> str:
+    """What fitting a model's speed-scaled equation error found
+    (:func:`benchmarks.speed_scaled.add_speed_scaled_error`'s record), in one phrase."""
+    error = found["speed_scaled_error"]
+    if error is None:
+        return (
+            "no speed-scaled equation error found (its fit is on the boundary or the "
+            "residuals are too few); the filter uses the model's equation error as before"
+        )
+    how = (
+        "held out: each recording's residuals from the model refitted on the others"
+        if found["speed_scaled_held_out"]
+        else "in-sample: one recording fitted on; --fit-on 2 or more holds it out"
+    )
+    gain = found["speed_scaled_gain"]
+    over = (
+        ""
+        if gain is None
+        else f"; {gain:+.3g} nats per sample over one white level on the recordings fitted on"
+    )
+    return (
+        f"speed-scaled equation error sigma_c {error['coloured_std']:.3g} rad at "
+        f"{error['reference_speed']:g} m/s, rho {error['correlation']:.3f}, sigma_w "
+        f"{error['white_std']:.3g} rad ({how}{over})"
+    )
 
 
 @dataclass(frozen=True)
@@ -496,8 +589,9 @@ class ReplayDocument:
             ran, ``model`` (``{"scores": {...}}`` of :data:`SCORE_KEYS`, or ``{"error"}``),
             ``estimator`` (the result, or ``{"error"}``), ``frames`` (``{"written",
             "directory"}`` or ``{"error"}``).
-        model: the model used (``spec``, ``steering_ratio``, ``fitted_on``), None before
-            (or without) one.
+        model: the model used (:meth:`add_model`: ``spec``, ``steering_ratio``, ``fitted_on``,
+            ``fitted_on_recordings``, the keys of :data:`SPEED_SCALED_KEYS`), None before (or
+            without) one.
         estimator_trust: the trust line shared by every recording's filter (None: none).
         warnings: the warnings shown while it listened (:meth:`WarningLog.listen`; the steps
             given it say on which recording each arose), the document's ``warnings``.
@@ -531,10 +625,18 @@ class ReplayDocument:
             )  # fmt: skip
 
     def add_model(self, prepared: PreparedModel) -> None:
-        """The model used."""
-        fitted_on = None if prepared.fitted_on is None else str(prepared.fitted_on)
-        self.model = {"spec": prepared.spec, "steering_ratio": prepared.steering_ratio,
-                      "fitted_on": fitted_on}  # fmt: skip
+        """The model used: ``spec``, ``steering_ratio``, ``fitted_on`` (the first recording
+        it was fitted on, as before ``--fit-on``; None: as loaded), ``fitted_on_recordings``
+        (all of them, in order; empty: as loaded) and its fitted speed-scaled equation error's
+        ``speed_scaled_error`` (numbers, or None), ``speed_scaled_held_out`` and
+        ``speed_scaled_gain`` (each None when it was not fitted)."""
+        paths = [None if path is None else str(path) for path in prepared.fitted_on]
+        found = prepared.speed_scaled or {}
+        self.model = json_clean({
+            "spec": prepared.spec, "steering_ratio": prepared.steering_ratio,
+            "fitted_on": paths[0] if paths else None, "fitted_on_recordings": paths,
+            **{key: found.get(key) for key in SPEED_SCALED_KEYS},
+        })  # fmt: skip
 
     def add_outcomes(self, key: str, outcomes: Sequence[RecordingOutcome]) -> None:
         """Each outcome of a step under ``key`` of its recording: ``"model"`` (scores),
