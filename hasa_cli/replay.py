@@ -39,7 +39,7 @@ What loading repaired or tolerated in a recording (e.g. the partly written last 
 crashed recording, dropped) is printed on stderr first, a ``warning:`` line naming the file.
 
 With ``--json FILE`` it also writes what it found as one JSON document
-(:class:`benchmarks.recordings.ReplayDocument`; ``"format": "hasa_replay.results"``):
+(:class:`benchmarks.replay_document.ReplayDocument`; ``"format": "hasa_replay.results"``):
 ``version`` and ``versions`` (as hasa-bench's results.json), ``arguments`` (paths, atol,
 model, fit, fit_on, speed_scaled_error, steering, steering_ratio, estimator, lane_check),
 ``model`` (spec, steering ratio used, ``fitted_on``: the first recording fitted on, a path or
@@ -93,7 +93,6 @@ from benchmarks.recordings import (
     LaneKeepingError,
     ModelSetupError,
     PreparedModel,
-    ReplayDocument,
     check_recordings,
     describe_estimate,
     describe_trust,
@@ -103,6 +102,7 @@ from benchmarks.recordings import (
     score_recordings,
     warn_load_notes,
 )
+from benchmarks.replay_document import ReplayDocument
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_INTERRUPTED,

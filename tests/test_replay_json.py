@@ -14,7 +14,7 @@ from _recording_files import crash, tamper
 
 import benchmarks.recordings as recordings_module
 import hasa_cli.replay as replay
-from benchmarks.recordings import REPLAY_FORMAT
+from benchmarks.replay_document import REPLAY_FORMAT
 from hasa_cli import EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_USAGE
 from hasa_cli.replay import main
 
