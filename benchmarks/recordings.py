@@ -8,7 +8,8 @@ repaired or tolerated in each is shown by :func:`warn_load_notes`):
    (:func:`hasa_env.recording.check_replay`) and compare, bit for bit or within
    ``atol``;
 2. :func:`prepare_model`: a steering model (:func:`hasa_env.steering.loading.load_model`),
-   optionally fitted on the first recording, with its steering ratio (model units
+   optionally fitted on the first recordings (a generalized model with its speed-scaled
+   equation error, as ``hasa-bench`` fits it), with its steering ratio (model units
    per recorded road-wheel rad) and where the estimator trusts it (:meth:`PreparedModel.trust`), and
    :func:`score_recordings`: its one-step-ahead scores on every recording
    (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the increments, Ljung-Box p);
@@ -18,14 +19,13 @@ repaired or tolerated in each is shown by :func:`warn_load_notes`):
    (:func:`hasa_env.render.frames.write_frames`), with the estimator's weights.
 
 A recording that fails a step is reported with its reason and the others go on.
-:class:`ReplayDocument` collects what the steps found as one JSON document
-(``hasa-replay --json``), written atomically, with the warnings they raised
+:class:`benchmarks.replay_document.ReplayDocument` collects what the steps found as one JSON
+document (``hasa-replay --json``), written atomically, with the warnings they raised
 (:class:`WarningLog`: each step given one says which recording a warning arose on).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
@@ -35,30 +35,31 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from benchmarks.documents import json_clean, versions
+from benchmarks.documents import json_clean
+from benchmarks.speed_scaled import add_speed_scaled_error
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
-from hasa_env.atomic import write_atomic
 from hasa_env.drivers import require_lane_keeping
 from hasa_env.recording import RecordingWarning, check_replay, load_notes
 from hasa_env.render.frames import write_frames
-from hasa_env.steering import SteeringModel, score
+from hasa_env.sim.road import Road
+from hasa_env.steering import GeneralizedModel, SteeringModel, score
 from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
 
 __all__ = [
     "MAX_STEERING_RATIO",
     "SCORE_KEYS",
+    "SPEED_SCALED_KEYS",
     "LaneKeepingError",
     "ModelSetupError",
     "PreparedModel",
-    "REPLAY_FORMAT",
     "RecordingOutcome",
     "ReplayCheck",
-    "ReplayDocument",
     "TrustLines",
     "WarningLog",
     "check_recordings",
     "describe_estimate",
+    "describe_speed_scaled",
     "describe_trust",
     "estimate_recordings",
     "prepare_model",
@@ -73,6 +74,11 @@ in degrees is about 15 x 57 = 860 per road-wheel rad."""
 
 SCORE_KEYS = ("rmse", "r2", "r2_increments", "ljung_box_p")
 """The scores :func:`score_recordings` keeps (of :func:`hasa_env.steering.score`)."""
+
+SPEED_SCALED_KEYS = ("speed_scaled_error", "speed_scaled_held_out", "speed_scaled_gain")
+"""What fitting a model's speed-scaled equation error records
+(:func:`benchmarks.speed_scaled.add_speed_scaled_error`; hasa-bench's results.json has the
+same keys), kept in the ``--json`` document's ``model``."""
 
 
 @dataclass
@@ -227,13 +233,19 @@ class PreparedModel:
     Attributes:
         spec: how it was named (a preset, a model file, ``package.module:Class``);
         model: the model (fitted); steering_ratio: model units per recorded road-wheel
-        rad; fitted_on: the recording it was fitted on (None: as loaded).
+        rad; fitted_on: the recordings it was fitted on, in order, each a run of its own
+        (empty: as loaded); speed_scaled: what fitting its speed-scaled equation error
+        found (:func:`benchmarks.speed_scaled.add_speed_scaled_error`: ``speed_scaled_error``,
+        its numbers or None when none was found; ``speed_scaled_held_out``;
+        ``speed_scaled_gain`` on the recordings fitted on), None when it was not fitted
+        (no fit, turned off, or not a generalized model).
     """
 
     spec: str
     model: SteeringModel
     steering_ratio: float
-    fitted_on: Path | None = None
+    fitted_on: tuple[Path | None, ...] = ()
+    speed_scaled: dict[str, Any] | None = None
 
     def trust(self) -> TrustedFilter:
         """Where the estimator would trust the model's steering without a recording, and why
@@ -251,6 +263,8 @@ def prepare_model(
     recordings: Sequence[Any],
     *,
     fit: bool = False,
+    fit_on: int = 1,
+    speed_scaled_error: bool = True,
     steering: str | None = None,
     steering_ratio: float | None = None,
     lane_check: bool = False,
@@ -259,19 +273,26 @@ def prepare_model(
     log: WarningLog | None = None,
 ) -> PreparedModel:
     """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
-    first recording (its ``steering`` signal: "measured" or "applied"; None: the model's);
-    the steering ratio is ``steering_ratio`` or the default of the spec
-    (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
+    first ``fit_on`` recordings, each a run of its own (their ``steering`` signal: "measured"
+    or "applied"; None: the model's); a generalized model (:class:`GeneralizedModel`, not a
+    user subclass) fitted so gets its speed-scaled equation error (``speed_scaled_error``;
+    docs/design.md §8.34) as ``hasa-bench`` fits its built-in one
+    (:func:`benchmarks.speed_scaled.add_speed_scaled_error`: on held-out residuals when
+    ``fit_on`` >= 2, else in-sample). The steering ratio is ``steering_ratio`` or the default
+    of the spec (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
     ``lane_check`` the model must keep a lane when it steers itself
     (:func:`hasa_env.drivers.require_lane_keeping`: 4 cars, 30 s, the straight track).
-    ``say`` hears what was fitted and the ratio used. ``trust_module``: a model file of a
+    ``say`` hears what was fitted (the recordings, the speed-scaled error's numbers and whether
+    held out, or that none was found) and the ratio used. ``trust_module``: a model file of a
     type not registered yet imports the module its ``"class"`` names
     (:func:`hasa_env.steering.loading.load_model_file`). ``log``: the warnings shown by the fit
-    are the first recording's (step ``"model"``; e.g. an
-    :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`).
+    are the recording's fitted on (step ``"model"``; e.g. an
+    :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`), or no one
+    recording's when fitted on several.
 
     Raises:
-        ModelSetupError: the model does not load, has no parameters and ``fit`` is off, or
+        ModelSetupError: the model does not load, has no parameters and ``fit`` is off,
+            ``fit_on`` is not an integer from 1 to the number of recordings, or
             ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
@@ -279,6 +300,12 @@ def prepare_model(
         raise ModelSetupError(
             f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
             f"road-wheel rad), got {steering_ratio!r}"
+        )
+    if fit and (isinstance(fit_on, bool) or not isinstance(fit_on, int)
+                or not 1 <= fit_on <= len(recordings)):  # fmt: skip
+        raise ModelSetupError(
+            f"--fit-on must be an integer from 1 to {len(recordings)} (the recordings loaded), "
+            f"got {fit_on!r}"
         )
     try:
         model = load_model(spec, recordings[0].dt, trust_module=trust_module)
@@ -289,18 +316,13 @@ def prepare_model(
             f"model {spec!r} has no parameters: add --fit to fit it on the first "
             "recording, or give a saved model file (model.save('model.json'))"
         )
-    road = recordings[0].road
     if steering is not None:
         model.steering_signal = steering
-    fitted_on = None
+    fitted_on: tuple[Path | None, ...] = ()
+    found = None
     if fit:
-        try:
-            with _about(log, recordings[0].path, "model"):
-                model = model.fit(recordings[0].data, road)
-        except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
-            raise ModelSetupError(f"cannot fit {spec} on {recordings[0].path}: {exc}") from None
-        fitted_on = recordings[0].path
-        say(f"model {spec}: fitted on {fitted_on}")
+        model, found = _fit(spec, model, recordings[:fit_on], speed_scaled_error, say, log)
+        fitted_on = tuple(rec.path for rec in recordings[:fit_on])
     ratio = default_steering_ratio(spec, fit) if steering_ratio is None else steering_ratio
     say(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
     if lane_check:
@@ -308,7 +330,74 @@ def prepare_model(
             require_lane_keeping(model, steering_ratio=ratio, what=f"model {spec!r}")
         except ValueError as exc:
             raise LaneKeepingError(str(exc)) from None
-    return PreparedModel(spec, model, ratio, fitted_on)
+    return PreparedModel(spec, model, ratio, fitted_on, found)
+
+
+def _fit(
+    spec: str,
+    model: SteeringModel,
+    recordings: Sequence[Any],
+    speed_scaled_error: bool,
+    say: Callable[[str], None],
+    log: WarningLog | None,
+) -> tuple[SteeringModel, dict[str, Any] | None]:
+    """``model`` fitted on ``recordings`` (each a run of its own; on their road when they
+    share one, else each run's from its metadata) as :func:`prepare_model` says, and what
+    fitting its speed-scaled equation error found (None: not fitted)."""
+    runs = [rec.data for rec in recordings]
+    road = _shared_road(recordings)
+    where = recordings[0].path if len(recordings) == 1 else None
+    names = ", ".join(str(rec.path) for rec in recordings)
+    with _about(log, where, "model"):
+        try:
+            fitted = model.fit(runs[0] if len(runs) == 1 else runs, road)
+        except ValueError as exc:  # e.g. a preset whose coefficients belong to another Ts
+            raise ModelSetupError(f"cannot fit {spec} on {names}: {exc}") from None
+        each = "" if len(runs) == 1 else f" ({len(runs)} recordings, each a run of its own)"
+        say(f"model {spec}: fitted on {names}{each}")
+        if type(model) is not GeneralizedModel or fitted.arx() is None:
+            return fitted, None  # the built-in generalized model's error only, as hasa-bench
+        if not speed_scaled_error:
+            say(f"model {spec}: speed-scaled equation error not fitted (--no-speed-scaled-error)")
+            return fitted, None
+        found: dict[str, Any] = {}
+        add_speed_scaled_error(model, fitted, runs, 0.0, found, road=road)
+    say(f"model {spec}: {describe_speed_scaled(found)}")
+    return fitted, found
+
+
+def _shared_road(recordings: Sequence[Any]) -> Road | None:
+    """The road of ``recordings`` when they were all made on the same track and lane width
+    (what a fit's features read of it), else None (each run's from its metadata)."""
+    roads = {(rec.config["track"], rec.config["road"]["lane_width"]) for rec in recordings}
+    return recordings[0].road if len(roads) == 1 else None
+
+
+def describe_speed_scaled(found: dict[str, Any]) -> str:
+    """What fitting a model's speed-scaled equation error found
+    (:func:`benchmarks.speed_scaled.add_speed_scaled_error`'s record), in one phrase."""
+    error = found["speed_scaled_error"]
+    if error is None:
+        return (
+            "no speed-scaled equation error found (its fit is on the boundary or the "
+            "residuals are too few); the filter uses the model's equation error as before"
+        )
+    how = (
+        "held out: each recording's residuals from the model refitted on the others"
+        if found["speed_scaled_held_out"]
+        else "in-sample: one recording fitted on; --fit-on 2 or more holds it out"
+    )
+    gain = found["speed_scaled_gain"]
+    over = (
+        ""
+        if gain is None
+        else f"; {gain:+.3g} nats per sample over one white level on the recordings fitted on"
+    )
+    return (
+        f"speed-scaled equation error sigma_c {error['coloured_std']:.3g} rad at "
+        f"{error['reference_speed']:g} m/s, rho {error['correlation']:.3f}, sigma_w "
+        f"{error['white_std']:.3g} rad ({how}{over})"
+    )
 
 
 @dataclass(frozen=True)
@@ -461,118 +550,3 @@ def render_recordings(
             continue
         out.append(RecordingOutcome(i, rec.path, value=(written, frames_dir)))
     return out
-
-
-REPLAY_FORMAT = "hasa_replay.results"
-"""The ``format`` of the document :class:`ReplayDocument` writes (``hasa-replay --json``)."""
-
-
-def _estimate_dict(run: EstimatorRun) -> dict[str, Any]:
-    """An estimator run's result as JSON data (what :func:`describe_estimate` says, and the
-    reasons of the filter that ran)."""
-    return {
-        "lateral_rmse": run.lateral_rmse,
-        "hypotheses": run.hypotheses,
-        "final_weights": run.weights[-1],
-        "true_index": None if run.true_index < 0 else run.true_index,
-        "true_lane_weight": run.final_true_weight,
-        "trusted_from": run.trusted_from,
-        "final_decision": run.final_decision,
-        "refused_by": run.refused_by,
-        "trust_reasons": None if run.trust is None else list(run.trust.reasons),
-    }
-
-
-@dataclass
-class ReplayDocument:
-    """What ``hasa-replay`` found, collected step by step as one JSON document
-    (:meth:`to_dict`, :meth:`write`), so that a run that ends early keeps what was done.
-
-    Attributes:
-        arguments: the arguments that matter (model spec, atol, estimator on or off, ...).
-        load_errors: the files that could not be loaded, ``{"path", "message"}`` each.
-        recordings: per loaded recording, in order: ``path``, ``label``, ``steps``,
-            ``complete``, ``replay`` (:meth:`ReplayCheck.to_dict`) and, when those steps
-            ran, ``model`` (``{"scores": {...}}`` of :data:`SCORE_KEYS`, or ``{"error"}``),
-            ``estimator`` (the result, or ``{"error"}``), ``frames`` (``{"written",
-            "directory"}`` or ``{"error"}``).
-        model: the model used (``spec``, ``steering_ratio``, ``fitted_on``), None before
-            (or without) one.
-        estimator_trust: the trust line shared by every recording's filter (None: none).
-        warnings: the warnings shown while it listened (:meth:`WarningLog.listen`; the steps
-            given it say on which recording each arose), the document's ``warnings``.
-        error: why the run ended early (None: it did not).
-        exit_status: the program's exit status.
-    """
-
-    arguments: dict[str, Any]
-    load_errors: list[dict[str, Any]] = field(default_factory=list)
-    recordings: list[dict[str, Any]] = field(default_factory=list)
-    model: dict[str, Any] | None = None
-    estimator_trust: str | None = None
-    warnings: WarningLog = field(default_factory=WarningLog)
-    error: str | None = None
-    exit_status: int | None = None
-
-    def add_load_errors(self, errors: Sequence[Exception]) -> None:
-        """The files that could not be loaded (:class:`~hasa_env.recording.RecordingError`)."""
-        for exc in errors:
-            path = getattr(exc, "path", None)
-            self.load_errors.append(
-                {"path": None if path is None else str(path), "message": str(exc)}
-            )
-
-    def add_checks(self, checks: Sequence[ReplayCheck]) -> None:
-        """One entry per recording, with its replay check."""
-        for check in checks:
-            self.recordings.append(
-                {"path": None if check.path is None else str(check.path), "label": check.label,
-                 "steps": check.steps, "complete": check.complete, "replay": check.to_dict()}
-            )  # fmt: skip
-
-    def add_model(self, prepared: PreparedModel) -> None:
-        """The model used."""
-        fitted_on = None if prepared.fitted_on is None else str(prepared.fitted_on)
-        self.model = {"spec": prepared.spec, "steering_ratio": prepared.steering_ratio,
-                      "fitted_on": fitted_on}  # fmt: skip
-
-    def add_outcomes(self, key: str, outcomes: Sequence[RecordingOutcome]) -> None:
-        """Each outcome of a step under ``key`` of its recording: ``"model"`` (scores),
-        ``"estimator"`` (:class:`~estimators.offline.EstimatorRun`) or ``"frames"``
-        (frames written, folder); ``{"error": ...}`` for one that failed."""
-        for o in outcomes:
-            if o.error is not None:
-                value: dict[str, Any] = {"error": o.error}
-            elif key == "model":
-                value = {"scores": dict(o.value)}
-            elif key == "estimator":
-                value = _estimate_dict(o.value)
-            else:
-                written, folder = o.value
-                value = {"written": len(written), "directory": None if folder is None
-                         else str(folder)}  # fmt: skip
-            self.recordings[o.index][key] = json_clean(value)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The document: ``format``, ``version`` (hasa-env's), ``versions`` (as hasa-bench's
-        results.json), ``arguments``, ``model``, ``estimator_trust``, ``load_errors``,
-        ``recordings``, ``warnings`` (:attr:`WarningLog.entries`), ``error``, ``exit_status``;
-        NaN and infinities as None."""
-        found = versions()
-        return json_clean({
-            "format": REPLAY_FORMAT, "version": found.get("hasa-env"), "versions": found,
-            "arguments": self.arguments, "model": self.model,
-            "estimator_trust": self.estimator_trust, "load_errors": self.load_errors,
-            "recordings": self.recordings, "warnings": self.warnings.entries,
-            "error": self.error, "exit_status": self.exit_status,
-        })  # fmt: skip
-
-    def write(self, path: str | os.PathLike[str]) -> None:
-        """Write the document to ``path`` atomically (:func:`hasa_env.atomic.write_atomic`:
-        the old file or the whole new one, never half of it).
-
-        Raises:
-            OSError: it cannot be written.
-        """
-        text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
-        write_atomic(path, text + "\n")

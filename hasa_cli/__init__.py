@@ -48,6 +48,7 @@ __all__ = [
     "EXIT_PARTIAL",
     "EXIT_USAGE",
     "Stopped",
+    "add_speed_scaled_error_option",
     "add_trust_model_option",
     "add_version",
     "console_script",
@@ -243,6 +244,23 @@ def add_trust_model_option(parser: argparse.ArgumentParser, subject: str) -> Non
         help=f"let {subject} import the module its 'class' names when its type is not "
         "registered (searched in the working directory, the file's folder and the installed "
         "packages): a user model is code, importing it runs it; only for files you trust",
+    )
+
+
+def add_speed_scaled_error_option(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, what: str, instead: str, off: str
+) -> None:
+    """``--speed-scaled-error`` / ``--no-speed-scaled-error`` (default on): ``what`` (e.g. "fit
+    the built-in generalized model's") equation error fitted as the speed-scaled error of
+    docs/design.md §8.34, carried by its filter in place of ``instead``; ``off``: what the
+    filter uses without it."""
+    parser.add_argument(
+        "--speed-scaled-error",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help=f"{what} equation error as a coloured part scaled by (15 / v)^2 plus a white part, "
+        f"which its filter carries as a state in place of {instead} (default; "
+        f"--no-speed-scaled-error: {off}; docs/design.md §8.34)",
     )
 
 

@@ -54,6 +54,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_speed_scaled_error_option,
     add_trust_model_option,
     add_version,
     console_script,
@@ -265,14 +266,8 @@ def _add_generalized_options(group: argparse._ArgumentGroup) -> None:
         f"its equation error; the estimator compares the steering whitened by it (default "
         f"{DEFAULT_EQUATION_ERROR_ORDER}; 0: white, the paper's model; docs/design.md §8.32)",
     )
-    group.add_argument(
-        "--speed-scaled-error",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="fit the built-in generalized model's equation error as a coloured part scaled "
-        "by (15 / v)^2 plus a white part, which its filter carries as a state in place of the "
-        "whitening above (default; --no-speed-scaled-error: the whitening; docs/design.md "
-        "§8.34)",
+    add_speed_scaled_error_option(
+        group, "fit the built-in generalized model's", "the whitening above", "the whitening"
     )
     group.add_argument(
         "--generalized-orders",

@@ -14,8 +14,13 @@ recording in a directory and its subdirectories) it:
    ``generalized``), a saved model file (any registered type, user types
    included), a user model ``package.module:ClassName`` (imported from the
    working directory or the installed packages), or, with ``--fit``, the
-   model fitted on the first recording and scored on all of them (the
-   paper's protocol);
+   model fitted on the first recording (``--fit-on N``: the first N, each a run
+   of its own) and scored on all of them (the paper's protocol); a generalized
+   model so fitted gets its speed-scaled equation error (docs/design.md §8.34)
+   as hasa-bench fits its built-in one (:func:`benchmarks.speed_scaled.add_speed_scaled_error`:
+   on held-out residuals when N >= 2, in-sample on one recording;
+   ``--no-speed-scaled-error``: not fitted), and the log says its numbers and
+   whether held out, or that none was found;
 3. optionally (``--estimator``) runs the Gaussian-mixture EKF with that
    steering model over the recorded sensors and prints its lateral RMSE, the
    final weight of the true lane hypothesis and when it was first trusted
@@ -34,10 +39,14 @@ What loading repaired or tolerated in a recording (e.g. the partly written last 
 crashed recording, dropped) is printed on stderr first, a ``warning:`` line naming the file.
 
 With ``--json FILE`` it also writes what it found as one JSON document
-(:class:`benchmarks.recordings.ReplayDocument`; ``"format": "hasa_replay.results"``):
+(:class:`benchmarks.replay_document.ReplayDocument`; ``"format": "hasa_replay.results"``):
 ``version`` and ``versions`` (as hasa-bench's results.json), ``arguments`` (paths, atol,
-model, fit, steering, steering_ratio, estimator, lane_check), ``model`` (spec, steering ratio
-used, fitted_on), ``estimator_trust``, ``load_errors`` (``path``, ``message``), per recording
+model, fit, fit_on, speed_scaled_error, steering, steering_ratio, estimator, lane_check),
+``model`` (spec, steering ratio used, ``fitted_on``: the first recording fitted on, a path or
+null as before ``--fit-on``; ``fitted_on_recordings``: all of them, in order; and, as in
+hasa-bench's results.json, ``speed_scaled_error`` (coloured_std, correlation, white_std,
+reference_speed, or null), ``speed_scaled_held_out`` and ``speed_scaled_gain``, each null when
+not fitted), ``estimator_trust``, ``load_errors`` (``path``, ``message``), per recording
 (``recordings``) its ``path``, ``label``, ``steps``, ``complete``, its replay check
 (``replay``: ``matches``, ``text``, ``divergence``: ``row``, ``time``, ``column``,
 ``recorded``, ``replayed`` or null) and, where those steps ran, ``model`` (``scores``),
@@ -45,7 +54,7 @@ used, fitted_on), ``estimator_trust``, ``load_errors`` (``path``, ``message``), 
 trusted_from, final_decision, refused_by, trust_reasons) and ``frames``, each ``{"error": ...}``
 where the step failed; ``warnings``: each warning the run printed on stderr (still printed
 there), as ``recording`` (the path of the recording it arose on, null when none: the
-model's lane check, the trust lines), ``step`` (``load``, ``replay``, ``model``,
+model's lane check, the trust lines, a fit on several recordings), ``step`` (``load``, ``replay``, ``model``,
 ``estimator``, ``frames``), ``category`` (e.g. ``IdentifiabilityWarning``, a fit on the
 first recording that cannot tell the lanes apart; ``RecordingWarning``, step ``load``, what
 loading repaired in that recording) and ``message``; then ``error`` (why the
@@ -84,7 +93,6 @@ from benchmarks.recordings import (
     LaneKeepingError,
     ModelSetupError,
     PreparedModel,
-    ReplayDocument,
     check_recordings,
     describe_estimate,
     describe_trust,
@@ -94,6 +102,7 @@ from benchmarks.recordings import (
     score_recordings,
     warn_load_notes,
 )
+from benchmarks.replay_document import ReplayDocument
 from hasa_cli import (
     EXIT_ENVIRONMENT,
     EXIT_INTERRUPTED,
@@ -101,6 +110,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_speed_scaled_error_option,
     add_trust_model_option,
     add_version,
     console_script,
@@ -178,7 +188,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_trust_model_option(p, "a --model file")
     p.add_argument(
-        "--fit", action="store_true", help="fit --model on the first recording, score on all"
+        "--fit",
+        action="store_true",
+        help="fit --model on the first recording (--fit-on: the first N), score on all",
+    )
+    p.add_argument(
+        "--fit-on",
+        type=int,
+        default=None,
+        metavar="N",
+        help="with --fit, fit on the first N recordings loaded, each a run of its own (default "
+        "1); with N >= 2 a generalized model's speed-scaled equation error is fitted on "
+        "held-out residuals (each recording's from the model refitted on the others), as "
+        "hasa-bench fits it",
+    )
+    add_speed_scaled_error_option(
+        p, "with --fit, fit a generalized model's", "its AR/white level", "that level"
     )
     p.add_argument(
         "--steering",
@@ -234,6 +259,8 @@ def _arguments(args: argparse.Namespace) -> dict[str, Any]:
         "atol": args.atol,
         "model": args.model,
         "fit": args.fit,
+        "fit_on": (args.fit_on or 1) if args.fit else None,
+        "speed_scaled_error": args.speed_scaled_error if args.fit else None,
         "steering": args.steering,
         "steering_ratio": args.steering_ratio,
         "estimator": args.estimator,
@@ -261,6 +288,8 @@ def _prepare_and_score(
         spec,
         recordings,
         fit=args.fit,
+        fit_on=args.fit_on or 1,
+        speed_scaled_error=args.speed_scaled_error,
         steering=args.steering,
         steering_ratio=args.steering_ratio,
         lane_check=args.estimator and not args.no_lane_check,
@@ -405,6 +434,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.fit and args.model is None:
         p.error(
             "--fit needs --model (two-point, generalized, a model file or package.module:Class)"
+        )
+    if args.fit_on is not None and not args.fit:
+        p.error("--fit-on needs --fit")
+    if args.fit_on is not None and args.fit_on < 1:
+        p.error(
+            "--fit-on must be an integer from 1 to the number of recordings loaded, "
+            f"got {args.fit_on!r}"
         )
     if not (math.isfinite(args.atol) and args.atol >= 0):
         p.error(f"--atol must be a finite tolerance >= 0, got {args.atol!r}")

@@ -14,7 +14,7 @@ from _recording_files import crash, tamper
 
 import benchmarks.recordings as recordings_module
 import hasa_cli.replay as replay
-from benchmarks.recordings import REPLAY_FORMAT
+from benchmarks.replay_document import REPLAY_FORMAT
 from hasa_cli import EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_USAGE
 from hasa_cli.replay import main
 
@@ -93,10 +93,13 @@ def test_model_scores_and_estimator_results_are_those_printed(files, tmp_path, c
     assert code == EXIT_OK and doc["exit_status"] == EXIT_OK
     spec = str(files["model.json"])
     assert doc["arguments"] | {"paths": None} == {
-        "paths": None, "atol": 0.0, "model": spec, "fit": False, "steering": None,
-        "steering_ratio": None, "estimator": True, "lane_check": False,
+        "paths": None, "atol": 0.0, "model": spec, "fit": False, "fit_on": None,
+        "speed_scaled_error": None, "steering": None, "steering_ratio": None, "estimator": True,
+        "lane_check": False,
     }  # fmt: skip
-    assert doc["model"] == {"spec": spec, "steering_ratio": 1.0, "fitted_on": None}
+    assert doc["model"] == {"spec": spec, "steering_ratio": 1.0, "fitted_on": None,
+                            "fitted_on_recordings": [], "speed_scaled_error": None,
+                            "speed_scaled_held_out": None, "speed_scaled_gain": None}  # fmt: skip
     shared = next(ln for ln in lines if ln.startswith(f"model {spec}: estimator trust: "))
     assert shared.endswith(f"estimator trust: {doc['estimator_trust']}")
     for rec in doc["recordings"]:

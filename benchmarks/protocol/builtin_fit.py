@@ -1,24 +1,21 @@
 """How the benchmark fits its built-in generalized model: its orders (the paper's, or by BIC on
-the training runs), its equation error's autoregression (docs/design.md §8.32) and its
-speed-scaled equation error, fitted on held-out residuals (docs/design.md §8.34)."""
+the training runs) and its equation error's autoregression (docs/design.md §8.32); its
+speed-scaled equation error is fitted on held-out residuals by
+:func:`benchmarks.speed_scaled.add_speed_scaled_error` (docs/design.md §8.34), which
+``hasa-replay --fit`` uses too."""
 
 from __future__ import annotations
 
-import copy
-import functools
 import warnings
 from typing import Any
 
 import pandas as pd
 
-from estimators.tuning import held_out_speed_scaled_error, speed_scaled_gain
-from hasa_env.steering import GeneralizedModel, SteeringModel
+from hasa_env.steering import GeneralizedModel
 from hasa_env.steering.order import select_order
 
 __all__ = [
-    "add_speed_scaled_error",
     "builtin_generalized",
-    "speed_scaled_description",
     "with_selected_orders",
 ]
 
@@ -58,38 +55,3 @@ def with_selected_orders(
         "n_common": int(selection.n_common),
         "candidates": len(selection.table),
     }
-
-
-def add_speed_scaled_error(
-    model: GeneralizedModel,
-    fitted: GeneralizedModel,
-    runs: list[pd.DataFrame],
-    sensor_std: float,
-    info: dict[str, Any],
-) -> None:
-    """Give the built-in generalized model ``fitted`` (``model`` fitted on ``runs``) its
-    speed-scaled equation error, fitted on held-out residuals (each run's from the model
-    refitted on the others; :func:`estimators.tuning.held_out_speed_scaled_error`), and record
-    in ``info`` the error (``speed_scaled_error``), whether it was held out
-    (``speed_scaled_held_out``) and its gain over one white level on ``runs``
-    (``speed_scaled_gain``, what the trust rule reads)."""
-    found, info["speed_scaled_held_out"] = held_out_speed_scaled_error(
-        fitted, runs, functools.partial(_refit, model, sensor_std=sensor_std)
-    )
-    fitted.equation_error_speed_scaled = found
-    info["speed_scaled_error"] = speed_scaled_description(fitted)
-    info["speed_scaled_gain"] = speed_scaled_gain(fitted, runs)
-
-
-def _refit(model: GeneralizedModel, runs: list[pd.DataFrame], *, sensor_std: float) -> Any:
-    """``model`` fitted on ``runs`` as :func:`_fit_one` fits it, its warnings not shown (they
-    are the fit's own, reported once)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return copy.deepcopy(model).fit(runs, sensor_std=sensor_std)
-
-
-def speed_scaled_description(fitted: SteeringModel) -> dict[str, float] | None:
-    """The model's speed-scaled equation error (docs/design.md §8.34) as numbers; None: none."""
-    found = getattr(fitted, "equation_error_speed_scaled", None)
-    return None if found is None else found.to_dict()

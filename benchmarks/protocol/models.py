@@ -16,11 +16,7 @@ from typing import Any
 
 import pandas as pd
 
-from benchmarks.protocol.builtin_fit import (
-    add_speed_scaled_error,
-    builtin_generalized,
-    speed_scaled_description,
-)
+from benchmarks.protocol.builtin_fit import builtin_generalized
 from benchmarks.protocol.config import (
     BASELINES,
     BUILTIN_MODELS,
@@ -35,6 +31,7 @@ from benchmarks.protocol.isolation import (
     guarded_in_time,
     run_isolated,
 )
+from benchmarks.speed_scaled import add_speed_scaled_error, speed_scaled_description
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import (

@@ -1,0 +1,62 @@
+"""The speed-scaled equation error of a fitted generalized model (docs/design.md §8.34), fitted
+on held-out residuals: one implementation for ``hasa-bench``'s built-in generalized model
+(:mod:`benchmarks.protocol.models`) and ``hasa-replay --fit`` (:mod:`benchmarks.recordings`).
+
+A module of its own, not of :mod:`benchmarks.protocol`, so that ``hasa-replay`` does not import
+the whole protocol package."""
+
+from __future__ import annotations
+
+import copy
+import functools
+import warnings
+from typing import Any
+
+import pandas as pd
+
+from estimators.tuning import held_out_speed_scaled_error, speed_scaled_gain
+from hasa_env.sim.road import Road
+from hasa_env.steering import GeneralizedModel, SteeringModel
+
+__all__ = ["add_speed_scaled_error", "speed_scaled_description"]
+
+
+def add_speed_scaled_error(
+    model: GeneralizedModel,
+    fitted: GeneralizedModel,
+    runs: list[pd.DataFrame],
+    sensor_std: float,
+    info: dict[str, Any],
+    *,
+    road: Road | None = None,
+) -> None:
+    """Give the generalized model ``fitted`` (``model`` fitted on ``runs``, on ``road``; None:
+    each run's from its metadata) its speed-scaled equation error, fitted on held-out residuals
+    (each run's from the model refitted on the others; with one run, ``fitted``'s in-sample
+    residuals; :func:`estimators.tuning.held_out_speed_scaled_error`), and record in ``info``
+    the error (``speed_scaled_error``, :func:`speed_scaled_description`; None: none found, e.g.
+    a fit on the boundary or too few residuals), whether it was held out
+    (``speed_scaled_held_out``) and its gain over one white level on ``runs``
+    (``speed_scaled_gain``, what the trust rule reads)."""
+    found, info["speed_scaled_held_out"] = held_out_speed_scaled_error(
+        fitted, runs, functools.partial(_refit, model, sensor_std=sensor_std, road=road)
+    )
+    fitted.equation_error_speed_scaled = found
+    info["speed_scaled_error"] = speed_scaled_description(fitted)
+    info["speed_scaled_gain"] = speed_scaled_gain(fitted, runs)
+
+
+def _refit(
+    model: GeneralizedModel, runs: list[pd.DataFrame], *, sensor_std: float, road: Road | None
+) -> Any:
+    """``model`` fitted on ``runs`` as the fit ``fitted`` came from, its warnings not shown
+    (they are the fit's own, reported once)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return copy.deepcopy(model).fit(runs, road, sensor_std=sensor_std)
+
+
+def speed_scaled_description(fitted: SteeringModel) -> dict[str, float] | None:
+    """The model's speed-scaled equation error (docs/design.md §8.34) as numbers; None: none."""
+    found = getattr(fitted, "equation_error_speed_scaled", None)
+    return None if found is None else found.to_dict()
