@@ -48,10 +48,12 @@ __all__ = [
     "EXIT_PARTIAL",
     "EXIT_USAGE",
     "Stopped",
+    "add_equation_error_order_option",
     "add_speed_scaled_error_option",
     "add_trust_model_option",
     "add_version",
     "console_script",
+    "equation_error_order",
     "error",
     "os_error_behind",
     "output_file_problem",
@@ -261,6 +263,46 @@ def add_speed_scaled_error_option(
         help=f"{what} equation error as a coloured part scaled by (15 / v)^2 plus a white part, "
         f"which its filter carries as a state in place of {instead} (default; "
         f"--no-speed-scaled-error: {off}; docs/design.md §8.34)",
+    )
+
+
+def equation_error_order(text: str) -> int:
+    """An argparse type (``--equation-error-order``): lags of the equation error's
+    autoregression, an integer from 0 (white) to
+    :data:`hasa_env.steering.equation_error.MAX_EQUATION_ERROR_ORDER`."""
+    from hasa_env.steering.equation_error import (  # start-up: only when the option is given
+        MAX_EQUATION_ERROR_ORDER,
+    )
+
+    try:
+        order = int(text)
+    except ValueError:
+        order = -1
+    if not 0 <= order <= MAX_EQUATION_ERROR_ORDER:
+        raise argparse.ArgumentTypeError(
+            f"must be an integer in [0, {MAX_EQUATION_ERROR_ORDER}] (0: white), "
+            f"got {printable(text)!r}"
+        )
+    return order
+
+
+def add_equation_error_order_option(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+    subject: str,
+    default: int | None,
+    shown_default: str,
+) -> None:
+    """``--equation-error-order P`` (:func:`equation_error_order`): lags of the autoregression
+    ``subject`` (e.g. "the built-in generalized model's fit") estimates for its equation error
+    (docs/design.md §8.32); ``default`` as the help shows it, ``shown_default``."""
+    parser.add_argument(
+        "--equation-error-order",
+        type=equation_error_order,
+        default=default,
+        metavar="P",
+        help=f"lags of the autoregression {subject} estimates for its equation error; the "
+        f"estimator compares the steering whitened by it (default {shown_default}; 0: white, "
+        "the paper's model; docs/design.md §8.32)",
     )
 
 

@@ -54,6 +54,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_equation_error_order_option,
     add_speed_scaled_error_option,
     add_trust_model_option,
     add_version,
@@ -257,14 +258,11 @@ def _add_recording_options(parser: argparse.ArgumentParser) -> None:
 
 def _add_generalized_options(group: argparse._ArgumentGroup) -> None:
     """How the built-in generalized model is fitted: its equation error and its orders."""
-    group.add_argument(
-        "--equation-error-order",
-        type=int,
-        default=DEFAULT_EQUATION_ERROR_ORDER,
-        metavar="P",
-        help="lags of the autoregression the built-in generalized model's fit estimates for "
-        f"its equation error; the estimator compares the steering whitened by it (default "
-        f"{DEFAULT_EQUATION_ERROR_ORDER}; 0: white, the paper's model; docs/design.md §8.32)",
+    add_equation_error_order_option(
+        group,
+        "the built-in generalized model's fit",
+        DEFAULT_EQUATION_ERROR_ORDER,
+        str(DEFAULT_EQUATION_ERROR_ORDER),
     )
     add_speed_scaled_error_option(
         group, "fit the built-in generalized model's", "the whitening above", "the whitening"

@@ -42,6 +42,10 @@ def test_hasa_bench_paper_refuses_an_out_of_range_noise_in_one_line(tmp_path):
         ("--imu-noise", "nan", "argument --imu-noise: config key 'noise.imu' must be a finite "
                                "number in [0, 50] m/s^2, got nan"),
         ("--steering-noise", "lots", "argument --steering-noise: expected a number, got 'lots'"),
+        ("--equation-error-order", "11", "argument --equation-error-order: must be an integer "
+                                         "in [0, 10] (0: white), got '11'"),
+        ("--equation-error-order", "-1", "argument --equation-error-order: must be an integer "
+                                         "in [0, 10] (0: white), got '-1'"),
     ],
 )  # fmt: skip
 def test_hasa_bench_range_errors_name_the_option(tmp_path, capsys, option, value, expected):
