@@ -8,9 +8,10 @@ repaired or tolerated in each is shown by :func:`warn_load_notes`):
    (:func:`hasa_env.recording.check_replay`) and compare, bit for bit or within
    ``atol``;
 2. :func:`prepare_model`: a steering model (:func:`hasa_env.steering.loading.load_model`),
-   optionally fitted on the first recordings (a generalized model with its speed-scaled
-   equation error, as ``hasa-bench`` fits it), with its steering ratio (model units
-   per recorded road-wheel rad) and where the estimator trusts it (:meth:`PreparedModel.trust`), and
+   optionally fitted on the first recordings (a generalized model with its equation error's
+   autoregression and speed-scaled equation error, as ``hasa-bench`` fits it), with its
+   steering ratio (model units per recorded road-wheel rad) and where the estimator trusts it
+   (:meth:`PreparedModel.trust`), and
    :func:`score_recordings`: its one-step-ahead scores on every recording
    (:func:`hasa_env.steering.score`: RMSE, R^2, R^2 of the increments, Ljung-Box p);
 3. :func:`estimate_recordings`: the Gaussian-mixture EKF with that model over each
@@ -35,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from benchmarks.defaults import DEFAULT_EQUATION_ERROR_ORDER
 from benchmarks.documents import json_clean
 from benchmarks.speed_scaled import add_speed_scaled_error
 from estimators.offline import EstimatorRun, estimate_recording
@@ -44,7 +46,13 @@ from hasa_env.recording import RecordingWarning, check_replay, load_notes
 from hasa_env.render.frames import write_frames
 from hasa_env.sim.road import Road
 from hasa_env.steering import GeneralizedModel, SteeringModel, score
-from hasa_env.steering.loading import default_steering_ratio, in_model_units, load_model
+from hasa_env.steering.equation_error import MAX_EQUATION_ERROR_ORDER
+from hasa_env.steering.loading import (
+    default_steering_ratio,
+    in_model_units,
+    load_model,
+    model_spec_kind,
+)
 
 __all__ = [
     "MAX_STEERING_RATIO",
@@ -58,6 +66,7 @@ __all__ = [
     "TrustLines",
     "WarningLog",
     "check_recordings",
+    "describe_equation_error",
     "describe_estimate",
     "describe_speed_scaled",
     "describe_trust",
@@ -265,6 +274,7 @@ def prepare_model(
     fit: bool = False,
     fit_on: int = 1,
     speed_scaled_error: bool = True,
+    equation_error_order: int | None = None,
     steering: str | None = None,
     steering_ratio: float | None = None,
     lane_check: bool = False,
@@ -274,25 +284,32 @@ def prepare_model(
 ) -> PreparedModel:
     """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
     first ``fit_on`` recordings, each a run of its own (their ``steering`` signal: "measured"
-    or "applied"; None: the model's); a generalized model (:class:`GeneralizedModel`, not a
-    user subclass) fitted so gets its speed-scaled equation error (``speed_scaled_error``;
-    docs/design.md §8.34) as ``hasa-bench`` fits its built-in one
-    (:func:`benchmarks.speed_scaled.add_speed_scaled_error`: on held-out residuals when
+    or "applied"; None: the model's). A generalized model (:class:`GeneralizedModel`, not a
+    user subclass) fitted so is fitted as ``hasa-bench`` fits its built-in one: its fit
+    estimates an ``equation_error_order``-lag autoregression of its equation error
+    (docs/design.md §8.32; None: hasa-bench's order,
+    :data:`~benchmarks.defaults.DEFAULT_EQUATION_ERROR_ORDER`, for the ``generalized``
+    preset, and its own for a model file or class, whose structure a fit keeps), and it gets
+    its speed-scaled equation error (``speed_scaled_error``; docs/design.md §8.34;
+    :func:`benchmarks.speed_scaled.add_speed_scaled_error`: on held-out residuals when
     ``fit_on`` >= 2, else in-sample). The steering ratio is ``steering_ratio`` or the default
     of the spec (:func:`default_steering_ratio`: 15 for a paper preset as given, else 1). With
     ``lane_check`` the model must keep a lane when it steers itself
     (:func:`hasa_env.drivers.require_lane_keeping`: 4 cars, 30 s, the straight track).
-    ``say`` hears what was fitted (the recordings, the speed-scaled error's numbers and whether
-    held out, or that none was found) and the ratio used. ``trust_module``: a model file of a
-    type not registered yet imports the module its ``"class"`` names
-    (:func:`hasa_env.steering.loading.load_model_file`). ``log``: the warnings shown by the fit
+    ``say`` hears what was fitted (the recordings, the equation error's autoregression and its
+    order, the speed-scaled error's numbers and whether held out, or that none was found) and
+    the ratio used. ``trust_module``: a model file of a type not registered yet imports the
+    module its ``"class"`` names (:func:`hasa_env.steering.loading.load_model_file`).
+    ``log``: the warnings shown by the fit
     are the recording's fitted on (step ``"model"``; e.g. an
     :class:`~hasa_env.steering.identifiability.IdentifiabilityWarning`), or no one
     recording's when fitted on several.
 
     Raises:
         ModelSetupError: the model does not load, has no parameters and ``fit`` is off,
-            ``fit_on`` is not an integer from 1 to the number of recordings, or
+            ``fit_on`` is not an integer from 1 to the number of recordings,
+            ``equation_error_order`` is not None or an integer in [0,
+            :data:`~hasa_env.steering.equation_error.MAX_EQUATION_ERROR_ORDER`], or
             ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
@@ -301,11 +318,17 @@ def prepare_model(
             f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
             f"road-wheel rad), got {steering_ratio!r}"
         )
-    if fit and (isinstance(fit_on, bool) or not isinstance(fit_on, int)
-                or not 1 <= fit_on <= len(recordings)):  # fmt: skip
+    if fit and not _is_int_in(fit_on, 1, len(recordings)):
         raise ModelSetupError(
             f"--fit-on must be an integer from 1 to {len(recordings)} (the recordings loaded), "
             f"got {fit_on!r}"
+        )
+    if equation_error_order is not None and not _is_int_in(
+        equation_error_order, 0, MAX_EQUATION_ERROR_ORDER
+    ):
+        raise ModelSetupError(
+            f"--equation-error-order must be an integer in [0, {MAX_EQUATION_ERROR_ORDER}] "
+            f"(0: white), got {equation_error_order!r}"
         )
     try:
         model = load_model(spec, recordings[0].dt, trust_module=trust_module)
@@ -321,7 +344,9 @@ def prepare_model(
     fitted_on: tuple[Path | None, ...] = ()
     found = None
     if fit:
-        model, found = _fit(spec, model, recordings[:fit_on], speed_scaled_error, say, log)
+        model, found = _fit(
+            spec, model, recordings[:fit_on], speed_scaled_error, equation_error_order, say, log
+        )
         fitted_on = tuple(rec.path for rec in recordings[:fit_on])
     ratio = default_steering_ratio(spec, fit) if steering_ratio is None else steering_ratio
     say(f"model {spec}: steering ratio {ratio:g} (model units per recorded road-wheel rad)")
@@ -333,17 +358,27 @@ def prepare_model(
     return PreparedModel(spec, model, ratio, fitted_on, found)
 
 
+def _is_int_in(value: object, low: int, high: int) -> bool:
+    """Whether ``value`` is an integer (not a bool) in [``low``, ``high``]."""
+    return isinstance(value, int) and not isinstance(value, bool) and low <= value <= high
+
+
 def _fit(
     spec: str,
     model: SteeringModel,
     recordings: Sequence[Any],
     speed_scaled_error: bool,
+    equation_error_order: int | None,
     say: Callable[[str], None],
     log: WarningLog | None,
 ) -> tuple[SteeringModel, dict[str, Any] | None]:
     """``model`` fitted on ``recordings`` (each a run of its own; on their road when they
     share one, else each run's from its metadata) as :func:`prepare_model` says, and what
     fitting its speed-scaled equation error found (None: not fitted)."""
+    model, order_how = _with_equation_error_order(spec, model, equation_error_order)
+    if order_how is None and equation_error_order is not None:
+        say(f"model {spec}: --equation-error-order not applied (it sets a generalized model's: "
+            "the preset's or a GeneralizedModel file's); this model keeps its own")  # fmt: skip
     runs = [rec.data for rec in recordings]
     road = _shared_road(recordings)
     where = recordings[0].path if len(recordings) == 1 else None
@@ -355,6 +390,8 @@ def _fit(
             raise ModelSetupError(f"cannot fit {spec} on {names}: {exc}") from None
         each = "" if len(runs) == 1 else f" ({len(runs)} recordings, each a run of its own)"
         say(f"model {spec}: fitted on {names}{each}")
+        if order_how is not None:
+            say(f"model {spec}: {describe_equation_error(fitted)} ({order_how})")
         if type(model) is not GeneralizedModel or fitted.arx() is None:
             return fitted, None  # the built-in generalized model's error only, as hasa-bench
         if not speed_scaled_error:
@@ -364,6 +401,35 @@ def _fit(
         add_speed_scaled_error(model, fitted, runs, 0.0, found, road=road)
     say(f"model {spec}: {describe_speed_scaled(found)}")
     return fitted, found
+
+
+def _with_equation_error_order(
+    spec: str, model: SteeringModel, order: int | None
+) -> tuple[SteeringModel, str | None]:
+    """``model`` to fit with ``order`` lags of its equation error's autoregression, as
+    :func:`prepare_model` says (None: hasa-bench's for the ``generalized`` preset, its own
+    for another), and how the order was chosen, for the log; a model other than a
+    :class:`GeneralizedModel` as it is, and None."""
+    if type(model) is not GeneralizedModel:
+        return model, None
+    if order is None and model_spec_kind(spec) != "preset":
+        return model, "the model's own order; --equation-error-order sets another"
+    how = f"--equation-error-order {order}"
+    if order is None:
+        order = DEFAULT_EQUATION_ERROR_ORDER
+        how = f"--equation-error-order {order}: hasa-bench's default"
+    structure = model.structure() | {"equation_error_order": order}  # as hasa-bench builds it
+    return GeneralizedModel(**structure, **model.common_kwargs()), how
+
+
+def describe_equation_error(model: SteeringModel) -> str:
+    """A fitted model's equation error (docs/design.md §8.32) in one phrase: white, or the
+    autoregression its fit estimated."""
+    order = int(getattr(model, "equation_error_order", 0))
+    ar = ", ".join(f"{r:.3g}" for r in getattr(model, "equation_error_ar", ()) or ())
+    if not order or not ar:  # none found: too few residuals, or not stationary
+        return "white equation error" + (f" (no AR({order}) found)" if order else "")
+    return f"equation error AR({order}): {ar}"
 
 
 def _shared_road(recordings: Sequence[Any]) -> Road | None:

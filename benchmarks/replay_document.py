@@ -97,13 +97,18 @@ class ReplayDocument:
         it was fitted on, as before ``--fit-on``; None: as loaded), ``fitted_on_recordings``
         (all of them, in order; empty: as loaded) and its fitted speed-scaled equation error's
         ``speed_scaled_error`` (numbers, or None), ``speed_scaled_held_out`` and
-        ``speed_scaled_gain`` (each None when it was not fitted)."""
+        ``speed_scaled_gain`` (each None when it was not fitted); ``equation_error_order``, the
+        lags of its equation error's autoregression (0: white), and ``equation_error_ar``, the
+        autoregression (empty: white; as hasa-bench's results.json)."""
         paths = [None if path is None else str(path) for path in prepared.fitted_on]
         found = prepared.speed_scaled or {}
+        model = prepared.model
         self.model = json_clean({
             "spec": prepared.spec, "steering_ratio": prepared.steering_ratio,
             "fitted_on": paths[0] if paths else None, "fitted_on_recordings": paths,
             **{key: found.get(key) for key in SPEED_SCALED_KEYS},
+            "equation_error_order": int(getattr(model, "equation_error_order", 0)),
+            "equation_error_ar": list(getattr(model, "equation_error_ar", ()) or ()),
         })  # fmt: skip
 
     def add_outcomes(self, key: str, outcomes: Sequence[RecordingOutcome]) -> None:

@@ -16,11 +16,14 @@ recording in a directory and its subdirectories) it:
    working directory or the installed packages), or, with ``--fit``, the
    model fitted on the first recording (``--fit-on N``: the first N, each a run
    of its own) and scored on all of them (the paper's protocol); a generalized
-   model so fitted gets its speed-scaled equation error (docs/design.md §8.34)
-   as hasa-bench fits its built-in one (:func:`benchmarks.speed_scaled.add_speed_scaled_error`:
-   on held-out residuals when N >= 2, in-sample on one recording;
-   ``--no-speed-scaled-error``: not fitted), and the log says its numbers and
-   whether held out, or that none was found;
+   model so fitted is fitted as hasa-bench fits its built-in one: its equation error's
+   autoregression of ``--equation-error-order`` lags (docs/design.md §8.32; default
+   hasa-bench's, 2, for the ``generalized`` preset, a model file's own order for a file)
+   and its speed-scaled equation error (docs/design.md §8.34;
+   :func:`benchmarks.speed_scaled.add_speed_scaled_error`: on held-out residuals when
+   N >= 2, in-sample on one recording; ``--no-speed-scaled-error``: not fitted, the filter
+   whitens by the autoregression instead), and the log says the autoregression and its
+   order, the speed-scaled error's numbers and whether held out, or that none was found;
 3. optionally (``--estimator``) runs the Gaussian-mixture EKF with that
    steering model over the recorded sensors and prints its lateral RMSE, the
    final weight of the true lane hypothesis and when it was first trusted
@@ -41,12 +44,14 @@ crashed recording, dropped) is printed on stderr first, a ``warning:`` line nami
 With ``--json FILE`` it also writes what it found as one JSON document
 (:class:`benchmarks.replay_document.ReplayDocument`; ``"format": "hasa_replay.results"``):
 ``version`` and ``versions`` (as hasa-bench's results.json), ``arguments`` (paths, atol,
-model, fit, fit_on, speed_scaled_error, steering, steering_ratio, estimator, lane_check),
+model, fit, fit_on, speed_scaled_error, equation_error_order: as given, null when not given or
+without --fit; steering, steering_ratio, estimator, lane_check),
 ``model`` (spec, steering ratio used, ``fitted_on``: the first recording fitted on, a path or
 null as before ``--fit-on``; ``fitted_on_recordings``: all of them, in order; and, as in
 hasa-bench's results.json, ``speed_scaled_error`` (coloured_std, correlation, white_std,
 reference_speed, or null), ``speed_scaled_held_out`` and ``speed_scaled_gain``, each null when
-not fitted), ``estimator_trust``, ``load_errors`` (``path``, ``message``), per recording
+not fitted; ``equation_error_order``, the order used, and ``equation_error_ar``, its
+autoregression, empty when white), ``estimator_trust``, ``load_errors`` (``path``, ``message``), per recording
 (``recordings``) its ``path``, ``label``, ``steps``, ``complete``, its replay check
 (``replay``: ``matches``, ``text``, ``divergence``: ``row``, ``time``, ``column``,
 ``recorded``, ``replayed`` or null) and, where those steps ran, ``model`` (``scores``),
@@ -88,6 +93,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from benchmarks.defaults import DEFAULT_EQUATION_ERROR_ORDER
 from benchmarks.recordings import (
     MAX_STEERING_RATIO,
     LaneKeepingError,
@@ -110,6 +116,7 @@ from hasa_cli import (
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
+    add_equation_error_order_option,
     add_speed_scaled_error_option,
     add_trust_model_option,
     add_version,
@@ -205,6 +212,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_speed_scaled_error_option(
         p, "with --fit, fit a generalized model's", "its AR/white level", "that level"
     )
+    add_equation_error_order_option(
+        p,
+        "a generalized model's fit (--fit)",
+        None,
+        f"{DEFAULT_EQUATION_ERROR_ORDER}, hasa-bench's, for the generalized preset; a model "
+        "file's own order for a file",
+    )
     p.add_argument(
         "--steering",
         choices=("measured", "applied"),
@@ -261,6 +275,7 @@ def _arguments(args: argparse.Namespace) -> dict[str, Any]:
         "fit": args.fit,
         "fit_on": (args.fit_on or 1) if args.fit else None,
         "speed_scaled_error": args.speed_scaled_error if args.fit else None,
+        "equation_error_order": args.equation_error_order if args.fit else None,
         "steering": args.steering,
         "steering_ratio": args.steering_ratio,
         "estimator": args.estimator,
@@ -290,6 +305,7 @@ def _prepare_and_score(
         fit=args.fit,
         fit_on=args.fit_on or 1,
         speed_scaled_error=args.speed_scaled_error,
+        equation_error_order=args.equation_error_order,
         steering=args.steering,
         steering_ratio=args.steering_ratio,
         lane_check=args.estimator and not args.no_lane_check,
@@ -437,6 +453,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if args.fit_on is not None and not args.fit:
         p.error("--fit-on needs --fit")
+    if args.equation_error_order is not None and not args.fit:
+        p.error("--equation-error-order needs --fit")
     if args.fit_on is not None and args.fit_on < 1:
         p.error(
             "--fit-on must be an integer from 1 to the number of recordings loaded, "

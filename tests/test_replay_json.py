@@ -94,12 +94,13 @@ def test_model_scores_and_estimator_results_are_those_printed(files, tmp_path, c
     spec = str(files["model.json"])
     assert doc["arguments"] | {"paths": None} == {
         "paths": None, "atol": 0.0, "model": spec, "fit": False, "fit_on": None,
-        "speed_scaled_error": None, "steering": None, "steering_ratio": None, "estimator": True,
-        "lane_check": False,
+        "speed_scaled_error": None, "equation_error_order": None, "steering": None,
+        "steering_ratio": None, "estimator": True, "lane_check": False,
     }  # fmt: skip
     assert doc["model"] == {"spec": spec, "steering_ratio": 1.0, "fitted_on": None,
                             "fitted_on_recordings": [], "speed_scaled_error": None,
-                            "speed_scaled_held_out": None, "speed_scaled_gain": None}  # fmt: skip
+                            "speed_scaled_held_out": None, "speed_scaled_gain": None,
+                            "equation_error_order": 0, "equation_error_ar": []}  # fmt: skip
     shared = next(ln for ln in lines if ln.startswith(f"model {spec}: estimator trust: "))
     assert shared.endswith(f"estimator trust: {doc['estimator_trust']}")
     for rec in doc["recordings"]:
