@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 import pytest
+from _recording_files import crash
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -490,6 +491,22 @@ def test_load_recordings_reports_the_corrupt_file_and_loads_the_rest(tmp_path):
     assert "run_001.csv, line 3" in str(info.value) and len(info.value.loaded) == 2
     with pytest.raises(FileNotFoundError):
         load_recordings(tmp_path / "nope")
+
+
+def test_load_recordings_warns_what_loading_repaired_from_the_callers_line(tmp_path):
+    """A crashed recording's note (its cut last line, dropped) is one RecordingWarning naming
+    the file, shown at the line that called load_recordings (hasa_env.recording.warn_load_notes);
+    the complete recording beside it adds none."""
+    for seed in range(2):
+        _record(tmp_path, 4, seed=seed)
+    crashed = tmp_path / "run_001.csv"
+    crash(crashed)
+    with pytest.warns(RecordingWarning) as caught:
+        recs = load_recordings(tmp_path)
+    (note,) = [w for w in caught if issubclass(w.category, RecordingWarning)]
+    assert str(note.message) == recs[1].warnings[0]
+    assert str(note.message).startswith(f"{crashed}: dropped the partly written line ")
+    assert note.filename == __file__
 
 
 # --------------------------------------------------------- save and compare

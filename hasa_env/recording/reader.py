@@ -336,9 +336,7 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
         raise error
     for e in errors:
         warnings.warn(f"skipped corrupt recording: {e}", RecordingWarning, stacklevel=2)
-    for rec in good:
-        for note in rec.warnings:
-            warnings.warn(note, RecordingWarning, stacklevel=2)
+    warn_load_notes(good, stacklevel=2)  # each names its file, shown where this was called
     return result
 
 
@@ -426,13 +424,15 @@ def load_notes(rec: Recording) -> list[str]:
     return [note if note.startswith(prefix) else prefix + note for note in rec.warnings]
 
 
-def warn_load_notes(recordings: Iterable[Recording]) -> None:
+def warn_load_notes(recordings: Iterable[Recording], *, stacklevel: int = 1) -> None:
     """Show each recording's :func:`load_notes` as a :class:`RecordingWarning`, in order: what
     the quiet loaders (:func:`load_paths`, :func:`load_any`) kept in the recordings'
-    ``warnings``. The programs that load recordings call it once per loaded recording."""
+    ``warnings``. The programs that load recordings call it once per loaded recording.
+    ``stacklevel``: where the warnings say they arose, counted from the caller (1: the line
+    that calls this; 2: its caller's, as :func:`load_recordings` shows them)."""
     for rec in recordings:
         for note in load_notes(rec):
-            warnings.warn(note, RecordingWarning, stacklevel=2)
+            warnings.warn(note, RecordingWarning, stacklevel=stacklevel + 1)
 
 
 # -------------------------------------------------------------------- Parquet
