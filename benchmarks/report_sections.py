@@ -394,14 +394,29 @@ _CHANNEL_COLUMNS = [
     Column("steering_mismatch_share", "model mismatch", percent),
     Column("steering_tempered_model_error_share", "tempered: model error", percent),
     Column("steering_tempered_autocorrelation_share", "tempered: autocorrelation", percent),
+    Column("least_live_share", "not live: the 5 least-live drivers' share", percent),
 ]
+LEAST_LIVE_DRIVERS = 5
+
+
+def least_live_share(runs: pd.DataFrame, drivers: int = LEAST_LIVE_DRIVERS) -> float:
+    """The share of the time the steering was not live, summed over ``runs`` (one
+    estimator's, with ``seed``, ``driver`` and ``steering_live_share`` columns), that the
+    ``drivers`` drivers (seed, name) with the most of it hold: near 1, a few drivers make the
+    shortfall (docs/design.md §8.35). NaN: no time not live, or no driver columns."""
+    if not {"seed", "driver", "steering_live_share"} <= set(runs.columns):
+        return float("nan")
+    keys = [runs["seed"], runs["driver"].astype(str)]
+    not_live = (1.0 - runs["steering_live_share"]).groupby(keys).sum()
+    total = float(not_live.sum())
+    return float(not_live.nlargest(drivers).sum() / total) if total > 0 else float("nan")
 
 
 def channel_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
     """Per estimator with a steering channel, the mean over its main-track runs of each share
     of :func:`estimators.calibration.steering_channel_shares` (the per-run columns of
     ``runs_estimation``; rows from before these columns give none)."""
-    keys = [str(c.key) for c in _CHANNEL_COLUMNS[2:]]
+    keys = [str(c.key) for c in _CHANNEL_COLUMNS[2:-1]]
     frame = pd.DataFrame(result.runs_estimation)
     if frame.empty or not set(keys) <= set(frame.columns):
         return []
@@ -409,6 +424,7 @@ def channel_rows(result: BenchmarkResult) -> list[dict[str, Any]]:
     main = main[main["steering_live_share"].notna()]
     table = main.groupby("model", sort=False)[keys].mean()
     table.insert(0, "runs", main.groupby("model", sort=False).size())
+    table["least_live_share"] = [least_live_share(main[main["model"] == m]) for m in table.index]
     return [{"model": model, **row} for model, row in table.to_dict("index").items()]
 
 
@@ -419,7 +435,10 @@ def _channel_section(result: BenchmarkResult) -> Section:
         "run's share of its steps, docs/design.md §8.14): live (counted at half its weight or "
         "more), off by the speed or curvature rule, unused (reading missing or gated), in "
         "model mismatch, or tempered below half its weight by the model-error ratio lambda "
-        "alone or by the autocorrelation of the steering innovations",
+        "alone or by the autocorrelation of the steering innovations; the last column: the "
+        f"share of the time not live (summed over runs) that the {LEAST_LIVE_DRIVERS} drivers "
+        "with the most of it hold (near 100 %: a few drivers make the shortfall, "
+        "docs/design.md §8.35)",
         channel_rows(result),
         _CHANNEL_COLUMNS,
         None,

@@ -24,6 +24,8 @@ from typing import Any
 
 import pandas as pd
 
+from benchmarks.report_sections import least_live_share
+
 SHARES = {
     "steering_live_share": "live",
     "steering_tempered_model_error_share": "tempered: lambda",
@@ -57,9 +59,8 @@ def driver_traits(drivers: list[dict[str, Any]]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def by_driver(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:
-    """Per (seed, driver): the mean over ``model``'s runs on ``track`` of each steering share,
-    the median model-error ratio, the lateral RMSE and the run count, with the traits."""
+def model_runs(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:
+    """``model``'s runs on ``track`` from ``results.json``'s ``runs_estimation``."""
     runs = pd.DataFrame(results["runs_estimation"])
     if runs.empty:
         raise SystemExit("results.json has no estimation runs (was it run with --no-estimate?)")
@@ -70,24 +71,26 @@ def by_driver(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:
         raise SystemExit(
             f"no runs of model {model!r} on track {track!r}; models: {models}; tracks: {tracks}"
         )
-    chosen = chosen.assign(driver=chosen["driver"].astype(str), seed=chosen["seed"].astype(int))
+    return chosen.assign(driver=chosen["driver"].astype(str), seed=chosen["seed"].astype(int))
+
+
+def by_driver(chosen: pd.DataFrame, drivers: list[dict[str, Any]]) -> pd.DataFrame:
+    """Per (seed, driver): the mean over the runs ``chosen`` of each steering share, the
+    median model-error ratio, the lateral RMSE and the run count, with the traits."""
     table = chosen.groupby(["seed", "driver"]).agg(
         runs=("run", "size"),
         **{column: (column, "mean") for column in SHARES},
         model_error=("model_error_median", "median"),
         lateral_rmse=("lateral_rmse", "mean"),
     )
-    traits = driver_traits(results["drivers"])
+    traits = driver_traits(drivers)
     return table.reset_index().merge(traits, on=["seed", "driver"], how="left")
 
 
-def concentration(table: pd.DataFrame, counts: tuple[int, ...] = (3, 5, 10)) -> dict[int, float]:
-    """The share of all the drivers' time not live (weighted by their runs) that the ``k``
-    drivers with the least live time hold, for each k in ``counts``."""
-    not_live = (1.0 - table["steering_live_share"]) * table["runs"]
-    total = float(not_live.sum())
-    ordered = not_live.sort_values(ascending=False)
-    return {k: float(ordered.iloc[:k].sum() / total) if total else 0.0 for k in counts}
+def concentration(runs: pd.DataFrame, counts: tuple[int, ...] = (3, 5, 10)) -> dict[int, float]:
+    """The share of the time not live, summed over ``runs``, that the ``k`` drivers with the
+    most of it hold, for each k in ``counts`` (the report's column is k = 5)."""
+    return {k: least_live_share(runs, k) for k in counts}
 
 
 def correlations(table: pd.DataFrame) -> pd.DataFrame:
@@ -109,7 +112,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
         results = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise SystemExit(f"{path}: cannot read hasa-bench results: {exc}") from None
-    table = by_driver(results, args.model, args.track)
+    runs = model_runs(results, args.model, args.track)
+    table = by_driver(runs, results["drivers"])
     shown = table.sort_values("steering_live_share").rename(columns=SHARES)
     columns = ["seed", "driver", "runs", *SHARES.values(), "model_error", "lateral_rmse",
                "archetype", "speed", "command_std", "neuromuscular_frequency",
@@ -119,7 +123,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
         print(shown[columns].head(args.worst).to_string(index=False, float_format="{:.3g}".format))
         weighted = float((table["steering_live_share"] * table["runs"]).sum() / table["runs"].sum())
         print(f"\nsteering live {weighted:.1%} of the time over all runs")
-        for k, share in concentration(table).items():
+        for k, share in concentration(runs).items():
             print(f"the {k} least-live drivers hold {share:.0%} of the time it was not live")
         print("\nSpearman correlation with the drivers' traits:")
         print(correlations(table).to_string(float_format="{:+.2f}".format))

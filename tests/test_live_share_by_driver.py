@@ -68,9 +68,8 @@ def test_per_driver_shares_traits_and_concentration(tmp_path, capsys) -> None:
     out = capsys.readouterr().out
     assert "steering live 63.3% of the time" in out
     # not live: A 0.9 x 2 runs, B 0.2 x 2, C 0: the least-live driver holds 0.9 / 1.1
-    assert module.concentration(table.reset_index(), (1, 2)) == pytest.approx(
-        {1: 0.9 / 1.1, 2: 1.0}
-    )
+    runs = module.model_runs(json.loads(_results(tmp_path).read_text()), "generalized", "straight")
+    assert module.concentration(runs, (1, 2)) == pytest.approx({1: 0.9 / 1.1, 2: 1.0})
     ranks = module.correlations(table.reset_index())
     assert ranks.loc["model_error", "command_std"] == pytest.approx(1.0)
     assert ranks.loc["steering_live_share", "command_std"] == pytest.approx(-1.0)

@@ -7,11 +7,12 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from benchmarks.protocol.config import ProtocolConfig
 from benchmarks.protocol.plan import load_frames, synthetic_plan
-from benchmarks.report_sections import channel_rows
+from benchmarks.report_sections import channel_rows, least_live_share
 from estimators import FilterSettings, GaussianMixtureEKF, NoSteeringEKF
 from estimators.calibration import (
     STEERING_CHANNEL_STATES,
@@ -94,3 +95,23 @@ def test_the_report_table_averages_the_main_tracks_runs_of_each_steering_estimat
     assert row["steering_live_share"] == pytest.approx(0.6)
     assert row["steering_tempered_autocorrelation_share"] == pytest.approx(0.2)
     assert channel_rows(SimpleNamespace(runs_estimation=[], config={})) == []
+
+
+def test_channel_rows_say_how_few_drivers_hold_the_time_not_live() -> None:
+    """The report's last channel column: the share of the time not live (summed over runs)
+    held by the 5 drivers with the most of it (docs/design.md §8.35); NaN without drivers."""
+    shares = [0.0, 0.5, 0.9, 0.95, 0.96, 0.97, 0.98]  # live, one run per driver of seed 3
+    rows = [
+        {"seed": 3, "driver": str(i), "model": "generalized", "track": "straight",
+         "steering_live_share": live, "steering_off_share": 0.0, "steering_unused_share": 0.0,
+         "steering_mismatch_share": 0.0, "steering_tempered_model_error_share": 1.0 - live,
+         "steering_tempered_autocorrelation_share": 0.0}
+        for i, live in enumerate(shares)
+    ]  # fmt: skip
+    (row,) = channel_rows(SimpleNamespace(runs_estimation=rows, config={}))
+    not_live = [1.0 - live for live in shares]
+    assert row["least_live_share"] == pytest.approx(sum(not_live[:5]) / sum(not_live))
+    frame = pd.DataFrame(rows)
+    assert least_live_share(frame, 1) == pytest.approx(1.0 / sum(not_live))
+    assert np.isnan(least_live_share(frame.drop(columns="driver")))
+    assert np.isnan(least_live_share(frame.assign(steering_live_share=1.0)))  # nothing to hold
