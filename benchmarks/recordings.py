@@ -42,7 +42,8 @@ from benchmarks.speed_scaled import add_speed_scaled_error
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.drivers import require_lane_keeping
-from hasa_env.recording import RecordingWarning, check_replay, load_notes
+from hasa_env.recording import check_replay
+from hasa_env.recording import warn_load_notes as warn_recording_notes
 from hasa_env.render.frames import write_frames
 from hasa_env.sim.road import Road
 from hasa_env.steering import GeneralizedModel, SteeringModel, score
@@ -157,13 +158,12 @@ def _about(
 def warn_load_notes(recordings: Sequence[Any], log: WarningLog | None = None) -> None:
     """Show each recording's notes from loading (:attr:`hasa_env.recording.Recording.warnings`:
     what was repaired or tolerated, e.g. the partly written last line of a crashed recording
-    dropped), in order, as :class:`~hasa_env.recording.RecordingWarning` naming the file (the
-    loaders keep them quiet; :func:`hasa_env.recording.load_notes`). ``log``: each the
+    dropped), in order, as :class:`~hasa_env.recording.RecordingWarning` naming the file
+    (:func:`hasa_env.recording.warn_load_notes`, at the caller's line). ``log``: each the
     recording's (step ``"load"``)."""
     for rec in recordings:
-        for note in load_notes(rec):
-            with _about(log, rec.path, "load"):
-                warnings.warn(note, RecordingWarning, stacklevel=2)
+        with _about(log, rec.path, "load"):
+            warn_recording_notes([rec], stacklevel=2)
 
 
 @dataclass(frozen=True)
