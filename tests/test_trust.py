@@ -270,6 +270,24 @@ def test_the_user_overrides_win_field_by_field() -> None:
         trusted_filter(_model(), overrides={"steering_max_speed": -1.0})
 
 
+def test_hasa_benchs_filter_honours_the_users_evidence_checks() -> None:
+    # `hasa-bench --filter evidence_checks=false` reached the trust rule as an override that
+    # the benchmark's checks=True then overruled: the "unchecked" run was the checked one
+    from benchmarks.protocol.models import FittedModel
+    from benchmarks.protocol.tasks import model_estimator
+
+    fitted = FittedModel("m", "user", _model(), 1e-4, TrainingRecord(keeps_lane=True))
+    checked = model_estimator(fitted, FilterSettings())
+    assert checked.settings.evidence_checks
+    unchecked = model_estimator(fitted, FilterSettings(), {"evidence_checks": False})
+    assert not unchecked.settings.evidence_checks
+    # only the evidence checks: the model's limits stay (--compare-checks drops them too)
+    assert unchecked.settings.steering_max_speed == checked.settings.steering_max_speed
+    compared = model_estimator(fitted, FilterSettings(), None, checks=False)
+    assert not compared.settings.evidence_checks
+    assert compared.settings.steering_max_speed == math.inf
+
+
 def test_a_model_that_cannot_drive_gives_no_lane_evidence_unless_unchecked() -> None:
     training = TrainingRecord(keeps_lane=False, lane_check="left the road after 15.5 s")
     trusted = trusted_filter(_model(), training=training)

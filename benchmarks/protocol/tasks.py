@@ -275,12 +275,14 @@ def model_estimator(
     fm: FittedModel,
     settings: FilterSettings,
     overrides: Mapping[str, Any] | None = None,
-    checks: bool = True,
+    checks: bool | None = None,
 ) -> GaussianMixtureEKF:
     """The benchmark's filter for a fitted model: :func:`estimators.trust.trusted_filter` on
     ``settings`` (the runs' config with the protocol's ``filter_settings``, the user's
     ``overrides``) with the model's residual level and training record; ``checks`` False:
-    the same filter without the evidence checks and the model's limits."""
+    the same filter without the evidence checks and the model's limits (``--compare-checks``);
+    None: the settings' own ``evidence_checks``, so a user's ``--filter
+    evidence_checks=false`` is honoured (it was overruled before 2026-12-06)."""
     training = replace(fm.training, residual_std=fm.residual_std)
     return trusted_filter(
         fm.model, settings, training=training, overrides=overrides, checks=checks
