@@ -65,6 +65,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from estimators.baselines import NoSteeringEKF
 from estimators.gm_ekf import GaussianMixtureEKF
@@ -75,7 +76,13 @@ from estimators.settings import (
     steering_curvature_limit,
     steering_speed_limits,
 )
-from estimators.tuning import PredictionCheck
+from estimators.tuning import (
+    PredictionCheck,
+    prediction_check,
+    speed_scaled_gain,
+    steering_residual_std,
+    whitened_residual_std,
+)
 from hasa_env.steering.arx import ARXForm
 from hasa_env.steering.equation_error import (
     SpeedScaledError,
@@ -142,6 +149,41 @@ class TrainingRecord:
                 frame["road_curvature"] if "road_curvature" in frame else None
             ),
             speed_range=_finite_range(frame["speed"] if "speed" in frame else None),
+        )
+
+    @classmethod
+    def measured(cls, model: Any, runs: Any, *, steering_ratio: float = 1.0) -> TrainingRecord:
+        """The record of ``model`` fitted on ``runs`` (a DataFrame or a sequence of them, the
+        recording columns), measured there as ``hasa-bench`` measures its models on their
+        training runs: the roads and speeds (:meth:`from_run`), the one-step residual level
+        (:func:`~estimators.tuning.steering_residual_std`), the prediction check against a
+        lane-free autoregression (:func:`~estimators.tuning.prediction_check`), the level
+        of its form whitened by a declared equation-error autoregression
+        (:func:`~estimators.tuning.whitened_residual_std`) and the gain of a declared
+        speed-scaled error (:func:`~estimators.tuning.speed_scaled_gain`); the last four None
+        for a model without an ARX form. ``steering_ratio``: model units per recorded
+        road-wheel radian (1 for models fitted on recordings). The lane-keeping check, which
+        drives cars with the model, is not made here (``keeps_lane`` None;
+        :func:`hasa_env.drivers.lane_keeping_check`). With it,
+        ``trusted_filter(model, training=TrainingRecord.measured(model, runs))`` is the
+        filter ``hasa-bench`` gives a model it fitted on ``runs``."""
+        frames = [runs] if isinstance(runs, pd.DataFrame) else list(runs)
+        if not frames:
+            raise ValueError("TrainingRecord.measured needs at least one training run")
+        record = cls.from_run(pd.concat(frames, ignore_index=True))
+        arx = model.arx()
+        if arx is None:
+            return record
+        lag = int(getattr(model, "decision_lag", 1))
+        data = frames[0] if len(frames) == 1 else frames
+        return replace(
+            record,
+            residual_std=steering_residual_std(
+                arx, data, decision_lag=lag, steering_ratio=steering_ratio
+            ),
+            prediction=prediction_check(arx, data, decision_lag=lag, steering_ratio=steering_ratio),
+            whitened_residual_std=whitened_residual_std(model, data, steering_ratio=steering_ratio),
+            speed_scaled_gain=speed_scaled_gain(model, data, steering_ratio=steering_ratio),
         )
 
 

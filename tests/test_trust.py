@@ -344,3 +344,46 @@ def test_the_benchmark_describes_each_models_limits() -> None:
         "steering off above 17.1 m/s: outside the training speeds 15.2-16.1 m/s +- 1",
     ]
     assert "steering_trust" not in infos[1]
+
+
+def test_a_model_fitted_in_python_gets_the_benchmarks_training_record() -> None:
+    from benchmarks.protocol.models import _filter_residual, _training_record
+    from hasa_env.drivers import SyntheticDriver, population, run_driver
+
+    runs = run_driver(SyntheticDriver(population("paper", seed=0)[0]), runs=3, seed=0,
+                      config={"time_limit": 8.0})  # fmt: skip
+    model = GeneralizedModel(equation_error_order=2).fit(runs[:2])
+    record = TrainingRecord.measured(model, runs[:2])
+    # what hasa-bench records for a model it fitted on the same runs
+    _, residual, prediction, whitened, _, gain = _filter_residual("m", model, runs[:2])
+    info = {
+        "whitened_residual_std": whitened,
+        "speed_scaled_gain": gain,
+        "prediction_residual_std": prediction.residual_std,
+        "lane_free_residual_std": prediction.lane_free_residual_std,
+    }
+    bench = dataclasses.replace(
+        _training_record(False, runs[:2], info, True), residual_std=residual
+    )
+    assert record == bench
+    assert record.prediction is not None and record.prediction.passed
+    speeds = pd.concat(runs[:2])["speed"]
+    assert record.speed_range == (speeds.min(), speeds.max())
+    assert record.whitened_residual_std is not None and record.speed_scaled_gain is None
+    # the trusted filter carries the measured level; the bare EKF the default 2e-3 rad
+    trusted = trusted_filter(model, training=record).estimator()
+    assert trusted.settings.steering_residual_std < 0.5 * FilterSettings.steering_residual_std
+    assert GaussianMixtureEKF(model.arx()).settings == FilterSettings()
+    assert TrainingRecord.measured(model, runs[0]) == TrainingRecord.measured(model, [runs[0]])
+    with pytest.raises(ValueError, match="at least one training run"):
+        TrainingRecord.measured(model, [])
+
+
+def test_a_model_without_an_arx_form_records_only_its_roads_and_speeds() -> None:
+    class NoForm:
+        def arx(self):
+            return None
+
+    frame = pd.DataFrame({"speed": [14.0, 16.0], "road_curvature": [0.0, -0.002]})
+    record = TrainingRecord.measured(NoForm(), frame)
+    assert record == TrainingRecord(curvature=0.002, speed_range=(14.0, 16.0))

@@ -36,11 +36,7 @@ from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import (
     PredictionCheck,
-    prediction_check,
-    speed_scaled_gain,
-    steering_residual_std,
     steering_residuals_by_speed,
-    whitened_residual_std,
 )
 from hasa_env.drivers import SpeedProfile, lane_keeping_checks
 from hasa_env.steering import (
@@ -470,11 +466,10 @@ def _filter_residual(
     if arx is None:
         return False, None, None, None, [], None
     try:
-        residual = steering_residual_std(arx, run, decision_lag=fitted.decision_lag)
-        prediction = prediction_check(arx, run, decision_lag=fitted.decision_lag)
-        whitened = whitened_residual_std(fitted, run)
+        measured = TrainingRecord.measured(fitted, run)  # what the library's users get
+        residual, prediction = measured.residual_std, measured.prediction
+        whitened, gain = measured.whitened_residual_std, measured.speed_scaled_gain
         by_speed = steering_residuals_by_speed(arx, run, decision_lag=fitted.decision_lag)
-        gain = speed_scaled_gain(fitted, run)
     except Exception as exc:  # noqa: BLE001
         raise ModelError(
             name, "fit", f"its ARX form cannot predict the training run: {describe(exc)}"
