@@ -4,7 +4,8 @@ The figures of the paper, on our data: steering prediction on one validation
 run (paper Fig. 4), residual autocorrelation (Fig. 5), the lateral estimate
 and the true lane's weight (Fig. 8), the lateral error over the first
 seconds (Fig. 9), steering on the curved track (Fig. 7). They show the
-first population seed.
+first population seed. Beside them, the reliability diagram of the lane probabilities over
+every seed (issue 25; the report's reliability table drawn).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ FIGURES = {
     "lateral_estimate": "lateral_estimate.png",
     "lateral_error": "lateral_error.png",
     "curved_steering": "curved_steering.png",
+    "reliability": "reliability.png",
 }
 """Figure key -> file name."""
 
@@ -82,7 +84,39 @@ def write_figures(result: BenchmarkResult, out: Path) -> dict[str, str]:
         c = plots.get("curved_run") or {}
         label = f"driver {c.get('driver')}, curved run {c.get('run')}"
         save(_steering_figure(curved, label, users), "curved_steering")
+    rows = [r for r in result.summary if r.get("reliability") and r.get("kind") != "stress"]
+    if rows:
+        save(_reliability_figure(rows, users), "reliability")
     return written
+
+
+def _reliability_figure(rows: list[dict[str, Any]], users: list[str]) -> Any:
+    """Per estimator (the stress set's left to the table), the share of the (step,
+    hypothesis) pairs of each probability bin whose hypothesis was the true lane against the
+    mean probability given there; marker area by the bin's share of the pairs."""
+    fig, ax = _subplots(figsize=(6.5, 6))
+    ax.plot([0, 1], [0, 1], color="black", lw=0.8, ls="--", label="calibrated")
+    for row in rows:
+        bins = [b for b in row["reliability"] if b is not None]
+        predicted, observed, count = (np.array(v, dtype=float) for v in zip(*bins, strict=True))
+        color = _color(row["model"], users)
+        ece = row.get("lane_ece")
+        label = row["model"] if ece is None else f"{row['model']} (ECE {ece:.3f})"
+        ax.plot(predicted, observed, color=color, lw=1.0, alpha=0.7)
+        area = 10.0 + 400.0 * count / count.sum()
+        ax.scatter(predicted, observed, s=area, color=color, alpha=0.7, label=label)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("probability given to a lane hypothesis (bin mean)")
+    ax.set_ylabel("share of those that were the true lane")
+    ax.set_title("Reliability of the lane probabilities, main track, every seed")
+    ax.grid(True, alpha=0.3)
+    legend = ax.legend(fontsize=8, loc="upper left")
+    for handle in legend.legend_handles:  # one marker size in the legend
+        if hasattr(handle, "set_sizes"):
+            handle.set_sizes([30.0])
+    return fig
 
 
 def _steering_figure(trace: dict, label: str, users: list[str]) -> Any:

@@ -338,6 +338,10 @@ _FIGURE_CAPTIONS = {
     "lateral_error": "Lateral error over the first seconds, mean and std over the "
     "illustrative driver's validation runs (paper Fig. 9)",
     "curved_steering": "Steering prediction on the curved track (paper Fig. 7)",
+    "reliability": "Reliability diagram of the lane probabilities, main track, every seed "
+    "(the reliability table drawn): per bin of the probability given to a hypothesis, the "
+    "share of those (step, hypothesis) pairs whose hypothesis was the true lane; on the "
+    "diagonal calibrated, above it underconfident; marker area by the pairs in the bin",
 }
 
 

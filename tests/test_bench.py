@@ -278,6 +278,7 @@ def test_output_files(outputs) -> None:
     assert csv.loc[0, "lateral_rmse_mean"] == pytest.approx(first["lateral_rmse_mean"], rel=1e-12)
     report = (out / "report.md").read_text()
     assert "| Driver | Model |" in report and "![lateral_error](lateral_error.png)" in report
+    assert "![reliability](reliability.png)" in report  # every seed: the table drawn
     text = format_tables(result)
     assert "paper RMSE" in text and "near_far_pd" in text and "no_steering" in text
 
