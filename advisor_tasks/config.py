@@ -83,7 +83,6 @@ from estimators.gm_ekf import GaussianMixtureEKF
 from estimators.settings import FilterSettings
 from estimators.timing import check_sample_time
 from estimators.trust import TrainingRecord, TrustedFilter, trusted_filter
-from estimators.tuning import prediction_check, steering_residual_std
 from hasa_env.drivers import (
     POPULATIONS,
     make_driver,
@@ -317,9 +316,10 @@ _LANE_CHECKS: dict[tuple[Any, ...], str | None] = {}
 
 @functools.lru_cache(maxsize=16)
 def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, TrainingRecord]:
-    """(fitted model, its training record: residual level (rad) and prediction check on the
-    run) of ``kind`` on one run of the population's first driver, as it drives in the
-    scenario, in the task's env (cached: every env of a vector or an evaluation shares it)."""
+    """(fitted model, its training record measured on the run:
+    :meth:`~estimators.trust.TrainingRecord.measured`) of ``kind`` on one run of the
+    population's first driver, as it drives in the scenario, in the task's env (cached: every
+    env of a vector or an evaluation shares it)."""
     name, seed, size = json.loads(population_key)
     config = json.loads(env_key)
     trainer = population(name, seed, size, scenario=config["scenario"])[0]
@@ -327,12 +327,7 @@ def _fitted_model(kind: str, population_key: str, env_key: str) -> tuple[Any, Tr
         make_driver(trainer), "hasa_env/LaneKeeping-v0", runs=1, seed=TRAINING_SEED, config=config
     )[0]
     model = _FITTED[kind]().fit(frame, sensor_std=float(config["noise"]["steering"]))
-    arx = model.arx()
-    lag = model.decision_lag
-    return model, TrainingRecord(
-        residual_std=steering_residual_std(arx, frame, decision_lag=lag),
-        prediction=prediction_check(arx, frame, decision_lag=lag),
-    )
+    return model, TrainingRecord.measured(model, frame)  # as hasa-bench measures its models
 
 
 def _steering_model(
