@@ -217,3 +217,30 @@ def test_hasa_replay_checks_a_declaration_on_each_recording(tmp_path, capsys) ->
     assert all("carried as a coloured part" in ln for ln in lines["right"][1:])
     assert len(lines["tiny"]) == 3  # the model's line and one per recording, each ignoring it
     assert all("speed-scaled equation error" in ln and "ignored" in ln for ln in lines["tiny"][1:])
+
+
+def test_hasa_bench_fits_it_for_a_users_generalized_model_as_for_its_own() -> None:
+    # `hasa-bench score hasa_env.steering.models:GeneralizedModel` fitted the same model as the
+    # built-in one without its speed-scaled error (hasa-replay --fit fitted it): the user's
+    # model was scored with a handicap
+    from benchmarks.protocol.config import ProtocolConfig
+    from benchmarks.protocol.models import fit_models, load_models
+    from benchmarks.protocol.plan import make_plan, training_frames
+
+    frames = training_frames(make_plan(ProtocolConfig(seeds=(8300,)), 8300))
+    errors: list = []
+    spec = "hasa_env.steering.models:GeneralizedModel"
+    candidates = load_models([spec], errors, time_limit=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted, infos = fit_models(frames, candidates, errors, speed_scaled_error=True)
+    assert errors == []
+    models = {fm.name: fm.model for fm in fitted}
+    own, users = models["generalized"], models[spec]
+    assert own.equation_error_speed_scaled is not None  # identified on the 9 training runs
+    assert users.equation_error_speed_scaled == own.equation_error_speed_scaled
+    described = {info["name"]: info for info in infos}
+    assert described[spec]["speed_scaled_gain"] == described["generalized"]["speed_scaled_gain"]
+    # --no-speed-scaled-error: for neither
+    plain, _ = fit_models(frames, candidates, errors, speed_scaled_error=False)
+    assert all(fm.model.equation_error_speed_scaled is None for fm in plain)

@@ -256,7 +256,8 @@ def fit_models(
     generalized model's fit estimates an ``equation_error_order``-lag autoregression of its
     equation error (0: white; docs/design.md §8.32); with ``speed_scaled_error`` its error's
     speed-scaled coloured part is fitted on ``train`` too, and its filter carries it as a state
-    instead (docs/design.md §8.34)."""
+    instead (docs/design.md §8.34); so is a user's :class:`GeneralizedModel` itself (not a
+    subclass, not a saved file), as ``hasa-replay --fit`` fits it."""
     runs = [train] if isinstance(train, pd.DataFrame) else list(train)
     train = train if isinstance(train, pd.DataFrame) else runs  # a list: what the fit takes
     dt = steering_features(runs[0]).attrs.get("dt", 0.01)
@@ -299,7 +300,7 @@ def fit_models(
             info["error"] = str(exc)
             infos.append(info)
             continue
-        if speed_scaled_error and kind == "builtin" and isinstance(model, GeneralizedModel):
+        if speed_scaled_error and _gets_speed_scaled_error(candidate, model):
             add_speed_scaled_error(model, model_fitted, runs, sensor_std, info_fit)
         info.update(info_fit)
         info["error"] = None
@@ -314,6 +315,18 @@ def fit_models(
         fitted.append(FittedModel(name, kind, model_fitted, residual, training))
         infos.append(info)
     return fitted, infos
+
+
+def _gets_speed_scaled_error(candidate: Candidate, model: SteeringModel) -> bool:
+    """Whether the benchmark fits ``model``'s speed-scaled equation error (docs/design.md
+    §8.34): the built-in generalized model's, and a user's :class:`GeneralizedModel` itself
+    (not a subclass: its fits run in this process) that the benchmark fits, as ``hasa-replay
+    --fit`` does (a saved model file keeps its own)."""
+    if not isinstance(model, GeneralizedModel):
+        return False
+    if candidate.kind == "builtin":
+        return True
+    return candidate.kind == "user" and not candidate.fixed and type(model) is GeneralizedModel
 
 
 def _training_record(
