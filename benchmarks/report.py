@@ -345,6 +345,11 @@ _FIGURE_CAPTIONS = {
 }
 
 
+def _seed_sentence(first: Any) -> str:
+    """Which seeds the figures show."""
+    return f"The figures show population seed {first}; the reliability diagram shows every seed."
+
+
 def _markdown_figures(cfg: dict[str, Any], figures: dict[str, str]) -> list[str]:
     """The figures with their captions (nothing without figures)."""
     if not figures:
@@ -352,7 +357,7 @@ def _markdown_figures(cfg: dict[str, Any], figures: dict[str, str]) -> list[str]
     lines = ["## Figures", ""]
     first = (cfg.get("seeds") or [None])[0]
     if first is not None:
-        lines.append(f"The figures show population seed {first}.")
+        lines.append(f"{_seed_sentence(first)}")
         lines.append("")
     for key, name in figures.items():
         lines.append(f"### {_FIGURE_CAPTIONS.get(key, key)}")
@@ -453,7 +458,7 @@ def _html_figures(cfg: dict[str, Any], figures: dict[str, str], folder: Path) ->
     parts = ['<h2 id="figures">Figures</h2>']
     first = (cfg.get("seeds") or [None])[0]
     if first is not None:
-        parts.append(f"<p>The figures show population seed {_esc(first)}.</p>")
+        parts.append(f"<p>{_esc(_seed_sentence(first))}</p>")
     for key, name in figures.items():
         caption = _FIGURE_CAPTIONS.get(key, key)
         parts += [
