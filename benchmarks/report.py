@@ -345,9 +345,10 @@ _FIGURE_CAPTIONS = {
 }
 
 
-def _seed_sentence(first: Any) -> str:
+def _seed_sentence(first: Any, figures: dict[str, str]) -> str:
     """Which seeds the figures show."""
-    return f"The figures show population seed {first}; the reliability diagram shows every seed."
+    every = "; the reliability diagram shows every seed" if "reliability" in figures else ""
+    return f"The figures show population seed {first}{every}."
 
 
 def _markdown_figures(cfg: dict[str, Any], figures: dict[str, str]) -> list[str]:
@@ -357,7 +358,7 @@ def _markdown_figures(cfg: dict[str, Any], figures: dict[str, str]) -> list[str]
     lines = ["## Figures", ""]
     first = (cfg.get("seeds") or [None])[0]
     if first is not None:
-        lines.append(f"{_seed_sentence(first)}")
+        lines.append(_seed_sentence(first, figures))
         lines.append("")
     for key, name in figures.items():
         lines.append(f"### {_FIGURE_CAPTIONS.get(key, key)}")
@@ -458,7 +459,7 @@ def _html_figures(cfg: dict[str, Any], figures: dict[str, str], folder: Path) ->
     parts = ['<h2 id="figures">Figures</h2>']
     first = (cfg.get("seeds") or [None])[0]
     if first is not None:
-        parts.append(f"<p>{_esc(_seed_sentence(first))}</p>")
+        parts.append(f"<p>{_esc(_seed_sentence(first, figures))}</p>")
     for key, name in figures.items():
         caption = _FIGURE_CAPTIONS.get(key, key)
         parts += [
