@@ -38,6 +38,7 @@ from typing import Any
 
 from benchmarks.defaults import DEFAULT_EQUATION_ERROR_ORDER
 from benchmarks.documents import json_clean
+from benchmarks.replay_estimate import describe_estimate
 from benchmarks.speed_scaled import add_speed_scaled_error
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
@@ -569,19 +570,6 @@ def describe_trust(prepared: PreparedModel, outcomes: Sequence[RecordingOutcome]
     else:  # nothing shared: everywhere, unless some recording's filter has a limit
         model = "as each recording's line says" if limited else STEERING_EVERYWHERE
     return TrustLines(model, lines)
-
-
-def describe_estimate(run: EstimatorRun) -> str:
-    """The estimator's result in one phrase: lateral RMSE, final weights, when trusted."""
-    hyp = ", ".join(
-        f"{b:+g} m: {w:.3f}" for b, w in zip(run.hypotheses, run.weights[-1], strict=True)
-    )
-    trusted = "never" if math.isnan(run.trusted_from) else f"{run.trusted_from:.2f} s"
-    decision = run.final_decision + (f" ({run.refused_by})" if run.refused_by else "")
-    return (
-        f"lateral RMSE {run.lateral_rmse:.3f} m, final weights [{hyp}], "
-        f"true lane trusted (> 0.9) from {trusted}, ends {decision}"
-    )
 
 
 def render_recordings(

@@ -18,6 +18,7 @@ from benchmarks.recordings import (
     ReplayCheck,
     WarningLog,
 )
+from benchmarks.replay_estimate import estimate_verdict
 from estimators.offline import EstimatorRun
 from hasa_env.atomic import write_atomic
 
@@ -41,6 +42,7 @@ def _estimate_dict(run: EstimatorRun) -> dict[str, Any]:
         "final_decision": run.final_decision,
         "refused_by": run.refused_by,
         "trust_reasons": None if run.trust is None else list(run.trust.reasons),
+        **estimate_verdict(run),
     }
 
 

@@ -673,6 +673,10 @@ class EstimatorRun:
             (:meth:`EstimationResult.refusal_reasons`); ``""`` otherwise.
         trust: the filter that ran (:func:`recording_filter`): its settings, the form it
             compared with the steering and its reasons (:meth:`TrustedFilter.describe`).
+        result: the filter's whole output over the recording, one run
+            (:class:`EstimationResult`: weights, means, stds, the evidence rule's statistics;
+            e.g. :func:`estimators.calibration.steering_channel_shares` of it, and
+            :meth:`EstimationResult.lateral_nees`); padded rows beyond the recording's cut.
     """
 
     weights: np.ndarray
@@ -685,6 +689,7 @@ class EstimatorRun:
     final_decision: str = ""
     refused_by: str = ""
     trust: TrustedFilter | None = None
+    result: EstimationResult | None = None
 
 
 def recording_filter(
@@ -780,6 +785,7 @@ def estimate_recording(
         "final_decision": str(result.final_decision()[0]),
         "refused_by": str(result.refusal_reasons()[0]),
         "trust": trust,
+        "result": result,
     }
     if not 0 <= true_index < hypotheses.size:
         matches = np.flatnonzero(np.isclose(hypotheses, float(data["bias"].iloc[0])))

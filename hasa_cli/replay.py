@@ -56,7 +56,10 @@ autoregression, empty when white), ``estimator_trust``, ``load_errors`` (``path`
 (``replay``: ``matches``, ``text``, ``divergence``: ``row``, ``time``, ``column``,
 ``recorded``, ``replayed`` or null) and, where those steps ran, ``model`` (``scores``),
 ``estimator`` (lateral_rmse, hypotheses, final_weights, true_index, true_lane_weight,
-trusted_from, final_decision, refused_by, trust_reasons) and ``frames``, each ``{"error": ...}``
+trusted_from, final_decision, refused_by, trust_reasons, ``steering``: the share of the
+time per state of the steering channel, ``live``, ``off``, ``unused``, ``mismatch``,
+``tempered_model_error``, ``tempered_autocorrelation``, or null without a steering channel, and
+``lateral_nees``) and ``frames``, each ``{"error": ...}``
 where the step failed; ``warnings``: each warning the run printed on stderr (still printed
 there), as ``recording`` (the path of the recording it arose on, null when none: the
 model's lane check, the trust lines, a fit on several recordings), ``step`` (``load``, ``replay``, ``model``,

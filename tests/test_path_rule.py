@@ -171,8 +171,8 @@ def test_hasa_replay_says_which_rule_refused_a_recording(shifted_and_kept, tmp_p
     recording = load_recording(save_recording(frame, tmp_path / "shift", recording_meta(frame)))
     run = estimate_recording(recording, GeneralizedModel.paper(), steering_ratio=15.0)
     assert (run.final_decision, run.refused_by) == ("model_mismatch", "path rule")
-    assert describe_estimate(run).endswith("ends model_mismatch (path rule)")
+    assert "ends model_mismatch (path rule); steering live" in describe_estimate(run)
     kept = shifted_and_kept["paper"]
     recording = load_recording(save_recording(kept, tmp_path / "kept", recording_meta(kept)))
     run = estimate_recording(recording, GeneralizedModel.paper(), steering_ratio=15.0)
-    assert run.refused_by == "" and describe_estimate(run).endswith(f"ends {run.final_decision}")
+    assert run.refused_by == "" and f"ends {run.final_decision}; " in describe_estimate(run)

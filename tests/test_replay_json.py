@@ -118,6 +118,14 @@ def test_model_scores_and_estimator_results_are_those_printed(files, tmp_path, c
         assert est["trusted_from"] is None or est["trusted_from"] >= 0.0
         assert isinstance(est["refused_by"], str) and isinstance(est["trust_reasons"], list)
         assert "; ".join(est["trust_reasons"]) or doc["estimator_trust"]
+        # how much of the time the steering counted, and why not (hasa-bench's states)
+        steering = est["steering"]
+        assert set(steering) == {"live", "off", "unused", "mismatch", "tempered_model_error",
+                                 "tempered_autocorrelation"}  # fmt: skip
+        assert all(0.0 <= v <= 1.0 for v in steering.values())
+        assert sum(steering.values()) == pytest.approx(1.0, abs=0.02)  # valid rows only
+        assert f"steering live {steering['live']:.0%} of the time" in printed
+        assert est["lateral_nees"] > 0 and f"lateral NEES {est['lateral_nees']:.2f}" in printed
 
 
 def test_a_missing_parent_directory_or_stdout_is_a_usage_error(files, tmp_path, capsys) -> None:

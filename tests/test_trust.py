@@ -387,3 +387,17 @@ def test_a_model_without_an_arx_form_records_only_its_roads_and_speeds() -> None
     frame = pd.DataFrame({"speed": [14.0, 16.0], "road_curvature": [0.0, -0.002]})
     record = TrainingRecord.measured(NoForm(), frame)
     assert record == TrainingRecord(curvature=0.002, speed_range=(14.0, 16.0))
+
+
+def test_hasa_replay_says_when_the_steering_was_never_used(recording) -> None:
+    from benchmarks.replay_estimate import describe_estimate, estimate_verdict
+    from estimators.offline import estimate_recording
+
+    run = estimate_recording(recording, _model(), training=TrainingRecord(keeps_lane=False))
+    verdict = estimate_verdict(run)  # the no-steering filter: its steering never used
+    assert verdict["steering"]["unused"] == pytest.approx(1.0) and verdict["lateral_nees"] > 0
+    assert "steering live 0% of the time (off 0%, unused 100%," in describe_estimate(run)
+    listened = estimate_verdict(estimate_recording(recording, _model()))["steering"]
+    assert listened is not None and listened["unused"] < 0.1  # used (0.5 s: mostly tempered)
+    unknown = dataclasses.replace(run, result=None)
+    assert estimate_verdict(unknown) == {"steering": None, "lateral_nees": None}
