@@ -676,7 +676,7 @@ class EstimatorRun:
         result: the filter's whole output over the recording, one run
             (:class:`EstimationResult`: weights, means, stds, the evidence rule's statistics;
             e.g. :func:`estimators.calibration.steering_channel_shares` of it, and
-            :meth:`EstimationResult.lateral_nees`); padded rows beyond the recording's cut.
+            :meth:`EstimationResult.lateral_nees`), one run of the recording's rows.
     """
 
     weights: np.ndarray

@@ -164,9 +164,9 @@ class TrainingRecord:
         for a model without an ARX form. ``steering_ratio``: model units per recorded
         road-wheel radian (1 for models fitted on recordings). The lane-keeping check, which
         drives cars with the model, is not made here (``keeps_lane`` None;
-        :func:`hasa_env.drivers.lane_keeping_check`). With it,
+        :func:`hasa_env.drivers.lane_keeping_check`):
         ``trusted_filter(model, training=TrainingRecord.measured(model, runs))`` is the
-        filter ``hasa-bench`` gives a model it fitted on ``runs``."""
+        filter ``hasa-bench`` gives a model it fitted on ``runs`` and that passed that check."""
         frames = [runs] if isinstance(runs, pd.DataFrame) else list(runs)
         if not frames:
             raise ValueError("TrainingRecord.measured needs at least one training run")
