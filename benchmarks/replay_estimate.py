@@ -22,9 +22,8 @@ def estimate_verdict(run: EstimatorRun) -> dict[str, Any]:
     if run.result is None:
         return {"steering": None, "lateral_nees": None}
     shares = steering_channel_shares(run.result)
-    steering = {name: float(shares[name][0]) for name in STEERING_CHANNEL_STATES}
-    if all(math.isnan(v) for v in steering.values()):
-        steering = None
+    of_run = {name: float(shares[name][0]) for name in STEERING_CHANNEL_STATES}
+    steering = None if all(math.isnan(v) for v in of_run.values()) else of_run
     nees = float(run.result.lateral_nees()[0])
     return {"steering": steering, "lateral_nees": nees if math.isfinite(nees) else None}
 
