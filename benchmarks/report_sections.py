@@ -14,6 +14,7 @@ from typing import Any, cast
 import numpy as np
 import pandas as pd
 
+from benchmarks.live_by_driver import least_live_drivers
 from benchmarks.protocol import BenchmarkResult
 from benchmarks.protocol.intervals import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 from benchmarks.tables import (
@@ -445,6 +446,37 @@ def _channel_section(result: BenchmarkResult) -> Section:
     )
 
 
+_LEAST_LIVE_COLUMNS = [
+    Column("model", "Estimator", left=True),
+    Column("seed", "seed"),
+    Column("driver", "driver", left=True),
+    Column("runs", "runs"),
+    Column("steering_live_share", "live", percent),
+    Column("steering_tempered_model_error_share", "tempered: model error", percent),
+    Column("steering_tempered_autocorrelation_share", "tempered: autocorrelation", percent),
+    Column("steering_mismatch_share", "model mismatch", percent),
+    Column("model_error", "median lambda", fixed(2)),
+    Column("archetype", "archetype", left=True),
+    Column("command_std", "command noise std (rad)", fixed(4)),
+]
+
+
+def _least_live_section(result: BenchmarkResult) -> Section:
+    return (
+        "least_live_drivers",
+        f"The {LEAST_LIVE_DRIVERS} drivers (seed, name) that hold the most of each steering "
+        "model's time not live (main track; mean over each driver's runs): tempered by the "
+        "model-error ratio lambda (its median over the runs: the driver's steering noisier than "
+        "the model's level) or by the autocorrelation of the innovations (the driver's dynamics "
+        "not the model's), with the driver's archetype and command-noise std (recorded "
+        "drivers: unknown; docs/design.md §8.35; examples/live_share_by_driver.py prints every "
+        "driver)",
+        least_live_drivers(result, LEAST_LIVE_DRIVERS),
+        _LEAST_LIVE_COLUMNS,
+        "model",
+    )
+
+
 def _checks_section(result: BenchmarkResult) -> Section:
     return (
         "checks",
@@ -536,6 +568,7 @@ def report_sections(result: BenchmarkResult) -> list[Section]:
         *_verdict_sections(result),
         _reliability_section(result),
         _channel_section(result),
+        _least_live_section(result),
         _checks_section(result),
         *_steering_sections(result),
         *_estimation_sections(result),

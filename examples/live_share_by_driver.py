@@ -24,39 +24,8 @@ from typing import Any
 
 import pandas as pd
 
+from benchmarks.live_by_driver import SHARES, TRAITS, by_driver
 from benchmarks.report_sections import least_live_share
-
-SHARES = {
-    "steering_live_share": "live",
-    "steering_tempered_model_error_share": "tempered: lambda",
-    "steering_tempered_autocorrelation_share": "tempered: autocorr.",
-    "steering_mismatch_share": "mismatch",
-    "steering_off_share": "off",
-    "steering_unused_share": "unused",
-}
-TRAITS = ("command_std", "neuromuscular_frequency", "neuromuscular_damping", "delay", "holds_speed")
-
-
-def driver_traits(drivers: list[dict[str, Any]]) -> pd.DataFrame:
-    """One row per (seed, driver) of ``results.json``'s ``drivers``: the traits printed."""
-    rows = []
-    for entry in drivers:
-        params = entry["parameters"]
-        target = (params.get("speed") or {}).get("target_speed")
-        rows.append(
-            {
-                "seed": int(entry["seed"]),
-                "driver": str(entry["driver"]),
-                "archetype": params.get("archetype", "?"),
-                "speed": "holds" if target is None else f"to {target:.0f} m/s",
-                "holds_speed": float(target is None),
-                "command_std": (params.get("motor") or {}).get("command_std", float("nan")),
-                "neuromuscular_frequency": params.get("neuromuscular_frequency", float("nan")),
-                "neuromuscular_damping": params.get("neuromuscular_damping", float("nan")),
-                "delay": params.get("delay", float("nan")),
-            }
-        )
-    return pd.DataFrame(rows)
 
 
 def model_runs(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:
@@ -72,19 +41,6 @@ def model_runs(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:
             f"no runs of model {model!r} on track {track!r}; models: {models}; tracks: {tracks}"
         )
     return chosen.assign(driver=chosen["driver"].astype(str), seed=chosen["seed"].astype(int))
-
-
-def by_driver(chosen: pd.DataFrame, drivers: list[dict[str, Any]]) -> pd.DataFrame:
-    """Per (seed, driver): the mean over the runs ``chosen`` of each steering share, the
-    median model-error ratio, the lateral RMSE and the run count, with the traits."""
-    table = chosen.groupby(["seed", "driver"]).agg(
-        runs=("run", "size"),
-        **{column: (column, "mean") for column in SHARES},
-        model_error=("model_error_median", "median"),
-        lateral_rmse=("lateral_rmse", "mean"),
-    )
-    traits = driver_traits(drivers)
-    return table.reset_index().merge(traits, on=["seed", "driver"], how="left")
 
 
 def concentration(runs: pd.DataFrame, counts: tuple[int, ...] = (3, 5, 10)) -> dict[int, float]:

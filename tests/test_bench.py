@@ -280,6 +280,7 @@ def test_output_files(outputs) -> None:
     assert "| Driver | Model |" in report and "![lateral_error](lateral_error.png)" in report
     assert "![reliability](reliability.png)" in report  # every seed: the table drawn
     assert "the reliability diagram shows every seed" in report
+    assert "drivers (seed, name) that hold the most of each steering model's time" in report
     text = format_tables(result)
     assert "paper RMSE" in text and "near_far_pd" in text and "no_steering" in text
 

@@ -82,3 +82,28 @@ def test_names_what_it_cannot_find(tmp_path) -> None:
         module.main([str(path), "--model", "nope"])
     with pytest.raises(SystemExit, match="cannot read hasa-bench results"):
         module.main([str(tmp_path / "missing.json")])
+
+
+def test_the_report_lists_each_models_least_live_drivers(tmp_path) -> None:
+    # benchmarks.live_by_driver (the example's grouping, in the library) on the same rows:
+    # per steering model the drivers with the most time not live, most first; none for a
+    # driver always live, nothing for a baseline or a stress model
+    from types import SimpleNamespace
+
+    from benchmarks.live_by_driver import least_live_drivers
+
+    doc = json.loads(_results(tmp_path).read_text())
+    models = [{"name": "generalized", "kind": "builtin"}, {"name": "two_point", "kind": "stress"}]
+    result = SimpleNamespace(
+        runs_estimation=doc["runs_estimation"],
+        drivers=doc["drivers"],
+        models=models,
+        config={"track": "straight"},
+    )
+    rows = least_live_drivers(result, count=5)
+    assert [(r["model"], r["driver"]) for r in rows] == [("generalized", "A"), ("generalized", "B")]
+    assert rows[0]["not_live_runs"] == pytest.approx(1.8)
+    assert rows[0]["steering_tempered_model_error_share"] == pytest.approx(0.9)
+    assert rows[0]["command_std"] == pytest.approx(0.012) and rows[0]["archetype"] == "preview"
+    assert least_live_drivers(result, count=1) == rows[:1]
+    assert least_live_drivers(SimpleNamespace(**{**vars(result), "runs_estimation": []})) == []
