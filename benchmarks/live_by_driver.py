@@ -95,5 +95,8 @@ def least_live_drivers(result: BenchmarkResult, count: int = 5) -> list[dict[str
             continue
         table = by_driver(main[main["model"] == model], result.drivers)
         worst = table[table["not_live_runs"] > 0].nlargest(count, "not_live_runs")
-        rows += [{"model": model, **row} for row in worst.to_dict("records")]
+        rows += [
+            {"model": model, **{str(key): value for key, value in row.items()}}
+            for row in worst.to_dict("records")
+        ]
     return rows
