@@ -386,15 +386,23 @@ def _reliability_section(result: BenchmarkResult) -> Section:
     )
 
 
+_SHARE_COLUMNS = {
+    state: Column(f"steering_{state}_share", header, percent)
+    for state, header in (
+        ("live", "live"),
+        ("off", "off (speed, curvature)"),
+        ("unused", "unused (missing, gated)"),
+        ("mismatch", "model mismatch"),
+        ("tempered_model_error", "tempered: model error"),
+        ("tempered_autocorrelation", "tempered: autocorrelation"),
+    )
+}
+"""The report's column of each state of the steering channel (its per-run share)."""
+
 _CHANNEL_COLUMNS = [
     Column("model", "Estimator", left=True),
     Column("runs", "runs"),
-    Column("steering_live_share", "live", percent),
-    Column("steering_off_share", "off (speed, curvature)", percent),
-    Column("steering_unused_share", "unused (missing, gated)", percent),
-    Column("steering_mismatch_share", "model mismatch", percent),
-    Column("steering_tempered_model_error_share", "tempered: model error", percent),
-    Column("steering_tempered_autocorrelation_share", "tempered: autocorrelation", percent),
+    *_SHARE_COLUMNS.values(),
     Column("least_live_share", "not live: the 5 least-live drivers' share", percent),
 ]
 LEAST_LIVE_DRIVERS = 5
@@ -451,10 +459,10 @@ _LEAST_LIVE_COLUMNS = [
     Column("seed", "seed"),
     Column("driver", "driver", left=True),
     Column("runs", "runs"),
-    Column("steering_live_share", "live", percent),
-    Column("steering_tempered_model_error_share", "tempered: model error", percent),
-    Column("steering_tempered_autocorrelation_share", "tempered: autocorrelation", percent),
-    Column("steering_mismatch_share", "model mismatch", percent),
+    *(
+        _SHARE_COLUMNS[state]
+        for state in ("live", "tempered_model_error", "tempered_autocorrelation", "mismatch")
+    ),
     Column("model_error", "median lambda", fixed(2)),
     Column("archetype", "archetype", left=True),
     Column("command_std", "command noise std (rad)", fixed(4)),
