@@ -15,7 +15,19 @@ import pandas as pd
 
 from benchmarks.protocol import BenchmarkResult
 
-__all__ = ["SHARES", "TRAITS", "by_driver", "driver_traits", "least_live_drivers"]
+__all__ = [
+    "LEAST_LIVE_DRIVERS",
+    "SHARES",
+    "TRAITS",
+    "by_driver",
+    "driver_traits",
+    "least_live_drivers",
+    "least_live_share",
+]
+
+LEAST_LIVE_DRIVERS = 5
+"""How many least-live drivers the report names (and whose share of the time not live it
+gives)."""
 
 SHARES = {
     "steering_live_share": "live",
@@ -57,28 +69,51 @@ def driver_traits(drivers: Sequence[dict[str, Any]]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=columns)
 
 
+def _keyed(runs: pd.DataFrame) -> pd.DataFrame:
+    """``runs`` with the driver keys of every table here: ``seed`` an integer (-1 for a
+    recorded run, which has none) and ``driver`` a string, and ``not_live`` = 1 - live share."""
+    return runs.assign(
+        driver=runs["driver"].astype(str),
+        seed=runs["seed"].fillna(-1).astype(int),
+        not_live=1.0 - runs["steering_live_share"],
+    )
+
+
+def least_live_share(runs: pd.DataFrame, drivers: int = LEAST_LIVE_DRIVERS) -> float:
+    """The share of the time the steering was not live, summed over ``runs`` (one
+    estimator's, with ``seed``, ``driver`` and ``steering_live_share`` columns), that the
+    ``drivers`` drivers (seed, name) with the most of it hold: near 1, a few drivers make the
+    shortfall (docs/design.md §8.35). NaN: no time not live, or no driver columns."""
+    if not {"seed", "driver", "steering_live_share"} <= set(runs.columns):
+        return float("nan")
+    not_live = _keyed(runs).groupby(["seed", "driver"])["not_live"].sum()
+    total = float(not_live.sum())
+    return float(not_live.nlargest(drivers).sum() / total) if total > 0 else float("nan")
+
+
 def by_driver(runs: pd.DataFrame, drivers: Sequence[dict[str, Any]]) -> pd.DataFrame:
     """Per (seed, driver) of ``runs`` (one model's rows of ``runs_estimation`` on one track):
     the run count, the mean over its runs of each share of :data:`SHARES`, the median model-error
     ratio (``model_error``), the mean lateral RMSE and the not-live time in runs
     (``not_live_runs``: the sum over its runs of 1 - live share), with the traits."""
-    runs = runs.assign(
-        driver=runs["driver"].astype(str),
-        seed=runs["seed"].fillna(-1).astype(int),
-        not_live=1.0 - runs["steering_live_share"],
-    )
-    table = runs.groupby(["seed", "driver"]).agg(
-        runs=("run", "size"),
-        **{column: (column, "mean") for column in SHARES},
-        model_error=("model_error_median", "median"),
-        lateral_rmse=("lateral_rmse", "mean"),
-        not_live_runs=("not_live", "sum"),
+    table = (
+        _keyed(runs)
+        .groupby(["seed", "driver"])
+        .agg(
+            runs=("run", "size"),
+            **{column: (column, "mean") for column in SHARES},
+            model_error=("model_error_median", "median"),
+            lateral_rmse=("lateral_rmse", "mean"),
+            not_live_runs=("not_live", "sum"),
+        )
     )
     traits = driver_traits(drivers)
     return table.reset_index().merge(traits, on=["seed", "driver"], how="left")
 
 
-def least_live_drivers(result: BenchmarkResult, count: int = 5) -> list[dict[str, Any]]:
+def least_live_drivers(
+    result: BenchmarkResult, count: int = LEAST_LIVE_DRIVERS
+) -> list[dict[str, Any]]:
     """Per steering model (built-in or user) on the main track, the ``count`` drivers that hold
     the most of its time not live (rows of :func:`by_driver` with ``model``; none for a model
     whose steering was live throughout, or without the share columns)."""

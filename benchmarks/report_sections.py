@@ -14,7 +14,7 @@ from typing import Any, cast
 import numpy as np
 import pandas as pd
 
-from benchmarks.live_by_driver import least_live_drivers
+from benchmarks.live_by_driver import LEAST_LIVE_DRIVERS, least_live_drivers, least_live_share
 from benchmarks.protocol import BenchmarkResult
 from benchmarks.protocol.intervals import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 from benchmarks.tables import (
@@ -405,20 +405,6 @@ _CHANNEL_COLUMNS = [
     *_SHARE_COLUMNS.values(),
     Column("least_live_share", "not live: the 5 least-live drivers' share", percent),
 ]
-LEAST_LIVE_DRIVERS = 5
-
-
-def least_live_share(runs: pd.DataFrame, drivers: int = LEAST_LIVE_DRIVERS) -> float:
-    """The share of the time the steering was not live, summed over ``runs`` (one
-    estimator's, with ``seed``, ``driver`` and ``steering_live_share`` columns), that the
-    ``drivers`` drivers (seed, name) with the most of it hold: near 1, a few drivers make the
-    shortfall (docs/design.md §8.35). NaN: no time not live, or no driver columns."""
-    if not {"seed", "driver", "steering_live_share"} <= set(runs.columns):
-        return float("nan")
-    keys = [runs["seed"], runs["driver"].astype(str)]
-    not_live = (1.0 - runs["steering_live_share"]).groupby(keys).sum()
-    total = float(not_live.sum())
-    return float(not_live.nlargest(drivers).sum() / total) if total > 0 else float("nan")
 
 
 def channel_rows(result: BenchmarkResult) -> list[dict[str, Any]]:

@@ -24,8 +24,7 @@ from typing import Any
 
 import pandas as pd
 
-from benchmarks.live_by_driver import SHARES, TRAITS, by_driver
-from benchmarks.report_sections import least_live_share
+from benchmarks.live_by_driver import SHARES, TRAITS, by_driver, least_live_share
 
 
 def model_runs(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:

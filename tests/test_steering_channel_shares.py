@@ -113,5 +113,7 @@ def test_channel_rows_say_how_few_drivers_hold_the_time_not_live() -> None:
     assert row["least_live_share"] == pytest.approx(sum(not_live[:5]) / sum(not_live))
     frame = pd.DataFrame(rows)
     assert least_live_share(frame, 1) == pytest.approx(1.0 / sum(not_live))
+    # a recorded study's runs have no seed: they count all the same (the groupby dropped them)
+    assert least_live_share(frame.assign(seed=None), 1) == pytest.approx(1.0 / sum(not_live))
     assert np.isnan(least_live_share(frame.drop(columns="driver")))
     assert np.isnan(least_live_share(frame.assign(steering_live_share=1.0)))  # nothing to hold
