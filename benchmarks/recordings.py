@@ -39,7 +39,7 @@ from typing import Any
 from benchmarks.defaults import DEFAULT_EQUATION_ERROR_ORDER
 from benchmarks.documents import json_clean
 from benchmarks.replay_estimate import describe_estimate
-from benchmarks.speed_scaled import add_speed_scaled_error
+from benchmarks.speed_scaled import add_speed_scaled_error, fits_speed_scaled_error
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.drivers import require_lane_keeping
@@ -393,7 +393,7 @@ def _fit(
         say(f"model {spec}: fitted on {names}{each}")
         if order_how is not None:
             say(f"model {spec}: {describe_equation_error(fitted)} ({order_how})")
-        if type(model) is not GeneralizedModel or fitted.arx() is None:
+        if not fits_speed_scaled_error(model) or fitted.arx() is None:
             return fitted, None  # the built-in generalized model's error only, as hasa-bench
         if not speed_scaled_error:
             say(f"model {spec}: speed-scaled equation error not fitted (--no-speed-scaled-error)")

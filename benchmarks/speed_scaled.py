@@ -18,7 +18,15 @@ from estimators.tuning import held_out_speed_scaled_error, speed_scaled_gain
 from hasa_env.sim.road import Road
 from hasa_env.steering import GeneralizedModel, SteeringModel
 
-__all__ = ["add_speed_scaled_error", "speed_scaled_description"]
+__all__ = ["add_speed_scaled_error", "fits_speed_scaled_error", "speed_scaled_description"]
+
+
+def fits_speed_scaled_error(model: SteeringModel) -> bool:
+    """Whether a program that fits ``model`` itself also fits its speed-scaled equation error:
+    a :class:`GeneralizedModel` of the class itself, not a subclass (user code, whose refits on
+    held-out runs ``hasa-bench`` would have to run isolated). ``hasa-bench`` and ``hasa-replay
+    --fit`` both ask this, so they give the same model the same error."""
+    return type(model) is GeneralizedModel
 
 
 def add_speed_scaled_error(

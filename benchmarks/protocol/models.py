@@ -31,7 +31,11 @@ from benchmarks.protocol.isolation import (
     guarded_in_time,
     run_isolated,
 )
-from benchmarks.speed_scaled import add_speed_scaled_error, speed_scaled_description
+from benchmarks.speed_scaled import (
+    add_speed_scaled_error,
+    fits_speed_scaled_error,
+    speed_scaled_description,
+)
 from benchmarks.stress import STRESS_MODELS, stress_models
 from estimators.trust import TrainingRecord, model_limits, trusted_filter
 from estimators.tuning import (
@@ -319,14 +323,12 @@ def fit_models(
 
 def _gets_speed_scaled_error(candidate: Candidate, model: SteeringModel) -> bool:
     """Whether the benchmark fits ``model``'s speed-scaled equation error (docs/design.md
-    §8.34): the built-in generalized model's, and a user's :class:`GeneralizedModel` itself
-    (not a subclass: its fits run in this process) that the benchmark fits, as ``hasa-replay
-    --fit`` does (a saved model file keeps its own)."""
-    if not isinstance(model, GeneralizedModel):
-        return False
+    §8.34): the built-in generalized model's, and a user's that the benchmark fits, by the
+    rule ``hasa-replay --fit`` follows (:func:`benchmarks.speed_scaled.fits_speed_scaled_error`;
+    a saved model file keeps its own)."""
     if candidate.kind == "builtin":
-        return True
-    return candidate.kind == "user" and not candidate.fixed and type(model) is GeneralizedModel
+        return isinstance(model, GeneralizedModel)
+    return candidate.kind == "user" and not candidate.fixed and fits_speed_scaled_error(model)
 
 
 def _training_record(
