@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -171,3 +172,17 @@ def test_calibrate_without_a_wheel_ends_on_ctrl_c_and_sigterm(tmp_path):
             if proc.poll() is None:
                 proc.kill()
     assert not list(tmp_path.glob("cal_*.json"))
+
+
+def test_the_rl_extra_brings_what_the_ppo_example_needs():
+    """examples/train_ppo.py trains with stable-baselines3's progress bar, which needs tqdm (a
+    core dependency) and rich: `pip install ".[rl]"` alone must run it (README's RL section;
+    rich had come only with the minari extra, so the test extra hid its absence)."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+
+    def names(requirements: list[str]) -> set[str]:
+        return {re.split(r"[<>=!~\[; ]", r, maxsplit=1)[0].lower() for r in requirements}
+
+    assert "progress_bar=True" in (ROOT / "examples" / "train_ppo.py").read_text()
+    assert "tqdm" in names(project["dependencies"])
+    assert {"stable-baselines3", "rich"} <= names(project["optional-dependencies"]["rl"])
