@@ -20,6 +20,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
 from benchmarks.defaults import NO_WORKER_TIMEOUT
+from hasa_env.extras import install_hint
 
 __all__ = [
     "NO_WORKER_TIMEOUT",
@@ -69,7 +70,7 @@ def check_scheduler(address: str, timeout: float = SCHEDULER_TIMEOUT) -> str:
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise SchedulerError(
             "unreachable",
-            "--scheduler needs Dask's distributed package: pip install 'hasa-env[dask]'",
+            f"--scheduler needs Dask's distributed package: {install_hint('dask')}",
         ) from exc
     if not isinstance(address, str) or not address.strip():
         raise SchedulerError(
@@ -267,7 +268,7 @@ def _map_dask(
         from distributed import Client  # optional extra 'dask'
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise RuntimeError(
-            "--scheduler needs Dask's distributed package: pip install 'hasa-env[dask]'"
+            f"--scheduler needs Dask's distributed package: {install_hint('dask')}"
         ) from exc
     address = check_scheduler(getattr(scheduler, "scheduler_address", scheduler))
     with Client(address, set_as_default=False, timeout=f"{SCHEDULER_TIMEOUT:g}s") as client:

@@ -2,7 +2,8 @@
 
 Commands::
 
-    hasa-rec info FILE [FILE ...]        summarise and validate recordings (.csv or .parquet)
+    hasa-rec info PATH [PATH ...]        summarise and validate recordings (.csv or .parquet files,
+                                         or every recording in a folder and below)
     hasa-rec convert SRC [-o OUT]        CSV recording(s) -> Parquet (needs pyarrow)
     hasa-rec export-minari DIR NAME      a folder of recordings -> Minari dataset NAME
 
@@ -44,7 +45,7 @@ from hasa_env.recording import (
 )
 from hasa_env.recording.export import export_minari
 from hasa_env.recording.parquet import require_pyarrow, to_parquet
-from hasa_env.recording.reader import load_any
+from hasa_env.recording.reader import load_any, load_paths, subfolder_hint
 from hasa_env.recording.summary import summarize
 
 __all__ = ["main"]
@@ -56,13 +57,31 @@ def _err(message: str) -> None:
     error(PROG, message)
 
 
+def _info_items(names: Sequence[str]) -> list[tuple[str, Recording | RecordingError | None]]:
+    """What ``info`` summarises, in order: a file as given (None: load it when shown), a
+    folder as the recordings in it and below (each loaded, or its error; as
+    :func:`~hasa_env.recording.reader.load_paths` finds them)."""
+    items: list[tuple[str, Recording | RecordingError | None]] = []
+    for name in names:
+        if not Path(name).is_dir():
+            items.append((name, None))
+            continue
+        loaded = load_paths([name])
+        items += [(str(rec.path), rec) for rec in loaded]
+        items += [(str(e.path or name), e) for e in loaded.errors]
+    return items
+
+
 def _info(args: argparse.Namespace) -> int:
     failed = 0
-    for i, name in enumerate(args.files):
+    items = _info_items(args.files)
+    for i, (name, item) in enumerate(items):
         if i:
             print()
         try:
-            summary = summarize(name)
+            if isinstance(item, RecordingError):
+                raise item
+            summary = summarize(name if item is None else item)
         except RecordingError as exc:
             print(f"file           {printable(name)}")
             print("valid          NO")
@@ -75,7 +94,7 @@ def _info(args: argparse.Namespace) -> int:
         print("\n".join(printable(line) for line in summary.lines()))
     if not failed:
         return EXIT_OK
-    return EXIT_USAGE if failed == len(args.files) else EXIT_PARTIAL
+    return EXIT_USAGE if failed == len(items) else EXIT_PARTIAL
 
 
 def _targets(
@@ -131,7 +150,7 @@ def _convert(args: argparse.Namespace) -> int:
         _err(str(exc))
         return EXIT_USAGE
     if not targets and not errors:
-        _err(f"no recordings (*.csv with a .json sidecar) in {src}")
+        _err(f"no recordings (*.csv with a .json sidecar) in {src}{subfolder_hint(src)}")
         return EXIT_USAGE
     warn_load_notes(rec for rec, _ in targets)  # e.g. a crashed recording's cut line, dropped
     problems = [str(e) for e in errors]
@@ -226,7 +245,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p_info = sub.add_parser("info", help="summarise and validate recordings")
-    p_info.add_argument("files", nargs="+", metavar="FILE", help="a recording .csv (or .parquet)")
+    p_info.add_argument(
+        "files",
+        nargs="+",
+        metavar="PATH",
+        help="a recording .csv (or .parquet), or a folder: every recording in it and below",
+    )
     p_info.set_defaults(func=_info)
 
     p_conv = sub.add_parser("convert", help="convert CSV recordings to Parquet (needs pyarrow)")

@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.protocol.config import ProtocolConfig
+from benchmarks.protocol.plan import recording_plan
 from hasa_cli.bench import main as bench_main
 from hasa_cli.rec import main as rec_main
 from hasa_cli.replay import main as replay_main
@@ -531,6 +533,19 @@ def test_hasa_bench_skips_and_names_every_bad_file_and_scores_the_rest(batch, tm
     runs = {(r["driver"], r["run"]) for r in doc["runs_estimation"] if r["model"] == "oracle"}
     assert len(runs) == len(scored) - 1  # every run but the training run is estimated
     assert all(np.isfinite(r["lateral_rmse"]) for r in doc["runs_estimation"])
+
+
+def test_hasa_bench_names_the_line_and_column_of_a_skipped_recording(good, tmp_path):
+    """hasa-bench's list of skipped recordings says where in the file, as hasa-rec and
+    hasa-replay do (it said the reason alone)."""
+    for path in good:
+        _copy(path, tmp_path / path.name)
+    BAD["not a number"](good[0], tmp_path / "bad_speed.csv")
+    config = ProtocolConfig(recordings=str(tmp_path), min_duration=0.5, allow_incomplete=True)
+    plan = recording_plan(config)
+    (skip,) = [s for s in plan.skipped if "bad_speed" in s["file"]]
+    assert skip["reason"] == "line 6, column 'speed': not a number: '15.0x'", skip
+    assert f"skipped {skip['file']}: line 6, column 'speed': " in "\n".join(plan.notes)
 
 
 def test_other_json_documents_in_a_folder_are_not_taken_for_orphan_sidecars(good, tmp_path):

@@ -72,6 +72,24 @@ def test_info_reports_errors_with_line_and_column(tmp_path, capsys):
     assert str(bad) in captured.err and "line 7" in captured.err and "'step'" in captured.err
 
 
+def test_info_of_a_folder_summarises_every_recording_in_it_and_below(tmp_path, capsys):
+    """A folder is its recordings, as hasa-replay and hasa-bench read one (it was taken for a
+    recording named like the folder: 'no such recording')."""
+    record(tmp_path / "P1", 1)
+    bad = record(tmp_path / "P1", 2)
+    record(tmp_path / "P2", 3)
+    corrupt(bad, 7)
+    assert main(["info", str(tmp_path)]) == 1
+    captured = capsys.readouterr()
+    assert captured.out.count("valid          yes") == 2
+    assert captured.out.count("valid          NO") == 1
+    assert str(tmp_path / "P2" / "run_000.csv") in captured.out
+    assert str(bad) in captured.err and "line 7" in captured.err
+    (tmp_path / "empty").mkdir()
+    assert main(["info", str(tmp_path / "empty")]) == 2
+    assert "no recordings" in capsys.readouterr().err
+
+
 def test_info_flags_an_incomplete_recording(tmp_path, capsys):
     path = record(tmp_path, 1, steps=5)
     sidecar = path.with_suffix(".json")
@@ -174,7 +192,8 @@ def test_convert_errors(tmp_path, capsys, monkeypatch):
     assert main(["info", str(not_ours)]) == 2
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
     assert main(["convert", str(tmp_path)]) == 3  # the machine lacks pyarrow
-    assert "pip install 'hasa-env[parquet]'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "pip install 'hasa-env[parquet]'" in err and "pip install '.[parquet]'" in err
 
 
 def test_to_parquet_rejects_a_tampered_file(tmp_path):
@@ -248,6 +267,22 @@ def test_export_minari_says_what_loading_repaired_once_naming_the_file(tmp_path,
     assert note.startswith(f"hasa-rec: warning: {crashed}: dropped the partly written line ")
     (skipped,) = [line for line in captured.err.splitlines() if str(bad) in line]
     assert skipped.startswith(f"hasa-rec: error: skipped {bad}: ") and "line 10" in skipped
+
+
+def test_convert_and_export_of_a_study_root_point_at_its_participants_folders(tmp_path, capsys):
+    """Both read a folder's own recordings; a study's root holds one folder per participant,
+    and "no recordings" alone left the user guessing."""
+    pytest.importorskip("pyarrow")
+    record(tmp_path / "study" / "P07", 1)
+    assert main(["convert", str(tmp_path / "study")]) == 2
+    hint = f"(its subfolders hold 1 recording(s), e.g. in {tmp_path / 'study' / 'P07'}: give"
+    assert hint in capsys.readouterr().err
+    pytest.importorskip("minari")
+    store = tmp_path / "store"
+    argv = ["export-minari", str(tmp_path / "study"), "hasa/root-v0", "--data-path", str(store)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "no recording to export" in err and hint in err, err
 
 
 def test_usage_errors(capsys):

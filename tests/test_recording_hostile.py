@@ -94,7 +94,9 @@ def test_an_error_quotes_a_bounded_part_of_the_file(good, tmp_path, newline):
     message = str(info.value)
     assert len(message) < 2000, len(message)  # was 242 KB: every cell of the file
     assert "carriage return or a Unicode line separator" in message
-    assert " more" in message  # the rest counted, not quoted
+    # the one line's cells are no columns: none is quoted as duplicated, unknown or missing
+    assert info.value.line == 1 and info.value.column is None, message
+    assert "duplicated" not in message and "unknown column" not in message
 
 
 def test_the_cli_error_line_of_a_one_line_file_is_short(good, tmp_path):

@@ -489,7 +489,7 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
     loaded = load_paths([root])
     warn_load_notes(loaded)  # e.g. a crashed recording's cut last line, dropped
     skipped = [
-        {"file": str(e.path) if e.path is not None else str(root), "reason": e.reason or str(e)}
+        {"file": str(e.path) if e.path is not None else str(root), "reason": e.located or str(e)}
         for e in loaded.errors
         if not (e.path == root and not loaded)  # "no recordings here" is said below
     ]

@@ -39,12 +39,18 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from hasa_env.extras import install_hint
 from hasa_env.recording.format import (
     Recording,
     RecordingError,
     RecordingWarning,
 )
-from hasa_env.recording.reader import load_recording, load_recordings, warn_load_notes
+from hasa_env.recording.reader import (
+    load_recording,
+    load_recordings,
+    subfolder_hint,
+    warn_load_notes,
+)
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.sensors import SENSOR_NAMES
 from hasa_env.sim.setup import INFO_KEYS, STATE_NAMES, EnvSetup, build_setup
@@ -71,14 +77,13 @@ def require_minari() -> Any:
         import minari  # optional extra 'minari'
     except ImportError as exc:
         raise ImportError(
-            "Minari is not installed; install the datasets extra: pip install 'hasa-env[minari]'"
+            f"Minari is not installed; install the minari extra: {install_hint('minari')}"
         ) from exc
     try:
         import pyarrow  # noqa: F401 - Minari's default (arrow) storage needs it
     except ImportError as exc:
         raise ImportError(
-            "Minari's arrow storage needs pyarrow; install the datasets extra: "
-            "pip install 'hasa-env[minari]'"
+            f"Minari's arrow storage needs pyarrow; install the minari extra: {install_hint('minari')}"
         ) from exc
     return minari
 
@@ -280,7 +285,7 @@ def _load_sources(
             loaded = load_recordings(root)
         warn_load_notes(loaded)  # e.g. a crashed recording's cut last line, dropped
         for err in loaded.errors:
-            skipped.append((err.path, err.reason if err.line is None else str(err)))
+            skipped.append((err.path, err.located))
         return list(loaded), skipped
     recordings: list[Recording] = []
     for item in source:
@@ -459,9 +464,10 @@ def export_minari(
     for path, reason in skipped:
         warnings.warn(f"not exported: {path}: {reason}", RecordingWarning, stacklevel=2)
     if not chosen:
+        nested = subfolder_hint(source) if isinstance(source, (str, os.PathLike)) else ""
         raise ValueError(
             "no recording to export"
-            + (": " + "; ".join(f"{p}: {r}" for p, r in skipped) if skipped else "")
+            + (": " + "; ".join(f"{p}: {r}" for p, r in skipped) if skipped else nested)
         )
     first = chosen[0][0]
     config = dataset_config(first.config, action_type, observation_type)

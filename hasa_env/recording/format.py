@@ -127,14 +127,21 @@ class RecordingError(ValueError):
         self.line = line
         self.column = column
         self.reason = message
-        where = []
-        if path is not None:
-            where.append(str(path))
-        if line is not None:
-            where.append(f"line {line}")
-        if column is not None:
-            where.append(f"column {show(column)}")
-        super().__init__(f"{', '.join(where)}: {message}" if where else message)
+        super().__init__(self.located if path is None else f"{path}{self._where(', ')}: {message}")
+
+    @property
+    def located(self) -> str:
+        """The message with its line and column but not its file (for a list of skipped
+        files that names each file itself): ``line 50, column 'speed': not a number: 'abc'``."""
+        where = self._where("")
+        return f"{where}: {self.reason}" if where else self.reason
+
+    def _where(self, lead: str) -> str:
+        """``line N, column 'c'`` (those known) after ``lead``, or ``""`` when neither is."""
+        where = [f"line {self.line}"] if self.line is not None else []
+        if self.column is not None:
+            where.append(f"column {show(self.column)}")
+        return lead + ", ".join(where) if where else ""
 
 
 class RecordingWarning(UserWarning):
@@ -425,14 +432,15 @@ def check_header(names: list[str], source: Path | str) -> None:
     if missing:
         problems.append("missing column(s) " + _some(missing))
     if problems:
-        column = (dup or unknown or missing)[0]
+        column: str | None = (dup or unknown or missing)[0]
         header = ",".join(names)
         if "\r" in header or "\u2028" in header or "\u2029" in header:
-            problems.insert(
-                0,
-                "the header holds a carriage return or a Unicode line separator: lines must "
-                "end with \\n (or \\r\\n)",
-            )
+            # the whole file reads as one header line: its columns say nothing more
+            problems = [
+                "the header holds a carriage return or a Unicode line separator (a file of "
+                "CR-only or U+2028 line ends?): lines must end with \\n (or \\r\\n)"
+            ]
+            column = None
         raise RecordingError(
             "bad header: " + "; ".join(problems) + f" (expected: {','.join(RECORDING_COLUMNS)})",
             source,

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from hasa_env._walk import walk_files
+from hasa_env.extras import install_hint
 from hasa_env.files import file_kind
 from hasa_env.recording.format import (
     BOOL_COLUMNS,
@@ -340,6 +341,22 @@ def load_recordings(directory: str | os.PathLike[str], *, strict: bool = False) 
     return result
 
 
+def subfolder_hint(folder: str | os.PathLike[str]) -> str:
+    """For a tool that reads the recordings of ``folder`` itself, not of its subfolders: ``""``
+    when none are below it either, else `` (its subfolders hold N recording(s), e.g. in
+    DIR: give a subfolder)``, to end a "no recordings" message (a study's root holds one
+    folder per participant)."""
+    root = Path(folder)
+    files, _ = walk_files(root, (".csv",))
+    nested = [p for p in files if p.parent != root and p.with_suffix(".json").exists()]
+    if not nested:
+        return ""
+    return (
+        f" (its subfolders hold {len(nested)} recording(s), e.g. in {nested[0].parent}: "
+        "give a subfolder)"
+    )
+
+
 def load_paths(paths: Sequence[str | os.PathLike[str]]) -> RecordingList:
     """Load the recordings named by ``paths`` (files, or directories searched recursively), quietly.
 
@@ -446,7 +463,7 @@ def require_pyarrow() -> Any:
         import pyarrow.parquet as pq  # optional extra 'parquet'
     except ImportError as exc:
         raise ImportError(
-            "pyarrow is not installed; install the Parquet extra: pip install 'hasa-env[parquet]'"
+            f"pyarrow is not installed; install the parquet extra: {install_hint('parquet')}"
         ) from exc
     return pq
 

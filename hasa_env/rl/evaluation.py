@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 
 from hasa_env.envs.base import hasa_unwrapped
+from hasa_env.extras import install_hint
 from hasa_env.rl.wrappers import env_action
 
 __all__ = [
@@ -29,8 +30,8 @@ __all__ = [
 ]
 
 _SB3_HINT = (
-    "Stable-Baselines3 is not installed; install the RL extra: pip install 'hasa-env[rl]' "
-    "(it needs torch; a CPU wheel is enough)"
+    f"Stable-Baselines3 is not installed; install the rl extra: {install_hint('rl')}; "
+    "it needs torch, and a CPU wheel is enough"
 )
 
 
