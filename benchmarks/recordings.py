@@ -39,7 +39,12 @@ from typing import Any
 from benchmarks.defaults import DEFAULT_EQUATION_ERROR_ORDER
 from benchmarks.documents import json_clean
 from benchmarks.replay_estimate import describe_estimate
-from benchmarks.speed_scaled import add_speed_scaled_error, fits_speed_scaled_error
+from benchmarks.speed_scaled import (
+    add_speed_scaled_error,
+    describe_equation_error,
+    describe_speed_scaled,
+    fits_speed_scaled_error,
+)
 from estimators.offline import EstimatorRun, estimate_recording
 from estimators.trust import STEERING_EVERYWHERE, TrustedFilter, trusted_filter
 from hasa_env.drivers import require_lane_keeping
@@ -73,6 +78,7 @@ __all__ = [
     "describe_speed_scaled",
     "describe_trust",
     "estimate_recordings",
+    "load_model_spec",
     "prepare_model",
     "render_recordings",
     "score_recordings",
@@ -268,6 +274,53 @@ class PreparedModel:
         return trusted_filter(self.model, steering_ratio=self.steering_ratio)
 
 
+def load_model_spec(
+    spec: str,
+    recordings: Sequence[Any],
+    *,
+    fit: bool = False,
+    fit_on: int = 1,
+    equation_error_order: int | None = None,
+    steering_ratio: float | None = None,
+    trust_module: bool = False,
+) -> SteeringModel:
+    """The model ``spec`` loaded for ``recordings``' sample time, and the arguments
+    :func:`prepare_model` takes with it checked, before anything is fitted or run: what a
+    program asks first, so that a misspelt model refuses the run before any recording is
+    replayed.
+
+    Raises:
+        ModelSetupError: as :func:`prepare_model`.
+    """
+    if steering_ratio is not None and not (0 < steering_ratio <= MAX_STEERING_RATIO):
+        raise ModelSetupError(
+            f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
+            f"road-wheel rad), got {steering_ratio!r}"
+        )
+    if fit and not _is_int_in(fit_on, 1, len(recordings)):
+        raise ModelSetupError(
+            f"--fit-on must be an integer from 1 to {len(recordings)} (the recordings loaded), "
+            f"got {fit_on!r}"
+        )
+    if equation_error_order is not None and not _is_int_in(
+        equation_error_order, 0, MAX_EQUATION_ERROR_ORDER
+    ):
+        raise ModelSetupError(
+            f"--equation-error-order must be an integer in [0, {MAX_EQUATION_ERROR_ORDER}] "
+            f"(0: white), got {equation_error_order!r}"
+        )
+    try:
+        model = load_model(spec, recordings[0].dt, trust_module=trust_module)
+    except (ValueError, OSError) as exc:
+        raise ModelSetupError(str(exc)) from None
+    if not model.is_fitted and not fit:
+        raise ModelSetupError(
+            f"model {spec!r} has no parameters: add --fit to fit it on the first "
+            "recording, or give a saved model file (model.save('model.json'))"
+        )
+    return model
+
+
 def prepare_model(
     spec: str,
     recordings: Sequence[Any],
@@ -314,32 +367,15 @@ def prepare_model(
             ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
-    if steering_ratio is not None and not (0 < steering_ratio <= MAX_STEERING_RATIO):
-        raise ModelSetupError(
-            f"steering ratio must be a number in (0, {MAX_STEERING_RATIO:g}] (model units per "
-            f"road-wheel rad), got {steering_ratio!r}"
-        )
-    if fit and not _is_int_in(fit_on, 1, len(recordings)):
-        raise ModelSetupError(
-            f"--fit-on must be an integer from 1 to {len(recordings)} (the recordings loaded), "
-            f"got {fit_on!r}"
-        )
-    if equation_error_order is not None and not _is_int_in(
-        equation_error_order, 0, MAX_EQUATION_ERROR_ORDER
-    ):
-        raise ModelSetupError(
-            f"--equation-error-order must be an integer in [0, {MAX_EQUATION_ERROR_ORDER}] "
-            f"(0: white), got {equation_error_order!r}"
-        )
-    try:
-        model = load_model(spec, recordings[0].dt, trust_module=trust_module)
-    except (ValueError, OSError) as exc:
-        raise ModelSetupError(str(exc)) from None
-    if not model.is_fitted and not fit:
-        raise ModelSetupError(
-            f"model {spec!r} has no parameters: add --fit to fit it on the first "
-            "recording, or give a saved model file (model.save('model.json'))"
-        )
+    model = load_model_spec(
+        spec,
+        recordings,
+        fit=fit,
+        fit_on=fit_on,
+        equation_error_order=equation_error_order,
+        steering_ratio=steering_ratio,
+        trust_module=trust_module,
+    )
     if steering is not None:
         model.steering_signal = steering
     fitted_on: tuple[Path | None, ...] = ()
@@ -423,48 +459,11 @@ def _with_equation_error_order(
     return GeneralizedModel(**structure, **model.common_kwargs()), how
 
 
-def describe_equation_error(model: SteeringModel) -> str:
-    """A fitted model's equation error (docs/design.md §8.32) in one phrase: white, or the
-    autoregression its fit estimated."""
-    order = int(getattr(model, "equation_error_order", 0))
-    ar = ", ".join(f"{r:.3g}" for r in getattr(model, "equation_error_ar", ()) or ())
-    if not order or not ar:  # none found: too few residuals, or not stationary
-        return "white equation error" + (f" (no AR({order}) found)" if order else "")
-    return f"equation error AR({order}): {ar}"
-
-
 def _shared_road(recordings: Sequence[Any]) -> Road | None:
     """The road of ``recordings`` when they were all made on the same track and lane width
     (what a fit's features read of it), else None (each run's from its metadata)."""
     roads = {(rec.config["track"], rec.config["road"]["lane_width"]) for rec in recordings}
     return recordings[0].road if len(roads) == 1 else None
-
-
-def describe_speed_scaled(found: dict[str, Any]) -> str:
-    """What fitting a model's speed-scaled equation error found
-    (:func:`benchmarks.speed_scaled.add_speed_scaled_error`'s record), in one phrase."""
-    error = found["speed_scaled_error"]
-    if error is None:
-        return (
-            "no speed-scaled equation error found (its fit is on the boundary or the "
-            "residuals are too few); the filter uses the model's equation error as before"
-        )
-    how = (
-        "held out: each recording's residuals from the model refitted on the others"
-        if found["speed_scaled_held_out"]
-        else "in-sample: one recording fitted on; --fit-on 2 or more holds it out"
-    )
-    gain = found["speed_scaled_gain"]
-    over = (
-        ""
-        if gain is None
-        else f"; {gain:+.3g} nats per sample over one white level on the recordings fitted on"
-    )
-    return (
-        f"speed-scaled equation error sigma_c {error['coloured_std']:.3g} rad at "
-        f"{error['reference_speed']:g} m/s, rho {error['correlation']:.3f}, sigma_w "
-        f"{error['white_std']:.3g} rad ({how}{over})"
-    )
 
 
 @dataclass(frozen=True)

@@ -106,6 +106,7 @@ from benchmarks.recordings import (
     describe_estimate,
     describe_trust,
     estimate_recordings,
+    load_model_spec,
     prepare_model,
     render_recordings,
     score_recordings,
@@ -253,7 +254,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--video", type=Path, default=None, help="write a video (needs imageio + imageio-ffmpeg)"
     )
     p.add_argument("--frame-every", type=int, default=10, help="render every N-th row (default 10)")
-    p.add_argument("--view", choices=("driver", "top_down"), default="driver")
+    p.add_argument(
+        "--view",
+        choices=("driver", "top_down"),
+        default="driver",
+        help="view of the frames: the driver's or the top-down one (default driver)",
+    )
     p.add_argument(
         "--size", type=_size, default=(1280, 720), help="frame size WIDTHxHEIGHT (default 1280x720)"
     )
@@ -286,6 +292,17 @@ def _arguments(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def _model_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The options that load the model and that :func:`load_model_spec` checks first."""
+    return {
+        "fit": args.fit,
+        "fit_on": args.fit_on or 1,
+        "equation_error_order": args.equation_error_order,
+        "steering_ratio": args.steering_ratio,
+        "trust_module": args.trust_model_module,
+    }
+
+
 def _prepare_and_score(
     args: argparse.Namespace,
     recordings: Sequence[Any],
@@ -305,15 +322,11 @@ def _prepare_and_score(
     prepared = prepare_model(
         spec,
         recordings,
-        fit=args.fit,
-        fit_on=args.fit_on or 1,
+        **_model_options(args),
         speed_scaled_error=args.speed_scaled_error,
-        equation_error_order=args.equation_error_order,
         steering=args.steering,
-        steering_ratio=args.steering_ratio,
         lane_check=args.estimator and not args.no_lane_check,
         say=lambda message: print(printable(message)),
-        trust_module=args.trust_model_module,
         log=report.warnings,
     )
     report.add_model(prepared)
@@ -363,6 +376,13 @@ def _run(
 ) -> int:
     """Every step after loading (module docstring), each recorded in ``report`` as it ends;
     a run that ends early says why in ``report.error``. Returns the exit status."""
+    if args.model is not None or args.estimator:
+        try:  # a model that cannot be loaded refuses the run before anything is replayed
+            load_model_spec(args.model or "generalized", recordings, **_model_options(args))
+        except ModelSetupError as exc:
+            report.error = str(exc)
+            error(PROG, report.error)
+            return EXIT_USAGE
     checks = check_recordings(recordings, args.atol, report.warnings)
     report.add_checks(checks)
     for check in checks:

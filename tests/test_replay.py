@@ -135,6 +135,23 @@ def test_hasa_replay_scores_a_fitted_steering_model(capsys):
     assert measured_rmse > rmse
 
 
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--model", "two-pont"], "did you mean 'two-point'?"),
+        (["--model", "no_such_module_here:Model", "--estimator"], "no_such_module_here"),
+        (["--model", "missing.json"], "missing.json"),
+    ],
+)
+def test_a_model_that_cannot_load_refuses_the_run_before_any_replay(argv, says, capsys):
+    """Exit 2 means nothing was done (README): a misspelt model refuses the run before the
+    recordings are replayed, not after."""
+    assert main([str(SAMPLE), *argv]) == 2
+    out, err = capsys.readouterr()
+    assert "replay" not in out, out
+    assert err.startswith("hasa-replay: error: ") and says in err, err
+
+
 @pytest.mark.slow
 def test_hasa_replay_runs_the_estimator_and_it_finds_the_true_lane(capsys):
     pytest.importorskip("estimators.gm_ekf")

@@ -43,6 +43,7 @@ from hasa_env.steering.model_file import (
     ModelFileError,
 )
 from hasa_env.steering.models import GeneralizedModel, TwoPointModel
+from hasa_env.validation import did_you_mean
 
 __all__ = [
     "MODEL_SPEC_FORMS",
@@ -121,7 +122,9 @@ def model_spec_kind(spec: str) -> str:
         return "file"
     if _IMPORT_PATH.fullmatch(spec):
         return "import"
-    raise ModelLoadError(spec, "import", f"unknown model; use {MODEL_SPEC_FORMS}")
+    raise ModelLoadError(
+        spec, "import", f"unknown model; use {MODEL_SPEC_FORMS}{did_you_mean(spec, PAPER_PRESETS)}"
+    )
 
 
 def import_model(spec: str) -> SteeringModel:
