@@ -122,9 +122,8 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="run length in s (30)",
     )
-    data.add_argument(
-        "--track", choices=("straight", "curved"), default="straight", help="main track"
-    )
+    tracks = ("straight", "curved")
+    data.add_argument("--track", choices=tracks, default="straight", help="main track (straight)")
     data.add_argument(
         "--scenario",
         choices=(*SCENARIOS, "all"),
@@ -315,7 +314,12 @@ def _add_execution_options(parser: argparse.ArgumentParser) -> None:
         "run in its own process so a model that hangs, exits or crashes fails alone "
         f"(default {DEFAULT_MODEL_TIME_LIMIT:g} s; 0: no limit, user code runs in-process)",
     )
-    run.add_argument("--out", default="hasa-bench-results", metavar="DIR", help="output directory")
+    run.add_argument(
+        "--out",
+        default="hasa-bench-results",
+        metavar="DIR",
+        help="output directory (default hasa-bench-results)",
+    )
     run.add_argument(
         "--overwrite",
         action="store_true",

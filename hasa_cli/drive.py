@@ -96,7 +96,12 @@ def _add_session_arguments(p: argparse.ArgumentParser, participant_required: boo
     p.add_argument(
         "--participant", required=participant_required, help="participant id (folder name)"
     )
-    p.add_argument("--track", choices=("straight", "curved"), default="straight")
+    p.add_argument(
+        "--track",
+        choices=("straight", "curved"),
+        default="straight",
+        help="road (default straight)",
+    )
     p.add_argument(
         "--bias",
         type=_bias,
@@ -363,10 +368,27 @@ def _calibrate_parser() -> argparse.ArgumentParser:
         description="Measure a wheel's axes (centre, locks, pedals); write a calibration file.",
     )
     add_version(p)
-    p.add_argument("--output", type=Path, default=user_calibration_path(), help="file to write")
-    p.add_argument("--wheel-range", type=float, default=900.0, help="lock-to-lock range in degrees")
-    p.add_argument("--steering-ratio", type=float, default=15.0, help="steering ratio (default 15)")
-    p.add_argument("--timeout", type=float, default=300.0, help="give up after this many seconds")
+    p.add_argument(
+        "--output",
+        type=Path,
+        default=user_calibration_path(),
+        help="file to write (default %(default)s)",
+    )
+    p.add_argument(
+        "--wheel-range",
+        type=float,
+        default=900.0,
+        help="lock-to-lock range in degrees (default %(default)g)",
+    )
+    p.add_argument(
+        "--steering-ratio", type=float, default=15.0, help="steering ratio (default %(default)g)"
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=300.0,
+        help="give up after this many seconds (default %(default)g)",
+    )
     return p
 
 
@@ -414,7 +436,12 @@ def _drive_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--keyboard", type=Path, default=None, help="keyboard calibration file")
     p.add_argument("--keyboard-only", action="store_true", help="ignore joysticks")
-    p.add_argument("--view", choices=("driver", "top_down"), default="driver")
+    p.add_argument(
+        "--view",
+        choices=("driver", "top_down"),
+        default="driver",
+        help="the driver's view or the top-down one (default driver)",
+    )
     p.add_argument("--show-points", action="store_true", help="draw the near and far points")
     p.add_argument(
         "--estimator",
@@ -434,10 +461,13 @@ def _drive_parser() -> argparse.ArgumentParser:
         "preset does)",
     )
     add_trust_model_option(p, "--estimator's model file")
-    p.add_argument("--width", type=int, default=1280)
-    p.add_argument("--height", type=int, default=720)
+    p.add_argument("--width", type=int, default=1280, help="window width in pixels (default 1280)")
+    p.add_argument("--height", type=int, default=720, help="window height in pixels (default 720)")
     p.add_argument(
-        "--fps", type=int, default=60, help="frame-rate cap (the physics runs at 100 Hz regardless)"
+        "--fps",
+        type=int,
+        default=60,
+        help="frame-rate cap (default 60; the physics runs at 100 Hz regardless)",
     )
     p.add_argument("--fullscreen", action="store_true")
     p.add_argument(

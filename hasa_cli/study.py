@@ -274,6 +274,7 @@ def _setup(args: argparse.Namespace) -> _Setup:
         env_wrapper = estimator_for(
             args.estimator,
             LaneKeepingEnv(config=study.env_config(track)),
+            log=print,  # where the filter does not listen to the model's steering, and why
             trust_module=args.trust_model_module,
         )
     # the input is checked first: a bad file is exit 2 with or without a screen
@@ -539,9 +540,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-status", action="store_true", help="no status line in the terminal")
     add_trust_model_option(p, "--estimator's model file")
-    p.add_argument("--width", type=int, default=1280)
-    p.add_argument("--height", type=int, default=720)
-    p.add_argument("--fps", type=int, default=60, help="frame-rate cap (physics: 100 Hz)")
+    p.add_argument("--width", type=int, default=1280, help="window width in pixels (default 1280)")
+    p.add_argument("--height", type=int, default=720, help="window height in pixels (default 720)")
+    p.add_argument(
+        "--fps", type=int, default=60, help="frame-rate cap (default 60; physics: 100 Hz)"
+    )
     p.add_argument("--fullscreen", action="store_true")
     p.add_argument("--autocentre", type=float, default=None, metavar="STRENGTH",
                    help="force feedback: autocentre spring 0..1 (Linux, evdev)")  # fmt: skip
@@ -556,7 +559,9 @@ def build_parser() -> argparse.ArgumentParser:
         "presses its button through the screens; headless and as fast as possible unless "
         "--realtime; recordings labelled synthetic",
     )
-    p.add_argument("--population", default="paper", help="population of --synthetic")
+    p.add_argument(
+        "--population", default="paper", help="population of --synthetic (default paper)"
+    )
     p.add_argument("--population-seed", type=int, default=0, help="its seed (0)")
     p.add_argument(
         "--realtime",

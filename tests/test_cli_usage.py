@@ -122,3 +122,36 @@ def test_a_fit_warning_is_one_warning_line_that_does_not_contradict_the_estimate
     (line,) = [ln for ln in lines if "static lane-offset gain" in ln]
     assert "carries no information" not in line and "may still decide a lane" in line
     assert "Warning:" not in done.stderr and ".py:" not in done.stderr
+
+
+def _options_with_defaults(name, parser):
+    """(program, option, default, help) of every option of ``parser`` and its subcommands
+    whose default is a value (not None, False, an empty list or argparse.SUPPRESS)."""
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub, subparser in action.choices.items():
+                yield from _options_with_defaults(f"{name} {sub}", subparser)
+        elif action.option_strings and action.default not in (None, False, argparse.SUPPRESS):
+            if action.default != [] and not isinstance(action, argparse._VersionAction):
+                yield name, action.option_strings[-1], action.default, action.help or ""
+
+
+def test_every_option_with_a_default_says_it_in_its_help():
+    """A user reads the default in --help (hasa-drive calibrate's --wheel-range and --output
+    said none); "(9)" or "(default 9)" both count."""
+    from hasa_cli import bench, drive, rec, replay, study
+
+    parsers = {"hasa-bench": bench.build_parser(), "hasa-rec": rec.build_parser(),
+               "hasa-replay": replay.build_parser(), "hasa-drive study": study.build_parser(),
+               "hasa-drive calibrate": drive._calibrate_parser(),
+               "hasa-drive synthetic": drive._synthetic_parser(),
+               "hasa-drive": drive._drive_parser()}  # fmt: skip
+    silent = []
+    for name, parser in parsers.items():
+        for prog, option, default, text in _options_with_defaults(name, parser):
+            shown = [str(default), f"{default:g}" if isinstance(default, float) else str(default)]
+            if "default" not in text and not any(f"({s}" in text for s in shown):
+                silent.append(f"{prog} {option} (default {default!r}): {text!r}")
+    assert not silent, "\n".join(silent)

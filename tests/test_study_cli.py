@@ -201,6 +201,8 @@ def test_the_status_line_shows_run_bias_time_speed_and_weights(tmp_path, capsys)
     assert all(" | v " in line and " | y " in line and "weights +0.0: " in line
                for line in driving)  # fmt: skip
     assert any(line.endswith("| break") for line in lines)
+    (trust,) = [line for line in lines if line.startswith("hasa-drive: --estimator generalized: ")]
+    assert "steering" in trust, trust  # where the filter does not listen, as hasa-drive says
     assert StatusLine().tty is False  # captured: plain lines, no carriage returns
 
 
