@@ -74,8 +74,10 @@ CSV_TABLES = {
 def _source(cfg: dict[str, Any]) -> str:
     if cfg.get("recordings"):
         return f"recordings in {cfg['recordings']} (scenario {cfg.get('scenario', 'paper')!r})"
+    scenario = cfg.get("scenario") or "paper"
     return (
-        f"synthetic population {cfg['population']!r}, seeds {cfg['seeds']}: "
+        f"synthetic population {cfg['population']!r}, scenario {scenario!r}, "
+        f"seeds {cfg['seeds']}: "
         f"{cfg['drivers']} drivers x {cfg['runs']} runs of {cfg['duration']:g} s on the "
         f"{cfg['track']} track ({cfg['illustrative']}: {cfg['ill_runs']}), "
         f"{cfg['curved_runs']} curved"

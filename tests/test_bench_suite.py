@@ -12,6 +12,7 @@ from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
 from benchmarks.protocol import run as protocol_run
 from benchmarks.protocol.plan import make_plan
 from benchmarks.protocol.suite import fit_key, run_suite
+from benchmarks.report import format_tables
 
 SMALL = {"seeds": (3710, 3711), "drivers": 2, "runs": 1, "ill_runs": 2, "duration": 3.0,
          "curved_runs": 1}  # fmt: skip
@@ -60,6 +61,8 @@ def test_the_suite_gives_each_scenario_the_result_it_gets_alone(monkeypatch) -> 
                 pd.DataFrame(getattr(together, table)), pd.DataFrame(getattr(alone, table))
             )
         assert together.executor["tasks"] == alone.executor["tasks"] == 2
+        # the tables' header (and the report's "Data:" line) say which scenario they are
+        assert f"scenario {name!r}, seeds " in format_tables(together).splitlines()[0]
 
 
 def test_a_suite_of_configs_that_differ_in_more_than_the_scenario_is_refused() -> None:
