@@ -31,7 +31,7 @@ def model_runs(results: dict[str, Any], model: str, track: str) -> pd.DataFrame:
     """``model``'s runs on ``track`` from ``results.json``'s ``runs_estimation``."""
     runs = pd.DataFrame(results["runs_estimation"])
     if runs.empty:
-        raise SystemExit("results.json has no estimation runs (was it run with --no-estimate?)")
+        raise SystemExit("results.json has no estimation runs (no run was filtered)")
     chosen = runs[(runs["model"] == model) & (runs["track"] == track)]
     if chosen.empty:
         models = ", ".join(sorted(runs["model"].unique()))

@@ -17,7 +17,8 @@ partial: a user model failed, or recordings were skipped or runs left out
 as degenerate (each named on stderr and in results.json; every other result
 is written); 2 invalid arguments or data, a user model that does not
 import, an output folder that exists (nothing run, nothing written); 3 the
-Dask scheduler cannot be reached. What loading repaired in a recording of
+environment: the Dask scheduler cannot be reached or is lost, Dask's package is not
+installed (the ``dask`` extra), or the results cannot be written. What loading repaired in a recording of
 ``--recordings`` (a crashed recording's partly written last line, dropped) is a
 ``hasa-bench: warning:`` line naming it, with ``--quiet`` too, and a note in
 results.json; it does not change the exit status.
@@ -383,24 +384,26 @@ def build_parser() -> argparse.ArgumentParser:
         description="The human-as-advisor benchmark (Mai et al.): steering-model prediction "
         "and lane estimation on a synthetic population or recorded drives.",
         epilog="Exit status: 0 ok, 1 partial (a user model failed, recordings skipped, runs "
-        "left out; each named), 2 usage or input error (nothing written), 3 the Dask "
-        "scheduler cannot be reached.",
+        "left out; each named), 2 usage or input error (nothing written), 3 environment: the "
+        "Dask scheduler cannot be reached or is lost, its package is not installed (the dask "
+        "extra), or the results cannot be written.",
     )
     add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="{paper,score,perf}")
     paper = sub.add_parser(
         "paper",
         help="the paper's protocol with the two built-in models",
-        description="Fit the two-point and generalized models on one run of 'Ill', score "
-        "steering prediction (paper table 1) and lateral estimation (table 2) on every "
-        "other run; the paper's values are printed beside ours.",
+        description="Fit the two-point and generalized models on one run of 'Ill' and one "
+        "run each of --training-drivers more drivers (default 8; 0: the paper's one-run "
+        "protocol), score steering prediction (paper table 1) and lateral estimation (table 2) "
+        "on every other run; the paper's values are printed beside ours.",
     )
     _add_protocol_options(paper)
     score = sub.add_parser(
         "score",
         help="score your steering model(s) with the same protocol",
         description="Import each MODEL ('package.module:ClassName', a SteeringModel subclass, "
-        "from the working directory or the installed packages), fit it on the training run "
+        "from the working directory or the installed packages), fit it on the training runs "
         "like the built-ins and rank it against them; a saved model file (model.save(...), "
         "any registered type) is scored with its own parameters.",
     )
