@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.protocol.config import ProtocolConfig
+from benchmarks.protocol.plan import recording_plan
 from hasa_cli.bench import main as bench_main
 from hasa_cli.drive import EXIT_NO_SCREEN
 from hasa_cli.drive import main as drive_main
@@ -142,6 +144,35 @@ def test_a_killed_study_resumes_at_the_next_run_and_the_benchmark_reads_it(tmp_p
     assert "aborted run not analysed" in text  # also in the printed report
     estimated = {r["driver"] for r in result["estimation"]}
     assert estimated == {"P01", "P02"}  # the paper's table 2 for the study's participants
+
+
+def test_the_benchmark_names_a_missing_measured_run_and_pools_no_two_protocols(tmp_path, capsys):
+    """A completed measured run whose recording is gone is a skipped file (the verdict lacks
+    it), not a silent 3/3; sessions of a study file whose runs differ are not pooled with
+    the training participant's (they were scored as one verdict)."""
+    out = tmp_path / "rec"
+    study = _study(tmp_path, seconds=1.5)
+    other = tmp_path / "other.toml"
+    other.write_text(STUDY.format(seconds=2.5))  # same name, other run length
+    for who, path, driver in (("P01", study, "2"), ("P02", study, "3"), ("P03", other, "4")):
+        args = ["study", str(path), "--participant", who, "--output", str(out),
+                "--synthetic", driver, "--meta", "age_band=25-34"]  # fmt: skip
+        assert drive_main(args) == 0
+    capsys.readouterr()
+    gone = out / "P02" / "measured_02_000.csv"
+    gone.unlink()
+    gone.with_suffix(".json").unlink()
+    config = ProtocolConfig(recordings=str(out), min_duration=0.5, illustrative="P01")
+    plan = recording_plan(config)
+    skipped = {Path(s["file"]).parent.name + "/" + Path(s["file"]).name: s["reason"]
+               for s in plan.skipped}  # fmt: skip
+    assert skipped["P02/measured_02_000.csv"].endswith("of its session file, missing")
+    p03 = [name for name in skipped if name.startswith("P03/")]
+    assert len(p03) == 3, skipped
+    assert "not of the training run's study 'scripted' of study.toml" in skipped[p03[0]]
+    assert {d["driver"] for d in plan.drivers} == {"P01", "P02"}
+    assert any("P02 (scripted, complete): 3/3 measured runs" in n and "1 of its measured "
+               "recordings missing" in n for n in plan.notes)  # fmt: skip
 
 
 @pytest.mark.slow

@@ -7,6 +7,8 @@ in the plan's notes or skipped files; they are kept next to the plan they decide
 
 from __future__ import annotations
 
+import hashlib
+import json
 import zlib
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
@@ -367,45 +369,62 @@ def _driver_of(rec: Recording, root: Path) -> str:
     return relative.parts[0] if relative.parts else "driver"
 
 
-def _study_sessions(
-    root: Path,
-) -> tuple[dict[Path, str], dict[Path, str], dict[str, Any], list[str]]:
-    """What the study session files under ``root`` say (``hasa-drive study``).
+PROTOCOL_SECTIONS = ("runs", "practice", "measured", "schedule", "env", "view")
+"""The sections of a study file that shape the drives (not its texts or questions): sessions
+whose sections differ follow different protocols, which one verdict does not pool."""
 
-    Returns (measured recording -> participant, recordings to leave out -> why (practice
-    runs, aborted attempts, files the session does not list, every recording of a folder
-    whose session file cannot be used), per-participant details, notes). A session file
-    that cannot be read or is invalid is named, and its folder's recordings are all left
-    out: without it practice runs cannot be told from measured ones.
-    """
-    measured: dict[Path, str] = {}
-    excluded: dict[Path, str] = {}
-    details: dict[str, Any] = {}
-    notes: list[str] = []
+
+@dataclass
+class _Sessions:
+    """What the study session files under a folder say (:func:`_study_sessions`)."""
+
+    measured: dict[Path, str] = field(default_factory=dict)
+    """Each completed measured run's recording -> its participant."""
+    excluded: dict[Path, str] = field(default_factory=dict)
+    """Recordings to leave out -> why ("": said in the notes): practice runs, aborted
+    attempts, files the session does not list, every recording of a folder whose session
+    file cannot be used."""
+    details: dict[str, Any] = field(default_factory=dict)
+    """Per participant: the session's details (results.json ``drivers[].study_session``)."""
+    notes: list[str] = field(default_factory=list)
+    missing: list[dict[str, str]] = field(default_factory=list)
+    """The completed measured runs a session file lists whose recording is missing,
+    ``{"file", "reason"}`` as a skipped file."""
+    protocols: dict[Path, str] = field(default_factory=dict)
+    """Each completed measured run's recording -> its session's protocol (:func:`_protocol`)."""
+
+
+def _study_sessions(root: Path) -> _Sessions:
+    """What the study session files under ``root`` say (``hasa-drive study``). A session
+    file that cannot be read or is invalid is named, and its folder's recordings are all
+    left out: without it practice runs cannot be told from measured ones."""
+    sessions = _Sessions()
     for path in find_session_files(root):
         try:
-            found = _one_session(path)
+            _one_session(path, sessions)
         except (SessionError, KeyError, TypeError, AttributeError, ValueError) as exc:
             text = str(exc) if isinstance(exc, SessionError) else f"{path}: {exc!s:.200}"
-            notes.append(f"skipped the session file {text}")
+            sessions.notes.append(f"skipped the session file {text}")
             reason = (
                 f"its folder's session file cannot be used ({text}): practice and measured "
                 "runs cannot be told apart"
             )
             for csv in path.parent.glob("*.csv"):
-                excluded[csv.resolve()] = reason
-            continue
-        measured.update(found[0])
-        excluded.update(found[1])
-        details.update(found[2])
-        notes += found[3]
-    return measured, excluded, details, notes
+                sessions.excluded[csv.resolve()] = reason
+    return sessions
 
 
-def _one_session(
-    path: Path,
-) -> tuple[dict[Path, str], dict[Path, str], dict[str, Any], list[str]]:
-    """What the session file ``path`` says, as :func:`_study_sessions` returns it.
+def _protocol(study: dict[str, Any]) -> str:
+    """A session's protocol: its study's name and file and a digest of the sections that
+    shape the drives (:data:`PROTOCOL_SECTIONS`)."""
+    spec = {name: study["spec"].get(name) for name in PROTOCOL_SECTIONS}
+    digest = hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()
+    source = Path(str(study.get("file") or "?")).name
+    return f"study {study['name']!r} of {source} (protocol {digest[:12]})"
+
+
+def _one_session(path: Path, into: _Sessions) -> None:
+    """Add what the session file ``path`` says to ``into`` (nothing when it raises).
 
     Raises:
         SessionError: the file cannot be read or is invalid (or KeyError, TypeError, ...:
@@ -440,6 +459,7 @@ def _one_session(
     unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
     excluded.update(dict.fromkeys(unlisted, ""))
     summary = session.summary()
+    protocol = _protocol(session.doc["study"])
     detail = {
         "session_file": str(path),
         "study": session.doc["study"]["name"],
@@ -457,8 +477,19 @@ def _one_session(
     )
     if unlisted:
         text += f", {len(unlisted)} recording(s) the session file does not list left out"
-    notes.append(text)
-    return measured, excluded, {who: detail}, notes
+    missing = [
+        {"file": str(csv), "reason": "a completed measured run of its session file, missing"}
+        for csv in measured
+        if not csv.exists()
+    ]
+    if missing:
+        text += f"; {len(missing)} of its measured recordings missing (listed as skipped)"
+    into.measured.update(measured)
+    into.excluded.update(excluded)
+    into.details[who] = detail
+    into.notes += [*notes, text]
+    into.missing += missing
+    into.protocols.update(dict.fromkeys(measured, protocol))
 
 
 @dataclass
@@ -480,6 +511,8 @@ class _Scan:
     """What loading repaired or tolerated in the recordings (:func:`hasa_env.recording.
     load_notes`: e.g. a crashed recording's partly written last line dropped), each naming
     its file."""
+    protocols: dict[Path, str | None] = field(default_factory=dict)
+    """Each found recording's study protocol (:func:`_protocol`; None: no session file)."""
 
 
 def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | None) -> _Scan:
@@ -497,7 +530,9 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
     scenarios: dict[Path, str] = {}
     rates: dict[Path, tuple[float, int]] = {}
     training: tuple[str, str] | None = None
-    session_runs, session_excluded, session_details, session_notes = _study_sessions(root)
+    sessions = _study_sessions(root)
+    session_runs, session_excluded = sessions.measured, sessions.excluded
+    skipped += sessions.missing  # named like a file that does not load: the verdict lacks it
     for rec in loaded:
         assert rec.path is not None
         if rec.path.resolve() in session_excluded:
@@ -526,9 +561,13 @@ def _scan_recordings(root: Path, config: ProtocolConfig, training_file: Path | N
             )
         raise BenchmarkError(f"no recordings (*.csv with a .json sidecar) in {str(root)!r}")
     repaired = [note for rec in loaded for note in load_notes(rec)]
+    protocols = {
+        path: sessions.protocols.get(path.resolve()) for ps in found.values() for path in ps
+    }
     return _Scan(
-        found, skipped, training, session_details, session_notes, scenarios, rates, repaired
-    )
+        found, skipped, training, sessions.details, sessions.notes, scenarios, rates, repaired,
+        protocols,
+    )  # fmt: skip
 
 
 def _keep_one_scenario(
@@ -544,19 +583,28 @@ def _keep_one_scenario(
     training = own[training_index] if training_index < len(own) else None
     scenario = scan.scenarios[training if training is not None else own[0]]
     rate = scan.rates[training if training is not None else own[0]]
+    protocol = scan.protocols.get(training if training is not None else own[0])
     for key in list(scan.found):
         kept = []
         for path in scan.found[key]:
             other = scan.scenarios[path]
-            if other == scenario and scan.rates[path] == rate:
+            theirs = scan.protocols.get(path)
+            same_protocol = protocol is None or theirs is None or theirs == protocol
+            if other == scenario and scan.rates[path] == rate and same_protocol:
                 kept.append(path)
                 continue
-            reason = (
-                f"scenario {other}, not the training run's {scenario}"
-                if other != scenario
-                else f"sampled {_rate_text(scan.rates[path])}, not as the training run "
-                f"({_rate_text(rate)}): the models' coefficients belong to one sample time"
-            )
+            if other != scenario:
+                reason = f"scenario {other}, not the training run's {scenario}"
+            elif scan.rates[path] != rate:
+                reason = (
+                    f"sampled {_rate_text(scan.rates[path])}, not as the training run "
+                    f"({_rate_text(rate)}): the models' coefficients belong to one sample time"
+                )
+            else:
+                reason = (
+                    f"a session of {theirs}, not of the training run's {protocol}: one "
+                    "verdict does not pool two protocols"
+                )
             scan.skipped.append(
                 {"file": str(path), "reason": reason + " (score it with a folder of its own)"}
             )
