@@ -292,6 +292,15 @@ def _arguments(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def _model_spec(args: argparse.Namespace) -> str:
+    """The spec of ``--model`` (default generalized); a user model's module is imported
+    from the working directory too (added to ``sys.path``, which a console script's lacks)."""
+    spec = args.model or "generalized"
+    if ":" in spec and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())  # user models in the working directory
+    return spec
+
+
 def _model_options(args: argparse.Namespace) -> dict[str, Any]:
     """The options that load the model and that :func:`load_model_spec` checks first."""
     return {
@@ -316,9 +325,7 @@ def _prepare_and_score(
     Raises:
         LaneKeepingError, ModelSetupError: as :func:`benchmarks.recordings.prepare_model`.
     """
-    spec = args.model or "generalized"
-    if ":" in spec and os.getcwd() not in sys.path:
-        sys.path.insert(0, os.getcwd())  # user models in the working directory
+    spec = _model_spec(args)
     prepared = prepare_model(
         spec,
         recordings,
@@ -378,7 +385,7 @@ def _run(
     a run that ends early says why in ``report.error``. Returns the exit status."""
     if args.model is not None or args.estimator:
         try:  # a model that cannot be loaded refuses the run before anything is replayed
-            load_model_spec(args.model or "generalized", recordings, **_model_options(args))
+            load_model_spec(_model_spec(args), recordings, **_model_options(args))
         except ModelSetupError as exc:
             report.error = str(exc)
             error(PROG, report.error)

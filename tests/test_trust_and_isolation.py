@@ -80,6 +80,16 @@ def test_a_saved_model_file_is_used_from_the_working_directory_when_trusted(user
     assert "model near_far_pd.json: rmse" in done.stdout
 
 
+def test_a_user_class_is_imported_from_the_working_directory(user):
+    """README: ``hasa-replay my_runs/ --model my_models:NearFarPD --fit``, the module found in
+    the working directory (the early check of the model, before any replay, once looked
+    before the working directory was on sys.path)."""
+    done = cli("hasa-replay", "my_runs", "--model", f"{MODULE}:NearFarPD", "--fit",
+               cwd=user["folder"])  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert f"model {MODULE}:NearFarPD: rmse" in done.stdout
+
+
 @pytest.mark.slow  # two programs, and the model's lane-keeping check
 def test_hasa_drive_takes_a_trusted_model_file_for_the_estimator(user, tmp_path):
     """``hasa-drive study ... --estimator F.json`` drives with it; ``hasa-drive --estimator
