@@ -409,6 +409,33 @@ def test_a_stopped_session_resumes_at_the_next_run_and_overwrites_nothing(tmp_pa
     assert not (folder / "session.lock").exists()
 
 
+@pytest.mark.parametrize(
+    "stop, note",
+    [(KeyboardInterrupt, "interrupted by Ctrl-C (SIGINT)"),
+     (lambda: SystemExit(143), "stopped by a signal (exit status 143)")],
+)  # fmt: skip
+def test_ctrl_c_or_a_signal_in_a_run_is_recorded_as_interrupted(tmp_path, pg, stop, note):
+    """The session file says a run stopped by Ctrl-C or SIGTERM was interrupted, as it says
+    of a SIGKILL's at the next start (it said "error", with the exception's name)."""
+    study = small(runs={"seconds": 1.0, "min_speed": 14.9})
+
+    def interrupt(session):
+        if session.state == "driving" and session.run_index == 1 and session.steps == 20:
+            raise stop()
+
+    session, wheel = _wheel_session(tmp_path, pg, study, hook_extra=interrupt)
+    try:
+        with pytest.raises((KeyboardInterrupt, SystemExit)):
+            session.run()
+    finally:
+        session.close()
+        wheel.detach()
+    doc = json.loads((tmp_path / "P01" / "session.json").read_text())
+    last = doc["attempts"][-1]
+    assert (last["status"], last["end_reason"], last["note"]) == ("aborted", "interrupted", note)
+    assert doc["sessions"][-1]["ended"] == "interrupted"
+
+
 def test_a_changed_study_file_does_not_resume(tmp_path, pg):
     path = write(tmp_path, '[study]\nname = "s"\nseed = 1\n[runs]\nseconds = 0.2\n'
                  "countdown = 0.0\n[measured]\nruns = 1\n")  # fmt: skip

@@ -366,7 +366,7 @@ class SessionFile:
         self.save()
 
     def end(self, how: str) -> None:
-        """Record how the current (re)start ended: complete, quit or error."""
+        """Record how the current (re)start ended: complete, quit, interrupted or error."""
         if self.doc["sessions"]:
             self.doc["sessions"][-1].update(ended_at=_now(), ended=how)
         if not self.remaining():

@@ -342,11 +342,10 @@ class StudySession:
             except BaseException as exc:
                 # best effort: on a full disk the session file cannot be written either;
                 # it then still says "started", which the next start marks as aborted
+                how, why = _how_it_ended(exc)
                 with contextlib.suppress(OSError):
-                    record.finish_attempt(
-                        attempt, "error", drive.steps, note=f"{type(exc).__name__}: {exc}"
-                    )
-                    record.end("error")
+                    record.finish_attempt(attempt, how, drive.steps, note=why)
+                    record.end(how)
                 raise
             if result is None:  # quit in the countdown: nothing was recorded
                 record.doc["attempts"].remove(attempt)
@@ -373,3 +372,14 @@ class StudySession:
         for drive in self._drives.values():
             drive.close()
         self._drives.clear()
+
+
+def _how_it_ended(exc: BaseException) -> tuple[str, str]:
+    """How a run that raised ``exc`` ended, for the session file: ``interrupted`` by Ctrl-C
+    or a signal (the program raises SystemExit(128 + signal) on SIGTERM and SIGHUP), as a
+    SIGKILL's run is marked at the next start, else ``error``; and a note saying which."""
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted", "interrupted by Ctrl-C (SIGINT)"
+    if isinstance(exc, SystemExit):
+        return "interrupted", f"stopped by a signal (exit status {exc.code})"
+    return "error", f"{type(exc).__name__}: {exc}"
