@@ -453,6 +453,9 @@ def test_stress_set_and_unchecked_estimators_are_scored(tmp_path: Path) -> None:
         unchecked = [r for r in result.runs_estimation if r["model"] == f"{name} (no checks)"]
         assert checked and all(r["final_decision"] == "undecided" for r in checked)
         assert any(r["final_decision"] != "undecided" for r in unchecked)
+        # its channel is off at every step (refused), not "unused" (missing or gated)
+        assert all(r["steering_off_share"] > 0.99 and r["steering_unused_share"] == 0
+                   and r["steering_live_share"] == 0 for r in checked)  # fmt: skip
     assert "off road 4/4" in text  # the Checks table says so
     assert "predicts (vs own past)" in text and " x: no better" in text  # and this one
     # nor does one that predicts the steering no better than its own past (design §8.13.1)

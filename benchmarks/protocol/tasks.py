@@ -586,8 +586,10 @@ def _estimate_model(
             settings = FilterSettings.from_env_config(
                 group[0].attrs["config"], **task.filter_settings
             )
-            result = stacks.run(make(settings), indices)
-            rows += _estimation_rows(task, indices, result, name, scratch, kind)
+            estimator = make(settings)
+            result = stacks.run(estimator, indices)
+            refused = kind != "baseline" and isinstance(estimator, NoSteeringEKF)
+            rows += _estimation_rows(task, indices, result, name, scratch, kind, refused)
     except ModelError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -606,17 +608,24 @@ def _estimate_model(
     _merge(out, scratch)
 
 
-def _channel_diagnostics(result: Any, kind: str) -> dict[str, np.ndarray]:
+def _channel_diagnostics(result: Any, kind: str, refused: bool = False) -> dict[str, np.ndarray]:
     """(R,) per-run diagnostics of the steering channel, in the rows' order: the share of
     the steps it was off (NaN: no such rule), the share it was live
     (:func:`estimators.calibration.steering_live_share`; NaN for a steering-free
     baseline) and why it was not (``steering_<state>_share`` of
     :func:`estimators.calibration.steering_channel_shares`), the median model-error ratio lambda and evidence scale tau (over the steps
-    it was on), and the mean NIS of each channel."""
+    it was on), and the mean NIS of each channel. ``refused``: a steering model the trust
+    rule gave no lane evidence at all (it failed the lane-keeping or the prediction check, or
+    has no ARX form: filtered by the no-steering estimator under its own name), whose channel
+    is off at every valid step, not "unused"."""
     n_runs = result.num_runs
     nan = np.full(n_runs, np.nan)
     shares = steering_channel_shares(result)
     off = result.low_speed
+    if refused:
+        off = result.valid.copy()
+        shares = {name: np.zeros(n_runs) for name in shares}
+        shares["off"] = result.valid.sum(axis=1) / result.lengths
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
         model_error = np.nanmedian(result.model_error, axis=1)
@@ -653,6 +662,7 @@ def _estimation_rows(
     name: str,
     out: ChunkResult,
     kind: str = "builtin",
+    refused: bool = False,
 ) -> list[dict[str, Any]]:
     refs = [task.runs[i] for i in indices]
     error = result.lateral_error()
@@ -672,7 +682,7 @@ def _estimation_rows(
     wrong_share = result.wrong_lane_confident_share(task.weight_threshold)
     wrong_decision = result.wrong_decision_ever(task.weight_threshold)
     nees = result.lateral_nees()
-    channel = _channel_diagnostics(result, kind)
+    channel = _channel_diagnostics(result, kind, refused)
     calibration = lane_calibration_bins(result)
     n_window = int(round(task.error_window / float(np.nanmedian(np.diff(result.time[0]))))) + 1
     rows = []
