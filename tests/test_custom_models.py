@@ -33,6 +33,16 @@ class WrongRegressors(NearFarPD):
     @property
     def regressors(self):
         return (Regressor("delta", 1), Regressor("phi", 0), Regressor("phi", 2))
+
+
+class Chatty(NearFarPD):
+    """Prints while it is designed (in the fit and every scoring)."""
+
+    model_type = "cli_test_chatty"
+
+    def design(self, features):
+        print("CHATTY MODEL OUTPUT")
+        return super().design(features)
 '''
 )
 
@@ -196,3 +206,14 @@ def test_hasa_bench_scores_a_user_model_from_a_module_and_from_a_file(user, tmp_
                        "--workers", "1", "--quiet", "--min-duration", "1"])  # fmt: skip
     assert code == 2  # a model that cannot be used is an input error: nothing is run
     assert "regressors and design() disagree" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("limit", ["600", "0"])  # isolated in a child process, or in-process
+def test_what_a_user_model_prints_goes_to_stderr_not_into_the_tables(user, tmp_path, capfd, limit):
+    code = bench_main(["score", f"{MODULE}:Chatty", "--recordings", str(user["recordings"]),
+                       "--out", str(tmp_path / "bench"), "--no-plots", "--workers", "1",
+                       "--min-duration", "1", "--model-time-limit", limit])  # fmt: skip
+    out, err = capfd.readouterr()
+    assert code == 0, err
+    assert "CHATTY MODEL OUTPUT" in err and "CHATTY MODEL OUTPUT" not in out
+    assert "Verdict over" in out  # the tables are on stdout

@@ -9,7 +9,7 @@ it holds when forked) and a CPU-time limit. A call that takes longer than the li
 is stopped; ``sys.exit``, ``os._exit``, a segmentation fault, a signal, the memory
 limit or any exception inside it ends that model (a :class:`ModelError` naming the
 reason), never the benchmark, and whatever the model does to the data it is given
-stays in its own process. When the call ends its whole process group is killed, so
+stays in its own process. What it prints goes to stderr (stdout holds the tables). When the call ends its whole process group is killed, so
 processes it forked do not outlive it (unless they left the group). This is crash
 isolation, not a sandbox: the model runs as the user, with the user's files,
 network and processes (it can still write files or signal the benchmark's process
@@ -31,6 +31,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+import sys
 import threading
 import time
 import warnings
@@ -98,9 +99,12 @@ class _OutOfTime(BaseException):
 
 
 def guarded(func: Callable[..., Any], args: tuple[Any, ...], model: str, stage: str) -> Any:
-    """``func(*args)``; any exception and ``SystemExit`` become this model's ModelError."""
+    """``func(*args)``; any exception and ``SystemExit`` become this model's ModelError.
+    What the user's code prints goes to stderr, so that stdout holds hasa-bench's tables
+    only."""
     try:
-        return func(*args)
+        with contextlib.redirect_stdout(sys.stderr):
+            return func(*args)
     except (ModelError, KeyboardInterrupt, _OutOfTime):
         raise
     except BaseException as exc:  # noqa: BLE001 - SystemExit in user code is its failure
@@ -157,6 +161,9 @@ def _child(
     stage: str,
     limits: tuple[float, int | None],
 ) -> None:
+    with contextlib.suppress(OSError):  # what the model's code writes to fd 1 goes to stderr
+        sys.stdout.flush()
+        os.dup2(2, 1)
     try:
         _limit_child(*limits)
     except (OSError, ValueError) as exc:  # a platform without these limits: still isolated
