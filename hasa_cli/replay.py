@@ -52,7 +52,9 @@ hasa-bench's results.json, ``speed_scaled_error`` (coloured_std, correlation, wh
 reference_speed, or null), ``speed_scaled_held_out`` and ``speed_scaled_gain``, each null when
 not fitted; ``equation_error_order``, the order used, and ``equation_error_ar``, its
 autoregression, empty when white), ``estimator_trust``, ``load_errors`` (``path``, ``message``), per recording
-(``recordings``) its ``path``, ``label``, ``steps``, ``complete``, its replay check
+(``recordings``) its ``path``, ``label``, ``steps``, ``complete``, ``study_role`` (what it
+was in its study session: ``measured run 3``, ``practice run 1``, ``aborted measured run 2
+(interrupted)``, ``unfinished ...``; null without a session file), its replay check
 (``replay``: ``matches``, ``text``, ``divergence``: ``row``, ``time``, ``column``,
 ``recorded``, ``replayed`` or null) and, where those steps ran, ``model`` (``scores``),
 ``estimator`` (lateral_rmse, hypotheses, final_weights, true_index, true_lane_weight,
@@ -131,6 +133,7 @@ from hasa_cli import (
     report_write_failure,
 )
 from hasa_env.recording.reader import load_paths
+from hasa_env.session.session_file import study_roles
 
 __all__ = ["build_parser", "main"]
 
@@ -312,15 +315,28 @@ def _model_options(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def _fit_candidates(recordings: Sequence[Any], roles: dict[Path, str]) -> list[Any]:
+    """The recordings ``--fit`` may fit on, in order: all but a study session's practice,
+    aborted and unfinished runs (``roles``: :func:`hasa_env.session.session_file.study_roles`)."""
+
+    def usable(rec: Any) -> bool:
+        role = None if rec.path is None else roles.get(Path(rec.path).resolve())
+        return role is None or role.startswith("measured run")
+
+    return [rec for rec in recordings if usable(rec)]
+
+
 def _prepare_and_score(
     args: argparse.Namespace,
     recordings: Sequence[Any],
     problems: list[str],
     report: ReplayDocument,
+    fit_on: Sequence[Any],
 ) -> PreparedModel:
-    """The model of ``--model`` (default generalized) prepared; with ``--model`` its scores on
-    every recording printed (a recording it cannot score named on stderr and added to
-    ``problems``). Both are added to ``report``.
+    """The model of ``--model`` (default generalized) prepared (fitted, with ``--fit``, on the
+    first ``--fit-on`` of ``fit_on``); with ``--model`` its scores on every recording printed
+    (a recording it cannot score named on stderr and added to ``problems``). Both are added
+    to ``report``.
 
     Raises:
         LaneKeepingError, ModelSetupError: as :func:`benchmarks.recordings.prepare_model`.
@@ -328,7 +344,7 @@ def _prepare_and_score(
     spec = _model_spec(args)
     prepared = prepare_model(
         spec,
-        recordings,
+        fit_on,
         **_model_options(args),
         speed_scaled_error=args.speed_scaled_error,
         steering=args.steering,
@@ -383,24 +399,41 @@ def _run(
 ) -> int:
     """Every step after loading (module docstring), each recorded in ``report`` as it ends;
     a run that ends early says why in ``report.error``. Returns the exit status."""
+    roles = study_roles(rec.path for rec in recordings if rec.path is not None)
+    fit_on = _fit_candidates(recordings, roles) if args.fit else recordings
+    if not fit_on:
+        report.error = (
+            "--fit: no recording to fit on: each is a study session's practice, aborted or "
+            "unfinished run"
+        )
+        error(PROG, report.error)
+        return EXIT_USAGE
     if args.model is not None or args.estimator:
         try:  # a model that cannot be loaded refuses the run before anything is replayed
-            load_model_spec(_model_spec(args), recordings, **_model_options(args))
+            load_model_spec(_model_spec(args), fit_on, **_model_options(args))
         except ModelSetupError as exc:
             report.error = str(exc)
             error(PROG, report.error)
             return EXIT_USAGE
     checks = check_recordings(recordings, args.atol, report.warnings)
     report.add_checks(checks)
-    for check in checks:
-        print(printable(check.describe()))
+    for check, entry in zip(checks, report.recordings, strict=True):
+        role = None if check.path is None else roles.get(Path(check.path).resolve())
+        entry["study_role"] = role
+        print(printable(check.describe() + ("" if role is None else f" [study: {role}]")))
     diverged = sum(not check.matches for check in checks)
 
     prepared = None
     if args.model is not None or args.estimator:
+        if len(fit_on) < len(recordings):
+            print(
+                f"--fit: on the study sessions' completed measured runs only ("
+                f"{len(recordings) - len(fit_on)} practice, aborted or unfinished run(s) left "
+                "out, as hasa-bench leaves them out)"
+            )
         try:
             with report.warnings.about(None, "model"):
-                prepared = _prepare_and_score(args, recordings, problems, report)
+                prepared = _prepare_and_score(args, recordings, problems, report, fit_on)
         except LaneKeepingError as exc:
             report.error = f"--estimator: {exc}; --no-lane-check runs it anyway"
             error(PROG, report.error)

@@ -175,6 +175,37 @@ def test_the_benchmark_names_a_missing_measured_run_and_pools_no_two_protocols(t
                "recordings missing" in n for n in plan.notes)  # fmt: skip
 
 
+def test_hasa_replay_says_what_each_run_was_and_fits_on_measured_runs_only(tmp_path, capsys):
+    """In a study's folder hasa-replay labels practice and aborted runs and --fit leaves them
+    out, as hasa-bench does (it fitted on an aborted run before)."""
+    from hasa_cli.replay import main as replay_main
+
+    out = tmp_path / "rec"
+    args = ["study", str(_study(tmp_path, seconds=1.5)), "--participant", "P01", "--output",
+            str(out), "--synthetic", "2", "--meta", "age_band=25-34"]  # fmt: skip
+    assert drive_main(args) == 0
+    folder = out / "P01"
+    doc = json.loads((folder / "session.json").read_text())
+    first = next(a for a in doc["attempts"] if a["file"] == "measured_01_000.csv")
+    first.update(status="aborted", end_reason="interrupted")  # as if Ctrl-C had stopped it
+    (folder / "session.json").write_text(json.dumps(doc))
+    capsys.readouterr()
+    report = tmp_path / "replay.json"
+    code = replay_main([str(folder), "--model", "generalized", "--fit", "--fit-on", "2",
+                        "--json", str(report)])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert code == 0
+    assert "measured_01_000.csv: synthetic" in printed
+    assert "[study: aborted measured run 1 (interrupted)]" in printed
+    assert "practice_01_000.csv" in printed and "[study: practice run 1]" in printed
+    assert "[study: measured run 2]" in printed
+    result = json.loads(report.read_text())
+    fitted = [Path(p).name for p in result["model"]["fitted_on_recordings"]]
+    assert fitted == ["measured_02_000.csv", "measured_03_000.csv"]
+    roles = {Path(r["path"]).name: r["study_role"] for r in result["recordings"]}
+    assert roles["practice_01_000.csv"] == "practice run 1"
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs Xvfb (xvfb-run)")
 def test_a_scripted_study_in_a_real_x_window(tmp_path):

@@ -38,7 +38,7 @@ import os
 import platform
 import socket
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -57,6 +57,7 @@ __all__ = [
     "SessionFile",
     "SessionLock",
     "find_session_files",
+    "study_roles",
 ]
 
 SESSION_FILE = "session.json"
@@ -429,3 +430,35 @@ def find_session_files(root: str | os.PathLike[str]) -> list[Path]:
     """Every ``session.json`` under ``root``, in folders linked into it too (sorted; a
     folder that cannot be read is left to the recordings' loader to name)."""
     return walk_files(root, names=(SESSION_FILE,))[0]
+
+
+def study_roles(paths: Iterable[str | os.PathLike[str]]) -> dict[Path, str]:
+    """What each recording of ``paths`` was in its study session, by its resolved path, as
+    the session file beside it says (``hasa-drive study``): ``measured run 3``, ``practice
+    run 1``, ``aborted measured run 2 (interrupted)`` or ``unfinished measured run 2`` (its
+    session stopped in it and was not resumed). Recordings without a readable session file
+    beside them, or that it does not list, are left out (``hasa-bench`` leaves the unlisted
+    ones of a session's folder out of a verdict)."""
+    roles: dict[Path, str] = {}
+    sessions: dict[Path, SessionFile | None] = {}
+    for raw in paths:
+        path = Path(raw).resolve()
+        folder = path.parent
+        if folder not in sessions:
+            try:
+                sessions[folder] = SessionFile.open(folder / SESSION_FILE)
+            except SessionError:
+                sessions[folder] = None
+        session = sessions[folder]
+        if session is None:
+            continue
+        for attempt in session.attempts:
+            if attempt.get("file") and (folder / attempt["file"]).resolve() == path:
+                run = f"{attempt['block']} run {attempt['number']}"
+                if attempt["status"] == "completed":
+                    roles[path] = run
+                elif attempt["status"] == "aborted":
+                    roles[path] = f"aborted {run} ({attempt['end_reason']})"
+                else:
+                    roles[path] = f"unfinished {run}"
+    return roles
