@@ -110,6 +110,8 @@ def test_info_missing_sidecar(tmp_path, capsys):
     assert main(["info", str(path)]) == 2  # nothing valid: an input error
     err = capsys.readouterr().err
     assert err.startswith("hasa-rec: error: ") and "missing sidecar" in err
+    # named by the CSV the user has, not by the JSON file that is missing
+    assert f"{path}: missing sidecar {path.with_suffix('.json').name}" in err, err
 
 
 # ------------------------------------------------------------------ convert

@@ -60,7 +60,7 @@ def test_two_good_recordings_and_one_that_does_not_load(files, tmp_path, capsys)
     assert doc["arguments"]["atol"] == 0.0 and doc["arguments"]["model"] is None
     assert doc["arguments"]["estimator"] is False and doc["model"] is None
     (bad,) = doc["load_errors"]
-    assert bad["path"] == str(files["broken"] / "run_000.json")  # the missing sidecar
+    assert bad["path"] == str(files["broken"] / "run_000.csv")  # the CSV whose sidecar is gone
     assert "missing sidecar" in bad["message"] and bad["message"] in err
     paths = [r["path"] for r in doc["recordings"]]
     assert paths == [str(files["runs"] / f"run_00{i}.csv") for i in (0, 1)]

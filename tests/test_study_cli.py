@@ -162,6 +162,10 @@ def test_the_benchmark_names_a_missing_measured_run_and_pools_no_two_protocols(t
     gone = out / "P02" / "measured_02_000.csv"
     gone.unlink()
     gone.with_suffix(".json").unlink()
+    session = out / "P01" / "session.json"  # as if killed in its practice run, not resumed
+    doc = json.loads(session.read_text())
+    doc["attempts"][0].update(status="started", end_reason=None, steps=0)
+    session.write_text(json.dumps(doc))
     config = ProtocolConfig(recordings=str(out), min_duration=0.5, illustrative="P01")
     plan = recording_plan(config)
     skipped = {Path(s["file"]).parent.name + "/" + Path(s["file"]).name: s["reason"]
@@ -173,6 +177,10 @@ def test_the_benchmark_names_a_missing_measured_run_and_pools_no_two_protocols(t
     assert {d["driver"] for d in plan.drivers} == {"P01", "P02"}
     assert any("P02 (scripted, complete): 3/3 measured runs" in n and "1 of its measured "
                "recordings missing" in n for n in plan.notes)  # fmt: skip
+    assert any(
+        "P01 practice run 1 attempt 0 (its session stopped in it and was not resumed)" in n
+        for n in plan.notes
+    ), plan.notes  # not "(None, 0 steps)"
 
 
 def test_hasa_replay_says_what_each_run_was_and_fits_on_measured_runs_only(tmp_path, capsys):

@@ -451,10 +451,15 @@ def _one_session(path: Path, into: _Sessions) -> None:
             practice += 1
         if attempt["status"] != "completed":
             aborted += 1
+            how = (
+                f"{attempt['end_reason']}, {attempt['steps']} steps"
+                if attempt["status"] == "aborted"
+                else "its session stopped in it and was not resumed"
+            )
             notes.append(
                 f"aborted run not analysed: {who} {attempt['block']} run "
-                f"{attempt['number']} attempt {attempt['attempt']} ({attempt['end_reason']}, "
-                f"{attempt['steps']} steps): {folder / attempt['file']}"
+                f"{attempt['number']} attempt {attempt['attempt']} ({how}): "
+                f"{folder / attempt['file']}"
             )
     unlisted = {c.resolve() for c in folder.glob("*.csv")} - listed
     excluded.update(dict.fromkeys(unlisted, ""))

@@ -112,6 +112,12 @@ def _load_recording(path: str | os.PathLike[str]) -> Recording:
                 "at most the reset row written); nothing of it can be used",
                 csv_path,
             ) from None
+        if exc.reason.startswith("missing sidecar"):  # named by the CSV the user has
+            raise RecordingError(
+                f"missing sidecar {json_path.name} (the JSON file next to the CSV; a CSV "
+                "without one is not a recording)",
+                csv_path,
+            ) from None
         raise
     try:
         data = read_regular_bytes(csv_path, "the CSV")
