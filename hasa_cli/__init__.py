@@ -314,12 +314,32 @@ class ArgumentParser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
+        self._given: list[str] = []
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's, keeping the words given (a missing required option may be one of
+        them misspelt: :meth:`error` says so)."""
+        self._given = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:
         """Exit 2 with ``prog: error: message``, plus a suggestion for a misspelt word."""
         super().error(message + self._suggestion(message))
 
     def _suggestion(self, message: str) -> str:
+        required = re.match(r"the following arguments are required: (.*)", message)
+        if required:  # argparse says so before it says that a misspelt one is unknown
+            wanted = [w for w in required.group(1).split(", ") if w.startswith("-")]
+            known = set(self._option_string_actions)
+            for word in self._given:
+                name = word.split("=")[0]
+                if name.startswith("-") and name not in known:
+                    close = difflib.get_close_matches(name, wanted, n=1)
+                    if close:
+                        return f" (did you mean {close[0]!r}? {name!r} is no option)"
+            return ""
         unknown = re.match(r"unrecognized arguments: (.*)", message)
         if unknown:
             options = sorted({o for p in self._parsers() for o in p._option_string_actions})

@@ -40,6 +40,11 @@ def test_a_misspelt_choice_and_subcommand_get_a_suggestion(tmp_path):
     assert done.returncode == 2 and "did you mean 'lane_shift'?" in done.stderr
     done = run_program("hasa-rec", "infos", "x.csv", cwd=tmp_path)
     assert done.returncode == 2 and "did you mean 'info'?" in done.stderr
+    # a misspelt required option: argparse says it is missing before that the word is unknown
+    done = run_program("hasa-drive", "study", "s.toml", "--participnt", "P01", cwd=tmp_path)
+    assert done.returncode == 2
+    (line,) = _error_lines(done.stderr, "hasa-drive study")
+    assert "did you mean '--participant'? '--participnt' is no option" in line, line
 
 
 def test_a_misspelt_filter_field_and_study_key_get_a_suggestion(tmp_path):
