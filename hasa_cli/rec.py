@@ -35,6 +35,7 @@ from hasa_cli import (
     console_script,
     error,
     printable,
+    warn,
 )
 from hasa_env.recording import (
     Recording,
@@ -223,10 +224,10 @@ def _export(args: argparse.Namespace) -> int:
             f"minari.load_dataset({result.dataset_id!r})"
         )
     for path in result.cut:
-        print(
-            printable(
-                f"note: {path} ended without termination or truncation; last step marked truncated"
-            )
+        warn(
+            PROG,
+            f"{path} ended without termination or truncation: its last step is marked "
+            "truncated in the dataset",
         )
     for path, reason in result.skipped:
         _err(f"skipped {path}: {reason}")
