@@ -86,10 +86,13 @@ def _source(cfg: dict[str, Any]) -> str:
 
 def _training_runs(cfg: dict[str, Any]) -> str:
     """What trained the models: "run 0 of Ill (each seed's)", "runs 0-2 of Ill (each seed's)",
-    then the extra runs at other start speeds and of other drivers, if any."""
+    "the recording F" (recordings, ``training_file``), "run 0 of P01" (recordings), then the
+    extra runs at other start speeds and of other drivers, if any."""
+    if cfg.get("training_file"):
+        return f"the recording {cfg['training_file']}"
     first, count = cfg["training_run"], int(cfg.get("training_runs") or 1)
     text = f"run {first}" if count == 1 or first is None else f"runs {first}-{first + count - 1}"
-    text += f" of {cfg.get('illustrative')} (each seed's)"
+    text += f" of {cfg.get('illustrative')}" + ("" if cfg.get("recordings") else " (each seed's)")
     speeds = cfg.get("training_speeds") or ()
     if speeds:
         text += f" and its runs started at {', '.join(f'{v:g}' for v in speeds)} m/s"

@@ -24,6 +24,7 @@ from _recording_files import crash
 
 from benchmarks.executor import SchedulerError, check_scheduler
 from benchmarks.protocol import BenchmarkError, ProtocolConfig, run_protocol
+from benchmarks.report import format_tables
 from benchmarks.schema import folder_problems
 from hasa_cli.bench import main
 from hasa_env.drivers import population, run_population, save_runs
@@ -244,6 +245,10 @@ def test_the_training_file_can_be_chosen_and_a_bad_one_is_refused(recordings):
     result = run_protocol(replace(base, training_file=str(chosen)), workers=1)
     assert any(f"trained on {chosen}" in n for n in result.notes)
     assert {r["run"] for r in result.runs_steering if r["driver"] == "Ill"} == {0, 1}
+    header = format_tables(result).splitlines()[0]  # (it said "run 0 of Ill (each seed's)")
+    assert f"models fitted on the recording {chosen}" in header, header
+    alone = format_tables(run_protocol(base, workers=1)).splitlines()[0]
+    assert "models fitted on run 0 of Ill" in alone and "each seed's" not in alone, alone
     with pytest.raises(BenchmarkError, match="short_000.csv is not usable: lasts 1.00 s"):
         run_protocol(replace(base, training_file=str(recordings / "Ill" / "short_000.csv")))
     with pytest.raises(BenchmarkError, match="not one of the recordings"):
