@@ -96,7 +96,7 @@ class LaneKeepingAdvisorEnv(SingleCarShell, gym.Env):
     | flag       | when                                                                |
     |------------|---------------------------------------------------------------------|
     | terminated | at any simulation sample of the step the car is past a road edge by more than offroad_margin, or faces backwards |
-    | truncated  | simulated time reaches ``time_limit`` (30 s)                        |
+    | truncated  | simulated time reaches ``time_limit`` (30 s) at the end of a step (up to one step past it when the step does not divide it) |
 
     ## Info
     The same keys at ``reset`` and every ``step``

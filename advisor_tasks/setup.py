@@ -41,7 +41,8 @@ from hasa_env.drivers import POPULATIONS, population
 from hasa_env.drivers.archetypes import HumanParams
 from hasa_env.sim.config import deep_merge
 from hasa_env.sim.sensors import SENSOR_NAMES
-from hasa_env.sim.setup import INFO_KEYS, EnvSetup, build_setup, physical_action
+from hasa_env.sim.setup import INFO_KEYS, RESET_OPTIONS, EnvSetup, build_setup, physical_action
+from hasa_env.validation import did_you_mean
 
 __all__ = [
     "ADVISOR_INFO_KEYS",
@@ -175,6 +176,8 @@ class AdvisorSetup:
         """The policy's (steering rad, acceleration m/s^2), validated and clipped."""
         if self.steering_only and num_envs is None and isinstance(action, np.ndarray):
             if action.shape == (1,) and action.dtype.kind in "fi":
+                if not math.isfinite(action[0]):  # named as the one element it has
+                    raise ValueError(f"action must be finite, got [steering={float(action[0])!r}]")
                 action = np.array([action[0], self._neutral_action], dtype=np.float64)
                 return physical_action(self.env, action, None)
         if self.steering_only:
@@ -342,7 +345,15 @@ class WheelNoise:
 
 
 def pop_advisor_option(options: dict[str, Any], count: int) -> int | None:
-    """Pop and check the ``advisor_index`` reset option (None when absent)."""
+    """Pop and check the ``advisor_index`` reset option (None when absent); an unknown
+    option is named with every option this task allows, ``advisor_index`` among them."""
+    allowed = sorted((*RESET_OPTIONS, "advisor_index"))
+    for name in options:
+        if name not in allowed:
+            raise ValueError(
+                f"unknown reset option {name!r} (allowed keys here: {', '.join(allowed)})"
+                + did_you_mean(str(name), allowed)
+            )
     if "advisor_index" not in options:
         return None
     value = options.pop("advisor_index")

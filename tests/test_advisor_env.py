@@ -335,7 +335,7 @@ def test_fitted_models_train_on_the_scenarios_first_driver(monkeypatch):
 def test_invalid_actions_and_reset_options_are_refused():
     env = gym.make(ID).unwrapped
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="finite"):
+    with pytest.raises(ValueError, match=r"finite, got \[steering=nan\]$"):  # its one element
         env.step(np.array([np.nan], np.float32))
     with pytest.raises(ValueError, match="shape"):
         env.step(np.zeros(2, np.float32))
@@ -345,6 +345,9 @@ def test_invalid_actions_and_reset_options_are_refused():
     assert info["advisor_index"] == 4 and info["bias_index"] == 1
     with pytest.raises(ValueError, match="unknown reset option"):
         _vec(ID, 2, {}).reset(options={"nope": 1})
+    with pytest.raises(ValueError, match=r"allowed keys here: advisor_index, bias, .*; did you "
+                       r"mean 'advisor_index'\?"):  # fmt: skip
+        env.reset(options={"advisr_index": 1})
 
 
 def test_the_estimator_wrappers_point_to_the_advisor_task_for_a_slow_policy():

@@ -192,6 +192,12 @@ def test_bad_reset_options():
         env.reset(options={"bias_index": 5})
     with pytest.raises(ValueError, match=r"'speed' = -3.0 is out of range"):
         env.reset(options={"speed": -3.0})
+    with pytest.raises(ValueError, match=r"'bias' = -1.8 and 'bias_index' = 0 disagree"):
+        env.reset(options={"bias": -1.8, "bias_index": 0})  # (bias_index 1 was kept silently)
+    _, info = env.reset(options={"bias": -1.8, "bias_index": 1})
+    assert info["bias"] == -1.8 and info["bias_index"] == 1
+    _, info = env.reset(options={"bias": 0.7})  # no hypothesis: a lane the estimator lacks
+    assert info["bias"] == 0.7 and info["bias_index"] == -1
 
 
 def test_truncated_at_time_limit_with_action_repeat():
@@ -205,6 +211,14 @@ def test_truncated_at_time_limit_with_action_repeat():
             break
     assert trunc and not term and steps == 10
     assert info["time"] == pytest.approx(1.0)
+    # a step of 0.07 s does not divide 1 s: truncated at the end of the step that reaches it
+    env = gym.make("hasa_env/LaneKeeping-v0", config={"time_limit": 1.0, "action_repeat": 7})
+    env.reset(seed=0)
+    times = []
+    while not times or not (term or trunc):
+        _, _, term, trunc, info = env.step(np.zeros(2))
+        times.append(info["time"])
+    assert trunc and times[-2] < 1.0 <= times[-1] == pytest.approx(1.05)
 
 
 def test_terminated_when_leaving_road():

@@ -74,8 +74,12 @@ def test_make_vector_env_uses_the_ids_track():
     assert env.unwrapped.config["track"] == "curved"
     assert isinstance(env.unwrapped, LaneKeepingVectorEnv)
     assert env.single_action_space.shape == (1,)
-    with pytest.raises(ValueError, match="not a hasa_env id"):
+    with pytest.raises(ValueError, match="not one of the lane-keeping env's ids"):
         make_vector_env("CartPole-v1")
+    import advisor_tasks  # noqa: F401 - registers the advisor ids
+
+    with pytest.raises(ValueError, match=r"gym.make_vec\('hasa_env/LaneKeepingAdvisor-v0', "):
+        make_vector_env("hasa_env/LaneKeepingAdvisor-v0")  # points to the way that works
 
 
 @pytest.mark.parametrize("action_type", ["normalized", "physical"])

@@ -75,7 +75,7 @@ class LaneKeepingEnv(LaneKeepingBase, SingleCarShell, gym.Env):
     | flag       | when                                                               |
     |------------|--------------------------------------------------------------------|
     | terminated | at any simulation sample of the step, the car is past a road edge by more than offroad_margin, or faces backwards |
-    | truncated  | simulated time reaches ``time_limit`` (30 s, the paper's run length) |
+    | truncated  | simulated time reaches ``time_limit`` (30 s, the paper's run length) at the end of a step: with an ``action_repeat`` whose step does not divide it, up to one step past it |
 
     ## Info
     The same keys at ``reset`` and every ``step`` (:data:`hasa_env.sim.setup.INFO_KEYS`):

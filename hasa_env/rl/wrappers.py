@@ -46,7 +46,9 @@ def make_vector_env(
     spec = gym.spec(env_id)
     if spec.vector_entry_point != "hasa_env.envs.vector:LaneKeepingVectorEnv":
         raise ValueError(
-            f"{env_id!r} is not a hasa_env id (vector entry point {spec.vector_entry_point!r})"
+            f"{env_id!r} is not one of the lane-keeping env's ids (its vector entry point is "
+            f"{spec.vector_entry_point!r}); make any id's native vector env with "
+            f"gym.make_vec({env_id!r}, num_envs=N, vectorization_mode='vector_entry_point')"
         )
     env: VectorEnv = LaneKeepingVectorEnv(
         num_envs=num_envs, config=config, track=spec.kwargs.get("track")

@@ -240,7 +240,9 @@ def check_reset_options(options: Any, setup: EnvSetup) -> dict[str, Any]:
     """The reset options, validated and converted (shared validator), before anything is drawn.
 
     ``options`` is None or a mapping of :data:`RESET_OPTIONS` keys: ``bias``
-    (m, within +-20), ``bias_index`` (0 .. number of hypotheses - 1),
+    (m, within +-20; one that is none of ``markings.hypotheses`` gives ``bias_index`` -1:
+    a true lane the estimator's hypotheses do not contain), ``bias_index`` (0 .. number of
+    hypotheses - 1; given with ``bias``, the two must agree),
     ``lateral_offset`` (m, +-30), ``heading`` (rad, +-pi/2), ``speed`` (m/s,
     0 .. ``vehicle.max_speed``), ``steering`` (rad, within the steering limit).
 
@@ -266,12 +268,21 @@ def check_reset_options(options: Any, setup: EnvSetup) -> dict[str, Any]:
             "steering": Field("number", ABSENT, unit="rad", low=-limit, high=limit),
         }
     )  # fmt: skip
-    return validate(
+    checked = validate(
         {} if options is None else options,
         spec,
         describe=lambda path: f"reset option '{path}'" if path else "reset options",
         error=lambda path, message: ValueError(message),
     )
+    if "bias" in checked and "bias_index" in checked:
+        chosen = setup.hypotheses[checked["bias_index"]]
+        if chosen != checked["bias"]:
+            raise ValueError(
+                f"reset options 'bias' = {checked['bias']!r} and 'bias_index' = "
+                f"{checked['bias_index']} disagree: hypothesis {checked['bias_index']} is "
+                f"{chosen!r} m; give one of them"
+            )
+    return checked
 
 
 def draw_episode(
