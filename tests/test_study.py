@@ -436,6 +436,23 @@ def test_ctrl_c_or_a_signal_in_a_run_is_recorded_as_interrupted(tmp_path, pg, st
     assert doc["sessions"][-1]["ended"] == "interrupted"
 
 
+def test_a_resume_says_that_it_keeps_the_first_slot_and_answers(tmp_path):
+    """A resumed session keeps its first slot (and schedule) and answers; given others, it
+    says so instead of ignoring them silently."""
+    study = small()
+    said: list[str] = []
+    first = StudySession(study, "P01", None, output=tmp_path, slot=1, log=said.append)
+    first.open()
+    again = StudySession(study, "P01", None, output=tmp_path, slot=3, log=said.append,
+                         metadata={"note": "other"})  # fmt: skip
+    record, resumed = again.open()
+    assert resumed and record.doc["participant"]["slot"] == 1
+    assert any("the slot 1 of the first start, and its schedule, are kept (--slot 3 is "
+               "ignored)" in line for line in said), said  # fmt: skip
+    assert any("participant metadata recorded at the first start is kept" in line
+               for line in said), said  # fmt: skip
+
+
 def test_a_changed_study_file_does_not_resume(tmp_path, pg):
     path = write(tmp_path, '[study]\nname = "s"\nseed = 1\n[runs]\nseconds = 0.2\n'
                  "countdown = 0.0\n[measured]\nruns = 1\n")  # fmt: skip

@@ -181,6 +181,12 @@ class StudySession:
                 "hasa-drive: resuming: the participant metadata recorded at the first start is "
                 "kept (the answers given now differ)"
             )
+        stored_slot = record.doc["participant"].get("slot")
+        if self.slot is not None and self.slot != stored_slot:
+            self.log(
+                f"hasa-drive: resuming: the slot {stored_slot} of the first start, and its "
+                f"schedule, are kept (--slot {self.slot} is ignored)"
+            )
         self.record = record
         return record, True
 
