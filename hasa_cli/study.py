@@ -34,6 +34,7 @@ import numpy as np
 
 from hasa_cli import (
     EXIT_ENVIRONMENT,
+    EXIT_INTERRUPTED,
     EXIT_PARTIAL,
     EXIT_USAGE,
     ArgumentParser,
@@ -468,14 +469,30 @@ def _drive_session(
         return EXIT_USAGE
     except (OSError, RecordingError) as exc:  # a full disk: name it, keep what was written
         status.close()
+        recorded = session.record is not None and bool(session.record.attempts)
         kept = (
             "every completed run and the session file as last written are kept (the next start "
             "resumes)"
+            if recorded
+            else "nothing was recorded"
         )
         code = report_write_failure(PROG, exc, session.directory, kept)
         if code is None:
             raise
-        return code
+        return code if recorded or code == EXIT_ENVIRONMENT else EXIT_USAGE
+    except (KeyboardInterrupt, SystemExit) as exc:  # Ctrl-C, SIGTERM: the run is aborted, kept
+        status.close()
+        how = "interrupted" if isinstance(exc, KeyboardInterrupt) else "stopped by a signal"
+        kept = (
+            "the run in progress is kept as aborted, every completed run and the session file "
+            "are kept (the same command resumes)"
+            if session.record is not None
+            else "nothing was recorded"
+        )
+        error(PROG, f"{how}; {kept}")
+        if isinstance(exc, SystemExit):
+            raise
+        return EXIT_INTERRUPTED
     finally:
         signal.signal(signal.SIGTERM, previous)
         status.close()

@@ -215,6 +215,33 @@ def test_hasa_replay_says_what_each_run_was_and_fits_on_measured_runs_only(tmp_p
 
 
 @pytest.mark.slow
+def test_sigterm_in_a_run_says_what_is_kept_and_records_it_as_interrupted(tmp_path):
+    study = _study(tmp_path, seconds=4.0)
+    out = tmp_path / "rec"
+    proc = subprocess.Popen(_command(study, out, "P01"), env=HEADLESS,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    target = out / "P01" / "measured_01_000.csv"
+    try:
+        deadline = time.monotonic() + 90
+        while not (target.exists() and target.stat().st_size > 30_000):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"measured run 1 never got going: {proc.stderr.read()}")
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert "hasa-drive study: error: stopped by a signal; the run in progress is kept as " \
+        "aborted" in err, err  # fmt: skip
+    doc = json.loads((out / "P01" / "session.json").read_text())
+    last = doc["attempts"][-1]
+    assert (last["file"], last["status"], last["end_reason"]) == (
+        "measured_01_000.csv", "aborted", "interrupted")  # fmt: skip
+    assert load_recording(target).steps > 50  # what it recorded is kept
+
+
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs Xvfb (xvfb-run)")
 def test_a_scripted_study_in_a_real_x_window(tmp_path):
     """Under Xvfb: a real window, real time, every screen confirmed with the wheel's button."""
