@@ -214,6 +214,16 @@ def test_hasa_replay_says_what_each_run_was_and_fits_on_measured_runs_only(tmp_p
     assert roles["practice_01_000.csv"] == "practice run 1"
 
 
+def test_an_output_that_cannot_be_written_records_nothing_and_says_so(tmp_path, capsys):
+    (tmp_path / "a_file").write_text("not a folder")
+    args = ["study", str(_study(tmp_path, seconds=0.5)), "--participant", "P01", "--output",
+            str(tmp_path / "a_file" / "sub"), "--synthetic", "2", "--meta", "age_band=25-34"]  # fmt: skip
+    assert drive_main(args) == 2  # nothing done: not "partial" (1)
+    err = capsys.readouterr().err
+    assert err.startswith("hasa-drive study: error: cannot write to ") and err.rstrip().endswith(
+        "; nothing was recorded"), err  # fmt: skip
+
+
 @pytest.mark.slow
 def test_sigterm_in_a_run_says_what_is_kept_and_records_it_as_interrupted(tmp_path):
     study = _study(tmp_path, seconds=4.0)
