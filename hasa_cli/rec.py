@@ -93,6 +93,8 @@ def _info(args: argparse.Namespace) -> int:
             _err(f"{name}: {exc}")
             return EXIT_ENVIRONMENT
         print("\n".join(printable(line) for line in summary.lines()))
+    if len(items) > 1:  # the tally of a batch (a study's folder is long)
+        print(f"\n{len(items)} recordings: {len(items) - failed} valid, {failed} not")
     if not failed:
         return EXIT_OK
     return EXIT_USAGE if failed == len(items) else EXIT_PARTIAL

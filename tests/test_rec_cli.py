@@ -83,6 +83,7 @@ def test_info_of_a_folder_summarises_every_recording_in_it_and_below(tmp_path, c
     captured = capsys.readouterr()
     assert captured.out.count("valid          yes") == 2
     assert captured.out.count("valid          NO") == 1
+    assert captured.out.rstrip().endswith("3 recordings: 2 valid, 1 not")
     assert str(tmp_path / "P2" / "run_000.csv") in captured.out
     assert str(bad) in captured.err and "line 7" in captured.err
     (tmp_path / "empty").mkdir()
