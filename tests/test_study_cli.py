@@ -175,6 +175,13 @@ def test_the_benchmark_names_a_missing_measured_run_and_pools_no_two_protocols(t
     assert len(p03) == 3, skipped
     assert "not of the training run's study 'scripted' of study.toml" in skipped[p03[0]]
     assert {d["driver"] for d in plan.drivers} == {"P01", "P02"}
+    # the same protocol under another file name is one protocol (a study file renamed)
+    shutil.copy(study, tmp_path / "renamed.toml")
+    args = ["study", str(tmp_path / "renamed.toml"), "--participant", "P04", "--output",
+            str(out), "--synthetic", "2", "--meta", "age_band=25-34"]  # fmt: skip
+    assert drive_main(args) == 0
+    plan = recording_plan(config)
+    assert {d["driver"] for d in plan.drivers} == {"P01", "P02", "P04"}
     assert any("P02 (scripted, complete): 3/3 measured runs" in n and "1 of its measured "
                "recordings missing" in n for n in plan.notes)  # fmt: skip
     assert any(

@@ -374,6 +374,18 @@ PROTOCOL_SECTIONS = ("runs", "practice", "measured", "schedule", "env", "view")
 whose sections differ follow different protocols, which one verdict does not pool."""
 
 
+@dataclass(frozen=True)
+class _Protocol:
+    """A session's protocol: equal when the sections that shape the drives are
+    (:data:`PROTOCOL_SECTIONS`, by digest), whatever the study file is called."""
+
+    digest: str
+    label: str = field(compare=False)
+
+    def __str__(self) -> str:
+        return self.label
+
+
 @dataclass
 class _Sessions:
     """What the study session files under a folder say (:func:`_study_sessions`)."""
@@ -390,7 +402,7 @@ class _Sessions:
     missing: list[dict[str, str]] = field(default_factory=list)
     """The completed measured runs a session file lists whose recording is missing,
     ``{"file", "reason"}`` as a skipped file."""
-    protocols: dict[Path, str] = field(default_factory=dict)
+    protocols: dict[Path, _Protocol] = field(default_factory=dict)
     """Each completed measured run's recording -> its session's protocol (:func:`_protocol`)."""
 
 
@@ -414,13 +426,13 @@ def _study_sessions(root: Path) -> _Sessions:
     return sessions
 
 
-def _protocol(study: dict[str, Any]) -> str:
-    """A session's protocol: its study's name and file and a digest of the sections that
-    shape the drives (:data:`PROTOCOL_SECTIONS`)."""
+def _protocol(study: dict[str, Any]) -> _Protocol:
+    """A session's protocol: a digest of its study's :data:`PROTOCOL_SECTIONS`, labelled with
+    the study's name and file."""
     spec = {name: study["spec"].get(name) for name in PROTOCOL_SECTIONS}
     digest = hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()
     source = Path(str(study.get("file") or "?")).name
-    return f"study {study['name']!r} of {source} (protocol {digest[:12]})"
+    return _Protocol(digest, f"study {study['name']!r} of {source} (protocol {digest[:12]})")
 
 
 def _one_session(path: Path, into: _Sessions) -> None:
@@ -516,7 +528,7 @@ class _Scan:
     """What loading repaired or tolerated in the recordings (:func:`hasa_env.recording.
     load_notes`: e.g. a crashed recording's partly written last line dropped), each naming
     its file."""
-    protocols: dict[Path, str | None] = field(default_factory=dict)
+    protocols: dict[Path, _Protocol | None] = field(default_factory=dict)
     """Each found recording's study protocol (:func:`_protocol`; None: no session file)."""
 
 
