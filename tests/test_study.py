@@ -453,6 +453,25 @@ def test_a_resume_says_that_it_keeps_the_first_slot_and_answers(tmp_path):
                for line in said), said  # fmt: skip
 
 
+def test_study_roles_pass_over_a_session_file_that_cannot_be_used(tmp_path):
+    """hasa-replay reads a study folder's session file for the runs' roles; one whose
+    attempts are not attempts' records gives no roles instead of a crash."""
+    from hasa_env.session.session_file import study_roles
+
+    StudySession(small(), "P01", None, output=tmp_path, log=lambda m: None).open()
+    session = tmp_path / "P01" / "session.json"
+    doc = json.loads(session.read_text())
+    csv = tmp_path / "P01" / "measured_01_000.csv"
+    doc["attempts"] = [{"file": csv.name, "block": "measured", "number": 1, "status":
+                        "completed"}]  # fmt: skip
+    session.write_text(json.dumps(doc))
+    assert study_roles([csv]) == {csv.resolve(): "measured run 1"}
+    for broken in ([1, 2], [{"file": csv.name}], [{"file": 3, "block": "x"}], "nope"):
+        doc["attempts"] = broken
+        session.write_text(json.dumps(doc))
+        assert study_roles([csv]) == {}, broken
+
+
 def test_a_changed_study_file_does_not_resume(tmp_path, pg):
     path = write(tmp_path, '[study]\nname = "s"\nseed = 1\n[runs]\nseconds = 0.2\n'
                  "countdown = 0.0\n[measured]\nruns = 1\n")  # fmt: skip

@@ -436,29 +436,37 @@ def study_roles(paths: Iterable[str | os.PathLike[str]]) -> dict[Path, str]:
     """What each recording of ``paths`` was in its study session, by its resolved path, as
     the session file beside it says (``hasa-drive study``): ``measured run 3``, ``practice
     run 1``, ``aborted measured run 2 (interrupted)`` or ``unfinished measured run 2`` (its
-    session stopped in it and was not resumed). Recordings without a readable session file
+    session stopped in it and was not resumed). Recordings without a usable session file
     beside them, or that it does not list, are left out (``hasa-bench`` leaves the unlisted
     ones of a session's folder out of a verdict)."""
+    folders: dict[Path, dict[Path, str]] = {}
     roles: dict[Path, str] = {}
-    sessions: dict[Path, SessionFile | None] = {}
     for raw in paths:
         path = Path(raw).resolve()
-        folder = path.parent
-        if folder not in sessions:
-            try:
-                sessions[folder] = SessionFile.open(folder / SESSION_FILE)
-            except SessionError:
-                sessions[folder] = None
-        session = sessions[folder]
-        if session is None:
-            continue
-        for attempt in session.attempts:
-            if attempt.get("file") and (folder / attempt["file"]).resolve() == path:
-                run = f"{attempt['block']} run {attempt['number']}"
-                if attempt["status"] == "completed":
-                    roles[path] = run
-                elif attempt["status"] == "aborted":
-                    roles[path] = f"aborted {run} ({attempt['end_reason']})"
-                else:
-                    roles[path] = f"unfinished {run}"
+        if path.parent not in folders:
+            folders[path.parent] = _folder_roles(path.parent)
+        if path in folders[path.parent]:
+            roles[path] = folders[path.parent][path]
     return roles
+
+
+def _folder_roles(folder: Path) -> dict[Path, str]:
+    """:func:`study_roles` of the recordings the session file in ``folder`` lists (empty:
+    none there, or one that cannot be used, e.g. an attempt that is no attempt's record)."""
+    try:
+        session = SessionFile.open(folder / SESSION_FILE)
+        roles = {}
+        for attempt in session.attempts:
+            if not attempt.get("file"):
+                continue
+            run = f"{attempt['block']} run {attempt['number']}"
+            if attempt["status"] == "completed":
+                role = run
+            elif attempt["status"] == "aborted":
+                role = f"aborted {run} ({attempt['end_reason']})"
+            else:
+                role = f"unfinished {run}"
+            roles[(folder / str(attempt["file"])).resolve()] = role
+        return roles
+    except (SessionError, KeyError, TypeError, AttributeError, ValueError, OSError):
+        return {}
