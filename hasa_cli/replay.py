@@ -331,10 +331,10 @@ def _prepare_and_score(
     recordings: Sequence[Any],
     problems: list[str],
     report: ReplayDocument,
-    fit_on: Sequence[Any],
+    fit_pool: Sequence[Any],
 ) -> PreparedModel:
     """The model of ``--model`` (default generalized) prepared (fitted, with ``--fit``, on the
-    first ``--fit-on`` of ``fit_on``); with ``--model`` its scores on every recording printed
+    first ``--fit-on`` of ``fit_pool``); with ``--model`` its scores on every recording printed
     (a recording it cannot score named on stderr and added to ``problems``). Both are added
     to ``report``.
 
@@ -344,7 +344,7 @@ def _prepare_and_score(
     spec = _model_spec(args)
     prepared = prepare_model(
         spec,
-        fit_on,
+        fit_pool,
         **_model_options(args),
         speed_scaled_error=args.speed_scaled_error,
         steering=args.steering,
@@ -400,8 +400,8 @@ def _run(
     """Every step after loading (module docstring), each recorded in ``report`` as it ends;
     a run that ends early says why in ``report.error``. Returns the exit status."""
     roles = study_roles(rec.path for rec in recordings if rec.path is not None)
-    fit_on = _fit_candidates(recordings, roles) if args.fit else recordings
-    if not fit_on:
+    fit_pool = _fit_candidates(recordings, roles) if args.fit else recordings
+    if not fit_pool:
         report.error = (
             "--fit: no recording to fit on: each is a study session's practice, aborted or "
             "unfinished run"
@@ -410,7 +410,7 @@ def _run(
         return EXIT_USAGE
     if args.model is not None or args.estimator:
         try:  # a model that cannot be loaded refuses the run before anything is replayed
-            load_model_spec(_model_spec(args), fit_on, **_model_options(args))
+            load_model_spec(_model_spec(args), fit_pool, **_model_options(args))
         except ModelSetupError as exc:
             report.error = str(exc)
             error(PROG, report.error)
@@ -425,15 +425,15 @@ def _run(
 
     prepared = None
     if args.model is not None or args.estimator:
-        if len(fit_on) < len(recordings):
+        if len(fit_pool) < len(recordings):
             print(
                 f"--fit: on the study sessions' completed measured runs only ("
-                f"{len(recordings) - len(fit_on)} practice, aborted or unfinished run(s) left "
+                f"{len(recordings) - len(fit_pool)} practice, aborted or unfinished run(s) left "
                 "out, as hasa-bench leaves them out)"
             )
         try:
             with report.warnings.about(None, "model"):
-                prepared = _prepare_and_score(args, recordings, problems, report, fit_on)
+                prepared = _prepare_and_score(args, recordings, problems, report, fit_pool)
         except LaneKeepingError as exc:
             report.error = f"--estimator: {exc}; --no-lane-check runs it anyway"
             error(PROG, report.error)
