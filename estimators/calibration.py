@@ -79,7 +79,7 @@ def steering_live_share(result: EstimationResult, max_scale: float = 2.0) -> np.
 
 
 def steering_channel_shares(
-    result: EstimationResult, max_scale: float = 2.0
+    result: EstimationResult, max_scale: float = 2.0, *, refused: bool = False
 ) -> dict[str, np.ndarray]:
     """Why the steering was or was not lane evidence: per state of
     :data:`STEERING_CHANNEL_STATES`, the (R,) share of each run's steps (of its length; the
@@ -95,6 +95,11 @@ def steering_channel_shares(
       autocorrelation, alone or with lambda);
     - ``live``: the rest, counted at ``1 / max_scale`` of its weight or more.
 
+    ``refused``: the result is a steering model's that the trust rule gave no lane evidence
+    at all (:func:`estimators.trust.trusted_filter` without an ARX form: it failed the
+    lane-keeping or the prediction check, or has none), filtered by the no-steering
+    estimator; its channel is ``off`` at every valid step, not ``unused``.
+
     Every state is NaN for an estimator that reports no steering channel."""
     if result.channel_nis is None or result.low_speed is None:
         return {name: np.full(result.num_runs, np.nan) for name in STEERING_CHANNEL_STATES}
@@ -105,7 +110,7 @@ def steering_channel_shares(
     error = np.ones_like(scale)
     if result.model_error is not None:
         error = np.maximum(1.0, np.nan_to_num(result.model_error, nan=1.0))
-    off = valid & result.low_speed
+    off = valid.copy() if refused else valid & result.low_speed
     used = valid & ~off & np.isfinite(result.channel_nis[..., 2])
     mismatch = np.zeros_like(valid)
     if result.decision is not None:

@@ -615,17 +615,12 @@ def _channel_diagnostics(result: Any, kind: str, refused: bool = False) -> dict[
     baseline) and why it was not (``steering_<state>_share`` of
     :func:`estimators.calibration.steering_channel_shares`), the median model-error ratio lambda and evidence scale tau (over the steps
     it was on), and the mean NIS of each channel. ``refused``: a steering model the trust
-    rule gave no lane evidence at all (it failed the lane-keeping or the prediction check, or
-    has no ARX form: filtered by the no-steering estimator under its own name), whose channel
-    is off at every valid step, not "unused"."""
+    rule gave no lane evidence at all, filtered by the no-steering estimator under its own
+    name, whose channel is off at every valid step (``steering_channel_shares``'s)."""
     n_runs = result.num_runs
     nan = np.full(n_runs, np.nan)
-    shares = steering_channel_shares(result)
-    off = result.low_speed
-    if refused:
-        off = result.valid.copy()
-        shares = {name: np.zeros(n_runs) for name in shares}
-        shares["off"] = result.valid.sum(axis=1) / result.lengths
+    shares = steering_channel_shares(result, refused=refused)
+    off = result.valid if refused else result.low_speed
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a run without steering data: NaN
         model_error = np.nanmedian(result.model_error, axis=1)
