@@ -335,9 +335,11 @@ def prepare_model(
     say: Callable[[str], None] = lambda message: None,
     trust_module: bool = False,
     log: WarningLog | None = None,
+    loaded: SteeringModel | None = None,
 ) -> PreparedModel:
-    """Load the model ``spec`` for ``recordings``' sample time; with ``fit`` fit it on the
-    first ``fit_on`` recordings, each a run of its own (their ``steering`` signal: "measured"
+    """Load the model ``spec`` for ``recordings``' sample time (``loaded``: what
+    :func:`load_model_spec` returned for the same arguments, not loaded again); with ``fit``
+    fit it on the first ``fit_on`` recordings, each a run of its own (their ``steering`` signal: "measured"
     or "applied"; None: the model's). A generalized model (:class:`GeneralizedModel`, not a
     user subclass) fitted so is fitted as ``hasa-bench`` fits its built-in one: its fit
     estimates an ``equation_error_order``-lag autoregression of its equation error
@@ -367,15 +369,17 @@ def prepare_model(
             ``steering_ratio`` is not a number in (0, :data:`MAX_STEERING_RATIO`].
         LaneKeepingError: ``lane_check`` and it drives off the road.
     """
-    model = load_model_spec(
-        spec,
-        recordings,
-        fit=fit,
-        fit_on=fit_on,
-        equation_error_order=equation_error_order,
-        steering_ratio=steering_ratio,
-        trust_module=trust_module,
-    )
+    model = loaded
+    if model is None:
+        model = load_model_spec(
+            spec,
+            recordings,
+            fit=fit,
+            fit_on=fit_on,
+            equation_error_order=equation_error_order,
+            steering_ratio=steering_ratio,
+            trust_module=trust_module,
+        )
     if steering is not None:
         model.steering_signal = steering
     fitted_on: tuple[Path | None, ...] = ()

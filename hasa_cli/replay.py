@@ -134,6 +134,7 @@ from hasa_cli import (
 )
 from hasa_env.recording.reader import load_paths
 from hasa_env.session.session_file import study_roles
+from hasa_env.steering.base import SteeringModel
 
 __all__ = ["build_parser", "main"]
 
@@ -332,6 +333,7 @@ def _prepare_and_score(
     problems: list[str],
     report: ReplayDocument,
     fit_pool: Sequence[Any],
+    loaded: SteeringModel | None,
 ) -> PreparedModel:
     """The model of ``--model`` (default generalized) prepared (fitted, with ``--fit``, on the
     first ``--fit-on`` of ``fit_pool``); with ``--model`` its scores on every recording printed
@@ -351,6 +353,7 @@ def _prepare_and_score(
         lane_check=args.estimator and not args.no_lane_check,
         say=lambda message: print(printable(message)),
         log=report.warnings,
+        loaded=loaded,  # (load_model_spec's, checked before the replay)
     )
     report.add_model(prepared)
     if args.model is not None:
@@ -408,9 +411,10 @@ def _run(
         )
         error(PROG, report.error)
         return EXIT_USAGE
+    loaded = None
     if args.model is not None or args.estimator:
         try:  # a model that cannot be loaded refuses the run before anything is replayed
-            load_model_spec(_model_spec(args), fit_pool, **_model_options(args))
+            loaded = load_model_spec(_model_spec(args), fit_pool, **_model_options(args))
         except ModelSetupError as exc:
             report.error = str(exc)
             error(PROG, report.error)
@@ -433,7 +437,7 @@ def _run(
             )
         try:
             with report.warnings.about(None, "model"):
-                prepared = _prepare_and_score(args, recordings, problems, report, fit_pool)
+                prepared = _prepare_and_score(args, recordings, problems, report, fit_pool, loaded)
         except LaneKeepingError as exc:
             report.error = f"--estimator: {exc}; --no-lane-check runs it anyway"
             error(PROG, report.error)
