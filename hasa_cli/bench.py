@@ -729,9 +729,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "perf":
         return _perf(args)
     user_models = (args.models if args.command == "score" else []) + list(args.model)
-    if user_models and os.getcwd() not in sys.path:
-        # like other tools that import user code by path: modules in the working directory
-        sys.path.insert(0, os.getcwd())
+    if user_models:  # like other tools that import user code by path: the working directory
+        from hasa_env.steering.loading import add_module_folders  # start-up: only where needed
+
+        add_module_folders(os.getcwd())
     with stop_on_signals():  # SIGTERM / SIGHUP: the worker pool is terminated, exit 143 / 129
         return _run_protocol(args, user_models)
 

@@ -7,7 +7,6 @@ Used by :mod:`hasa_cli.drive` (the plain session) and :mod:`hasa_cli.study`
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from hasa_env.devices.sources import InputManager
 from hasa_env.drivers import require_lane_keeping
 from hasa_env.envs.lane_keeping import LaneKeepingEnv
 from hasa_env.steering.base import SteeringModel
-from hasa_env.steering.loading import default_steering_ratio, load_model
+from hasa_env.steering.loading import add_module_folders, default_steering_ratio, load_model
 
 __all__ = [
     "estimator_for",
@@ -57,8 +56,8 @@ def joystick_profiles(path: Path | None, log: Callable[[str], None]) -> list[Joy
 def estimator_model(spec: str, dt: float, trust_module: bool = False) -> SteeringModel:
     """The steering model of ``--estimator``: fitted, with an ARX form (ValueError if not);
     ``trust_module``: ``--trust-model-module`` (a model file may import its class's module)."""
-    if ":" in spec and os.getcwd() not in sys.path:
-        sys.path.insert(0, os.getcwd())  # user models in the working directory
+    if ":" in spec:
+        add_module_folders(os.getcwd())  # user models in the working directory
     model = load_model(spec, dt, trust_module=trust_module)
     if not model.is_fitted:
         raise ValueError(

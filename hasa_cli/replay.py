@@ -135,6 +135,7 @@ from hasa_cli import (
 from hasa_env.recording.reader import load_paths
 from hasa_env.session.session_file import study_roles
 from hasa_env.steering.base import SteeringModel
+from hasa_env.steering.loading import add_module_folders
 
 __all__ = ["build_parser", "main"]
 
@@ -300,8 +301,8 @@ def _model_spec(args: argparse.Namespace) -> str:
     """The spec of ``--model`` (default generalized); a user model's module is imported
     from the working directory too (added to ``sys.path``, which a console script's lacks)."""
     spec = args.model or "generalized"
-    if ":" in spec and os.getcwd() not in sys.path:
-        sys.path.insert(0, os.getcwd())  # user models in the working directory
+    if ":" in spec:
+        add_module_folders(os.getcwd())  # user models in the working directory
     return spec
 
 
